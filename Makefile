@@ -1,0 +1,34 @@
+# Setup lives here: `make run` and `make test` work on a clean clone.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: setup run test test-long bench clean
+
+setup: $(STAMP)
+
+# torch is pinned to the CPU build that pip finds on this machine's disk; pinning it
+# before anything else keeps pip from resolving a CUDA build for a dependent.
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip setuptools wheel
+	$(PY) -m pip install --quiet "torch==2.13.0"
+	$(PY) -m pip install --quiet -e ".[test]"
+	touch $(STAMP)
+
+run: $(STAMP)
+	$(VENV)/bin/hycosim run configs/default.json
+
+test: $(STAMP)
+	$(PY) -m pytest -q -p no:cacheprovider
+
+test-long: $(STAMP)
+	$(PY) -m pytest -q -p no:cacheprovider -m long
+
+bench: $(STAMP)
+	$(PY) -m pip install --quiet -e ".[test,bench]"
+	$(PY) benchmarks/barrier.py
+
+clean:
+	rm -rf $(VENV) build *.egg-info

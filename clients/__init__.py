@@ -1,0 +1,1 @@
+"""Node runtime (attach, step, detach) and the node implementations."""

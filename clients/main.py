@@ -1,0 +1,33 @@
+"""``hycosim node NAME FILE``: load one node's implementation and attach it to the server."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fmu_bridge import logs
+from fmu_bridge.config import LoadedProject, server_endpoint
+from fmu_bridge.session import ConnectError
+
+from clients.loader import NodeLoadError, load_node
+from clients.runtime import NodeRunError, NodeRuntime
+
+
+def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
+             log_file: Path | None = None) -> tuple[int, str]:
+    """Run one node to the end of the co-simulation; return (exit code, message)."""
+    logs.configure(log_file)
+    try:
+        spec = loaded.project.node(name)
+    except KeyError:
+        names = ", ".join(n.nodeName for n in loaded.project.nodeLists)
+        return 2, f"{loaded.path}: no node named {name!r} (nodes: {names})"
+    endpoint = connect or server_endpoint(loaded.project.serverIP)
+    try:
+        impl = load_node(spec)
+        runtime = NodeRuntime(loaded, name, impl, endpoint)
+        runtime.run()
+    except (NodeLoadError, NodeRunError, ConnectError) as exc:
+        return 3, str(exc)
+    except KeyboardInterrupt:
+        return 130, f"node {name!r} interrupted by Ctrl-C"
+    return 0, f"node {name!r} finished after {runtime.steps} steps"

@@ -1,0 +1,77 @@
+"""The node interface: what a simulator implements to take part in a co-simulation.
+
+A stepping node is advanced by the runtime once per macro step::
+
+    setup(ctx)                      once, before attaching
+    outputs()                       its outputs at the current time (also at t0)
+    set_mode(mode, driven)          when the coordinator switches mode
+    step(t, h, inputs)              integrate from t to t+h on inputs sampled at t
+    teardown()                      once, at the end (also after a failure)
+
+In a mode where ``driven`` is True the node stops following its own dynamics and
+follows its inputs (the paper's s_A = g_B(s_B)); how is the node's business.
+
+An asynchronous source (a camera, a real robot) does not step: the runtime asks it for
+the samples it has taken up to a time and publishes them with their timestamps.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from fmu_bridge.config import Port
+
+
+@dataclass
+class NodeContext:
+    """What a node knows about its place in the co-simulation."""
+
+    name: str
+    uid: int
+    inputs: list[Port]
+    outputs: list[Port]
+    parameters: dict[str, Any]
+    step_size: float
+    start_time: float
+    project_dir: Path = field(default_factory=Path.cwd)
+
+    def parameter(self, key: str, default: Any) -> Any:
+        return self.parameters.get(key, default)
+
+
+class Node(ABC):
+    """A simulator advanced in macro steps by the runtime."""
+
+    def setup(self, ctx: NodeContext) -> None:
+        """Prepare the model; called once before the node attaches."""
+
+    @abstractmethod
+    def outputs(self) -> dict[str, Any]:
+        """Current output values by port name."""
+
+    @abstractmethod
+    def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
+        """Advance from t to t+h; ``inputs`` are the routed values at t."""
+
+    def set_mode(self, mode: str, driven: bool) -> None:
+        """The coordinator entered ``mode``; ``driven`` says whether this node now follows another."""
+
+    def teardown(self) -> None:
+        """Release resources; called once at the end, also after a failure."""
+
+
+class AsyncSource(ABC):
+    """A source that publishes timestamped samples at its own rate instead of stepping."""
+
+    def setup(self, ctx: NodeContext) -> None:
+        """Prepare the source; called once before the node attaches."""
+
+    @abstractmethod
+    def samples_until(self, t: float) -> list[tuple[float, dict[str, Any]]]:
+        """Samples taken since the last call, up to simulated time t, oldest first."""
+
+    def teardown(self) -> None:
+        """Release resources; called once at the end."""

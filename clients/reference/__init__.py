@@ -1,0 +1,1 @@
+"""Small reference nodes for tests, examples and benchmarks."""

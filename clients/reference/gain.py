@@ -1,0 +1,27 @@
+"""y = k·u + b: a static gain, the benchmark ring's workload."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from clients.node import Node, NodeContext
+
+
+class Gain(Node):
+    """Parameters ``k`` (1.0) and ``b`` (0.0); input ``u``, output ``y``.
+
+    Its output at T+H is computed from the input sampled at T, so a chain of gains shows
+    the Jacobi scheme's one-step delay per hop exactly.
+    """
+
+    def setup(self, ctx: NodeContext) -> None:
+        self.k = float(ctx.parameter("k", 1.0))
+        self.b = float(ctx.parameter("b", 0.0))
+        start = ctx.inputs[0].start_value() if ctx.inputs else 0.0
+        self.y = self.k * start + self.b
+
+    def outputs(self) -> dict[str, Any]:
+        return {"y": self.y}
+
+    def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
+        self.y = self.k * inputs["u"] + self.b

@@ -1,0 +1,51 @@
+"""A damped pendulum integrated by RK4 micro-steps inside each macro step.
+
+θ'' = −(g/L)·sin θ − c·θ'. Free, it follows its own dynamics; driven, it takes its angle
+and angular velocity from the inputs ``theta_in`` and ``omega_in`` (s_A = g_B(s_B)).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from clients.node import Node, NodeContext
+
+
+class Pendulum(Node):
+    """Parameters: ``length`` (1.0 m), ``g`` (9.81), ``damping`` c (0.0 1/s),
+    ``theta0`` (rad), ``omega0`` (rad/s), ``micro_steps`` per macro step (10)."""
+
+    def setup(self, ctx: NodeContext) -> None:
+        self.length = float(ctx.parameter("length", 1.0))
+        self.g = float(ctx.parameter("g", 9.81))
+        self.c = float(ctx.parameter("damping", 0.0))
+        self.theta = float(ctx.parameter("theta0", 0.5))
+        self.omega = float(ctx.parameter("omega0", 0.0))
+        self.micro = int(ctx.parameter("micro_steps", 10))
+        self.driven = False
+
+    def _deriv(self, theta: float, omega: float) -> tuple[float, float]:
+        return omega, -(self.g / self.length) * math.sin(theta) - self.c * omega
+
+    def outputs(self) -> dict[str, Any]:
+        return {"theta": self.theta, "omega": self.omega}
+
+    def set_mode(self, mode: str, driven: bool) -> None:
+        self.driven = driven
+
+    def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
+        if self.driven:
+            self.theta = float(inputs["theta_in"])
+            self.omega = float(inputs.get("omega_in", 0.0))
+            return
+        dt = h / self.micro
+        th, om = self.theta, self.omega
+        for _ in range(self.micro):
+            k1 = self._deriv(th, om)
+            k2 = self._deriv(th + dt / 2 * k1[0], om + dt / 2 * k1[1])
+            k3 = self._deriv(th + dt / 2 * k2[0], om + dt / 2 * k2[1])
+            k4 = self._deriv(th + dt * k3[0], om + dt * k3[1])
+            th += dt / 6 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
+            om += dt / 6 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1])
+        self.theta, self.omega = th, om

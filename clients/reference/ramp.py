@@ -1,0 +1,22 @@
+"""y = a + b·t: a clock, or a hand moving at constant speed."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from clients.node import Node, NodeContext
+
+
+class Ramp(Node):
+    """Parameters ``a`` (0.0) and ``b`` (1.0); outputs ``y`` and its rate ``v`` = b."""
+
+    def setup(self, ctx: NodeContext) -> None:
+        self.a = float(ctx.parameter("a", 0.0))
+        self.b = float(ctx.parameter("b", 1.0))
+        self.t = ctx.start_time
+
+    def outputs(self) -> dict[str, Any]:
+        return {"y": self.a + self.b * self.t, "v": self.b}
+
+    def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
+        self.t = t + h

@@ -1,0 +1,28 @@
+"""An asynchronous source sampling y = a + b·t at its own rate (a stand-in for a sensor)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from clients.node import AsyncSource, NodeContext
+
+
+class RampSource(AsyncSource):
+    """Parameters ``a`` (0.0), ``b`` (1.0); samples at the node's ``rate`` (30 Hz) from t0."""
+
+    def setup(self, ctx: NodeContext) -> None:
+        self.a = float(ctx.parameter("a", 0.0))
+        self.b = float(ctx.parameter("b", 1.0))
+        self.rate = float(ctx.parameter("rate", 30.0))
+        self.t0 = ctx.start_time
+        self.next_index = 0
+
+    def samples_until(self, t: float) -> list[tuple[float, dict[str, Any]]]:
+        last = math.floor((t - self.t0) * self.rate + 1e-9)
+        out = []
+        while self.next_index <= last:
+            ts = self.t0 + self.next_index / self.rate
+            out.append((ts, {"y": self.a + self.b * ts}))
+            self.next_index += 1
+        return out

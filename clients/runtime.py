@@ -1,0 +1,174 @@
+"""The node runtime: attach one node to a relay server and step it until STOP.
+
+One Zenoh client session, explicit declarations, closed on exit: a subscriber (the
+inbox) on the server's ``down`` key, a publisher on the node's own ``up`` key, a
+liveliness token announcing the node, and a liveliness subscriber that notices the
+server going away. Every wait has a timeout.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import structlog
+import zenoh
+
+from fmu_bridge import frames
+from fmu_bridge.config import LoadedProject, PortType
+from fmu_bridge.inbox import Inbox
+from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
+from fmu_bridge.session import client_config, open_session
+
+from clients.node import AsyncSource, Node, NodeContext
+
+_COERCE = {
+    PortType.REAL: float,
+    PortType.INTEGER: int,
+    PortType.BOOLEAN: bool,
+    PortType.STRING: str,
+    PortType.BINARY: bytes,
+}
+
+
+class NodeRunError(RuntimeError):
+    """The node cannot go on; the message names the node and the step."""
+
+
+class NodeRuntime:
+    def __init__(self, loaded: LoadedProject, node_name: str, impl: Node | AsyncSource, endpoint: str):
+        self.loaded = loaded
+        self.spec = loaded.project.node(node_name)
+        self.name = node_name
+        self.impl = impl
+        self.endpoint = endpoint
+        self.cosim = loaded.project.coSimulation
+        self.keys = ProjectKeys(loaded.project.projectName)
+        self._out_ports = [(p.name, _COERCE[p.type]) for p in self.spec.output]
+        self._in_names = self.spec.input_names()
+        self._log = structlog.get_logger("node").bind(node=node_name)
+        self.steps = 0
+
+    def context(self) -> NodeContext:
+        params = dict(self.spec.parameters)
+        if self.spec.rate is not None:
+            params.setdefault("rate", self.spec.rate)
+        project_dir = self.loaded.path.parent if self.loaded.path else None
+        return NodeContext(self.name, self.spec.UID, list(self.spec.input), list(self.spec.output), params,
+                           self.cosim.stepSize, self.cosim.startTime, **({"project_dir": project_dir} if project_dir else {}))
+
+    def _pack_outputs(self, values: dict[str, Any]) -> list[Any]:
+        packed = []
+        for port, coerce in self._out_ports:
+            if port not in values:
+                raise NodeRunError(f"node {self.name!r}: its model returned no value for output {port!r}")
+            packed.append(coerce(values[port]))
+        return packed
+
+    def _on_server_liveliness(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.DELETE:
+            self.inbox.inject(frames.encode(frames.LIVE, SERVER_TOKEN, False))
+
+    def run(self) -> None:
+        self.impl.setup(self.context())
+        session = open_session(client_config(self.endpoint, timeout_s=self.cosim.attachTimeout), self.endpoint)
+        try:
+            self.inbox = Inbox(session, self.keys.down, self.keys.down)
+            publisher = session.declare_publisher(self.keys.up(self.name),
+                                                  congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+            watch = session.liveliness().declare_subscriber(self.keys.alive(SERVER_TOKEN), self._on_server_liveliness)
+            # Declared after the subscriber: the server starts once it sees this token.
+            token = session.liveliness().declare_token(self.keys.alive(self.name))
+            try:
+                start = self._wait(self.cosim.attachTimeout, "the server's START")
+                if start.kind == frames.STOP:
+                    return
+                if isinstance(self.impl, AsyncSource):
+                    self._run_async(publisher, start)
+                else:
+                    self._run_stepping(publisher)
+            finally:
+                token.undeclare()
+                watch.undeclare()
+                self.inbox.close()
+        finally:
+            try:
+                self.impl.teardown()
+            finally:
+                session.close()
+
+    def _wait(self, timeout: float, what: str) -> frames.Frame:
+        """The next frame from the server (skipping ones not for us); STOP ends the wait too."""
+        deadline = time.monotonic() + timeout
+        while True:
+            msg = self.inbox.recv(deadline - time.monotonic())
+            if msg is None:
+                raise NodeRunError(f"node {self.name!r}: no {what} from the server at {self.endpoint} "
+                                   f"within {timeout:g} s (after step {self.steps})")
+            try:
+                frame = frames.decode(msg[1])
+            except frames.FrameError as exc:
+                self._log.warning("frame dropped", reason=str(exc), step=self.steps)
+                continue
+            if frame.kind == frames.LIVE:
+                raise NodeRunError(f"node {self.name!r}: the server went away after step {self.steps}")
+            return frame
+
+    def _run_stepping(self, publisher: zenoh.Publisher) -> None:
+        impl = self.impl
+        assert isinstance(impl, Node)
+        publisher.put(frames.encode(frames.OUTPUTS, self.spec.UID, 0, self.cosim.startTime,
+                                    self._pack_outputs(impl.outputs())))
+        # The server enforces step timeouts; a node only needs to notice the server is gone,
+        # which liveliness tells; this bound is the last resort for a frozen server.
+        silence = self.cosim.stepTimeout + 30.0
+        mode, driven = None, False
+        while True:
+            frame = self._wait(silence, "release")
+            if frame.kind == frames.STOP:
+                self._log.info("stop", step=self.steps, reason=frame.fields[1])
+                return
+            if frame.kind != frames.STEP:
+                continue
+            k, t, h, new_mode, inputs, driven_nodes = frame.fields
+            now_driven = self.name in driven_nodes
+            if (new_mode, now_driven) != (mode, driven):
+                mode, driven = new_mode, now_driven
+                impl.set_mode(mode, driven)
+                self._log.info("mode", step=k, mode=mode, driven=driven)
+            mine = inputs.get(self.name, [])
+            try:
+                impl.step(t, h, dict(zip(self._in_names, mine)))
+            except Exception as exc:
+                raise NodeRunError(f"node {self.name!r}: its model failed at step {k} (t={t:g} s): "
+                                   f"{type(exc).__name__}: {exc}") from exc
+            self.steps = k + 1
+            publisher.put(frames.encode(frames.OUTPUTS, self.spec.UID, k + 1, t + h,
+                                        self._pack_outputs(impl.outputs())))
+
+    def _run_async(self, publisher: zenoh.Publisher, start: frames.Frame) -> None:
+        impl = self.impl
+        assert isinstance(impl, AsyncSource)
+        _, t0, _, wall0, rt = start.fields
+        sim_now, seq = t0, 0
+        period = 1.0 / float(self.spec.rate or 30.0)
+        while True:
+            for ts, values in impl.samples_until(sim_now):
+                publisher.put(frames.encode(frames.SAMPLE, self.spec.UID, seq, ts, self._pack_outputs(values)))
+                seq += 1
+            if rt:
+                # Real time: sample by the wall clock, and look for STOP in between.
+                msg = self.inbox.recv(period)
+                frame = frames.decode(msg[1]) if msg is not None else None
+                sim_now = t0 + (time.time() - wall0) / rt
+            else:
+                # As fast as possible: the server's releases are the clock.
+                frame = self._wait(self.cosim.stepTimeout + 30.0, "release")
+                if frame.kind == frames.STEP:
+                    _, t, h, *_ = frame.fields
+                    sim_now = t + h
+                    self.steps = frame.fields[0] + 1
+            if frame is not None and frame.kind == frames.LIVE:
+                raise NodeRunError(f"node {self.name!r}: the server went away after step {self.steps}")
+            if frame is not None and frame.kind == frames.STOP:
+                return

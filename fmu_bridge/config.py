@@ -1,0 +1,429 @@
+"""The project JSON: pydantic models of the paper's keys plus hycosim's optional ones.
+
+The paper's keys are accepted verbatim (``serverIP``, ``nodeNum``, ``nodeLists`` with
+``nodeName``/``UID``/``input``/``output``, ``linkNum``, ``linkLists``). Our additions are
+optional camelCase keys. Unknown keys are errors so that a typo cannot pass silently.
+
+Loading happens in two passes: pydantic checks the shape, then :func:`check_semantics`
+checks what spans entries (links against ports, modes, guards). Both report every error
+with its JSON path, so one run of ``hycosim validate`` lists all that is wrong.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from enum import Enum
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from fmu_bridge.guards import Guard, GuardError
+
+FREE_MODE = "free"
+
+
+class PortType(str, Enum):
+    REAL = "Real"
+    INTEGER = "Integer"
+    BOOLEAN = "Boolean"
+    STRING = "String"
+    BINARY = "Binary"
+
+
+# A link may widen a value (an Integer count into a Real input) but never narrow it.
+_ASSIGNABLE = {
+    PortType.REAL: {PortType.REAL, PortType.INTEGER, PortType.BOOLEAN},
+    PortType.INTEGER: {PortType.INTEGER, PortType.BOOLEAN},
+    PortType.BOOLEAN: {PortType.BOOLEAN},
+    PortType.STRING: {PortType.STRING},
+    PortType.BINARY: {PortType.BINARY},
+}
+
+_DEFAULT_START = {
+    PortType.REAL: 0.0,
+    PortType.INTEGER: 0,
+    PortType.BOOLEAN: False,
+    PortType.STRING: "",
+    PortType.BINARY: b"",
+}
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", populate_by_name=True, frozen=True)
+
+
+class Port(_Strict):
+    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")
+    type: PortType = PortType.REAL
+    unit: str | None = None
+    start: Any = None
+    # For FMU nodes: the FMU variable this port maps to, when its name differs.
+    variable: str | None = None
+
+    def start_value(self) -> Any:
+        return _DEFAULT_START[self.type] if self.start is None else self.start
+
+
+def _as_port(value: Any) -> Any:
+    # The paper lists ports as bare names; hycosim also takes objects with a type.
+    return {"name": value} if isinstance(value, str) else value
+
+
+class Node(_Strict):
+    # No leading underscore: hycosim's own keys (_server, _local) start with one.
+    nodeName: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_\-]*$")
+    UID: int = Field(ge=0)
+    input: list[Port] = Field(default_factory=list)
+    output: list[Port] = Field(default_factory=list)
+    # What implements the node: a reference model name ("gain") or "module:Class".
+    model: str | None = None
+    # An FMU file (path relative to the project JSON) run through fmpy.
+    fmu: str | None = None
+    parameters: dict[str, Any] = Field(default_factory=dict)
+    # Asynchronous sources publish timestamped samples instead of stepping.
+    asynchronous: bool = Field(default=False, alias="async")
+    rate: float | None = Field(default=None, gt=0)
+
+    @field_validator("input", "output", mode="before")
+    @classmethod
+    def _ports(cls, value: Any) -> Any:
+        return [_as_port(v) for v in value] if isinstance(value, list) else value
+
+    def port(self, name: str) -> Port | None:
+        for p in (*self.input, *self.output):
+            if p.name == name:
+                return p
+        return None
+
+    def output_names(self) -> list[str]:
+        return [p.name for p in self.output]
+
+    def input_names(self) -> list[str]:
+        return [p.name for p in self.input]
+
+
+class Link(_Strict):
+    """Routes outputs of one node to inputs of another.
+
+    Either ``from``/``to`` name ports as ``node.port``, or they name nodes and ``pairs``
+    lists ``[output, input]`` pairs carried by the same link.
+    """
+
+    source: str = Field(alias="from")
+    target: str = Field(alias="to")
+    pairs: list[tuple[str, str]] | None = None
+    activeIn: list[str] | None = None
+    extrapolation: Literal["hold", "linear"] = "hold"
+    description: str | None = None
+
+
+class CoSimulation(_Strict):
+    stepSize: float = Field(default=0.01, gt=0)
+    startTime: float = 0.0
+    stopTime: float = Field(default=1.0)
+    # false: as fast as possible; true or a factor: wall time = simulated time * factor.
+    realTime: bool | float = False
+    stepTimeout: float = Field(default=10.0, gt=0)
+    attachTimeout: float = Field(default=30.0, gt=0)
+
+    def real_time_factor(self) -> float | None:
+        if self.realTime is False:
+            return None
+        if self.realTime is True:
+            return 1.0
+        return float(self.realTime) if self.realTime > 0 else None
+
+
+class Event(_Strict):
+    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_\-]*$")
+    when: str
+    drives: str
+    until: str
+    description: str | None = None
+
+
+class Project(_Strict):
+    projectName: str = Field(default="project", pattern=r"^[A-Za-z0-9_\-]+$")
+    serverIP: str = "127.0.0.1"
+    nodeNum: int = Field(ge=1)
+    nodeLists: list[Node]
+    linkNum: int = Field(default=0, ge=0)
+    linkLists: list[Link] = Field(default_factory=list)
+    coSimulation: CoSimulation = Field(default_factory=CoSimulation)
+    events: list[Event] = Field(default_factory=list)
+    description: str | None = None
+
+    def node(self, name: str) -> Node:
+        for n in self.nodeLists:
+            if n.nodeName == name:
+                return n
+        raise KeyError(name)
+
+    def modes(self) -> list[str]:
+        return [FREE_MODE, *(e.name for e in self.events)]
+
+    def stepping_nodes(self) -> list[Node]:
+        return [n for n in self.nodeLists if not n.asynchronous]
+
+    def async_nodes(self) -> list[Node]:
+        return [n for n in self.nodeLists if n.asynchronous]
+
+
+@dataclass(frozen=True)
+class Route:
+    """One output→input pair of a link, resolved against the nodes."""
+
+    link_index: int
+    src_node: str
+    src_port: str
+    dst_node: str
+    dst_port: str
+    active_in: frozenset[str] | None  # None: active in every mode
+    extrapolation: str
+
+    def active(self, mode: str) -> bool:
+        return self.active_in is None or mode in self.active_in
+
+
+@dataclass(frozen=True)
+class Issue:
+    path: str
+    message: str
+    hint: str = ""
+
+    def render(self) -> str:
+        hint = f" (hint: {self.hint})" if self.hint else ""
+        return f"{self.path}: {self.message}{hint}"
+
+
+class ConfigError(Exception):
+    """A project file that cannot be used, with every problem found in it."""
+
+    def __init__(self, source: str, issues: list[Issue]):
+        self.source = source
+        self.issues = issues
+        lines = "\n".join(f"  {source}: {i.render()}" for i in issues)
+        super().__init__(f"{source}: {len(issues)} error(s) in project file\n{lines}")
+
+
+@dataclass
+class LoadedProject:
+    """A validated project with its resolved routes and compiled guards."""
+
+    project: Project
+    path: Path | None
+    routes: list[Route]
+    guards: dict[str, tuple[Guard, Guard]] = field(default_factory=dict)
+    digest: str = ""
+
+    @property
+    def name(self) -> str:
+        return self.project.projectName
+
+    def resolve(self, relative: str) -> Path:
+        """Resolve a path written in the project file against the file's folder."""
+        base = self.path.parent if self.path else Path.cwd()
+        return (base / relative).resolve()
+
+
+def _reject_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    seen: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in seen:
+            raise ValueError(f"duplicate key {key!r}")
+        seen[key] = value
+    return seen
+
+
+def _pydantic_issues(err: ValidationError) -> list[Issue]:
+    issues = []
+    for e in err.errors():
+        path = ""
+        for part in e["loc"]:
+            path += f"[{part}]" if isinstance(part, int) else (f".{part}" if path else str(part))
+        msg = e["msg"]
+        hint = ""
+        if e["type"] == "extra_forbidden":
+            msg = "unknown key"
+            hint = "check the spelling; keys are case-sensitive camelCase as in the README"
+        elif e["type"] == "missing":
+            hint = "this key is required"
+        issues.append(Issue(path or "(top level)", msg, hint))
+    return issues
+
+
+def _split_port_ref(ref: str) -> tuple[str, str] | None:
+    if ref.count(".") != 1:
+        return None
+    node, port = ref.split(".")
+    return (node, port) if node and port else None
+
+
+def _resolve_routes(project: Project, issues: list[Issue]) -> list[Route]:
+    nodes = {n.nodeName: n for n in project.nodeLists}
+    modes = set(project.modes())
+    routes: list[Route] = []
+    for i, link in enumerate(project.linkLists):
+        where = f"linkLists[{i}]"
+        if link.activeIn is not None:
+            for mode in link.activeIn:
+                if mode not in modes:
+                    issues.append(Issue(f"{where}.activeIn", f"unknown mode {mode!r}",
+                                        f"modes are {sorted(modes)}"))
+        active = frozenset(link.activeIn) if link.activeIn is not None else None
+        if link.pairs is None:
+            src = _split_port_ref(link.source)
+            dst = _split_port_ref(link.target)
+            if src is None or dst is None:
+                bad = "from" if src is None else "to"
+                issues.append(Issue(f"{where}.{bad}", f"{getattr(link, 'source' if bad == 'from' else 'target')!r} is not 'node.port'",
+                                    "write 'node.port', or name nodes and give 'pairs'"))
+                continue
+            pairs = [(src[0], src[1], dst[0], dst[1])]
+        else:
+            pairs = [(link.source, o, link.target, n) for o, n in link.pairs]
+        for j, (sn, sp, dn, dp) in enumerate(pairs):
+            pw = where if link.pairs is None else f"{where}.pairs[{j}]"
+            ok = True
+            if sn not in nodes:
+                issues.append(Issue(f"{where}.from", f"unknown node {sn!r}", f"nodes are {sorted(nodes)}"))
+                ok = False
+            elif sp not in nodes[sn].output_names():
+                issues.append(Issue(f"{pw}.from", f"{sn}.{sp} is not an output of node {sn!r}",
+                                    f"outputs of {sn} are {nodes[sn].output_names()}"))
+                ok = False
+            if dn not in nodes:
+                issues.append(Issue(f"{where}.to", f"unknown node {dn!r}", f"nodes are {sorted(nodes)}"))
+                ok = False
+            elif dp not in nodes[dn].input_names():
+                issues.append(Issue(f"{pw}.to", f"{dn}.{dp} is not an input of node {dn!r}",
+                                    f"inputs of {dn} are {nodes[dn].input_names()}"))
+                ok = False
+            if not ok:
+                continue
+            st, dt = nodes[sn].port(sp).type, nodes[dn].port(dp).type
+            if st not in _ASSIGNABLE[dt]:
+                issues.append(Issue(pw, f"type mismatch: {sn}.{sp} is {st.value}, {dn}.{dp} is {dt.value}",
+                                    "a link may widen (Integer→Real) but not narrow"))
+                continue
+            if link.extrapolation == "linear" and st is not PortType.REAL:
+                issues.append(Issue(f"{where}.extrapolation", f"linear extrapolation of {st.value} port {sn}.{sp}",
+                                    "use 'hold' for non-Real ports"))
+            routes.append(Route(i, sn, sp, dn, dp, active, link.extrapolation))
+    # One writer per input per mode: two active feeders would make the value depend on order.
+    for mode in sorted(modes):
+        feeders: dict[tuple[str, str], int] = {}
+        for r in routes:
+            if not r.active(mode):
+                continue
+            key = (r.dst_node, r.dst_port)
+            if key in feeders and feeders[key] != r.link_index:
+                issues.append(Issue(f"linkLists[{r.link_index}].to",
+                                    f"input {key[0]}.{key[1]} is also fed by linkLists[{feeders[key]}] in mode {mode!r}",
+                                    "give the links disjoint 'activeIn' modes"))
+            feeders.setdefault(key, r.link_index)
+    return routes
+
+
+def check_semantics(project: Project) -> tuple[list[Route], dict[str, tuple[Guard, Guard]], list[Issue]]:
+    """Check everything that spans entries; return routes, compiled guards and issues."""
+    issues: list[Issue] = []
+    if project.nodeNum != len(project.nodeLists):
+        issues.append(Issue("nodeNum", f"nodeNum is {project.nodeNum} but nodeLists has {len(project.nodeLists)} entries",
+                            "make nodeNum equal the number of nodes"))
+    if project.linkNum != len(project.linkLists):
+        issues.append(Issue("linkNum", f"linkNum is {project.linkNum} but linkLists has {len(project.linkLists)} entries",
+                            "make linkNum equal the number of links"))
+    names: dict[str, int] = {}
+    uids: dict[int, int] = {}
+    for i, n in enumerate(project.nodeLists):
+        if n.nodeName in names:
+            issues.append(Issue(f"nodeLists[{i}].nodeName", f"duplicate node name {n.nodeName!r}",
+                                f"also used by nodeLists[{names[n.nodeName]}]"))
+        names.setdefault(n.nodeName, i)
+        if n.UID in uids:
+            issues.append(Issue(f"nodeLists[{i}].UID", f"duplicate UID {n.UID}", f"also used by nodeLists[{uids[n.UID]}]"))
+        uids.setdefault(n.UID, i)
+        seen_ports: set[str] = set()
+        for kind, ports in (("input", n.input), ("output", n.output)):
+            for j, p in enumerate(ports):
+                if p.name in seen_ports:
+                    issues.append(Issue(f"nodeLists[{i}].{kind}[{j}]", f"duplicate port {n.nodeName}.{p.name}",
+                                        "port names are unique within a node, inputs and outputs together"))
+                seen_ports.add(p.name)
+        if n.model and n.fmu:
+            issues.append(Issue(f"nodeLists[{i}]", f"node {n.nodeName!r} names both 'model' and 'fmu'", "keep one"))
+        if n.asynchronous and n.input:
+            issues.append(Issue(f"nodeLists[{i}].input", f"asynchronous node {n.nodeName!r} has inputs",
+                                "an asynchronous source only publishes samples"))
+    cosim = project.coSimulation
+    if cosim.stopTime <= cosim.startTime:
+        issues.append(Issue("coSimulation.stopTime", "stopTime must be after startTime"))
+    event_names: set[str] = set()
+    guards: dict[str, tuple[Guard, Guard]] = {}
+    outputs = {(n.nodeName, p.name) for n in project.nodeLists for p in n.output}
+    for i, e in enumerate(project.events):
+        if e.name == FREE_MODE or e.name in event_names:
+            issues.append(Issue(f"events[{i}].name", f"event name {e.name!r} is reserved or repeated"))
+        event_names.add(e.name)
+        if e.drives not in names:
+            issues.append(Issue(f"events[{i}].drives", f"unknown node {e.drives!r}", f"nodes are {sorted(names)}"))
+        compiled = []
+        for key in ("when", "until"):
+            try:
+                g = Guard(getattr(e, key))
+            except GuardError as exc:
+                issues.append(Issue(f"events[{i}].{key}", str(exc), "e.g. 'robot.grasped > 0.5'"))
+                continue
+            for ref in g.references:
+                if ref not in outputs:
+                    issues.append(Issue(f"events[{i}].{key}", f"guard names {ref[0]}.{ref[1]}, which is not a node output",
+                                        "guards read node outputs as node.port"))
+            compiled.append(g)
+        if len(compiled) == 2:
+            guards[e.name] = (compiled[0], compiled[1])
+    routes = _resolve_routes(project, issues)
+    return routes, guards, issues
+
+
+def parse_project(data: Any, source: str = "<config>", path: Path | None = None, raw: bytes = b"") -> LoadedProject:
+    """Validate an already-decoded project document; raise ConfigError listing every problem."""
+    try:
+        project = Project.model_validate(data)
+    except ValidationError as err:
+        raise ConfigError(source, _pydantic_issues(err)) from None
+    routes, guards, issues = check_semantics(project)
+    if issues:
+        raise ConfigError(source, issues)
+    digest = hashlib.sha256(raw or json.dumps(data, sort_keys=True).encode()).hexdigest()
+    return LoadedProject(project, path, routes, guards, digest)
+
+
+def load_project(path: str | Path) -> LoadedProject:
+    """Read and validate a project JSON file; raise ConfigError naming the file on any problem."""
+    path = Path(path)
+    source = str(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise ConfigError(source, [Issue("(file)", f"cannot read: {exc.strerror or exc}")]) from None
+    try:
+        data = json.loads(raw, object_pairs_hook=_reject_duplicate_keys)
+    except json.JSONDecodeError as exc:
+        raise ConfigError(source, [Issue(f"line {exc.lineno} column {exc.colno}", f"invalid JSON: {exc.msg}")]) from None
+    except ValueError as exc:
+        raise ConfigError(source, [Issue("(top level)", str(exc), "each key may appear once per object")]) from None
+    return parse_project(data, source, path.resolve(), raw)
+
+
+def server_endpoint(server_ip: str) -> str:
+    """Turn the paper's ``serverIP`` (bare IP, IP:port) or a Zenoh endpoint into an endpoint."""
+    if "/" in server_ip:
+        return server_ip
+    host, _, port = server_ip.rpartition(":") if server_ip.count(":") == 1 else (server_ip, "", "")
+    if not host:
+        host, port = server_ip, ""
+    return f"tcp/{host}:{port or 7447}"

@@ -1,0 +1,67 @@
+"""Value frames on the wire: msgpack arrays, versioned, one kind per message.
+
+Arrays rather than maps keep frames small and decoding cheap on the hot path. Every
+frame starts with ``[VERSION, KIND, ...]``; :func:`decode` rejects anything else with a
+:class:`FrameError`, so random bytes never reach the coordinator.
+
+Kinds and layouts (after version and kind):
+
+* ``OUTPUTS``  node → server: ``uid, step, t, values`` (values in the node's output order)
+* ``SAMPLE``   async node → server: ``uid, seq, t, values``
+* ``START``    server → nodes: ``run_id, t0, H, wall_t0, real_time_factor``
+* ``STEP``     server → nodes: ``step, t, H, mode, inputs {node: [values]}, driven [nodes]``
+* ``STOP``     server → nodes: ``step, reason``
+* ``LIVE``     local only, server: ``node, alive`` (liveliness changes fed into the inbox)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import msgpack
+
+VERSION = 1
+
+OUTPUTS = 1
+SAMPLE = 2
+START = 3
+STEP = 4
+STOP = 5
+LIVE = 6
+
+_ARITY = {OUTPUTS: 4, SAMPLE: 4, START: 5, STEP: 6, STOP: 2, LIVE: 2}
+
+
+class FrameError(ValueError):
+    """Bytes that are not a well-formed hycosim frame."""
+
+
+@dataclass(frozen=True)
+class Frame:
+    kind: int
+    fields: tuple[Any, ...]
+
+
+def encode(kind: int, *fields: Any) -> bytes:
+    """Pack one frame of the given kind."""
+    return msgpack.packb([VERSION, kind, *fields], use_bin_type=True)
+
+
+def decode(payload: bytes) -> Frame:
+    """Unpack and shape-check one frame; raise FrameError with the reason otherwise."""
+    try:
+        obj = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+    except Exception as exc:  # msgpack raises several unrelated types for garbage
+        raise FrameError(f"not msgpack ({type(exc).__name__})") from None
+    if not isinstance(obj, list) or len(obj) < 2:
+        raise FrameError("not a frame array")
+    version, kind = obj[0], obj[1]
+    if version != VERSION:
+        raise FrameError(f"frame version {version!r}, expected {VERSION}")
+    if kind not in _ARITY:
+        raise FrameError(f"unknown frame kind {kind!r}")
+    fields = tuple(obj[2:])
+    if len(fields) != _ARITY[kind]:
+        raise FrameError(f"frame kind {kind} has {len(fields)} fields, expected {_ARITY[kind]}")
+    return Frame(kind, fields)

@@ -1,0 +1,1 @@
+"""The ``hycosim`` command line: validate, server, node, run, report, plot, status."""

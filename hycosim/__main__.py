@@ -1,0 +1,3 @@
+from hycosim.cli import app
+
+app(prog_name="hycosim")

@@ -1,0 +1,203 @@
+"""The ``hycosim`` command line. User-facing output goes through here, not through logs.
+
+Exit codes: 0 success, 2 bad input (config, arguments, run directory), 3 a run that
+failed (timeout, lost node, server gone), 130 Ctrl-C.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from fmu_bridge.config import ConfigError, LoadedProject, load_project
+
+app = typer.Typer(add_completion=False, no_args_is_help=True,
+                  help="hycosim: hybrid time/event co-simulation on FMI, relayed over Zenoh.")
+out = Console(soft_wrap=True)
+err = Console(stderr=True, soft_wrap=True)
+
+
+def _load(path: Path) -> LoadedProject:
+    try:
+        return load_project(path)
+    except ConfigError as exc:
+        err.print(f"[red]error:[/red] {exc.source}: {len(exc.issues)} error(s)", highlight=False)
+        for issue in exc.issues:
+            err.print(f"  {exc.source}: {issue.render()}", highlight=False, markup=False)
+        raise typer.Exit(2) from None
+
+
+@app.command()
+def validate(file: Path) -> None:
+    """Check a project JSON: print OK, or every error with its JSON path and a hint."""
+    loaded = _load(file)
+    p = loaded.project
+    out.print(f"OK {file}: project {p.projectName!r}, {len(p.nodeLists)} nodes, {len(p.linkLists)} links, "
+              f"{len(loaded.routes)} routes, {len(p.events)} events", highlight=False)
+
+
+@app.command()
+def server(
+    file: Path,
+    listen: Annotated[Optional[str], typer.Option(help="Zenoh endpoint to listen on (default: serverIP)")] = None,
+    runs_dir: Annotated[Path, typer.Option(help="where run directories are made")] = Path("runs"),
+    run_dir: Annotated[Optional[Path], typer.Option(help="exact run directory to write")] = None,
+    progress_jsonl: Annotated[bool, typer.Option(help="print progress as JSON lines (for launchers)")] = False,
+) -> None:
+    """Run the relay server for one co-simulation."""
+    from server.main import serve
+
+    loaded = _load(file)
+    code, rdir, message = serve(loaded, listen=listen, runs_dir=runs_dir, run_dir=run_dir,
+                                progress_jsonl=progress_jsonl)
+    if code:
+        err.print(f"[red]error:[/red] {message}\n  results so far: {rdir}", highlight=False)
+    elif not progress_jsonl:
+        out.print(f"{message}; results in {rdir}", highlight=False)
+    raise typer.Exit(code)
+
+
+@app.command()
+def node(
+    name: str,
+    file: Path,
+    connect: Annotated[Optional[str], typer.Option(help="server endpoint, e.g. tcp/HOST:7447")] = None,
+    log_file: Annotated[Optional[Path], typer.Option(help="append JSON-lines logs here (default: stderr)")] = None,
+) -> None:
+    """Attach one node of the project to a running server."""
+    from clients.main import run_node
+
+    loaded = _load(file)
+    code, message = run_node(loaded, name, connect, log_file)
+    (err if code else out).print(("[red]error:[/red] " if code else "") + message, highlight=False)
+    raise typer.Exit(code)
+
+
+@app.command()
+def run(
+    file: Path,
+    listen: Annotated[Optional[str], typer.Option(help="endpoint for the server (default: a free loopback port)")] = None,
+    runs_dir: Annotated[Path, typer.Option(help="where run directories are made")] = Path("runs"),
+    progress: Annotated[bool, typer.Option(help="show the progress bar")] = True,
+) -> None:
+    """Run the server and every node as local processes on loopback."""
+    from hycosim.embedded import run_embedded
+    from server.report import summarise
+
+    loaded = _load(file)
+    result = run_embedded(loaded, file, listen=listen, runs_dir=runs_dir, console=err, show_progress=progress)
+    if result.code:
+        err.print(f"[red]error:[/red] {result.message}\n  results so far: {result.run_dir}", highlight=False)
+        raise typer.Exit(result.code)
+    summary = summarise(result.run_dir)
+    _print_summary(summary)
+
+
+def _print_summary(s) -> None:
+    rate = f"{s.steps_per_s:,.0f} steps/s" if s.steps_per_s else "-"
+    wall = f"{s.wall_time_s:.2f} s" if s.wall_time_s else "-"
+    out.print(f"[bold]{s.status}[/bold]: {s.steps} macro steps in {wall} ({rate}); "
+              f"{len(s.mode_switches)} mode switches; results in {s.run_dir}", highlight=False)
+
+
+@app.command()
+def report(
+    run_dir: Path,
+    as_json: Annotated[bool, typer.Option("--json", help="print the summary as JSON")] = False,
+) -> None:
+    """Summarise a run: rate, who held the barrier, slowest steps, lateness, mode switches."""
+    from server.report import RunDirError, summarise
+
+    try:
+        s = summarise(run_dir)
+    except RunDirError as exc:
+        err.print(f"[red]error:[/red] {exc}", highlight=False)
+        raise typer.Exit(2) from None
+    if as_json:
+        out.print_json(json.dumps(asdict(s)))
+        return
+    _print_summary(s)
+    if s.reason:
+        out.print(f"reason: {s.reason}", highlight=False)
+    table = Table(title="who held the barrier")
+    for col in ("node", "share of waiting", "steps held", "mean arrival (ms)"):
+        table.add_column(col)
+    for node in sorted(set(s.holder_share) | set(s.mean_arrival_ms)):
+        share = s.holder_share.get(node)
+        table.add_row(node, "-" if share is None else f"{100 * share:.1f} %", str(s.holder_steps.get(node, 0)),
+                      f"{s.mean_arrival_ms.get(node, float('nan')):.3f}")
+    out.print(table)
+    slow = Table(title="slowest steps")
+    for col in ("step", "t (s)", "wait (ms)", "held by"):
+        slow.add_column(col)
+    for row in s.slowest_steps:
+        slow.add_row(str(row["step"]), f"{row['t']:.4f}", f"{row['wait_ms']:.3f}", row["holder"])
+    out.print(slow)
+    if s.lateness:
+        out.print(f"real-time lateness: mean {s.lateness['mean_ms']:.3f} ms, max {s.lateness['max_ms']:.3f} ms, "
+                  f"{s.lateness['late_steps']} of {s.lateness['steps']} steps late by > 1 ms", highlight=False)
+    for ev in s.mode_switches:
+        out.print(f"t={ev['t']:.4f} s step {ev['step']}: {ev['from']} → {ev['to']} ({ev['guard']}; {ev['values']})",
+                  highlight=False)
+    if s.async_age_ms:
+        out.print("mean age of asynchronous values: " + ", ".join(f"{k} {v:.1f} ms" for k, v in s.async_age_ms.items()),
+                  highlight=False)
+    if s.dropped_frames:
+        out.print("dropped frames: " + ", ".join(f"{k}: {v}" for k, v in s.dropped_frames.items()), highlight=False)
+
+
+@app.command()
+def plot(
+    run_dir: Path,
+    ports: Annotated[Optional[list[str]], typer.Argument(help="node.port columns (default: up to 8)")] = None,
+    output: Annotated[Optional[Path], typer.Option("-o", "--output", help="PNG to write")] = None,
+) -> None:
+    """Draw recorded values over time with the mode switches marked, to a PNG."""
+    from server.report import RunDirError, plot_run
+
+    try:
+        path = plot_run(run_dir, ports or [], output or run_dir / "plot.png")
+    except RunDirError as exc:
+        err.print(f"[red]error:[/red] {exc}", highlight=False)
+        raise typer.Exit(2) from None
+    out.print(f"wrote {path}", highlight=False)
+
+
+@app.command()
+def status(
+    endpoint: str,
+    project: Annotated[str, typer.Option(help="project name")] = "*",
+    timeout: Annotated[float, typer.Option(help="seconds to wait for an answer")] = 3.0,
+) -> None:
+    """Ask a running server who is attached."""
+    from fmu_bridge.keys import ProjectKeys
+    from fmu_bridge.session import ConnectError, client_config, open_session
+
+    try:
+        session = open_session(client_config(endpoint, timeout_s=timeout), endpoint)
+    except ConnectError as exc:
+        err.print(f"[red]error:[/red] {exc}", highlight=False)
+        raise typer.Exit(3) from None
+    answers = []
+    try:
+        for reply in session.get(ProjectKeys(project).status, timeout=timeout):
+            if reply.ok is not None:
+                answers.append(json.loads(reply.ok.payload.to_bytes()))
+    finally:
+        session.close()
+    if not answers:
+        err.print(f"[red]error:[/red] no hycosim server answered on {endpoint} within {timeout:g} s", highlight=False)
+        raise typer.Exit(3)
+    for a in answers:
+        out.print(f"{a['project']}: step {a['step']} t={a['t']:g} s mode={a['mode']}; "
+                  f"attached {len(a['attached'])}/{len(a['expected'])}: {', '.join(a['attached'])}", highlight=False)
+
+
+if __name__ == "__main__":
+    app()

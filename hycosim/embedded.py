@@ -1,0 +1,132 @@
+"""``hycosim run FILE``: the server and every node as local processes on loopback.
+
+The server reports progress as JSON lines on its stdout; this launcher turns them into
+a progress bar, watches the node processes (one that dies early stops the run with its
+own message), and always leaves the run directory behind.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+from fmu_bridge.config import LoadedProject
+from server.relay import run_dir_for
+
+
+def free_loopback_endpoint() -> str:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+
+
+@dataclass
+class EmbeddedResult:
+    code: int
+    run_dir: Path
+    message: str
+    node_failures: dict[str, str] = field(default_factory=dict)
+
+
+def _tail(path: Path, lines: int = 5) -> str:
+    try:
+        return "\n".join(path.read_text(errors="replace").strip().splitlines()[-lines:])
+    except OSError:
+        return ""
+
+
+def _pump(stream, sink: queue.Queue) -> None:
+    for line in stream:
+        sink.put(line)
+    sink.put(None)
+
+
+def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None = None,
+                 runs_dir: Path = Path("runs"), console: Console | None = None,
+                 show_progress: bool = True) -> EmbeddedResult:
+    console = console or Console(stderr=True)
+    endpoint = listen or free_loopback_endpoint()
+    run_dir = run_dir_for(runs_dir, loaded.name)
+    run_dir.mkdir(parents=True)
+    cmd = [sys.executable, "-m", "hycosim"]
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    server = subprocess.Popen([*cmd, "server", str(config_path), "--listen", endpoint, "--run-dir", str(run_dir),
+                               "--progress-jsonl"], stdout=subprocess.PIPE, stderr=open(run_dir / "server.stderr.txt", "w"),
+                              text=True, env=env)
+    nodes: dict[str, subprocess.Popen] = {}
+    for spec in loaded.project.nodeLists:
+        err = open(run_dir / f"node-{spec.nodeName}.stderr.txt", "w")
+        nodes[spec.nodeName] = subprocess.Popen(
+            [*cmd, "node", spec.nodeName, str(config_path), "--connect", endpoint,
+             "--log-file", str(run_dir / f"node-{spec.nodeName}.log.jsonl")],
+            stdout=err, stderr=subprocess.STDOUT, env=env)
+    lines: queue.Queue = queue.Queue()
+    threading.Thread(target=_pump, args=(server.stdout, lines), daemon=True).start()
+    cosim = loaded.project.coSimulation
+    total = cosim.stopTime - cosim.startTime
+    code, message, failures = None, "", {}
+    progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(),
+                        TextColumn("t={task.fields[t]:.3f}/{task.total:.3f} s"),
+                        TextColumn("{task.fields[rate]:.0f} steps/s"), TextColumn("mode={task.fields[mode]}"),
+                        TimeElapsedColumn(), console=console, disable=not show_progress)
+    try:
+        with progress:
+            task = progress.add_task(loaded.name, total=total, t=0.0, rate=0.0, mode="free")
+            while code is None:
+                try:
+                    line = lines.get(timeout=0.2)
+                except queue.Empty:
+                    line = ""
+                if line is None:
+                    break
+                if line.strip():
+                    try:
+                        msg = json.loads(line)
+                    except json.JSONDecodeError:
+                        continue
+                    if "progress" in msg:
+                        p = msg["progress"]
+                        progress.update(task, completed=p["t"] - cosim.startTime, t=p["t"] - cosim.startTime,
+                                        rate=p["steps_per_s"], mode=p["mode"])
+                    elif "done" in msg:
+                        code, message = msg["done"], msg["message"]
+                for name, proc in nodes.items():
+                    if name not in failures and proc.poll() not in (None, 0):
+                        failures[name] = _tail(run_dir / f"node-{name}.stderr.txt")
+                        if server.poll() is None:
+                            server.send_signal(signal.SIGINT)
+    except KeyboardInterrupt:
+        server.send_signal(signal.SIGINT)
+        code, message = 130, "interrupted by Ctrl-C"
+    try:
+        server.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        server.kill()
+    if code is None:
+        code, message = (server.returncode or 3), _tail(run_dir / "server.stderr.txt") or "the server exited"
+    for name, proc in nodes.items():
+        try:
+            proc.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        if proc.returncode not in (0, None) and name not in failures and code == 0:
+            failures[name] = _tail(run_dir / f"node-{name}.stderr.txt")
+    if failures and code in (0, 130):
+        code = 3
+        message = "; ".join(f"{n}: {m}" for n, m in failures.items())
+    elif failures:
+        message += "".join(f"\n  node {n}: {m}" for n, m in failures.items() if m)
+    return EmbeddedResult(code, run_dir, message, failures)

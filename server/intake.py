@@ -1,0 +1,71 @@
+"""Checking frames that arrive from nodes before they reach the barrier.
+
+Anything malformed (random bytes, wrong types, unknown ports, a step already past, a
+sender whose UID does not own the key it wrote on) is dropped, counted by reason and
+logged; the run goes on.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from typing import Any, Callable
+
+import structlog
+
+from fmu_bridge import frames
+from fmu_bridge.config import Node, PortType
+
+_CHECKS: dict[PortType, Callable[[Any], bool]] = {
+    PortType.REAL: lambda v: isinstance(v, (float, int)) and not isinstance(v, bool),
+    PortType.INTEGER: lambda v: isinstance(v, int) and not isinstance(v, bool),
+    PortType.BOOLEAN: lambda v: isinstance(v, bool),
+    PortType.STRING: lambda v: isinstance(v, str),
+    PortType.BINARY: lambda v: isinstance(v, (bytes, bytearray, list)),
+}
+
+
+class Dropped(Exception):
+    """A frame that is not accepted: a short reason (counted) and a detail (logged)."""
+
+    def __init__(self, reason: str, detail: str):
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+        self.detail = detail
+
+
+class Intake:
+    def __init__(self, nodes: list[Node]):
+        self._nodes = {n.nodeName: n for n in nodes}
+        self._checks = {n.nodeName: [(p.name, _CHECKS[p.type]) for p in n.output] for n in nodes}
+        self.dropped: Counter[str] = Counter()
+        self._log = structlog.get_logger("server.intake")
+
+    def drop(self, reason: str, detail: str, step: int) -> None:
+        self.dropped[reason] += 1
+        self._log.warning("frame dropped", reason=reason, detail=detail, step=step)
+
+    def accept(self, node: str, payload: bytes) -> frames.Frame:
+        """Decode and check a frame written on ``up/<node>``; raise Dropped otherwise."""
+        spec = self._nodes.get(node)
+        if spec is None:
+            raise Dropped("unknown sender", f"frame on key of unknown node {node!r}")
+        try:
+            frame = frames.decode(payload)
+        except frames.FrameError as exc:
+            raise Dropped("malformed", f"from {node}: {exc}") from None
+        if frame.kind not in (frames.OUTPUTS, frames.SAMPLE):
+            raise Dropped("wrong kind", f"from {node}: frame kind {frame.kind} is not for the server")
+        uid, _, t, values = frame.fields
+        if uid != spec.UID:
+            raise Dropped("not owner", f"frame on {node}'s key carries UID {uid!r}, {node} owns UID {spec.UID}")
+        if (frame.kind == frames.SAMPLE) != spec.asynchronous:
+            raise Dropped("wrong kind", f"{node} is {'' if spec.asynchronous else 'not '}asynchronous")
+        if not isinstance(t, (int, float)) or isinstance(t, bool):
+            raise Dropped("wrong type", f"from {node}: time {t!r} is not a number")
+        if not isinstance(values, list) or len(values) != len(self._checks[node]):
+            raise Dropped("unknown ports", f"from {node}: {len(values) if isinstance(values, list) else values!r} "
+                                           f"values for {len(self._checks[node])} outputs")
+        for value, (port, check) in zip(values, self._checks[node]):
+            if not check(value):
+                raise Dropped("wrong type", f"{node}.{port} got {type(value).__name__} {value!r:.40}")
+        return frame

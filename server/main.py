@@ -1,0 +1,79 @@
+"""``hycosim server FILE``: open the router session, run the relay, report the outcome."""
+
+from __future__ import annotations
+
+import json
+import platform
+import sys
+from dataclasses import asdict
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import structlog
+
+from fmu_bridge import logs
+from fmu_bridge.config import LoadedProject, server_endpoint
+from fmu_bridge.session import open_session, router_config
+
+from server.recorder import Recorder
+from server.relay import Relay, RunError, run_dir_for
+
+
+def _versions() -> dict[str, str]:
+    found = {"python": platform.python_version()}
+    for dist in ("hycosim", "eclipse-zenoh", "fmpy", "msgpack", "pydantic", "mujoco", "torch"):
+        try:
+            found[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            pass
+    return found
+
+
+def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = Path("runs"),
+          run_dir: Path | None = None, progress_jsonl: bool = False) -> tuple[int, Path, str]:
+    """Run one co-simulation as its server; return (exit code, run directory, message)."""
+    endpoint = listen or server_endpoint(loaded.project.serverIP)
+    run_dir = run_dir or run_dir_for(runs_dir, loaded.name)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    logs.configure(run_dir / "server.log.jsonl")
+    log = structlog.get_logger("server")
+    meta: dict[str, Any] = {
+        "project": loaded.name, "config": str(loaded.path) if loaded.path else None,
+        "config_sha256": loaded.digest, "endpoint": endpoint, "versions": _versions(),
+        "stepSize": loaded.project.coSimulation.stepSize, "stopTime": loaded.project.coSimulation.stopTime,
+        "realTime": loaded.project.coSimulation.realTime,
+        "event_localisation": "none: fixed macro steps",
+    }
+    recorder = Recorder(run_dir, loaded, meta)
+    on_progress = None
+    if progress_jsonl:
+        def on_progress(p: Any) -> None:
+            print(json.dumps({"progress": asdict(p), "run_dir": str(run_dir)}), flush=True)
+    try:
+        session = open_session(router_config(endpoint), endpoint)
+    except Exception as exc:
+        recorder.close("failed", reason=str(exc))
+        return 3, run_dir, str(exc)
+    relay = Relay(loaded, session, recorder, progress_every_s=0.1, on_progress=on_progress)
+    code, message = 0, f"completed {recorder.meta.get('steps', 0)} steps"
+    try:
+        relay.run()
+        message = f"completed {recorder.meta['steps']} macro steps"
+    except RunError as exc:
+        log.error("run failed", error=str(exc))
+        code, message = 3, str(exc)
+    except KeyboardInterrupt:
+        code, message = 130, "interrupted by Ctrl-C; results so far are flushed"
+    except Exception as exc:  # a bug, not bad input: keep the traceback in the log
+        log.exception("internal error")
+        code, message = 4, f"internal error {type(exc).__name__}: {exc} (traceback in {run_dir / 'server.log.jsonl'})"
+    finally:
+        session.close()
+    if progress_jsonl:
+        print(json.dumps({"done": code, "message": message, "run_dir": str(run_dir)}), flush=True)
+    return code, run_dir, message
+
+
+if __name__ == "__main__":  # pragma: no cover - the CLI is the entry point
+    sys.exit("use: hycosim server FILE")

@@ -1,0 +1,264 @@
+"""The relay server's co-simulation loop: attach, then the macro-step barrier until stopTime.
+
+Read top to bottom, :meth:`Relay.run` is the whole algorithm (Jacobi coupling):
+
+1. wait until every node holds a liveliness token (attachTimeout names the missing ones);
+2. START: every stepping node reports its outputs at t0;
+3. at each macro-step point T_k: evaluate the guards (maybe switch mode), route the
+   outputs along the links active in the mode, record the step, then release all nodes
+   at once to integrate T_k → T_k+H on those inputs, and gather their outputs at T_k+H;
+4. STOP at stopTime, on Ctrl-C, or on a fault, with everything recorded so far on disk.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import structlog
+import zenoh
+
+from fmu_bridge import frames
+from fmu_bridge.config import FREE_MODE, LoadedProject
+from fmu_bridge.inbox import Inbox
+from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
+
+from server.async_sources import SampleHistory
+from server.coordinator import Coordinator
+from server.intake import Dropped, Intake
+from server.recorder import Recorder
+from server.routing import OutputView, Router
+
+
+class RunError(RuntimeError):
+    """A run that cannot go on; the message names the node and the step."""
+
+
+@dataclass
+class Progress:
+    """What the server reports while running (read by ``hycosim run``'s progress bar)."""
+
+    step: int = 0
+    t: float = 0.0
+    mode: str = FREE_MODE
+    steps_per_s: float = 0.0
+    attached: list[str] = field(default_factory=list)
+
+
+class Relay:
+    def __init__(self, loaded: LoadedProject, session: zenoh.Session, recorder: Recorder,
+                 progress_every_s: float = 0.0, on_progress: Any = None):
+        self.loaded = loaded
+        self.project = loaded.project
+        self.cosim = self.project.coSimulation
+        self.keys = ProjectKeys(self.project.projectName)
+        self.session = session
+        self.recorder = recorder
+        self.coordinator = Coordinator(self.project.events, loaded.guards)
+        self.router = Router(loaded)
+        self.intake = Intake(self.project.nodeLists)
+        self.stepping = [n.nodeName for n in self.project.stepping_nodes()]
+        self.histories = {n.nodeName: SampleHistory([p.start_value() for p in n.output])
+                          for n in self.project.async_nodes()}
+        # Async nodes' outputs as seen at the current point (hold), for guards and records.
+        self.outputs: dict[str, list[Any]] = {
+            n.nodeName: [p.start_value() for p in n.output] for n in self.project.nodeLists}
+        self.alive: set[str] = set()
+        self.progress = Progress()
+        self._progress_every = progress_every_s
+        self._on_progress = on_progress
+        self._log = structlog.get_logger("server").bind(project=self.project.projectName)
+        self._local_key = f"{self.keys.root}/up/_local"
+        self._stop_requested = threading.Event()
+
+    # --- wiring -------------------------------------------------------------------
+
+    def _on_liveliness(self, sample: zenoh.Sample) -> None:
+        node = ProjectKeys.last_chunk(str(sample.key_expr))
+        alive = sample.kind == zenoh.SampleKind.PUT
+        self.inbox.inject(frames.encode(frames.LIVE, node, alive))
+
+    def _on_status(self, query: zenoh.Query) -> None:
+        query.reply(self.keys.status, json.dumps({
+            "project": self.project.projectName, "attached": sorted(self.alive),
+            "expected": [n.nodeName for n in self.project.nodeLists],
+            "step": self.progress.step, "t": self.progress.t, "mode": self.progress.mode}))
+
+    def request_stop(self) -> None:
+        """Ask the loop to stop at the next macro-step point (thread-safe)."""
+        self._stop_requested.set()
+
+    # --- the loop -----------------------------------------------------------------
+
+    def run(self) -> None:
+        self.inbox = Inbox(self.session, self.keys.up_all, self._local_key)
+        self.release = self.session.declare_publisher(
+            self.keys.down, congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+        token = self.session.liveliness().declare_token(self.keys.alive(SERVER_TOKEN))
+        watcher = self.session.liveliness().declare_subscriber(self.keys.alive_all, self._on_liveliness, history=True)
+        status = self.session.declare_queryable(self.keys.status, self._on_status)
+        status_text, reason = "failed", ""
+        try:
+            self._wait_for_nodes()
+            self._loop()
+            status_text = "completed" if not self._stop_requested.is_set() else "stopped"
+        except KeyboardInterrupt:
+            status_text, reason = "interrupted", "interrupted by Ctrl-C"
+            raise
+        except RunError as exc:
+            reason = str(exc)
+            raise
+        finally:
+            self._broadcast_stop(status_text if not reason else reason)
+            self.recorder.close(status_text, reason=reason, dropped_frames=dict(self.intake.dropped),
+                                samples_received={n: h.received for n, h in self.histories.items()})
+            for decl in (status, watcher, token):
+                try:
+                    decl.undeclare()
+                except Exception:
+                    pass
+            self.inbox.close()
+
+    def _broadcast_stop(self, reason: str) -> None:
+        try:
+            self.release.put(frames.encode(frames.STOP, self.progress.step, reason))
+        except Exception:  # the session may be gone with Ctrl-C
+            pass
+
+    def _wait_for_nodes(self) -> None:
+        expected = {n.nodeName for n in self.project.nodeLists}
+        deadline = time.monotonic() + self.cosim.attachTimeout
+        while not expected <= self.alive:
+            msg = self.inbox.recv(deadline - time.monotonic())
+            if msg is None:
+                missing = sorted(expected - self.alive)
+                raise RunError(f"timed out after {self.cosim.attachTimeout:g} s waiting for node(s) "
+                               f"{', '.join(missing)} to attach to {self.project.serverIP}")
+            self._handle_side_message(*msg, step=-1, collecting=False)
+        self._log.info("all nodes attached", nodes=sorted(self.alive))
+
+    def _handle_side_message(self, key: str, payload: bytes, step: int, collecting: bool) -> tuple[str, frames.Frame] | None:
+        """Liveliness and samples are handled here; stepping outputs are returned to the caller."""
+        if key == self._local_key:
+            frame = frames.decode(payload)
+            node, alive = frame.fields
+            if node == SERVER_TOKEN:
+                return None
+            if alive:
+                self.alive.add(node)
+                self.progress.attached = sorted(self.alive)
+                self._log.info("node attached", node=node)
+            elif node in self.alive:
+                self.alive.discard(node)
+                if collecting or step >= 0:
+                    raise RunError(f"node {node!r} was lost at step {step} (t={self._time(step):g} s): "
+                                   "its liveliness token disappeared (process killed or link lost)")
+            return None
+        node = ProjectKeys.last_chunk(key)
+        try:
+            frame = self.intake.accept(node, payload)
+        except Dropped as exc:
+            self.intake.drop(exc.reason, exc.detail, step)
+            return None
+        if frame.kind == frames.SAMPLE:
+            _, _, t, values = frame.fields
+            self.histories[node].add(float(t), values)
+            return None
+        return node, frame
+
+    def _time(self, step: int) -> float:
+        return self.cosim.startTime + max(step, 0) * self.cosim.stepSize
+
+    def _collect(self, step: int, released_at: float) -> dict[str, float]:
+        """Gather every stepping node's outputs for ``step``; return arrival offsets (s)."""
+        pending = set(self.stepping)
+        arrivals: dict[str, float] = {}
+        deadline = time.monotonic() + self.cosim.stepTimeout
+        while pending:
+            msg = self.inbox.recv(deadline - time.monotonic())
+            if msg is None:
+                raise RunError(f"timed out after {self.cosim.stepTimeout:g} s at step {step} "
+                               f"(t={self._time(step):g} s) waiting for outputs of {', '.join(sorted(pending))}")
+            got = self._handle_side_message(*msg, step=step, collecting=True)
+            if got is None:
+                continue
+            node, frame = got
+            _, frame_step, _, values = frame.fields
+            if frame_step != step:
+                reason = "step already past" if isinstance(frame_step, int) and frame_step < step else "wrong step"
+                self.intake.drop(reason, f"{node} sent step {frame_step!r} while collecting {step}", step)
+                continue
+            if node not in pending:
+                self.intake.drop("duplicate", f"{node} sent step {step} twice", step)
+                continue
+            pending.discard(node)
+            self.outputs[node] = values
+            arrivals[node] = time.perf_counter() - released_at
+        return arrivals
+
+    def _loop(self) -> None:
+        cosim = self.cosim
+        n_steps = round((cosim.stopTime - cosim.startTime) / cosim.stepSize)
+        rt = cosim.real_time_factor()
+        wall0 = time.time()
+        self.release.put(frames.encode(frames.START, self.recorder.run_dir.name, cosim.startTime,
+                                       cosim.stepSize, wall0, rt))
+        released_at = time.perf_counter()
+        arrivals = self._collect(0, released_at)
+        wait = time.perf_counter() - released_at
+        perf0 = time.perf_counter()
+        last_progress = 0.0
+        for k in range(n_steps + 1):
+            t = cosim.startTime + k * cosim.stepSize
+            for node, history in self.histories.items():
+                if history.latest is not None:
+                    self.outputs[node] = history.latest[1]
+            switch = self.coordinator.update(k, t, OutputView(self.router.output_index, self.outputs))
+            if switch is not None:
+                self.recorder.event(switch.as_record())
+                self._log.info("mode switch", step=k, t=t, name=switch.event, to=switch.to_mode, values=switch.values)
+            mode = self.coordinator.mode
+            ages = self.router.route(mode, t, self.outputs, self.histories)
+            self.recorder.row(k, t, mode, self.outputs, self.router.inputs)
+            lateness = None
+            if rt is not None:
+                target = wall0 + (t - cosim.startTime) * rt
+                lateness = max(0.0, time.time() - target)
+                if time.time() < target:
+                    time.sleep(target - time.time())
+            holder = max(arrivals, key=arrivals.get) if arrivals else ""
+            self.recorder.timing(k, t, wait, holder, lateness, arrivals, ages)
+            self.progress.step, self.progress.t, self.progress.mode = k, t, mode
+            now = time.perf_counter()
+            if self._on_progress is not None and now - last_progress >= self._progress_every:
+                last_progress = now
+                self.progress.steps_per_s = k / (now - perf0) if now > perf0 else 0.0
+                self._on_progress(self.progress)
+            if k == n_steps or self._stop_requested.is_set():
+                break
+            inputs = {n: self.router.inputs[n] for n in self.stepping}
+            released_at = time.perf_counter()
+            self.release.put(frames.encode(frames.STEP, k, t, cosim.stepSize, mode, inputs,
+                                           self.coordinator.driven_nodes()))
+            arrivals = self._collect(k + 1, released_at)
+            wait = time.perf_counter() - released_at
+        elapsed = time.perf_counter() - perf0
+        self.recorder.meta["steps_per_s"] = n_steps / elapsed if elapsed > 0 else None
+        if self._on_progress is not None:
+            self.progress.steps_per_s = self.recorder.meta["steps_per_s"] or 0.0
+            self._on_progress(self.progress)
+
+
+def run_dir_for(base: Path, project: str) -> Path:
+    """``runs/<project>-<timestamp>``, made unique if two runs start in the same second."""
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    candidate = base / f"{project}-{stamp}"
+    n = 1
+    while candidate.exists():
+        n += 1
+        candidate = base / f"{project}-{stamp}-{n}"
+    return candidate
