@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 from clients.node import Node, NodeContext
 
 
 class Gain(Node):
-    """Parameters ``k`` (1.0) and ``b`` (0.0); input ``u``, output ``y``.
+    """Parameters ``k`` (1.0) and ``b`` (0.0); input ``u``, output ``y``. ``work_s`` (0.0)
+    spends that much wall time per step, standing in for an expensive model (benchmarks,
+    and the report's "who held the barrier").
 
     Its output at T+H is computed from the input sampled at T, so a chain of gains shows
     the Jacobi scheme's one-step delay per hop exactly.
@@ -17,6 +20,7 @@ class Gain(Node):
     def setup(self, ctx: NodeContext) -> None:
         self.k = float(ctx.parameter("k", 1.0))
         self.b = float(ctx.parameter("b", 0.0))
+        self.work_s = float(ctx.parameter("work_s", 0.0))
         start = ctx.inputs[0].start_value() if ctx.inputs else 0.0
         self.y = self.k * start + self.b
 
@@ -24,4 +28,6 @@ class Gain(Node):
         return {"y": self.y}
 
     def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
+        if self.work_s > 0:
+            time.sleep(self.work_s)
         self.y = self.k * inputs["u"] + self.b

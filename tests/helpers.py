@@ -1,0 +1,80 @@
+"""Shared test helpers: project files, free loopback endpoints, real processes."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parents[1]
+HYCOSIM = [sys.executable, "-m", "hycosim"]
+
+
+def free_endpoint() -> str:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+
+
+def write_project(path: Path, nodes: list[dict], links: list[dict] | None = None, events: list[dict] | None = None,
+                  cosim: dict | None = None, name: str = "t", **extra: Any) -> Path:
+    links = links or []
+    doc = {"projectName": name, "serverIP": free_endpoint(), "nodeNum": len(nodes), "nodeLists": nodes,
+           "linkNum": len(links), "linkLists": links, **extra}
+    if cosim is not None:
+        doc["coSimulation"] = cosim
+    if events:
+        doc["events"] = events
+    path.write_text(json.dumps(doc, indent=1))
+    return path
+
+
+def env() -> dict[str, str]:
+    return dict(os.environ, PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1")
+
+
+def hycosim(*args: str, timeout: float = 120, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([*HYCOSIM, *args], capture_output=True, text=True, timeout=timeout, env=env(),
+                          cwd=cwd or REPO)
+
+
+def spawn(*args: str, **kw: Any) -> subprocess.Popen:
+    return subprocess.Popen([*HYCOSIM, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env(), cwd=REPO, **kw)
+
+
+def run_project(cfg: Path, runs: Path, timeout: float = 120) -> Path:
+    """``hycosim run`` the project; assert success and return its run directory."""
+    res = hycosim("run", str(cfg), "--runs-dir", str(runs), "--no-progress", timeout=timeout)
+    assert res.returncode == 0, f"run failed ({res.returncode}):\n{res.stdout}\n{res.stderr}"
+    dirs = sorted(runs.iterdir())
+    assert len(dirs) == 1
+    return dirs[0]
+
+
+def read_rows(run_dir: Path, name: str = "values.csv") -> list[dict[str, str]]:
+    with open(run_dir / name, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def column(rows: list[dict[str, str]], key: str) -> list[float]:
+    return [float(r[key]) for r in rows]
+
+
+def meta(run_dir: Path) -> dict[str, Any]:
+    return json.loads((run_dir / "meta.json").read_text())
+
+
+def wait_for(predicate, timeout: float, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")

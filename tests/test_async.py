@@ -1,0 +1,52 @@
+"""Asynchronous sources: samples at their own rate, brought to macro-step points by hold or extrapolation."""
+
+from __future__ import annotations
+
+import math
+
+from server.async_sources import SampleHistory
+from tests.helpers import column, meta, read_rows, run_project, write_project
+
+
+def test_sample_history_hold_and_linear():
+    hist = SampleHistory([7.0])
+    assert hist.value_at(0, 1.0, "linear") == (7.0, None)
+    hist.add(0.1, [1.0])
+    assert hist.value_at(0, 0.25, "linear") == (1.0, 0.15)
+    hist.add(0.2, [2.0])
+    value, age = hist.value_at(0, 0.25, "linear")
+    assert math.isclose(value, 2.5) and math.isclose(age, 0.05)
+    assert not hist.add(0.15, [9.0])  # older than the latest: ignored
+    assert hist.value_at(0, 0.3, "hold")[0] == 2.0
+
+
+def test_extrapolated_and_held_samples_over_zenoh(tmp_path):
+    rate, slope = 23.0, 2.0  # a rate that never lines up with the macro step
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "sensor", "UID": 1, "model": "ramp_source", "async": True, "rate": rate,
+         "parameters": {"a": 0.5, "b": slope}, "output": ["y"]},
+        {"nodeName": "lin", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+        {"nodeName": "zoh", "UID": 3, "model": "gain", "input": ["u"], "output": ["y"]},
+    ], [{"from": "sensor.y", "to": "lin.u", "extrapolation": "linear"},
+        {"from": "sensor.y", "to": "zoh.u", "extrapolation": "hold"}],
+        cosim={"stepSize": 0.01, "stopTime": 1.0})
+    run = run_project(cfg, tmp_path / "runs")
+    rows = read_rows(run)
+    timing = read_rows(run, "timing.csv")
+    t, lin, zoh = column(rows, "t"), column(rows, "lin.u"), column(rows, "zoh.u")
+    checked = 0
+    for k in range(len(rows)):
+        age_lin, age_zoh = timing[k]["age_s:lin.u"], timing[k]["age_s:zoh.u"]
+        if not age_lin:
+            assert lin[k] == 0.0 and zoh[k] == 0.0  # start values until the first sample
+            continue
+        assert float(age_lin) >= 0 and float(age_zoh) >= 0
+        # Held: the value of the sample taken `age` ago.
+        assert math.isclose(zoh[k], 0.5 + slope * (t[k] - float(age_zoh)), abs_tol=1e-5)
+        sample_time = (zoh[k] - 0.5) / slope
+        assert math.isclose(sample_time * rate, round(sample_time * rate), abs_tol=1e-6)
+        if k >= 20:  # two samples in hand: a ramp is extrapolated exactly
+            assert math.isclose(lin[k], 0.5 + slope * t[k], abs_tol=1e-9)
+            checked += 1
+    assert checked > 50
+    assert meta(run)["samples_received"]["sensor"] >= int(rate * 0.9)

@@ -1,0 +1,134 @@
+"""Project JSON validation: the shipped configs pass, and one bad file per rule fails clearly."""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import pytest
+
+from fmu_bridge.config import ConfigError, load_project, server_endpoint
+from tests.helpers import REPO, hycosim
+
+GOOD = {
+    "projectName": "demo",
+    "serverIP": "127.0.0.1:7447",
+    "nodeNum": 3,
+    "nodeLists": [
+        {"nodeName": "a", "UID": 1, "model": "ramp", "input": [], "output": ["y", "v"]},
+        {"nodeName": "b", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+        {"nodeName": "c", "UID": 3, "model": "gain", "input": ["u", {"name": "n", "type": "Integer"}],
+         "output": [{"name": "y"}, {"name": "flag", "type": "Boolean"}]},
+    ],
+    "linkNum": 3,
+    "linkLists": [
+        {"from": "a.y", "to": "b.u"},
+        {"from": "b.y", "to": "c.u", "activeIn": ["free"]},
+        {"from": "a", "to": "c", "pairs": [["v", "u"]], "activeIn": ["hold"]},
+    ],
+    "events": [{"name": "hold", "when": "c.flag", "drives": "c", "until": "not c.flag and a.y > 1"}],
+}
+
+
+def _write(tmp_path: Path, doc: dict) -> Path:
+    p = tmp_path / "project.json"
+    p.write_text(json.dumps(doc))
+    return p
+
+
+def _bad(tmp_path: Path, mutate) -> ConfigError:
+    doc = copy.deepcopy(GOOD)
+    mutate(doc)
+    with pytest.raises(ConfigError) as info:
+        load_project(_write(tmp_path, doc))
+    return info.value
+
+
+def test_good_file_loads_with_routes_and_guards(tmp_path):
+    loaded = load_project(_write(tmp_path, GOOD))
+    assert [(r.src_node, r.src_port, r.dst_node, r.dst_port) for r in loaded.routes] == [
+        ("a", "y", "b", "u"), ("b", "y", "c", "u"), ("a", "v", "c", "u")]
+    assert loaded.routes[1].active("free") and not loaded.routes[1].active("hold")
+    assert loaded.routes[0].active("hold")
+    when, until = loaded.guards["hold"]
+    assert when.references == [("c", "flag")]
+    assert len(loaded.digest) == 64
+
+
+@pytest.mark.parametrize("path", sorted((REPO / "configs").glob("*.json")), ids=lambda p: p.name)
+def test_shipped_configs_validate(path):
+    res = hycosim("validate", str(path))
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.startswith("OK")
+
+
+CASES = {
+    "unknown key": (lambda d: d["nodeLists"][0].update(outputs=["x"]), "nodeLists[0].outputs", "unknown key"),
+    "nodeNum disagrees": (lambda d: d.update(nodeNum=4), "nodeNum", "nodeNum is 4"),
+    "linkNum disagrees": (lambda d: d.update(linkNum=1), "linkNum", "linkNum is 1"),
+    "duplicate name": (lambda d: d["nodeLists"][1].update(nodeName="a"), "nodeLists[1].nodeName", "duplicate node name"),
+    "duplicate UID": (lambda d: d["nodeLists"][2].update(UID=1), "nodeLists[2].UID", "duplicate UID 1"),
+    "link from an input": (lambda d: d["linkLists"][0].update({"from": "b.u"}), "linkLists[0]", "not an output of node 'b'"),
+    "link to an output": (lambda d: d["linkLists"][0].update({"to": "b.y"}), "linkLists[0]", "not an input of node 'b'"),
+    "link to unknown node": (lambda d: d["linkLists"][0].update({"to": "zz.u"}), "linkLists[0].to", "unknown node 'zz'"),
+    "two feeders in one mode": (lambda d: d["linkLists"][2].update(activeIn=["free"]), "linkLists[2].to",
+                                "also fed by linkLists[1] in mode 'free'"),
+    "type mismatch": (lambda d: d["linkLists"].append({"from": "a.y", "to": "c.n"}) or d.update(linkNum=4),
+                      "linkLists[3]", "type mismatch: a.y is Real, c.n is Integer"),
+    "guard does not parse": (lambda d: d["events"][0].update(when="c.flag >"), "events[0].when", "does not parse"),
+    "guard names unknown port": (lambda d: d["events"][0].update(until="c.nothing > 1"), "events[0].until",
+                                 "c.nothing, which is not a node output"),
+    "guard calls code": (lambda d: d["events"][0].update(when="__import__('os').system('true')"), "events[0].when",
+                         "not allowed"),
+    "unknown mode": (lambda d: d["linkLists"][1].update(activeIn=["grab"]), "linkLists[1].activeIn", "unknown mode 'grab'"),
+    "event drives unknown node": (lambda d: d["events"][0].update(drives="ghost"), "events[0].drives", "unknown node"),
+    "bad port type": (lambda d: d["nodeLists"][1].update(input=[{"name": "u", "type": "Float"}]),
+                      "nodeLists[1].input[0].type", "Input should be"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_each_rule_rejects_with_path_and_hint(tmp_path, case):
+    mutate, path, text = CASES[case]
+    err = _bad(tmp_path, mutate)
+    rendered = [i.render() for i in err.issues]
+    assert any(r.startswith(path) and text in r for r in rendered), rendered
+    assert str(tmp_path / "project.json") in str(err)
+
+
+def test_all_errors_reported_at_once(tmp_path):
+    err = _bad(tmp_path, lambda d: (d.update(nodeNum=9, linkNum=9), d["nodeLists"][2].update(UID=2)))
+    paths = {i.path for i in err.issues}
+    assert {"nodeNum", "linkNum", "nodeLists[2].UID"} <= paths
+
+
+def test_duplicate_json_key_and_bad_json(tmp_path):
+    p = tmp_path / "dup.json"
+    p.write_text('{"nodeNum": 1, "nodeNum": 2, "nodeLists": []}')
+    with pytest.raises(ConfigError, match="duplicate key 'nodeNum'"):
+        load_project(p)
+    p.write_text('{"nodeNum": 1,, }')
+    with pytest.raises(ConfigError, match="line 1 column"):
+        load_project(p)
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_project(tmp_path / "missing.json")
+
+
+def test_cli_lists_every_error_and_exits_2(tmp_path):
+    doc = copy.deepcopy(GOOD)
+    doc["nodeNum"] = 7
+    doc["linkLists"][0]["to"] = "b.nope"
+    p = _write(tmp_path, doc)
+    res = hycosim("validate", str(p))
+    assert res.returncode == 2
+    assert f"{p}: nodeNum: nodeNum is 7" in res.stderr
+    assert "linkLists[0].to: b.nope is not an input of node 'b'" in res.stderr
+    assert "hint:" in res.stderr
+    assert "Traceback" not in res.stderr
+
+
+def test_server_ip_forms():
+    assert server_endpoint("10.0.0.5") == "tcp/10.0.0.5:7447"
+    assert server_endpoint("10.0.0.5:9000") == "tcp/10.0.0.5:9000"
+    assert server_endpoint("tcp/127.0.0.1:7448") == "tcp/127.0.0.1:7448"

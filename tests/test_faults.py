@@ -1,0 +1,165 @@
+"""Faults: lost nodes, malformed frames, nodes that never attach, Ctrl-C, broken node models."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import time
+
+import msgpack
+import zenoh
+
+from fmu_bridge import frames
+from fmu_bridge.keys import ProjectKeys
+from fmu_bridge.session import client_config
+from tests.helpers import hycosim, meta, read_rows, spawn, wait_for, write_project
+
+
+def _pair(tmp_path, **cosim):
+    settings = {"stepSize": 0.01, "stopTime": 3.0, "realTime": True, "stepTimeout": 5.0, "attachTimeout": 20.0}
+    settings.update(cosim)
+    return write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+    ], [{"from": "clock.y", "to": "g.u"}], cosim=settings, name="faults")
+
+
+def _endpoint(cfg):
+    return json.loads(cfg.read_text())["serverIP"]
+
+
+def _steps_on_disk(run_dir):
+    path = run_dir / "values.csv"
+    return len(read_rows(run_dir)) if path.exists() else 0
+
+
+def test_node_killed_mid_run_stops_with_its_name_and_step(tmp_path):
+    cfg = _pair(tmp_path)
+    run_dir = tmp_path / "run"
+    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
+    nodes = {n: spawn("node", n, str(cfg)) for n in ("clock", "g")}
+    try:
+        wait_for(lambda: _steps_on_disk(run_dir) > 30, 30, "30 steps")
+        nodes["g"].send_signal(signal.SIGKILL)
+        killed_at = time.monotonic()
+        _, err = server.communicate(timeout=30)
+        assert time.monotonic() - killed_at < 5  # noticed through liveliness, not a step timeout
+        assert server.returncode == 3
+        assert "node 'g' was lost at step" in err
+        assert "Traceback" not in err
+        m = meta(run_dir)
+        assert m["status"] == "failed" and "node 'g' was lost" in m["reason"]
+        rows = read_rows(run_dir)
+        assert len(rows) >= 30 and all(r["step"] == str(i) for i, r in enumerate(rows))
+        step = int(m["reason"].split("at step ")[1].split()[0])
+        assert len(rows) == step  # every step before the loss is on disk, none after
+        assert nodes["clock"].wait(timeout=20) == 0  # told to stop
+    finally:
+        for p in (server, *nodes.values()):
+            if p.poll() is None:
+                p.kill()
+
+
+def test_malformed_frames_are_dropped_counted_and_the_run_goes_on(tmp_path):
+    cfg = _pair(tmp_path, stopTime=2.0)
+    run_dir = tmp_path / "run"
+    endpoint = _endpoint(cfg)
+    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
+    nodes = [spawn("node", n, str(cfg)) for n in ("clock", "g")]
+    keys = ProjectKeys("faults")
+    try:
+        wait_for(lambda: _steps_on_disk(run_dir) > 10, 30, "10 steps")
+        with zenoh.open(client_config(endpoint)) as session:
+            bad = [
+                (keys.up("g"), os.urandom(40)),                                      # random bytes
+                (keys.up("g"), msgpack.packb({"not": "a frame"})),                   # not an array
+                (keys.up("g"), msgpack.packb([99, frames.OUTPUTS, 2, 1, 0.0, [1.0]])),  # wrong version
+                (keys.up("g"), frames.encode(frames.OUTPUTS, 2, 10**6, 0.0, ["text"])),  # wrong type
+                (keys.up("g"), frames.encode(frames.OUTPUTS, 2, 10**6, 0.0, [1.0, 2.0])),  # unknown ports
+                (keys.up("g"), frames.encode(frames.OUTPUTS, 2, 0, 0.0, [1.0])),      # step already past
+                (keys.up("g"), frames.encode(frames.OUTPUTS, 1, 10**6, 0.0, [1.0])),  # UID of another node
+                (keys.up("ghost"), frames.encode(frames.OUTPUTS, 9, 1, 0.0, [1.0])),  # unknown sender
+            ]
+            for key, payload in bad:
+                session.put(key, payload, congestion_control=zenoh.CongestionControl.BLOCK)
+            time.sleep(0.3)
+        _, err = server.communicate(timeout=30)
+        assert server.returncode == 0, err
+        m = meta(run_dir)
+        assert m["status"] == "completed"
+        assert m["dropped_frames"] == {"malformed": 3, "wrong type": 1, "unknown ports": 1,
+                                       "step already past": 1, "not owner": 1, "unknown sender": 1}
+        rows = read_rows(run_dir)
+        assert len(rows) == 201
+        # The forged values never reached the routing: g.u is the clock, step by step.
+        assert all(r["g.u"] == r["clock.y"] for r in rows)
+        log = (run_dir / "server.log.jsonl").read_text()
+        assert log.count('"frame dropped"') == 8
+    finally:
+        for p in (server, *nodes):
+            if p.poll() is None:
+                p.kill()
+
+
+def test_node_that_never_attaches_times_out_naming_it(tmp_path):
+    cfg = _pair(tmp_path, attachTimeout=2.0)
+    run_dir = tmp_path / "run"
+    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
+    node = spawn("node", "clock", str(cfg))
+    try:
+        _, err = server.communicate(timeout=30)
+        assert server.returncode == 3
+        assert "timed out after 2 s waiting for node(s) g to attach" in err
+        assert "clock" not in err.split("waiting for node(s)")[1].split("to attach")[0]
+        assert meta(run_dir)["status"] == "failed"
+        assert node.wait(timeout=20) == 0  # the server's STOP reaches the node that did attach
+    finally:
+        for p in (server, node):
+            if p.poll() is None:
+                p.kill()
+
+
+def test_ctrl_c_shuts_down_cleanly_with_results_flushed(tmp_path):
+    cfg = _pair(tmp_path, stopTime=30.0)
+    run_dir = tmp_path / "run"
+    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
+    nodes = [spawn("node", n, str(cfg)) for n in ("clock", "g")]
+    try:
+        wait_for(lambda: _steps_on_disk(run_dir) > 20, 30, "20 steps")
+        server.send_signal(signal.SIGINT)
+        _, err = server.communicate(timeout=20)
+        assert server.returncode == 130
+        assert "Ctrl-C" in err
+        m = meta(run_dir)
+        assert m["status"] == "interrupted"
+        assert len(read_rows(run_dir)) == m["steps"] >= 20
+        for p in nodes:
+            assert p.wait(timeout=20) == 0
+    finally:
+        for p in (server, *nodes):
+            if p.poll() is None:
+                p.kill()
+
+
+def test_node_without_server_fails_clearly(tmp_path):
+    cfg = _pair(tmp_path, attachTimeout=1.0)
+    res = hycosim("node", "clock", str(cfg), timeout=60)
+    assert res.returncode == 3
+    assert f"cannot open Zenoh session on {_endpoint(cfg)}" in res.stderr
+    res = hycosim("node", "nobody", str(cfg), timeout=60)
+    assert res.returncode == 2 and "no node named 'nobody'" in res.stderr
+
+
+def test_embedded_run_reports_a_broken_node_model(tmp_path):
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "broken", "UID": 2, "model": "no_such_module:Thing", "input": ["u"], "output": ["y"]},
+    ], [{"from": "clock.y", "to": "broken.u"}], cosim={"stopTime": 1.0, "attachTimeout": 30.0})
+    started = time.monotonic()
+    res = hycosim("run", str(cfg), "--runs-dir", str(tmp_path / "runs"), "--no-progress", timeout=90)
+    assert res.returncode == 3
+    assert "node 'broken': cannot load model 'no_such_module:Thing'" in res.stderr
+    assert time.monotonic() - started < 25  # the launcher does not wait out the attach timeout
+    run_dir = next((tmp_path / "runs").iterdir())
+    assert (run_dir / "meta.json").exists()

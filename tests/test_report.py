@@ -1,0 +1,54 @@
+"""Where the time goes: report, plot and real-time pacing on real runs."""
+
+from __future__ import annotations
+
+import json
+
+from tests.helpers import hycosim, meta, read_rows, run_project, write_project
+
+
+def test_report_names_the_node_that_holds_the_barrier_and_plot_draws(tmp_path):
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "fast", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+        {"nodeName": "slow", "UID": 3, "model": "gain", "parameters": {"work_s": 0.004}, "input": ["u"], "output": ["y"]},
+    ], [{"from": "clock.y", "to": "fast.u"}, {"from": "clock.y", "to": "slow.u"}],
+        events=[{"name": "late", "when": "clock.y >= 0.5 and clock.y < 0.8", "drives": "fast", "until": "clock.y >= 0.8"}],
+        cosim={"stepSize": 0.01, "stopTime": 1.0})
+    run = run_project(cfg, tmp_path / "runs")
+    res = hycosim("report", str(run), "--json")
+    assert res.returncode == 0, res.stderr
+    s = json.loads(res.stdout)
+    assert s["steps"] == 101 and s["status"] == "completed"
+    assert max(s["holder_share"], key=s["holder_share"].get) == "slow"
+    assert s["holder_share"]["slow"] > 0.8
+    assert s["mean_arrival_ms"]["slow"] > 4.0 > s["mean_arrival_ms"]["fast"]
+    assert [e["to"] for e in s["mode_switches"]] == ["late", "free"]
+    assert all(row["holder"] == "slow" for row in s["slowest_steps"])
+    text = hycosim("report", str(run))
+    assert text.returncode == 0 and "who held the barrier" in text.stdout and "slow" in text.stdout
+    png = tmp_path / "plot.png"
+    res = hycosim("plot", str(run), "clock.y", "slow.y", "-o", str(png))
+    assert res.returncode == 0, res.stderr
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
+    bad = hycosim("plot", str(run), "clock.nope")
+    assert bad.returncode == 2 and "no recorded port clock.nope" in bad.stderr
+    missing = hycosim("report", str(tmp_path / "nowhere"))
+    assert missing.returncode == 2 and "not a run directory" in missing.stderr
+
+
+def test_real_time_pacing_follows_the_wall_clock(tmp_path):
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+    ], [{"from": "clock.y", "to": "g.u"}], cosim={"stepSize": 0.02, "stopTime": 1.0, "realTime": 0.5})
+    run = run_project(cfg, tmp_path / "runs")
+    m = meta(run)
+    # factor 0.5: one simulated second in half a wall second, not faster
+    assert 0.49 < m["wall_time_s"]
+    assert m["steps_per_s"] < 2 * 50 / 0.5 * 1.1
+    timing = read_rows(run, "timing.csv")
+    lateness = [float(r["lateness_s"]) for r in timing]
+    assert len(lateness) == 51 and all(x >= 0 for x in lateness)
+    s = json.loads(hycosim("report", str(run), "--json").stdout)
+    assert s["lateness"]["steps"] == 50  # the start-up point is not a macro step
