@@ -1,7 +1,9 @@
 """The run directory: every routed value at every macro step, events, timing, metadata.
 
-Rows are written and flushed as each macro step completes, so whatever happened before a
-failure is on disk and readable; ``meta.json`` is rewritten with the outcome at the end.
+Rows are written as each macro step completes and flushed at least every 0.1 s of wall
+time (a flush per step costs the barrier about a tenth of its rate), and always on close,
+which every failure path of the server reaches: whatever happened before a failure is on
+disk and readable. ``meta.json`` is rewritten with the outcome at the end.
 """
 
 from __future__ import annotations
@@ -13,6 +15,9 @@ from pathlib import Path
 from typing import Any
 
 from fmu_bridge.config import LoadedProject
+
+
+FLUSH_EVERY_S = 0.1
 
 
 def _cell(value: Any) -> Any:
@@ -45,6 +50,7 @@ class Recorder:
                                *(f"arrival_s:{n}" for n in self._stepping),
                                *(f"age_s:{label}" for label in self._async_labels)])
         self._events_file = open(run_dir / "events.jsonl", "w")  # noqa: SIM115
+        self._flushed = time.monotonic()
         self.meta = dict(meta)
         self.meta.update(status="running", started_at=time.time(), steps=0)
         self.write_meta()
@@ -56,7 +62,6 @@ class Recorder:
         for n in self._nodes:
             cells.extend(_cell(v) for v in inputs[n])
         self._values.writerow(cells)
-        self._values_file.flush()
         self.meta["steps"] = step + 1
 
     def timing(self, step: int, t: float, wait_s: float, holder: str, lateness_s: float | None,
@@ -65,7 +70,14 @@ class Recorder:
             step, repr(t), f"{wait_s:.9f}", holder, "" if lateness_s is None else f"{lateness_s:.6f}",
             *(f"{arrivals[n]:.9f}" if n in arrivals else "" for n in self._stepping),
             *("" if ages.get(label) is None else f"{ages[label]:.6f}" for label in self._async_labels)])
-        self._timing_file.flush()
+        now = time.monotonic()
+        if now - self._flushed >= FLUSH_EVERY_S:
+            self.flush()
+            self._flushed = now
+
+    def flush(self) -> None:
+        for f in (self._values_file, self._timing_file, self._events_file):
+            f.flush()
 
     def event(self, record: dict[str, Any]) -> None:
         self._events_file.write(json.dumps(record) + "\n")

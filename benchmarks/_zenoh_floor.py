@@ -1,0 +1,62 @@
+"""The floor for a Zenoh barrier in Python: one step message out, N replies back, nothing else.
+
+Same transport choices as hycosim (router server, BLOCK + express publishers, FifoChannel
+read in the main thread, msgpack) but no config, routing, checking or recording.
+"""
+
+import subprocess
+import sys
+import time
+
+import msgpack
+import zenoh
+
+
+def _conf(endpoint: str, router: bool) -> zenoh.Config:
+    c = zenoh.Config()
+    c.insert_json5("mode", '"router"' if router else '"client"')
+    c.insert_json5("scouting/multicast/enabled", "false")
+    c.insert_json5("listen/endpoints" if router else "connect/endpoints", f'["{endpoint}"]')
+    return c
+
+
+def node(endpoint: str, i: int) -> None:
+    with zenoh.open(_conf(endpoint, False)) as s:
+        pub = s.declare_publisher(f"floor/out/{i}", congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+        sub = s.declare_subscriber("floor/step", zenoh.handlers.FifoChannel(64))
+        s.liveliness().declare_token(f"floor/alive/{i}")
+        while True:
+            m = msgpack.unpackb(sub.recv().payload.to_bytes())
+            if m[0] < 0:
+                break
+            pub.put(msgpack.packb([m[0], i, 0.5 * m[1][i] + 1.0]))
+
+
+def server(endpoint: str, n: int, steps: int) -> float:
+    with zenoh.open(_conf(endpoint, True)) as s:
+        pub = s.declare_publisher("floor/step", congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+        sub = s.declare_subscriber("floor/out/*", zenoh.handlers.FifoChannel(256))
+        alive = s.liveliness().declare_subscriber("floor/alive/*", zenoh.handlers.FifoChannel(64), history=True)
+        procs = [subprocess.Popen([sys.executable, __file__, "node", endpoint, str(i)]) for i in range(n)]
+        seen = set()
+        while len(seen) < n:
+            seen.add(str(alive.recv().key_expr))
+        y = [1.0] * n
+        t0 = time.perf_counter()
+        for k in range(steps):
+            pub.put(msgpack.packb([k, [y[(i - 1) % n] for i in range(n)]]))
+            for _ in range(n):
+                _, i, value = msgpack.unpackb(sub.recv().payload.to_bytes())
+                y[i] = value
+        rate = steps / (time.perf_counter() - t0)
+        pub.put(msgpack.packb([-1, []]))
+        for p in procs:
+            p.wait(timeout=30)
+    return rate
+
+
+if __name__ == "__main__":
+    if sys.argv[1] == "node":
+        node(sys.argv[2], int(sys.argv[3]))
+    else:
+        print(server(sys.argv[2], int(sys.argv[3]), int(sys.argv[4])), flush=True)

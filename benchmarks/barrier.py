@@ -1,0 +1,160 @@
+"""Macro-step barrier throughput: hycosim against HELICS (tcp, zmq), mosaik 3 and a plain Zenoh barrier.
+
+One workload for every system, in one run: N nodes, each its own OS process, in a ring,
+one float in and out each, y = 0.5·u + 1, for 3000 macro steps; N = 2, 4, 8, 16.
+Rates count macro steps per second of the stepping loop only (start-up excluded).
+Processes are not pinned to cores: on 2 cores the scheduler decides, as it would for a user.
+
+    python benchmarks/barrier.py [--n 2 4] [--steps 3000] [--systems hycosim helics-tcp ...] [--json]
+
+HELICS and mosaik come from the optional extra: pip install -e '.[bench]'.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+SYSTEMS = ["hycosim", "zenoh-floor", "helics-tcp", "helics-zmq", "mosaik"]
+
+
+def _port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def ring_config(n: int, steps: int, path: Path) -> Path:
+    nodes = [{"nodeName": f"n{i}", "UID": i + 1, "model": "gain", "parameters": {"k": 0.5, "b": 1.0},
+              "input": ["u"], "output": ["y"]} for i in range(n)]
+    links = [{"from": f"n{i}.y", "to": f"n{(i + 1) % n}.u"} for i in range(n)]
+    doc = {"projectName": f"ring{n}", "serverIP": f"127.0.0.1:{_port()}", "nodeNum": n, "nodeLists": nodes,
+           "linkNum": n, "linkLists": links,
+           "coSimulation": {"stepSize": 1.0, "stopTime": float(steps), "stepTimeout": 30.0}}
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def run_hycosim(n: int, steps: int) -> float:
+    with tempfile.TemporaryDirectory() as tmp:
+        cfg = ring_config(n, steps, Path(tmp) / "ring.json")
+        res = subprocess.run([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", tmp, "--no-progress"],
+                             capture_output=True, text=True, timeout=600, cwd=REPO)
+        if res.returncode:
+            logs = "".join(f"--- {p.name}\n{p.read_text()[-800:]}" for p in Path(tmp).glob("ring*/*.stderr.txt"))
+            raise RuntimeError(res.stderr + logs)
+        meta = json.loads(next(Path(tmp).glob("ring*/meta.json")).read_text())
+        return float(meta["steps_per_s"])
+
+
+def run_zenoh_floor(n: int, steps: int) -> float:
+    res = subprocess.run([sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{_port()}",
+                          str(n), str(steps)], capture_output=True, text=True, timeout=600)
+    if res.returncode:
+        raise RuntimeError(res.stderr)
+    return float(res.stdout.split()[-1])
+
+
+def run_helics(core: str, n: int, steps: int) -> float:
+    port = _port()
+    script = str(HERE / "_helics_fed.py")
+    broker = subprocess.Popen([sys.executable, script, "broker", core, str(n), str(port)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    feds = [subprocess.Popen([sys.executable, script, "fed", core, str(n), str(i), str(steps), str(port)],
+                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True) for i in range(n)]
+    try:
+        out = feds[0].communicate(timeout=600)[0]
+        for f in feds[1:]:
+            f.wait(timeout=60)
+        broker.wait(timeout=60)
+    finally:
+        for p in (broker, *feds):
+            if p.poll() is None:
+                p.kill()
+    return float(out.split()[0])
+
+
+def run_mosaik(n: int, steps: int) -> float:
+    code = f"""
+import sys, time, mosaik, logging
+from loguru import logger
+logger.remove()
+cfg = {{f"S{{i}}": {{"cmd": sys.executable + " {HERE / '_mosaik_gain.py'} %(addr)s"}} for i in range({n})}}
+world = mosaik.World(cfg)
+ents = [world.start(f"S{{i}}").Gain() for i in range({n})]
+for i in range({n}):
+    world.connect(ents[i], ents[(i + 1) % {n}], ("y", "u"), time_shifted=True, initial_data={{"y": 0.0}})
+t0 = time.perf_counter()
+world.run(until={steps}, print_progress=False)
+print({steps} / (time.perf_counter() - t0))
+"""
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=900)
+    if res.returncode:
+        raise RuntimeError(res.stderr[-2000:])
+    return float(res.stdout.split()[-1])
+
+
+RUNNERS = {
+    "hycosim": run_hycosim,
+    "zenoh-floor": run_zenoh_floor,
+    "helics-tcp": lambda n, s: run_helics("tcp", n, s),
+    "helics-zmq": lambda n, s: run_helics("zmq", n, s),
+    "mosaik": run_mosaik,
+}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, nargs="+", default=[2, 4, 8, 16])
+    ap.add_argument("--steps", type=int, default=3000)
+    ap.add_argument("--systems", nargs="+", default=SYSTEMS, choices=SYSTEMS)
+    ap.add_argument("--json", action="store_true", help="one JSON object per line: system, n, steps_per_s")
+    args = ap.parse_args()
+    results: dict[tuple[str, int], float | None] = {}
+    for n in args.n:
+        for system in args.systems:
+            try:
+                rate = RUNNERS[system](n, args.steps)
+            except ImportError as exc:
+                rate = None
+                print(f"# {system}: skipped ({exc}; pip install -e '.[bench]')", file=sys.stderr)
+            except Exception as exc:  # report and go on with the other systems
+                rate = None
+                print(f"# {system} n={n}: failed:\n{str(exc).strip()[-3000:]}", file=sys.stderr)
+            results[(system, n)] = rate
+            if args.json:
+                print(json.dumps({"system": system, "n": n, "steps_per_s": rate}), flush=True)
+            time.sleep(0.5)  # let sockets of the last run close
+    if args.json:
+        return
+    print(f"{'system':<12}" + "".join(f"{'N=' + str(n):>12}" for n in args.n))
+    for system in args.systems:
+        cells = [results[(system, n)] for n in args.n]
+        print(f"{system:<12}" + "".join(f"{c:>12,.0f}" if c else f"{'-':>12}" for c in cells))
+    print("\nratios (hycosim / other):")
+    for system in args.systems:
+        if system == "hycosim":
+            continue
+        cells = []
+        for n in args.n:
+            a, b = results[("hycosim", n)] if "hycosim" in args.systems else None, results[(system, n)]
+            cells.append(f"{a / b:>12.2f}" if a and b else f"{'-':>12}")
+        print(f"{system:<12}" + "".join(cells))
+    if "hycosim" in args.systems and len(args.n) > 1:
+        base_n = args.n[0]
+        base = results[("hycosim", base_n)]
+        print("\nhycosim cost per step relative to N={}: ".format(base_n) + ", ".join(
+            f"N={n}: {base / results[('hycosim', n)]:.2f}× (linear would be {n / base_n:.0f}×)"
+            for n in args.n if results[("hycosim", n)] and base))
+
+
+if __name__ == "__main__":
+    main()
