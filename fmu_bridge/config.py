@@ -148,6 +148,8 @@ class Event(_Strict):
 class Project(_Strict):
     projectName: str = Field(default="project", pattern=r"^[A-Za-z0-9_\-]+$")
     serverIP: str = "127.0.0.1"
+    # The TCP gateway for bridge FMUs (HOST:PORT); default: serverIP's host, port + 1.
+    gatewayIP: str | None = None
     nodeNum: int = Field(ge=1)
     nodeLists: list[Node]
     linkNum: int = Field(default=0, ge=0)
@@ -419,11 +421,35 @@ def load_project(path: str | Path) -> LoadedProject:
     return parse_project(data, source, path.resolve(), raw)
 
 
+def _host_port(address: str, default_port: int) -> tuple[str, int]:
+    if "/" in address:
+        address = address.split("/", 1)[1]
+    if address.startswith("["):  # [v6]:port
+        host, _, port = address[1:].partition("]:")
+        return host, int(port or default_port)
+    if address.count(":") == 1:
+        host, port = address.split(":")
+        return host, int(port)
+    return address, default_port
+
+
 def server_endpoint(server_ip: str) -> str:
     """Turn the paper's ``serverIP`` (bare IP, IP:port) or a Zenoh endpoint into an endpoint."""
     if "/" in server_ip:
         return server_ip
-    host, _, port = server_ip.rpartition(":") if server_ip.count(":") == 1 else (server_ip, "", "")
-    if not host:
-        host, port = server_ip, ""
-    return f"tcp/{host}:{port or 7447}"
+    host, port = _host_port(server_ip, 7447)
+    return f"tcp/{host}:{port}"
+
+
+def gateway_endpoint(project: Project, server_ip: str | None = None) -> str:
+    """``HOST:PORT`` of the TCP gateway for bridge FMUs: ``gatewayIP``, or serverIP's port + 1."""
+    if project.gatewayIP:
+        host, port = _host_port(project.gatewayIP, 7448)
+        return f"{host}:{port}"
+    host, port = _host_port(server_ip or project.serverIP, 7447)
+    return f"{host}:{port + 1}"
+
+
+def split_host_port(address: str, default_port: int = 7448) -> tuple[str, int]:
+    """(host, port) of ``HOST:PORT``, ``tcp/HOST:PORT`` or ``[v6]:PORT``."""
+    return _host_port(address, default_port)

@@ -49,13 +49,15 @@ def server(
     runs_dir: Annotated[Path, typer.Option(help="where run directories are made")] = Path("runs"),
     run_dir: Annotated[Optional[Path], typer.Option(help="exact run directory to write")] = None,
     progress_jsonl: Annotated[bool, typer.Option(help="print progress as JSON lines (for launchers)")] = False,
+    gateway: Annotated[Optional[str], typer.Option(help="HOST:PORT for bridge FMUs (default: gatewayIP, "
+                                                        "or the server's port + 1)")] = None,
 ) -> None:
-    """Run the relay server for one co-simulation."""
+    """Run the relay server for one co-simulation (Zenoh nodes and bridge FMUs)."""
     from server.main import serve
 
     loaded = _load(file)
     code, rdir, message = serve(loaded, listen=listen, runs_dir=runs_dir, run_dir=run_dir,
-                                progress_jsonl=progress_jsonl)
+                                progress_jsonl=progress_jsonl, gateway=gateway)
     if code:
         err.print(f"[red]error:[/red] {message}\n  results so far: {rdir}", highlight=False)
     elif not progress_jsonl:

@@ -13,7 +13,7 @@ from typing import Any
 import structlog
 
 from fmu_bridge import logs
-from fmu_bridge.config import LoadedProject, server_endpoint
+from fmu_bridge.config import LoadedProject, gateway_endpoint, server_endpoint, split_host_port
 from fmu_bridge.session import open_session, router_config
 
 from server.recorder import Recorder
@@ -31,9 +31,12 @@ def _versions() -> dict[str, str]:
 
 
 def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = Path("runs"),
-          run_dir: Path | None = None, progress_jsonl: bool = False) -> tuple[int, Path, str]:
+          run_dir: Path | None = None, progress_jsonl: bool = False,
+          gateway: str | None = None) -> tuple[int, Path, str]:
     """Run one co-simulation as its server; return (exit code, run directory, message)."""
     endpoint = listen or server_endpoint(loaded.project.serverIP)
+    gateway_required = bool(gateway or loaded.project.gatewayIP)
+    gateway_address = split_host_port(gateway or gateway_endpoint(loaded.project, endpoint))
     run_dir = run_dir or run_dir_for(runs_dir, loaded.name)
     run_dir.mkdir(parents=True, exist_ok=True)
     logs.configure(run_dir / "server.log.jsonl")
@@ -55,7 +58,8 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     except Exception as exc:
         recorder.close("failed", reason=str(exc))
         return 3, run_dir, str(exc)
-    relay = Relay(loaded, session, recorder, progress_every_s=0.1, on_progress=on_progress)
+    relay = Relay(loaded, session, recorder, progress_every_s=0.1, on_progress=on_progress,
+                  gateway_address=gateway_address, gateway_required=gateway_required)
     code, message = 0, f"completed {recorder.meta.get('steps', 0)} steps"
     try:
         relay.run()

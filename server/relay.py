@@ -29,6 +29,7 @@ from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
 
 from server.async_sources import SampleHistory
 from server.coordinator import Coordinator
+from server.gateway import Gateway, GatewayError
 from server.intake import Dropped, Intake
 from server.recorder import Recorder
 from server.routing import OutputView, Router
@@ -51,7 +52,8 @@ class Progress:
 
 class Relay:
     def __init__(self, loaded: LoadedProject, session: zenoh.Session, recorder: Recorder,
-                 progress_every_s: float = 0.0, on_progress: Any = None):
+                 progress_every_s: float = 0.0, on_progress: Any = None,
+                 gateway_address: tuple[str, int] | None = None, gateway_required: bool = False):
         self.loaded = loaded
         self.project = loaded.project
         self.cosim = self.project.coSimulation
@@ -74,6 +76,9 @@ class Relay:
         self._log = structlog.get_logger("server").bind(project=self.project.projectName)
         self._local_key = f"{self.keys.root}/up/_local"
         self._stop_requested = threading.Event()
+        self._gateway_address = gateway_address
+        self._gateway_required = gateway_required
+        self.gateway: Gateway | None = None
 
     # --- wiring -------------------------------------------------------------------
 
@@ -103,6 +108,7 @@ class Relay:
         status = self.session.declare_queryable(self.keys.status, self._on_status)
         status_text, reason = "failed", ""
         try:
+            self._start_gateway()
             self._wait_for_nodes()
             self._loop()
             status_text = "completed" if not self._stop_requested.is_set() else "stopped"
@@ -114,6 +120,8 @@ class Relay:
             raise
         finally:
             self._broadcast_stop(status_text if not reason else reason)
+            if self.gateway is not None:
+                self.gateway.close(reason or status_text)
             self.recorder.close(status_text, reason=reason, dropped_frames=dict(self.intake.dropped),
                                 samples_received={n: h.received for n, h in self.histories.items()})
             for decl in (status, watcher, token):
@@ -122,6 +130,23 @@ class Relay:
                 except Exception:
                     pass
             self.inbox.close()
+
+    def _start_gateway(self) -> None:
+        if self._gateway_address is None:
+            return
+        host, port = self._gateway_address
+        try:
+            self.gateway = Gateway(
+                self.project.stepping_nodes(), self.session, self.keys, host, port,
+                announce=lambda node, alive: self.inbox.inject(frames.encode(frames.LIVE, node, alive)),
+                drop=self.intake.drop)
+        except GatewayError as exc:
+            if self._gateway_required:
+                raise RunError(str(exc)) from None
+            self._log.warning("gateway disabled", reason=str(exc))
+            self.recorder.meta["gateway"] = f"disabled: {exc}"
+            return
+        self.recorder.meta["gateway"] = self.gateway.address
 
     def _broadcast_stop(self, reason: str) -> None:
         try:

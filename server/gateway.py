@@ -1,0 +1,205 @@
+"""The relay's TCP gateway: bridge FMUs attach here and join the same barrier as Zenoh nodes.
+
+The paper's server "can also transmit FMU data": a tool that can only import FMUs loads
+a generated bridge FMU, which connects here (framing in ``fmu_bridge.gateway_protocol``).
+The gateway turns that connection into an ordinary node for the relay: HELLO becomes a
+liveliness PUT, each OUTPUTS frame becomes the msgpack frame a Zenoh node would have
+published on ``up/<node>`` (put session-locally, so it takes the same path through
+intake and barrier), and the server's START/STEP/STOP on ``down`` are written back to
+each connection with that node's inputs. A closed connection is a lost node.
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+from typing import Callable
+
+import structlog
+import zenoh
+
+from fmu_bridge import frames
+from fmu_bridge import gateway_protocol as gp
+from fmu_bridge.config import Node, PortType
+from fmu_bridge.keys import ProjectKeys
+
+_FROM_WIRE: dict[PortType, Callable[[float], object]] = {
+    PortType.REAL: float,
+    PortType.INTEGER: lambda v: int(round(v)),
+    PortType.BOOLEAN: lambda v: v != 0.0,
+}
+
+
+class GatewayError(RuntimeError):
+    """The gateway cannot listen where it was told to."""
+
+
+class _Connection:
+    def __init__(self, sock: socket.socket, node: Node):
+        self.sock = sock
+        self.node = node
+        self.lock = threading.Lock()
+
+    def send(self, data: bytes) -> None:
+        with self.lock:
+            self.sock.sendall(data)
+
+
+class Gateway:
+    def __init__(self, nodes: list[Node], session: zenoh.Session, keys: ProjectKeys, host: str, port: int,
+                 announce: Callable[[str, bool], None], drop: Callable[[str, str, int], None],
+                 hello_timeout: float = 10.0):
+        self._nodes = {n.nodeName: n for n in nodes}
+        self._session = session
+        self._keys = keys
+        self._announce = announce
+        self._drop = drop
+        self._hello_timeout = hello_timeout
+        self._conns: dict[str, _Connection] = {}
+        self._lock = threading.Lock()
+        self._closing = threading.Event()
+        self._log = structlog.get_logger("server.gateway")
+        try:
+            self._listener = socket.create_server((host, port), reuse_port=False)
+        except OSError as exc:
+            raise GatewayError(f"cannot listen for bridge FMUs on {host}:{port}: {exc.strerror or exc}") from None
+        self.address = f"{host}:{self._listener.getsockname()[1]}"
+        self._down = session.declare_subscriber(keys.down, self._on_down)
+        self._accepter = threading.Thread(target=self._accept, name="gateway-accept", daemon=True)
+        self._accepter.start()
+
+    # --- attach ---------------------------------------------------------------------
+
+    def _accept(self) -> None:
+        while not self._closing.is_set():
+            try:
+                sock, peer = self._listener.accept()
+            except OSError:
+                return
+            threading.Thread(target=self._serve, args=(sock, peer), name=f"gateway-{peer}", daemon=True).start()
+
+    def _refuse(self, sock: socket.socket, reason: str, counted_as: str) -> None:
+        self._drop(counted_as, reason, -1)
+        try:
+            sock.sendall(gp.text(gp.REFUSE, reason))
+        except OSError:
+            pass
+        sock.close()
+
+    def _hello(self, sock: socket.socket) -> Node | None:
+        sock.settimeout(self._hello_timeout)
+        try:
+            kind, payload = gp.read_frame(sock)
+            if kind != gp.HELLO:
+                raise gp.ProtocolError(f"expected HELLO, got frame type {kind}")
+            uid, name, n_out, n_in = gp.parse_hello(payload)
+        except (gp.ProtocolError, EOFError, OSError) as exc:
+            self._refuse(sock, f"bad attach: {exc}", "malformed")
+            return None
+        node = self._nodes.get(name)
+        if node is None or node.asynchronous:
+            self._refuse(sock, f"no stepping node named {name!r} in this project", "unknown sender")
+            return None
+        if uid != node.UID:
+            self._refuse(sock, f"UID {uid} does not own node {name!r}", "not owner")
+            return None
+        if (n_out, n_in) != (len(node.output), len(node.input)):
+            self._refuse(sock, f"node {name!r} has {len(node.output)} outputs and {len(node.input)} inputs, "
+                               f"the FMU declares {n_out} and {n_in}: rebuild it from this project", "unknown ports")
+            return None
+        with self._lock:
+            if name in self._conns:
+                self._refuse(sock, f"node {name!r} is already attached", "not owner")
+                return None
+            sock.settimeout(None)
+            self._conns[name] = _Connection(sock, node)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        sock.sendall(gp.frame(gp.WELCOME))
+        return node
+
+    def _serve(self, sock: socket.socket, peer: object) -> None:
+        node = self._hello(sock)
+        if node is None:
+            return
+        name = node.nodeName
+        log = self._log.bind(node=name, peer=str(peer))
+        log.info("bridge FMU attached")
+        self._announce(name, True)
+        convert = [_FROM_WIRE[p.type] for p in node.output]
+        key = self._keys.up(name)
+        try:
+            while True:
+                kind, payload = gp.read_frame(sock)
+                if kind != gp.OUTPUTS:
+                    self._drop("wrong kind", f"{name} sent gateway frame type {kind}", -1)
+                    continue
+                try:
+                    step, t, values = gp.parse_outputs(payload)
+                except gp.ProtocolError as exc:
+                    self._drop("malformed", f"from {name}: {exc}", -1)
+                    continue
+                if len(values) != len(convert):
+                    self._drop("unknown ports", f"{name} sent {len(values)} values for {len(convert)} outputs", step)
+                    continue
+                typed = [c(v) for c, v in zip(convert, values)]
+                self._session.put(key, frames.encode(frames.OUTPUTS, node.UID, step, t, typed),
+                                  allowed_destination=zenoh.Locality.SESSION_LOCAL,
+                                  congestion_control=zenoh.CongestionControl.BLOCK)
+        except gp.Truncated as exc:
+            self._drop("truncated", f"{name}: {exc}", -1)
+        except gp.ProtocolError as exc:
+            self._drop("malformed", f"{name}: {exc}", -1)
+        except (EOFError, OSError):
+            pass
+        finally:
+            with self._lock:
+                self._conns.pop(name, None)
+            sock.close()
+            if not self._closing.is_set():
+                log.info("bridge FMU detached")
+                self._announce(name, False)
+
+    # --- releases -------------------------------------------------------------------
+
+    def _on_down(self, sample: zenoh.Sample) -> None:
+        with self._lock:
+            conns = list(self._conns.values())
+        if not conns:
+            return
+        try:
+            frame = frames.decode(sample.payload.to_bytes())
+        except frames.FrameError:
+            return
+        if frame.kind == frames.START:
+            _, t0, h, _, _ = frame.fields
+            data = {c: gp.start(t0, h) for c in conns}
+        elif frame.kind == frames.STEP:
+            k, t, h, _, inputs, driven = frame.fields
+            data = {c: gp.step(k, t, h, c.node.nodeName in driven, [float(v) for v in inputs[c.node.nodeName]])
+                    for c in conns}
+        elif frame.kind == frames.STOP:
+            data = {c: gp.text(gp.STOP, str(frame.fields[1])) for c in conns}
+        else:
+            return
+        for conn, payload in data.items():
+            try:
+                conn.send(payload)
+            except OSError:
+                pass  # the reader thread reports the loss
+
+    def close(self, reason: str = "the server stopped") -> None:
+        self._closing.set()
+        try:
+            self._down.undeclare()
+        except Exception:
+            pass
+        self._listener.close()
+        with self._lock:
+            conns = list(self._conns.values())
+        for c in conns:
+            try:
+                # STOP may already be on its way from _on_down; a second one is never read.
+                c.send(gp.text(gp.STOP, reason))
+                c.sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
