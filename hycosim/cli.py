@@ -201,5 +201,39 @@ def status(
                   f"attached {len(a['attached'])}/{len(a['expected'])}: {', '.join(a['attached'])}", highlight=False)
 
 
+fmu_app = typer.Typer(no_args_is_help=True, help="Build bridge FMUs from a project; inspect FMUs.")
+app.add_typer(fmu_app, name="fmu")
+
+
+@fmu_app.command("build")
+def fmu_build(
+    file: Path,
+    output: Annotated[Path, typer.Option("-o", "--output", help="folder for the .fmu files")] = Path("fmus"),
+    node: Annotated[Optional[list[str]], typer.Option(help="only these nodes (repeatable)")] = None,
+    server: Annotated[Optional[str], typer.Option(help="gateway HOST:PORT baked in as the default")] = None,
+) -> None:
+    """Write one native FMI 2.0 co-simulation bridge FMU per stepping node of the project."""
+    from fmpy.validation import validate_fmu
+
+    from fmu_bridge.bridge_fmu import BridgeBuildError, build_bridge_fmus
+
+    loaded = _load(file)
+    unknown = [n for n in node or [] if n not in {x.nodeName for x in loaded.project.nodeLists}]
+    if unknown:
+        err.print(f"[red]error:[/red] {file}: no node named {', '.join(unknown)}", highlight=False)
+        raise typer.Exit(2)
+    try:
+        built = build_bridge_fmus(loaded, output, server, node)
+    except BridgeBuildError as exc:
+        err.print(f"[red]error:[/red] {file}: {exc}", highlight=False)
+        raise typer.Exit(2) from None
+    for b in built:
+        problems = validate_fmu(str(b.path))
+        status = "valid" if not problems else "INVALID: " + "; ".join(problems)
+        out.print(f"{b.path}  ({b.model_identifier}, {status})", highlight=False)
+        if problems:
+            raise typer.Exit(4)
+
+
 if __name__ == "__main__":
     app()

@@ -15,6 +15,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #ifdef _WIN32
 #include <winsock2.h>
@@ -22,6 +23,7 @@
 typedef SOCKET hy_socket;
 #define HY_BAD_SOCKET INVALID_SOCKET
 #define hy_close closesocket
+#define hy_pause_100ms() Sleep(100)
 #else
 #include <netdb.h>
 #include <netinet/in.h>
@@ -32,6 +34,7 @@ typedef SOCKET hy_socket;
 typedef int hy_socket;
 #define HY_BAD_SOCKET (-1)
 #define hy_close close
+#define hy_pause_100ms() do { struct timespec ts = {0, 100000000L}; nanosleep(&ts, NULL); } while (0)
 #endif
 
 #include "fmi2Functions.h"
@@ -169,12 +172,20 @@ static int connect_server(Bridge *b) {
         return -1;
     }
     b->sock = HY_BAD_SOCKET;
-    for (ai = res; ai; ai = ai->ai_next) {
-        hy_socket s = socket(ai->ai_family, ai->ai_socktype, ai->ai_protocol);
-        if (s == HY_BAD_SOCKET) continue;
-        set_timeout(s, b->timeout);
-        if (connect(s, ai->ai_addr, (int)ai->ai_addrlen) == 0) { b->sock = s; break; }
-        hy_close(s);
+    /* The tool may start before the server: retry until the timeout. */
+    {
+        time_t deadline = time(NULL) + (time_t)b->timeout + 1;
+        while (b->sock == HY_BAD_SOCKET) {
+            for (ai = res; ai; ai = ai->ai_next) {
+                hy_socket s = socket(ai->ai_family, ai->ai_socktype, ai->ai_protocol);
+                if (s == HY_BAD_SOCKET) continue;
+                set_timeout(s, b->timeout);
+                if (connect(s, ai->ai_addr, (int)ai->ai_addrlen) == 0) { b->sock = s; break; }
+                hy_close(s);
+            }
+            if (b->sock != HY_BAD_SOCKET || time(NULL) >= deadline) break;
+            hy_pause_100ms();
+        }
     }
     freeaddrinfo(res);
     if (b->sock == HY_BAD_SOCKET) {

@@ -1,0 +1,226 @@
+"""Generated native bridge FMUs: validation, fmpy and a C-only importer on the barrier, gateway refusals."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import socket
+import subprocess
+import sys
+import time
+import zipfile
+from pathlib import Path
+
+import pytest
+from fmpy import read_model_description
+from fmpy.validation import validate_fmu
+
+from fmu_bridge import gateway_protocol as gp
+from fmu_bridge.bridge_fmu import BridgeBuildError, build_bridge_fmu
+from fmu_bridge.config import load_project
+from tests.helpers import REPO, column, env, hycosim, meta, read_rows, spawn, write_project
+
+FMI_HEADERS = Path(__import__("fmpy").__file__).parent / "c-code"
+
+
+def _project(tmp_path: Path, stop: float = 1.0, **cosim) -> Path:
+    settings = {"stepSize": 0.1, "stopTime": stop, "attachTimeout": 30.0, "stepTimeout": 10.0}
+    settings.update(cosim)
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "tool", "UID": 7, "input": ["u"], "output": [{"name": "y", "unit": "m", "start": 1.5}]},
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+    ], [{"from": "clock.y", "to": "tool.u"}], cosim=settings, name="bridge")
+    doc = json.loads(cfg.read_text())
+    host, port = doc["serverIP"].split("/")[1].split(":")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        doc["gatewayIP"] = f"127.0.0.1:{s.getsockname()[1]}"
+    cfg.write_text(json.dumps(doc))
+    return cfg
+
+
+def _gateway(cfg: Path) -> tuple[str, int]:
+    host, port = json.loads(cfg.read_text())["gatewayIP"].split(":")
+    return host, int(port)
+
+
+def test_every_generated_fmu_validates_and_declares_exactly_the_ports(tmp_path):
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "a", "UID": 1, "input": ["u", {"name": "n", "type": "Integer", "start": 3}],
+         "output": [{"name": "y", "unit": "rad"}, {"name": "ok", "type": "Boolean", "start": True}]},
+        {"nodeName": "b-2", "UID": 2, "input": [], "output": ["z"]},
+    ], [{"from": "b-2.z", "to": "a.u"}])
+    res = hycosim("fmu", "build", str(cfg), "-o", str(tmp_path / "fmus"))
+    assert res.returncode == 0, res.stderr
+    for name, ins, outs in (("a", ["y", "ok"], ["u", "n"]), ("b-2", ["z"], [])):
+        path = tmp_path / "fmus" / f"{name}.fmu"
+        assert validate_fmu(str(path)) == []
+        md = read_model_description(str(path), validate_model_structure=True, validate_variable_names=True)
+        by_causality = {c: [v.name for v in md.modelVariables if v.causality == c] for c in ("input", "output")}
+        assert by_causality == {"input": ins, "output": outs}
+        params = {v.name: v.start for v in md.modelVariables if v.causality == "parameter"}
+        assert set(params) == {"hycosim_server", "hycosim_node", "hycosim_uid", "hycosim_timeout"}
+        assert md.coSimulation.modelIdentifier == "hycosim_" + name.replace("-", "_")
+        with zipfile.ZipFile(path) as zf:
+            names = set(zf.namelist())
+        assert {"sources/bridge_fmu.c", "sources/bridge_config.h", "sources/Makefile", "sources/CMakeLists.txt",
+                f"binaries/linux64/{md.coSimulation.modelIdentifier}.so"} <= names
+    md = read_model_description(str(tmp_path / "fmus" / "a.fmu"))
+    starts = {v.name: v.start for v in md.modelVariables}
+    assert starts["n"] == "3" and starts["ok"] == "true"
+    assert [v.unit for v in md.modelVariables if v.name == "y"] == ["rad"]
+
+
+def test_sources_in_the_fmu_rebuild_with_their_makefile(tmp_path):
+    built = build_bridge_fmu(load_project(_project(tmp_path)), "tool", tmp_path / "fmus")
+    with zipfile.ZipFile(built.path) as zf:
+        zf.extractall(tmp_path / "x")
+    (tmp_path / "x" / "binaries" / "linux64" / "hycosim_tool.so").unlink()
+    res = subprocess.run(["make", "-C", str(tmp_path / "x" / "sources")], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert (tmp_path / "x" / "binaries" / "linux64" / "hycosim_tool.so").stat().st_size > 5000
+
+
+def test_unsupported_port_types_are_refused_naming_node_and_port(tmp_path):
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "cam", "UID": 1, "input": [], "output": [{"name": "frame", "type": "Binary"}]}])
+    with pytest.raises(BridgeBuildError, match="node 'cam', port 'frame'"):
+        build_bridge_fmu(load_project(cfg), "cam", tmp_path)
+    res = hycosim("fmu", "build", str(cfg), "-o", str(tmp_path / "o"))
+    assert res.returncode == 2 and "port 'frame'" in res.stderr
+
+
+def _start(cfg: Path, run_dir: Path):
+    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
+    clock = spawn("node", "clock", str(cfg))
+    return server, clock
+
+
+def _finish(procs, timeout=60):
+    outs = []
+    try:
+        for p in procs:
+            outs.append(p.communicate(timeout=timeout))
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+    return outs
+
+
+def _check_exchange(run_dir: Path, u_seen: list[tuple[float, float]]) -> None:
+    rows = read_rows(run_dir)
+    assert len(rows) == 11 and meta(run_dir)["status"] == "completed"
+    clock, tool_u, tool_y, t = column(rows, "clock.y"), column(rows, "tool.u"), column(rows, "tool.y"), column(rows, "t")
+    for k in range(10):
+        assert abs(tool_y[k] - (2 * t[k] + 1)) < 1e-12  # what the importer set at T_k reached the server
+        assert tool_u[k] == clock[k]
+        # doStep(T_k) returns the inputs routed at T_k, read by the importer at T_k + H
+        assert abs(u_seen[k][0] - t[k + 1]) < 1e-12 and u_seen[k][1] == clock[k]
+
+
+def test_bridge_fmu_in_fmpy_simulate_fmu_exchanges_exact_values(tmp_path):
+    cfg = _project(tmp_path)
+    fmu = build_bridge_fmu(load_project(cfg), "tool", tmp_path / "fmus").path
+    server, clock = _start(cfg, tmp_path / "run")
+    script = f"""
+import numpy as np
+from fmpy import simulate_fmu
+sig = np.array([(t, 2 * t + 1) for t in np.linspace(0, 1, 11)], dtype=[("time", float), ("y", float)])
+r = simulate_fmu({str(fmu)!r}, start_time=0, stop_time=1.0, step_size=0.1, output_interval=0.1, input=sig,
+                 output=["u"])
+for row in r[1:]:
+    print(repr(float(row["time"])) + "," + repr(float(row["u"])))
+"""
+    importer = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, env=env())
+    (out, err), (_, serr), _ = _finish([importer, server, clock])
+    assert importer.returncode == 0, err
+    assert server.returncode == 0, serr
+    u_seen = [tuple(map(float, line.split(","))) for line in out.split()]
+    _check_exchange(tmp_path / "run", u_seen)
+
+
+@pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
+def test_bridge_fmu_in_a_c_only_importer(tmp_path):
+    cfg = _project(tmp_path)
+    built = build_bridge_fmu(load_project(cfg), "tool", tmp_path / "fmus")
+    with zipfile.ZipFile(built.path) as zf:
+        zf.extractall(tmp_path / "fmu")
+    exe = tmp_path / "importer"
+    res = subprocess.run(["gcc", "-O1", f"-I{FMI_HEADERS}", "-o", str(exe), str(REPO / "tests" / "c" / "importer.c"),
+                          "-ldl"], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    server, clock = _start(cfg, tmp_path / "run")
+    host, port = _gateway(cfg)
+    importer = subprocess.Popen([str(exe), str(tmp_path / "fmu" / "binaries" / "linux64" / "hycosim_tool.so"),
+                                 built.guid, (tmp_path / "fmu" / "resources").as_uri(), f"{host}:{port}", "10", "0.1"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    (out, err), (_, serr), _ = _finish([importer, server, clock])
+    assert importer.returncode == 0, err
+    assert server.returncode == 0, serr
+    _check_exchange(tmp_path / "run", [tuple(map(float, line.split(","))) for line in out.split()])
+
+
+def _raw_attach(cfg: Path, uid: int, name: str = "tool", n_out: int = 1, n_in: int = 1) -> tuple[socket.socket, int, bytes]:
+    host, port = _gateway(cfg)
+    deadline = time.monotonic() + 20
+    while True:
+        try:
+            sock = socket.create_connection((host, port), timeout=10)
+            break
+        except OSError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.1)
+    sock.sendall(gp.hello(uid, name, n_out, n_in))
+    kind, payload = gp.read_frame(sock)
+    return sock, kind, payload
+
+
+def test_gateway_refuses_a_wrong_uid_and_counts_it(tmp_path):
+    cfg = _project(tmp_path, attachTimeout=3.0)
+    server, clock = _start(cfg, tmp_path / "run")
+    sock, kind, payload = _raw_attach(cfg, uid=99)
+    assert kind == gp.REFUSE and payload.decode() == "UID 99 does not own node 'tool'"
+    sock.close()
+    sock, kind, payload = _raw_attach(cfg, uid=7, n_out=3)
+    assert kind == gp.REFUSE and "rebuild it from this project" in payload.decode()
+    sock.close()
+    (_, serr), _ = _finish([server, clock])
+    assert server.returncode == 3 and "waiting for node(s) tool to attach" in serr
+    assert meta(tmp_path / "run")["dropped_frames"] == {"not owner": 1, "unknown ports": 1}
+
+
+def test_gateway_truncated_frame_is_counted_and_the_node_is_lost(tmp_path):
+    cfg = _project(tmp_path)
+    server, clock = _start(cfg, tmp_path / "run")
+    sock, kind, _ = _raw_attach(cfg, uid=7)
+    assert kind == gp.WELCOME
+    assert gp.read_frame(sock)[0] == gp.START
+    sock.sendall(gp.outputs(0, 0.0, [1.0]))
+    assert gp.read_frame(sock)[0] == gp.STEP
+    sock.sendall(gp.outputs(1, 0.1, [2.0])[:-5])  # a frame cut short, then the connection ends
+    sock.close()
+    (_, serr), _ = _finish([server, clock])
+    assert server.returncode == 3 and "node 'tool' was lost at step 1" in serr
+    m = meta(tmp_path / "run")
+    assert m["dropped_frames"] == {"truncated": 1}
+    assert len(read_rows(tmp_path / "run")) == 1
+
+
+def test_gateway_node_disconnecting_mid_step_stops_the_run_naming_it(tmp_path):
+    cfg = _project(tmp_path, stop=5.0)
+    server, clock = _start(cfg, tmp_path / "run")
+    sock, kind, _ = _raw_attach(cfg, uid=7)
+    assert kind == gp.WELCOME and gp.read_frame(sock)[0] == gp.START
+    for k in range(3):
+        sock.sendall(gp.outputs(k, 0.1 * k, [float(k)]))
+        kind, payload = gp.read_frame(sock)
+        assert kind == gp.STEP and gp.parse_step(payload)[0] == k
+    sock.close()  # mid-step: released for step 2, never reports step 3
+    (_, serr), (_, cerr) = _finish([server, clock])
+    assert server.returncode == 3 and "node 'tool' was lost at step 3" in serr
+    assert clock.returncode == 0
+    rows = read_rows(tmp_path / "run")
+    assert column(rows, "tool.y") == [0.0, 1.0, 2.0]
