@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+from pathlib import Path
 
 from fmu_bridge.config import Node as NodeSpec
 
@@ -21,11 +22,17 @@ class NodeLoadError(RuntimeError):
     """A node entry whose implementation cannot be found or made."""
 
 
-def load_node(spec: NodeSpec) -> Node | AsyncSource:
-    """Instantiate the implementation named by the node's ``model``."""
+def load_node(spec: NodeSpec, project_dir: Path) -> Node | AsyncSource:
+    """Instantiate the implementation named by the node's ``model`` or ``fmu``."""
     if spec.fmu:
-        raise NodeLoadError(f"node {spec.nodeName!r}: FMU-backed nodes ('fmu': {spec.fmu!r}) "
-                            "need the FMU bridge, which this version does not include yet")
+        from clients.fmu_node import FmuNode
+
+        path = (project_dir / spec.fmu).resolve()
+        if not path.is_file():
+            raise NodeLoadError(f"node {spec.nodeName!r}: FMU file {path} does not exist")
+        if spec.asynchronous:
+            raise NodeLoadError(f"node {spec.nodeName!r}: an FMU node steps; it cannot be asynchronous")
+        return FmuNode(spec, path)
     if not spec.model:
         raise NodeLoadError(f"node {spec.nodeName!r} names no 'model' to run; give a reference model "
                             f"({', '.join(sorted(REFERENCE_MODELS))}) or 'module:Class'")

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from fmu_bridge import logs
 from fmu_bridge.config import LoadedProject, server_endpoint
+from fmu_bridge.fmu_loader import FmuError
 from fmu_bridge.session import ConnectError
 
 from clients.loader import NodeLoadError, load_node
@@ -23,10 +24,10 @@ def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
         return 2, f"{loaded.path}: no node named {name!r} (nodes: {names})"
     endpoint = connect or server_endpoint(loaded.project.serverIP)
     try:
-        impl = load_node(spec)
+        impl = load_node(spec, loaded.path.parent if loaded.path else Path.cwd())
         runtime = NodeRuntime(loaded, name, impl, endpoint)
         runtime.run()
-    except (NodeLoadError, NodeRunError, ConnectError) as exc:
+    except (NodeLoadError, NodeRunError, ConnectError, FmuError) as exc:
         return 3, str(exc)
     except KeyboardInterrupt:
         return 130, f"node {name!r} interrupted by Ctrl-C"

@@ -62,6 +62,20 @@ class Node(ABC):
     def teardown(self) -> None:
         """Release resources; called once at the end, also after a failure."""
 
+    # Rollback, for event localisation: a node that can save and restore its state lets
+    # the coordinator retry a macro step with a smaller step size.
+    @property
+    def can_rollback(self) -> bool:
+        return False
+
+    def get_state(self) -> Any:
+        """A snapshot of the node's state (called before a step that may be retried)."""
+        raise NotImplementedError
+
+    def set_state(self, state: Any) -> None:
+        """Restore a snapshot taken by get_state."""
+        raise NotImplementedError
+
 
 class AsyncSource(ABC):
     """A source that publishes timestamped samples at its own rate instead of stepping."""

@@ -16,6 +16,7 @@ import zenoh
 
 from fmu_bridge import frames
 from fmu_bridge.config import LoadedProject, PortType
+from fmu_bridge.fmu_loader import FmuError
 from fmu_bridge.inbox import Inbox
 from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
 from fmu_bridge.session import client_config, open_session
@@ -70,7 +71,12 @@ class NodeRuntime:
             self.inbox.inject(frames.encode(frames.LIVE, SERVER_TOKEN, False))
 
     def run(self) -> None:
-        self.impl.setup(self.context())
+        try:
+            self.impl.setup(self.context())
+        except Exception as exc:
+            if isinstance(exc, (NodeRunError, FmuError)):
+                raise
+            raise NodeRunError(f"node {self.name!r}: its model failed to set up: {type(exc).__name__}: {exc}") from exc
         session = open_session(client_config(self.endpoint, timeout_s=self.cosim.attachTimeout), self.endpoint)
         try:
             self.inbox = Inbox(session, self.keys.down, self.keys.down)
@@ -80,13 +86,15 @@ class NodeRuntime:
             # Declared after the subscriber: the server starts once it sees this token.
             token = session.liveliness().declare_token(self.keys.alive(self.name))
             try:
-                start = self._wait(self.cosim.attachTimeout, "the server's START")
+                # The server times out the attach; outwait it so that its STOP, naming who is
+                # missing, reaches this node rather than a timeout of our own.
+                start = self._wait(self.cosim.attachTimeout + self.cosim.stepTimeout, "START")
                 if start.kind == frames.STOP:
                     return
                 if isinstance(self.impl, AsyncSource):
                     self._run_async(publisher, start)
                 else:
-                    self._run_stepping(publisher)
+                    self._run_stepping(publisher, checkpoint=bool(start.fields[5].get("checkpoint")))
             finally:
                 token.undeclare()
                 watch.undeclare()
@@ -114,9 +122,12 @@ class NodeRuntime:
                 raise NodeRunError(f"node {self.name!r}: the server went away after step {self.steps}")
             return frame
 
-    def _run_stepping(self, publisher: zenoh.Publisher) -> None:
+    def _run_stepping(self, publisher: zenoh.Publisher, checkpoint: bool) -> None:
         impl = self.impl
         assert isinstance(impl, Node)
+        checkpoint = checkpoint and impl.can_rollback
+        saved_step, saved = -1, None
+        publisher.put(frames.encode(frames.HELLO, self.spec.UID, {"rollback": impl.can_rollback}))
         publisher.put(frames.encode(frames.OUTPUTS, self.spec.UID, 0, self.cosim.startTime,
                                     self._pack_outputs(impl.outputs())))
         # The server enforces step timeouts; a node only needs to notice the server is gone,
@@ -128,9 +139,19 @@ class NodeRuntime:
             if frame.kind == frames.STOP:
                 self._log.info("stop", step=self.steps, reason=frame.fields[1])
                 return
+            if frame.kind == frames.ROLLBACK:
+                k, t = frame.fields
+                if saved_step != k:
+                    raise NodeRunError(f"node {self.name!r}: asked to roll back to step {k}, "
+                                       f"but its last saved state is from step {saved_step}")
+                impl.set_state(saved)
+                self._log.info("rollback", step=k, t=t)
+                continue
             if frame.kind != frames.STEP:
                 continue
             k, t, h, new_mode, inputs, driven_nodes = frame.fields
+            if checkpoint and saved_step != k:
+                saved, saved_step = impl.get_state(), k
             now_driven = self.name in driven_nodes
             if (new_mode, now_driven) != (mode, driven):
                 mode, driven = new_mode, now_driven
@@ -149,7 +170,7 @@ class NodeRuntime:
     def _run_async(self, publisher: zenoh.Publisher, start: frames.Frame) -> None:
         impl = self.impl
         assert isinstance(impl, AsyncSource)
-        _, t0, _, wall0, rt = start.fields
+        _, t0, _, wall0, rt, _ = start.fields
         sim_now, seq = t0, 0
         period = 1.0 / float(self.spec.rate or 30.0)
         while True:

@@ -127,6 +127,9 @@ class CoSimulation(_Strict):
     # false: as fast as possible; true or a factor: wall time = simulated time * factor.
     realTime: bool | float = False
     stepTimeout: float = Field(default=10.0, gt=0)
+    # Locate guard crossings to within this many seconds by rolling steps back (when every
+    # stepping node can save and restore its state); None: fixed macro steps.
+    eventTolerance: float | None = Field(default=None, gt=0)
     attachTimeout: float = Field(default=30.0, gt=0)
 
     def real_time_factor(self) -> float | None:

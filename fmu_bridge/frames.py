@@ -8,10 +8,13 @@ Kinds and layouts (after version and kind):
 
 * ``OUTPUTS``  node → server: ``uid, step, t, values`` (values in the node's output order)
 * ``SAMPLE``   async node → server: ``uid, seq, t, values``
-* ``START``    server → nodes: ``run_id, t0, H, wall_t0, real_time_factor``
+* ``START``    server → nodes: ``run_id, t0, H, wall_t0, real_time_factor, options``
+  (options: ``{"checkpoint": bool}``: save state before each step, for rollback)
 * ``STEP``     server → nodes: ``step, t, H, mode, inputs {node: [values]}, driven [nodes]``
 * ``STOP``     server → nodes: ``step, reason``
 * ``LIVE``     local only, server: ``node, alive`` (liveliness changes fed into the inbox)
+* ``HELLO``    node → server, before its first outputs: ``uid, capabilities`` (``{"rollback": bool}``)
+* ``ROLLBACK`` server → nodes: ``step, t``: restore the state saved before that step
 """
 
 from __future__ import annotations
@@ -29,8 +32,10 @@ START = 3
 STEP = 4
 STOP = 5
 LIVE = 6
+HELLO = 7
+ROLLBACK = 8
 
-_ARITY = {OUTPUTS: 4, SAMPLE: 4, START: 5, STEP: 6, STOP: 2, LIVE: 2}
+_ARITY = {OUTPUTS: 4, SAMPLE: 4, START: 6, STEP: 6, STOP: 2, LIVE: 2, HELLO: 2, ROLLBACK: 2}
 
 
 class FrameError(ValueError):

@@ -54,6 +54,12 @@ class Coordinator:
             raise GuardEvaluationError(
                 f"event {event!r}: guard {guard.text!r} failed on {guard.inputs(values)}: {exc}") from None
 
+    def pending_guard_holds(self, values: Mapping[tuple[str, str], Any]) -> bool:
+        """Whether the guard that the current mode watches holds, without switching."""
+        if self.mode == FREE_MODE:
+            return any(self._holds(e.name, self._guards[e.name][0], values) for e in self._events)
+        return self._holds(self.mode, self._guards[self.mode][1], values)
+
     def update(self, step: int, t: float, values: Mapping[tuple[str, str], Any]) -> ModeSwitch | None:
         """Evaluate the guards at a macro-step point; switch mode and report it if one holds."""
         if self.mode == FREE_MODE:

@@ -171,7 +171,7 @@ class Gateway:
         except frames.FrameError:
             return
         if frame.kind == frames.START:
-            _, t0, h, _, _ = frame.fields
+            _, t0, h, _, _, _ = frame.fields
             data = {c: gp.start(t0, h) for c in conns}
         elif frame.kind == frames.STEP:
             k, t, h, _, inputs, driven = frame.fields

@@ -53,9 +53,14 @@ class Intake:
             frame = frames.decode(payload)
         except frames.FrameError as exc:
             raise Dropped("malformed", f"from {node}: {exc}") from None
-        if frame.kind not in (frames.OUTPUTS, frames.SAMPLE):
+        if frame.kind not in (frames.OUTPUTS, frames.SAMPLE, frames.HELLO):
             raise Dropped("wrong kind", f"from {node}: frame kind {frame.kind} is not for the server")
-        uid, _, t, values = frame.fields
+        uid = frame.fields[0]
+        if uid != spec.UID:
+            raise Dropped("not owner", f"frame on {node}'s key carries UID {uid!r}, {node} owns UID {spec.UID}")
+        if frame.kind == frames.HELLO:
+            return frame
+        _, _, t, values = frame.fields
         if uid != spec.UID:
             raise Dropped("not owner", f"frame on {node}'s key carries UID {uid!r}, {node} owns UID {spec.UID}")
         if (frame.kind == frames.SAMPLE) != spec.asynchronous:

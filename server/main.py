@@ -46,7 +46,6 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         "config_sha256": loaded.digest, "endpoint": endpoint, "versions": _versions(),
         "stepSize": loaded.project.coSimulation.stepSize, "stopTime": loaded.project.coSimulation.stopTime,
         "realTime": loaded.project.coSimulation.realTime,
-        "event_localisation": "none: fixed macro steps",
     }
     recorder = Recorder(run_dir, loaded, meta)
     on_progress = None

@@ -70,6 +70,7 @@ class Relay:
         self.outputs: dict[str, list[Any]] = {
             n.nodeName: [p.start_value() for p in n.output] for n in self.project.nodeLists}
         self.alive: set[str] = set()
+        self.capabilities: dict[str, dict[str, Any]] = {}
         self.progress = Progress()
         self._progress_every = progress_every_s
         self._on_progress = on_progress
@@ -193,6 +194,9 @@ class Relay:
             _, _, t, values = frame.fields
             self.histories[node].add(float(t), values)
             return None
+        if frame.kind == frames.HELLO:
+            self.capabilities[node] = dict(frame.fields[1]) if isinstance(frame.fields[1], dict) else {}
+            return None
         return node, frame
 
     def _time(self, step: int) -> float:
@@ -225,26 +229,86 @@ class Relay:
             arrivals[node] = time.perf_counter() - released_at
         return arrivals
 
+    def _localisation_plan(self) -> bool:
+        """Whether steps may be rolled back to locate guard crossings; say why not in the metadata."""
+        tol = self.cosim.eventTolerance
+        if tol is None:
+            self.recorder.meta["event_localisation"] = "none: fixed macro steps (no eventTolerance)"
+            return False
+        fixed = sorted(n for n in self.stepping if not self.capabilities.get(n, {}).get("rollback"))
+        if fixed:
+            self.recorder.meta["event_localisation"] = (
+                f"none: fixed macro steps ({', '.join(fixed)} cannot get and set state)")
+            return False
+        self.recorder.meta["event_localisation"] = f"rollback and bisection to {tol:g} s"
+        return True
+
+    def _release(self, k: int, t: float, h: float, mode: str) -> tuple[dict[str, float], float]:
+        """Release step k (t → t+h) and gather the outputs at t+h; return arrivals and wait."""
+        inputs = {n: self.router.inputs[n] for n in self.stepping}
+        released_at = time.perf_counter()
+        self.release.put(frames.encode(frames.STEP, k, t, h, mode, inputs, self.coordinator.driven_nodes()))
+        arrivals = self._collect(k + 1, released_at)
+        return arrivals, time.perf_counter() - released_at
+
+    def _localise(self, k: int, t: float, h: float, mode: str, watched_at_start: bool,
+                  arrivals: dict[str, float], wait: float) -> tuple[float, dict[str, float], float, dict[str, Any]]:
+        """Shrink step k until a guard crossing inside it lies within eventTolerance of its end.
+
+        The step was taken and its end satisfies a guard that did not hold at its start. Bisect on
+        the step length, rolling every node back to its state at t before each retry.
+        """
+        view = OutputView(self.router.output_index, self.outputs)
+        tol = self.cosim.eventTolerance
+        if watched_at_start or not self.coordinator.pending_guard_holds(view) or h <= tol:
+            return h, arrivals, wait, {}
+        lo, hi, tries, at_hi = 0.0, h, 0, True
+        while hi - lo > tol:
+            mid = 0.5 * (lo + hi)
+            self.release.put(frames.encode(frames.ROLLBACK, k, t))
+            arrivals, wait = self._release(k, t, mid, mode)
+            tries += 1
+            if self.coordinator.pending_guard_holds(view):
+                hi, at_hi = mid, True
+            else:
+                lo, at_hi = mid, False
+        if not at_hi:
+            self.release.put(frames.encode(frames.ROLLBACK, k, t))
+            arrivals, wait = self._release(k, t, hi, mode)
+            tries += 1
+        return hi, arrivals, wait, {"retries": tries, "window": [t + lo, t + hi]}
+
     def _loop(self) -> None:
         cosim = self.cosim
-        n_steps = round((cosim.stopTime - cosim.startTime) / cosim.stepSize)
+        H = cosim.stepSize
         rt = cosim.real_time_factor()
         wall0 = time.time()
+        checkpoint = cosim.eventTolerance is not None
         self.release.put(frames.encode(frames.START, self.recorder.run_dir.name, cosim.startTime,
-                                       cosim.stepSize, wall0, rt))
+                                       H, wall0, rt, {"checkpoint": checkpoint}))
         released_at = time.perf_counter()
         arrivals = self._collect(0, released_at)
         wait = time.perf_counter() - released_at
+        localise = self._localisation_plan()
+        # Points lie on a grid origin + j·H; a located event starts a new grid at its time.
+        origin, j = cosim.startTime, 0
+        t = origin
+        end = cosim.stopTime - 1e-9 * H
         perf0 = time.perf_counter()
         last_progress = 0.0
-        for k in range(n_steps + 1):
-            t = cosim.startTime + k * cosim.stepSize
+        localised: dict[str, Any] = {}
+        k = 0
+        while True:
             for node, history in self.histories.items():
                 if history.latest is not None:
                     self.outputs[node] = history.latest[1]
-            switch = self.coordinator.update(k, t, OutputView(self.router.output_index, self.outputs))
+            view = OutputView(self.router.output_index, self.outputs)
+            switch = self.coordinator.update(k, t, view)
             if switch is not None:
-                self.recorder.event(switch.as_record())
+                record = switch.as_record()
+                if localised:
+                    record["localised"] = localised
+                self.recorder.event(record)
                 self._log.info("mode switch", step=k, t=t, name=switch.event, to=switch.to_mode, values=switch.values)
             mode = self.coordinator.mode
             ages = self.router.route(mode, t, self.outputs, self.histories)
@@ -263,16 +327,22 @@ class Relay:
                 last_progress = now
                 self.progress.steps_per_s = k / (now - perf0) if now > perf0 else 0.0
                 self._on_progress(self.progress)
-            if k == n_steps or self._stop_requested.is_set():
+            if t >= end or self._stop_requested.is_set():
                 break
-            inputs = {n: self.router.inputs[n] for n in self.stepping}
-            released_at = time.perf_counter()
-            self.release.put(frames.encode(frames.STEP, k, t, cosim.stepSize, mode, inputs,
-                                           self.coordinator.driven_nodes()))
-            arrivals = self._collect(k + 1, released_at)
-            wait = time.perf_counter() - released_at
+            next_t = min(origin + (j + 1) * H, cosim.stopTime)
+            h = next_t - t
+            watched = localise and self.coordinator.pending_guard_holds(view)
+            arrivals, wait = self._release(k, t, h, mode)
+            localised = {}
+            if localise:
+                h_used, arrivals, wait, localised = self._localise(k, t, h, mode, watched, arrivals, wait)
+                if h_used != h:
+                    origin, j, next_t = t + h_used, -1, t + h_used
+            t = next_t
+            j += 1
+            k += 1
         elapsed = time.perf_counter() - perf0
-        self.recorder.meta["steps_per_s"] = n_steps / elapsed if elapsed > 0 else None
+        self.recorder.meta["steps_per_s"] = k / elapsed if elapsed > 0 else None
         if self._on_progress is not None:
             self.progress.steps_per_s = self.recorder.meta["steps_per_s"] or 0.0
             self._on_progress(self.progress)

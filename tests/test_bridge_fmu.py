@@ -179,7 +179,7 @@ def _raw_attach(cfg: Path, uid: int, name: str = "tool", n_out: int = 1, n_in: i
 
 
 def test_gateway_refuses_a_wrong_uid_and_counts_it(tmp_path):
-    cfg = _project(tmp_path, attachTimeout=3.0)
+    cfg = _project(tmp_path, attachTimeout=8.0)
     server, clock = _start(cfg, tmp_path / "run")
     sock, kind, payload = _raw_attach(cfg, uid=99)
     assert kind == gp.REFUSE and payload.decode() == "UID 99 does not own node 'tool'"

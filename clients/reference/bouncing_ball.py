@@ -60,3 +60,13 @@ class BouncingBall(Node):
             return
         self.h, self.v, n = fall(self.h, self.v, self.g, self.e, h)
         self.impacts += n
+
+    @property
+    def can_rollback(self) -> bool:
+        return True
+
+    def get_state(self) -> tuple[float, float, int, bool]:
+        return self.h, self.v, self.impacts, self.driven
+
+    def set_state(self, state: tuple[float, float, int, bool]) -> None:
+        self.h, self.v, self.impacts, self.driven = state

@@ -1,0 +1,240 @@
+"""Loading a co-simulation FMU with fmpy and mapping a node's ports onto its variables.
+
+One class, :class:`FmuInstance`, one method per thing the node runtime needs (set
+inputs, step, get outputs, save and restore state), each a thin call into fmpy's FMI 2.0
+or 3.0 slave. Every failure is an :class:`FmuError` that names the node and, where there
+is one, the variable.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import fmpy
+from fmpy import read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.model_description import ModelDescription, ScalarVariable
+
+from fmu_bridge.config import Node, PortType
+
+# FMI 2 type names and their FMI 3 counterparts, per port type.
+_COMPATIBLE = {
+    PortType.REAL: {"Real", "Float64", "Float32"},
+    PortType.INTEGER: {"Integer", "Int32", "Int64", "Int16", "Int8", "UInt32", "UInt64", "UInt16", "UInt8", "Enumeration"},
+    PortType.BOOLEAN: {"Boolean"},
+    PortType.STRING: {"String"},
+    PortType.BINARY: {"Binary"},
+}
+
+
+class FmuError(RuntimeError):
+    """An FMU that cannot serve as the node, or a call into it that failed."""
+
+
+@dataclass(frozen=True)
+class MappedPort:
+    port: str
+    variable: str
+    vr: int
+    type: str
+
+
+def describe(path: Path) -> ModelDescription:
+    """Read an FMU's model description; FmuError if the file is not a readable FMU."""
+    try:
+        return read_model_description(str(path))
+    except FileNotFoundError:
+        raise FmuError(f"{path}: no such FMU file") from None
+    except Exception as exc:
+        raise FmuError(f"{path}: not a readable FMU ({exc})") from None
+
+
+def check_platform(path: Path, md: ModelDescription, node: str) -> None:
+    """Raise FmuError unless the FMU has co-simulation and a binary for this platform."""
+    if md.coSimulation is None:
+        raise FmuError(f"node {node!r}: {path.name} has no co-simulation interface (model exchange only)")
+    platforms = fmpy.supported_platforms(str(path))
+    want = fmpy.platform_tuple if md.fmiVersion.startswith("3") else fmpy.platform
+    if want not in platforms and not (md.fmiVersion.startswith("3") and fmpy.platform in platforms):
+        raise FmuError(f"node {node!r}: {path.name} has binaries for {', '.join(platforms) or 'no platform'}, "
+                       f"not for this one ({want})")
+
+
+def map_ports(md: ModelDescription, node: Node, path: Path) -> tuple[list[MappedPort], list[MappedPort]]:
+    """Map the node's inputs and outputs onto FMU variables by name (``variable`` renames)."""
+    variables = {v.name: v for v in md.modelVariables}
+
+    def one(port, causalities: tuple[str, ...], kind: str) -> MappedPort:
+        name = port.variable or port.name
+        var: ScalarVariable | None = variables.get(name)
+        if var is None:
+            raise FmuError(f"node {node.nodeName!r}: {kind} {port.name!r} maps to variable {name!r}, "
+                           f"which {path.name} does not have")
+        if var.causality not in causalities:
+            raise FmuError(f"node {node.nodeName!r}: variable {name!r} of {path.name} is a {var.causality}, "
+                           f"not an {kind}")
+        if var.type not in _COMPATIBLE[port.type]:
+            raise FmuError(f"node {node.nodeName!r}: {kind} {port.name!r} is {port.type.value} but variable "
+                           f"{name!r} of {path.name} is {var.type}")
+        return MappedPort(port.name, name, var.valueReference, var.type)
+
+    inputs = [one(p, ("input", "parameter"), "input") for p in node.input]
+    outputs = [one(p, ("output", "local"), "output") for p in node.output]
+    return inputs, outputs
+
+
+class FmuInstance:
+    """One instantiated co-simulation FMU playing one node."""
+
+    def __init__(self, path: Path, node: Node, parameters: dict[str, Any]):
+        self.path = path
+        self.node = node.nodeName
+        self.md = describe(path)
+        check_platform(path, self.md, self.node)
+        self.inputs, self.outputs = map_ports(self.md, node, path)
+        self.fmi3 = self.md.fmiVersion.startswith("3")
+        cs = self.md.coSimulation
+        self.can_rollback = bool(getattr(cs, "canGetAndSetFMUstate", False))
+        self.event_mode = bool(self.fmi3 and getattr(cs, "hasEventMode", False))
+        self.early_return = bool(self.fmi3 and getattr(cs, "canReturnEarlyAfterIntermediateUpdate", False))
+        self._variables = {v.name: v for v in self.md.modelVariables}
+        self._starts = {p.variable or p.name: p.start for p in node.input if p.start is not None}
+        self._parameters = parameters
+        self._unzipdir = tempfile.mkdtemp(prefix=f"hycosim-{self.node}-")
+        fmpy.extract(str(path), self._unzipdir)
+        kwargs = dict(guid=self.md.guid, unzipDirectory=self._unzipdir,
+                      modelIdentifier=cs.modelIdentifier, instanceName=self.node)
+        if self.fmi3:
+            from fmpy.fmi3 import FMU3Slave
+
+            self.fmu = FMU3Slave(**{k if k != "guid" else "instantiationToken": v for k, v in kwargs.items()})
+            self.fmu.instantiate(eventModeUsed=self.event_mode, earlyReturnAllowed=self.early_return)
+        else:
+            from fmpy.fmi2 import FMU2Slave
+
+            self.fmu = FMU2Slave(**kwargs)
+            self.fmu.instantiate()
+        self.time = 0.0
+
+    # --- values ---------------------------------------------------------------------
+
+    def _set(self, var: ScalarVariable, value: Any) -> None:
+        vr = [var.valueReference]
+        t = var.type
+        try:
+            if t in ("Real", "Float64", "Float32"):
+                (self.fmu.setFloat64 if self.fmi3 else self.fmu.setReal)(vr, [float(value)])
+            elif t == "Boolean":
+                self.fmu.setBoolean(vr, [bool(value)])
+            elif t == "String":
+                self.fmu.setString(vr, [str(value)])
+            elif self.fmi3:
+                getattr(self.fmu, f"set{t if t != 'Enumeration' else 'Int64'}")(vr, [int(value)])
+            else:
+                self.fmu.setInteger(vr, [int(value)])
+        except FMICallException as exc:
+            raise FmuError(f"node {self.node!r}: setting {var.name!r} = {value!r} failed ({exc})") from None
+
+    def _get(self, vr: int, t: str) -> Any:
+        if t in ("Real", "Float64", "Float32"):
+            return (self.fmu.getFloat64 if self.fmi3 else self.fmu.getReal)([vr])[0]
+        if t == "Boolean":
+            return bool(self.fmu.getBoolean([vr])[0])
+        if t == "String":
+            return self.fmu.getString([vr])[0]
+        if self.fmi3:
+            return int(getattr(self.fmu, f"get{t if t != 'Enumeration' else 'Int64'}")([vr])[0])
+        return int(self.fmu.getInteger([vr])[0])
+
+    def set_variable(self, name: str, value: Any) -> None:
+        """Set a parameter or start value by FMU variable name."""
+        var = self._variables.get(name)
+        if var is None:
+            raise FmuError(f"node {self.node!r}: parameter {name!r} is not a variable of {self.path.name}")
+        self._set(var, value)
+
+    def set_inputs(self, values: dict[str, Any]) -> None:
+        for m in self.inputs:
+            if m.port in values:
+                self._set(self._variables[m.variable], values[m.port])
+
+    def get_outputs(self) -> dict[str, Any]:
+        try:
+            return {m.port: self._get(m.vr, m.type) for m in self.outputs}
+        except FMICallException as exc:
+            raise FmuError(f"node {self.node!r}: reading outputs failed ({exc})") from None
+
+    # --- lifecycle ------------------------------------------------------------------
+
+    def initialize(self, start_time: float) -> None:
+        self.time = start_time
+        try:
+            if not self.fmi3:
+                self.fmu.setupExperiment(startTime=start_time)
+            for name, value in {**self._starts, **self._parameters}.items():
+                self.set_variable(name, value)
+            if self.fmi3:
+                self.fmu.enterInitializationMode(startTime=start_time)
+            else:
+                self.fmu.enterInitializationMode()
+            self.fmu.exitInitializationMode()
+            if self.event_mode:
+                self._handle_events()
+        except FMICallException as exc:
+            raise FmuError(f"node {self.node!r}: initialising {self.path.name} failed ({exc})") from None
+
+    def _handle_events(self) -> None:
+        """FMI 3 event mode: iterate the discrete states until settled, then back to step mode."""
+        while self.fmu.updateDiscreteStates()[0]:  # discreteStatesNeedUpdate
+            pass
+        self.fmu.enterStepMode()
+
+    def do_step(self, t: float, h: float) -> None:
+        """Advance from t to t+h; the FMU's own micro-steps stay inside it."""
+        try:
+            if not self.fmi3:
+                self.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+            else:
+                end = t + h
+                now = t
+                while now < end - 1e-12 * max(1.0, abs(end)):
+                    event, terminate, early, last = self.fmu.doStep(
+                        currentCommunicationPoint=now, communicationStepSize=end - now)
+                    if terminate:
+                        raise FmuError(f"node {self.node!r}: {self.path.name} asked to terminate at t={last:g}")
+                    if event and self.event_mode:
+                        self.fmu.enterEventMode()
+                        self._handle_events()
+                    # An early return ends the call before `end`; go on from where it stopped.
+                    now = last if early else end
+        except FMICallException as exc:
+            kind = "discarded" if exc.status == 2 else "failed"
+            raise FmuError(f"node {self.node!r}: doStep from t={t:g} by {h:g} {kind} (status {exc.status})") from None
+        self.time = t + h
+
+    def get_state(self) -> Any:
+        if not self.can_rollback:
+            raise FmuError(f"node {self.node!r}: {self.path.name} cannot get and set its state")
+        return (self.fmu.getFMUState() if self.fmi3 else self.fmu.getFMUstate()), self.time
+
+    def set_state(self, state: Any) -> None:
+        handle, self.time = state
+        (self.fmu.setFMUState if self.fmi3 else self.fmu.setFMUstate)(handle)
+
+    def free_state(self, state: Any) -> None:
+        (self.fmu.freeFMUState if self.fmi3 else self.fmu.freeFMUstate)(state[0])
+
+    def close(self) -> None:
+        try:
+            self.fmu.terminate()
+        except Exception:
+            pass
+        try:
+            self.fmu.freeInstance()
+        except Exception:
+            pass
+        shutil.rmtree(self._unzipdir, ignore_errors=True)
