@@ -111,7 +111,7 @@ class FmuInstance:
         if self.fmi3:
             from fmpy.fmi3 import FMU3Slave
 
-            self.fmu = FMU3Slave(**{k if k != "guid" else "instantiationToken": v for k, v in kwargs.items()})
+            self.fmu = FMU3Slave(**kwargs)
             self.fmu.instantiate(eventModeUsed=self.event_mode, earlyReturnAllowed=self.early_return)
         else:
             from fmpy.fmi2 import FMU2Slave

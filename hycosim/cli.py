@@ -235,5 +235,71 @@ def fmu_build(
             raise typer.Exit(4)
 
 
+@fmu_app.command("inspect")
+def fmu_inspect(
+    fmu: Path,
+    config: Annotated[Optional[Path], typer.Option(help="a project JSON: show how a node's ports map")] = None,
+    node: Annotated[Optional[str], typer.Option(help="the node of --config (default: the one naming this FMU)")] = None,
+) -> None:
+    """List an FMU's co-simulation capabilities and variables; with --config, the port mapping."""
+    import fmpy
+
+    from fmu_bridge.fmu_loader import FmuError, check_platform, describe, map_ports
+
+    try:
+        md = describe(fmu)
+    except FmuError as exc:
+        err.print(f"[red]error:[/red] {exc}", highlight=False)
+        raise typer.Exit(2) from None
+    cs = md.coSimulation
+    caps = Table(title=f"{fmu.name}: FMI {md.fmiVersion}, {md.modelName}")
+    caps.add_column("capability")
+    caps.add_column("value")
+    caps.add_row("co-simulation", "yes" if cs else "no (model exchange only)")
+    caps.add_row("platforms", ", ".join(fmpy.supported_platforms(str(fmu))) or "-")
+    if cs:
+        caps.add_row("modelIdentifier", cs.modelIdentifier)
+        for attr in ("canGetAndSetFMUstate", "canHandleVariableCommunicationStepSize", "needsExecutionTool",
+                     "hasEventMode", "canReturnEarlyAfterIntermediateUpdate"):
+            if hasattr(cs, attr):
+                caps.add_row(attr, str(bool(getattr(cs, attr))))
+    out.print(caps)
+    variables = Table(title="variables")
+    for col in ("name", "causality", "variability", "type", "start", "unit"):
+        variables.add_column(col)
+    for v in md.modelVariables:
+        variables.add_row(v.name, v.causality or "", v.variability or "", v.type, "" if v.start is None else str(v.start),
+                          getattr(v, "unit", None) or "")
+    out.print(variables)
+    if config is None:
+        return
+    loaded = _load(config)
+    spec = None
+    if node:
+        try:
+            spec = loaded.project.node(node)
+        except KeyError:
+            err.print(f"[red]error:[/red] {config}: no node named {node!r}", highlight=False)
+            raise typer.Exit(2) from None
+    else:
+        spec = next((n for n in loaded.project.nodeLists if n.fmu and loaded.resolve(n.fmu) == fmu.resolve()), None)
+        if spec is None:
+            err.print(f"[red]error:[/red] {config}: no node names {fmu}; pick one with --node", highlight=False)
+            raise typer.Exit(2)
+    try:
+        check_platform(fmu, md, spec.nodeName)
+        inputs, outputs = map_ports(md, spec, fmu)
+    except FmuError as exc:
+        err.print(f"[red]error:[/red] {exc}", highlight=False)
+        raise typer.Exit(2) from None
+    mapping = Table(title=f"node {spec.nodeName!r} → {fmu.name}")
+    for col in ("port", "direction", "FMU variable", "value reference", "type"):
+        mapping.add_column(col)
+    for direction, ports in (("input", inputs), ("output", outputs)):
+        for m in ports:
+            mapping.add_row(m.port, direction, m.variable, str(m.vr), m.type)
+    out.print(mapping)
+
+
 if __name__ == "__main__":
     app()

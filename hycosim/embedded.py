@@ -122,7 +122,7 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
-        if proc.returncode not in (0, None) and name not in failures and code == 0:
+        if proc.returncode not in (0, None) and name not in failures:
             failures[name] = _tail(run_dir / f"node-{name}.stderr.txt")
     if failures and code in (0, 130):
         code = 3

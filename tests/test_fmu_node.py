@@ -1,0 +1,189 @@
+"""Any FMI co-simulation FMU as a node: model FMUs built from Python classes, errors, FMI 3, rollback."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from fmu_bridge.config import load_project
+from fmu_bridge.fmu_loader import FmuError, FmuInstance
+from fmu_bridge.model_fmu import ModelFmuError, build_model_fmu
+from tests.helpers import REPO, column, hycosim, meta, read_rows, run_project, write_project
+
+MODELS = REPO / "tests" / "models"
+G = 9.81
+
+
+@pytest.fixture(scope="module")
+def fmus(tmp_path_factory) -> dict[str, Path]:
+    out = tmp_path_factory.mktemp("fmus")
+    return {
+        "gain": build_model_fmu(MODELS / "gain_model.py", out),
+        "ball": build_model_fmu(MODELS / "ball_model.py", out),
+        "gain3": build_model_fmu(MODELS / "gain_model3.py", out, fmi_version="3.0"),
+    }
+
+
+def _gain_node(path: Path, **extra) -> dict:
+    node = {"nodeName": "g", "UID": 2, "fmu": str(path), "parameters": {"k": 2.0, "b": 0.5},
+            "input": ["u"], "output": ["y", {"name": "n", "type": "Integer", "variable": "count"}]}
+    node.update(extra)
+    return node
+
+
+def test_model_fmu_runs_as_a_node_with_parameters_and_a_renamed_port(tmp_path, fmus):
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        _gain_node(fmus["gain"]),
+    ], [{"from": "clock.y", "to": "g.u"}], cosim={"stepSize": 0.1, "stopTime": 1.0})
+    rows = read_rows(run_project(cfg, tmp_path / "runs"))
+    clock, y, n = column(rows, "clock.y"), column(rows, "g.y"), column(rows, "g.n")
+    assert y[0] == 1.0 and n[0] == 0  # the FMU's own start values before any step
+    for k in range(1, len(rows)):
+        assert y[k] == 2.0 * clock[k - 1] + 0.5
+        assert n[k] == k  # one doStep per macro step
+
+
+def test_fmi3_model_fmu_runs_as_a_node(tmp_path, fmus):
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "g", "UID": 2, "fmu": str(fmus["gain3"]), "parameters": {"k": 3.0}, "input": ["u"], "output": ["y"]},
+    ], [{"from": "clock.y", "to": "g.u"}], cosim={"stepSize": 0.1, "stopTime": 0.5})
+    rows = read_rows(run_project(cfg, tmp_path / "runs"))
+    clock, y = column(rows, "clock.y"), column(rows, "g.y")
+    for k in range(1, len(rows)):
+        assert math.isclose(y[k], 3.0 * clock[k - 1] + 1.0, abs_tol=1e-12)
+
+
+def _instance(tmp_path: Path, fmu: Path, node: dict) -> FmuInstance:
+    cfg = write_project(tmp_path / "p.json", [node])
+    spec = load_project(cfg).project.node(node["nodeName"])
+    return FmuInstance(fmu, spec, node.get("parameters", {}))
+
+
+def test_missing_variable_names_node_and_variable(tmp_path, fmus):
+    with pytest.raises(FmuError, match="node 'g': output 'speed' maps to variable 'speed', which GainModel.fmu does not have"):
+        _instance(tmp_path, fmus["gain"], _gain_node(fmus["gain"], output=["speed"]))
+
+
+def test_type_mismatch_names_node_and_variable(tmp_path, fmus):
+    with pytest.raises(FmuError, match="node 'g': input 'u' is Boolean but variable 'u' of GainModel.fmu is Real"):
+        _instance(tmp_path, fmus["gain"], _gain_node(fmus["gain"], input=[{"name": "u", "type": "Boolean"}]))
+
+
+def test_wrong_causality_names_the_variable(tmp_path, fmus):
+    with pytest.raises(FmuError, match="variable 'y' of GainModel.fmu is a output, not an input"):
+        _instance(tmp_path, fmus["gain"], _gain_node(fmus["gain"], input=[{"name": "u", "variable": "y"}]))
+
+
+def _rewrite(src: Path, dst: Path, edit) -> Path:
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dst, "w") as zout:
+        for item in zin.infolist():
+            name, data = edit(item.filename, zin.read(item.filename))
+            if name:
+                zout.writestr(name, data)
+    return dst
+
+
+def test_fmu_without_co_simulation(tmp_path, fmus):
+    def to_me(name, data):
+        if name == "modelDescription.xml":
+            text = re.sub(r"<CoSimulation[^>]*/>", '<ModelExchange modelIdentifier="GainModel"/>', data.decode())
+            return name, text.encode()
+        return name, data
+    me = _rewrite(fmus["gain"], tmp_path / "me.fmu", to_me)
+    with pytest.raises(FmuError, match="node 'g': me.fmu has no co-simulation interface"):
+        _instance(tmp_path, me, _gain_node(me))
+
+
+def test_fmu_for_another_platform(tmp_path, fmus):
+    def windows_only(name, data):
+        if name.startswith("binaries/") and not name.startswith("binaries/win64"):
+            return None, data
+        return name, data
+    win = _rewrite(fmus["gain"], tmp_path / "win.fmu", windows_only)
+    with pytest.raises(FmuError, match=r"node 'g': win.fmu has binaries for win64, not for this one \(linux64\)"):
+        _instance(tmp_path, win, _gain_node(win))
+
+
+def test_do_step_failure_stops_the_run_naming_node_and_time(tmp_path, fmus):
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        _gain_node(fmus["gain"], parameters={"fail_at": 0.5}),
+    ], [{"from": "clock.y", "to": "g.u"}], cosim={"stepSize": 0.1, "stopTime": 1.0, "stepTimeout": 5.0})
+    res = hycosim("run", str(cfg), "--runs-dir", str(tmp_path / "runs"), "--no-progress")
+    assert res.returncode == 3
+    assert "node 'g': doStep from t=0.5 by 0.1" in res.stderr
+    assert "Traceback" not in res.stderr
+    run = next((tmp_path / "runs").iterdir())
+    assert len(read_rows(run)) == 6  # T_0..T_5 recorded before the failing step
+
+
+def test_missing_fmu_file_and_bad_parameter(tmp_path, fmus):
+    cfg = write_project(tmp_path / "p.json", [_gain_node(tmp_path / "nope.fmu")])
+    res = hycosim("node", "g", str(cfg), timeout=60)
+    assert res.returncode == 3 and "nope.fmu does not exist" in res.stderr
+    with pytest.raises(FmuError, match="parameter 'gain' is not a variable of GainModel.fmu"):
+        _instance(tmp_path, fmus["gain"], _gain_node(fmus["gain"], parameters={"gain": 1.0})).initialize(0.0)
+
+
+def test_model_fmu_helper_errors_name_the_script(tmp_path):
+    with pytest.raises(ModelFmuError, match="no such model script"):
+        build_model_fmu(tmp_path / "missing.py", tmp_path)
+
+
+def test_inspect_lists_capabilities_variables_and_mapping(tmp_path, fmus):
+    res = hycosim("fmu", "inspect", str(fmus["ball"]))
+    assert res.returncode == 0, res.stderr
+    assert "canGetAndSetFMUstate" in res.stdout and "impacts" in res.stdout
+    cfg = write_project(tmp_path / "p.json", [_gain_node(fmus["gain"])])
+    res = hycosim("fmu", "inspect", str(fmus["gain"]), "--config", str(cfg))
+    assert res.returncode == 0, res.stderr
+    line = next(l for l in res.stdout.splitlines() if "│ n " in l)
+    assert "count" in line and "output" in line
+    bad = write_project(tmp_path / "bad.json", [_gain_node(fmus["gain"], output=["speed"])])
+    res = hycosim("fmu", "inspect", str(fmus["gain"]), "--config", str(bad))
+    assert res.returncode == 2 and "'speed'" in res.stderr
+
+
+def _ball_project(tmp_path: Path, fmu: Path, extra_nodes: list | None = None, **cosim) -> Path:
+    settings = {"stepSize": 0.05, "stopTime": 0.8}
+    settings.update(cosim)
+    nodes = [{"nodeName": "ball", "UID": 1, "fmu": str(fmu), "parameters": {"h": 1.0},
+              "output": ["h", "v", {"name": "impacts", "type": "Integer"}]}, *(extra_nodes or [])]
+    return write_project(tmp_path / "p.json", nodes, events=[
+        {"name": "bounced", "when": "ball.impacts >= 1", "drives": "ball", "until": "ball.impacts >= 2"}], cosim=settings)
+
+
+def test_rollback_locates_the_impact_within_tolerance(tmp_path, fmus):
+    tol = 1e-4
+    cfg = _ball_project(tmp_path, fmus["ball"], eventTolerance=tol)
+    run = run_project(cfg, tmp_path / "runs")
+    t_impact = math.sqrt(2 * 1.0 / G)
+    event = json.loads((run / "events.jsonl").read_text().splitlines()[0])
+    assert 0 <= event["t"] - t_impact <= tol
+    assert event["localised"]["retries"] >= math.ceil(math.log2(0.05 / tol))
+    assert meta(run)["event_localisation"] == f"rollback and bisection to {tol:g} s"
+    rows = read_rows(run)
+    t = column(rows, "t")
+    k = event["step"]
+    assert t[k] == event["t"] and rows[k]["mode"] == "bounced"
+    assert math.isclose(t[k + 1] - t[k], 0.05, rel_tol=1e-9)  # a new grid from the event on
+    assert math.isclose(t[-1], 0.8, abs_tol=1e-12)  # the last step is shortened to stopTime
+    for i in range(k):  # before the impact, exact free fall at the recorded points
+        assert math.isclose(float(rows[i]["ball.h"]), 1.0 - G * t[i] ** 2 / 2, abs_tol=1e-9)
+
+
+def test_without_rollback_the_event_falls_on_the_grid_and_meta_says_why(tmp_path, fmus):
+    cfg = _ball_project(tmp_path, fmus["ball"], [{"nodeName": "clock", "UID": 2, "model": "ramp", "output": ["y", "v"]}],
+                        eventTolerance=1e-4)
+    run = run_project(cfg, tmp_path / "runs")
+    event = json.loads((run / "events.jsonl").read_text().splitlines()[0])
+    assert math.isclose(event["t"], math.ceil(math.sqrt(2 / G) / 0.05) * 0.05, abs_tol=1e-9)
+    assert "localised" not in event
+    assert meta(run)["event_localisation"] == "none: fixed macro steps (clock cannot get and set state)"
