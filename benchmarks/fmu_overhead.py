@@ -1,0 +1,140 @@
+"""FMU overheads per macro step, measured in one run.
+
+1. A model as an FMU node (pythonfmu, through fmpy) against the same model as a plain
+   Python node: both in-process (the node's step call alone) and in a whole
+   co-simulation over Zenoh (one node, so the barrier's round trip is the rest).
+2. A generated native bridge FMU driven by a C-only importer through the TCP gateway,
+   against a Zenoh Python node and the raw Zenoh round trip (benchmarks/_zenoh_floor.py).
+
+    python benchmarks/fmu_overhead.py [--steps 3000] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+import zipfile
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+sys.path.insert(0, str(REPO))
+
+from fmu_bridge.bridge_fmu import build_bridge_fmu  # noqa: E402
+from fmu_bridge.config import load_project, parse_project  # noqa: E402
+from fmu_bridge.model_fmu import build_model_fmu  # noqa: E402
+
+
+def _port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _project(tmp: Path, node: dict, steps: int) -> Path:
+    port = _port()
+    doc = {"projectName": "bench", "serverIP": f"127.0.0.1:{port}", "gatewayIP": f"127.0.0.1:{_port()}",
+           "nodeNum": 1, "nodeLists": [node], "linkNum": 1,
+           "linkLists": [{"from": f"{node['nodeName']}.y", "to": f"{node['nodeName']}.u"}],
+           "coSimulation": {"stepSize": 1.0, "stopTime": float(steps), "stepTimeout": 30.0}}
+    path = tmp / f"{node['nodeName']}.json"
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def _run(cfg: Path, tmp: Path) -> float:
+    res = subprocess.run([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", str(tmp / "runs"),
+                          "--no-progress"], capture_output=True, text=True, timeout=600, cwd=REPO)
+    if res.returncode:
+        raise RuntimeError(res.stderr)
+    metas = sorted((tmp / "runs").glob("bench-*/meta.json"), key=lambda p: p.stat().st_mtime)
+    return float(json.loads(metas[-1].read_text())["steps_per_s"])
+
+
+def in_process(fmu: Path, steps: int) -> tuple[float, float]:
+    from clients.fmu_node import FmuNode
+    from clients.node import NodeContext
+    from clients.reference.gain import Gain
+
+    doc = {"nodeNum": 2, "nodeLists": [
+        {"nodeName": "f", "UID": 1, "fmu": str(fmu), "input": ["u"], "output": ["y"]},
+        {"nodeName": "p", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]}]}
+    project = parse_project(doc).project
+    results = []
+    for spec, impl in ((project.node("p"), Gain()), (project.node("f"), FmuNode(project.node("f"), fmu))):
+        impl.setup(NodeContext(spec.nodeName, spec.UID, list(spec.input), list(spec.output),
+                               {"k": 0.5, "b": 1.0}, 1.0, 0.0))
+        y = impl.outputs()["y"]
+        t0 = time.perf_counter()
+        for k in range(steps):
+            impl.step(float(k), 1.0, {"u": y})
+            y = impl.outputs()["y"]
+        results.append((time.perf_counter() - t0) / steps)
+        impl.teardown()
+    return results[0], results[1]
+
+
+def bridge(tmp: Path, steps: int) -> float:
+    node = {"nodeName": "tool", "UID": 9, "input": ["u"], "output": ["y"]}
+    cfg = _project(tmp, node, steps)
+    built = build_bridge_fmu(load_project(cfg), "tool", tmp / "fmus")
+    with zipfile.ZipFile(built.path) as zf:
+        zf.extractall(tmp / "bridge")
+    exe = tmp / "importer"
+    headers = Path(__import__("fmpy").__file__).parent / "c-code"
+    subprocess.run(["gcc", "-O2", f"-I{headers}", "-o", str(exe), str(REPO / "tests" / "c" / "importer.c"), "-ldl"],
+                   check=True)
+    doc = json.loads(cfg.read_text())
+    server = subprocess.Popen([sys.executable, "-m", "hycosim", "server", str(cfg), "--run-dir", str(tmp / "bridge-run")],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=REPO)
+    imp = subprocess.run([str(exe), str(tmp / "bridge" / "binaries" / "linux64" / "hycosim_tool.so"), built.guid,
+                          (tmp / "bridge").as_uri(), doc["gatewayIP"], str(steps), "1.0"],
+                         capture_output=True, text=True, timeout=600)
+    server.wait(timeout=60)
+    if imp.returncode or server.returncode:
+        raise RuntimeError(imp.stderr + server.stderr.read())
+    return float(json.loads((tmp / "bridge-run" / "meta.json").read_text())["steps_per_s"])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=3000)
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmpname:
+        tmp = Path(tmpname)
+        fmu = build_model_fmu(REPO / "tests" / "models" / "gain_model.py", tmp)
+        py_step, fmu_step = in_process(fmu, args.steps)
+        py_cosim = _run(_project(tmp, {"nodeName": "py", "UID": 1, "model": "gain",
+                                       "parameters": {"k": 0.5, "b": 1.0}, "input": ["u"], "output": ["y"]},
+                                 args.steps), tmp)
+        fmu_cosim = _run(_project(tmp, {"nodeName": "fmu", "UID": 1, "fmu": str(fmu),
+                                        "input": ["u"], "output": ["y"]}, args.steps), tmp)
+        bridge_rate = bridge(tmp, args.steps)
+        floor = subprocess.run([sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{_port()}",
+                                "1", str(args.steps)], capture_output=True, text=True, timeout=600)
+        floor_rate = float(floor.stdout.split()[-1])
+    figures = {
+        "python_node_step_us": py_step * 1e6, "fmu_node_step_us": fmu_step * 1e6,
+        "python_node_cosim_steps_per_s": py_cosim, "fmu_node_cosim_steps_per_s": fmu_cosim,
+        "bridge_fmu_cosim_steps_per_s": bridge_rate, "zenoh_floor_steps_per_s": floor_rate,
+    }
+    if args.json:
+        print(json.dumps(figures))
+        return
+    print(f"node step alone:   Python {py_step * 1e6:8.1f} µs   FMU (pythonfmu via fmpy) {fmu_step * 1e6:8.1f} µs"
+          f"   ratio {fmu_step / py_step:.1f}×")
+    print(f"one-node co-sim:   Python {py_cosim:8.0f} steps/s   FMU {fmu_cosim:8.0f} steps/s"
+          f"   overhead {1e6 / fmu_cosim - 1e6 / py_cosim:+.1f} µs/step")
+    print(f"round trip:        raw Zenoh {1e6 / floor_rate:7.1f} µs   hycosim Zenoh node {1e6 / py_cosim:7.1f} µs"
+          f"   bridge FMU (C importer, TCP gateway) {1e6 / bridge_rate:7.1f} µs"
+          f"   bridge/raw {floor_rate / bridge_rate:.2f}×")
+
+
+if __name__ == "__main__":
+    main()
