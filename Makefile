@@ -18,7 +18,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 run: $(STAMP)
-	$(VENV)/bin/hycosim run configs/default.json
+	$(VENV)/bin/hycosim run configs/grasp.json
 
 test: $(STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider

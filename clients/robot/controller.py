@@ -1,0 +1,107 @@
+"""A scripted reference controller: grasp the swinging rod at a predicted turning point.
+
+It runs the rod's own model forward from the routed angle and angular velocity to find
+the next turning points (where the rod is momentarily at rest), picks the first one the
+robot can reach in time (IK with the jaws across the rod, travel time from the axis
+speed limits), commands those joint angles, and closes the jaws just before the rod
+arrives. It lets the grasp scenario run end to end before the learned policy exists,
+and is the baseline the policy is compared with.
+
+Inputs: ``rod_angle``, ``rod_omega``, ``q1``…``q6``, ``grasped``.
+Outputs: ``q_cmd1``…``q_cmd6``, ``grip_cmd``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from clients.node import Node, NodeContext
+from clients.robot import kr6
+from clients.robot.node import scene_params
+from clients.robot.scene import RobotScene, SceneParams
+from clients.rod.model import RodModel
+from clients.rod.node import rod_params
+
+
+@dataclass
+class Plan:
+    t_turn: float      # absolute time of the turning point
+    angle: float       # rod angle there
+    q: np.ndarray      # joint target
+
+
+def turning_points(rod: RodModel, angle: float, omega: float, horizon: float) -> list[tuple[float, float]]:
+    """(time from now, angle) of the rod's turning points within ``horizon`` seconds."""
+    rod.reset(angle, omega)
+    dt = rod.model.opt.timestep
+    found = []
+    w_prev = omega
+    steps = int(horizon / dt)
+    for i in range(1, steps + 1):
+        rod.advance(dt)
+        w = rod.omega
+        if w_prev != 0.0 and (w_prev > 0) != (w > 0):
+            frac = abs(w_prev) / (abs(w_prev) + abs(w))
+            found.append(((i - 1 + frac) * dt, rod.angle))
+        w_prev = w
+    return found
+
+
+def travel_time(q_from: np.ndarray, q_to: np.ndarray) -> float:
+    return float(np.max(np.abs(q_to - q_from) / kr6.SPEEDS))
+
+
+def plan_grasp(rod: RodModel, scene: RobotScene, t: float, angle: float, omega: float, q: np.ndarray,
+               horizon: float = 3.0, margin: float = 0.15, min_angle: float = math.radians(3)) -> Plan | None:
+    """The first turning point the robot can reach, in time, with the jaws across the rod."""
+    for dt, a in turning_points(rod, angle, omega, horizon):
+        if abs(a) < min_angle:
+            continue  # a rod all but at rest: any point will do, but needs no turning point
+        ik = scene.reach(a, q0=q)
+        if not (ik.position_error < 1e-3 and ik.rotation_error < math.radians(1)):
+            continue
+        if travel_time(q, ik.q) + margin <= dt:
+            return Plan(t + dt, a, ik.q)
+    return None
+
+
+class ReferenceController(Node):
+    """Parameters: the rod's (as for the rod node), ``close_lead`` s before the turning point
+    to start closing (0.03), ``replan_every`` s (0.1)."""
+
+    def setup(self, ctx: NodeContext) -> None:
+        self.rod = RodModel(rod_params(ctx.parameters))
+        params = scene_params(ctx.parameters)
+        self.scene = RobotScene(SceneParams(**{**params.__dict__, "check_reach": False}))
+        self.close_lead = float(ctx.parameter("close_lead", 0.03))
+        self.replan_every = float(ctx.parameter("replan_every", 0.1))
+        self.q_cmd = kr6.HOME.copy()
+        self.grip = False
+        self.plan: Plan | None = None
+        self.planned_at = -math.inf
+
+    def outputs(self) -> dict[str, Any]:
+        out: dict[str, Any] = {f"q_cmd{i + 1}": float(self.q_cmd[i]) for i in range(6)}
+        out["grip_cmd"] = self.grip
+        return out
+
+    def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
+        if float(inputs.get("grasped", 0.0)) > 0.5:
+            self.grip = True  # hold what we have
+            return
+        now = t + h
+        q = np.array([float(inputs.get(f"q{i + 1}", self.q_cmd[i])) for i in range(6)])
+        committed = self.plan is not None and self.plan.t_turn - now < 0.25
+        if not committed and now - self.planned_at >= self.replan_every:
+            self.plan = plan_grasp(self.rod, self.scene, t, float(inputs["rod_angle"]), float(inputs["rod_omega"]), q)
+            self.planned_at = now
+        if self.plan is None:
+            return
+        self.q_cmd = self.plan.q
+        self.grip = self.plan.t_turn - now <= self.close_lead
+        if now > self.plan.t_turn + 0.2:  # missed it: open and plan again
+            self.plan, self.grip = None, False

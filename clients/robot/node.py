@@ -1,0 +1,59 @@
+"""The robot scene as a hycosim node.
+
+Inputs: ``q_cmd1``…``q_cmd6`` (rad), ``grip_cmd`` (close when > 0.5), ``rod_angle``.
+Outputs: ``q1``…``q6``, ``tcp_x/y/z`` and ``tcp_roll/pitch/yaw`` (ZYX Euler, rad), ``dist``
+(TCP to the rod's grasp point, m), ``grasped``, ``collision``, ``reachable``, ``near_miss``,
+``gap`` (jaw opening, m) and ``grip_x/y/z`` (where the held rod's grasp point goes).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from clients.node import Node, NodeContext
+from clients.robot import kr6
+from clients.robot.scene import RobotScene, SceneOutputs, SceneParams
+from clients.rod.node import rod_params
+
+
+def scene_params(parameters: dict[str, Any]) -> SceneParams:
+    rod = rod_params(parameters)
+    return SceneParams(base=tuple(float(v) for v in parameters.get("base", (0.0, 0.0, 0.0))),
+                       rod_length=rod.length, rod_radius=rod.radius, pivot=rod.pivot, grasp_distance=rod.grasp_distance,
+                       check_reach=bool(parameters.get("check_reach", True)))
+
+
+def euler_zyx(rot: np.ndarray) -> tuple[float, float, float]:
+    """(roll, pitch, yaw) of a rotation matrix, ZYX convention."""
+    pitch = math.asin(max(-1.0, min(1.0, -rot[2, 0])))
+    return math.atan2(rot[2, 1], rot[2, 2]), pitch, math.atan2(rot[1, 0], rot[0, 0])
+
+
+def scene_output_dict(o: SceneOutputs) -> dict[str, Any]:
+    roll, pitch, yaw = euler_zyx(o.tcp_rot)
+    out: dict[str, Any] = {f"q{i + 1}": float(o.q[i]) for i in range(6)}
+    out.update(tcp_x=o.tcp[0], tcp_y=o.tcp[1], tcp_z=o.tcp[2], tcp_roll=roll, tcp_pitch=pitch, tcp_yaw=yaw,
+               dist=o.distance, grasped=o.grasped, collision=o.collision, reachable=o.reachable,
+               near_miss=o.near_miss, gap=o.gap, grip_x=o.grip_target[0], grip_y=o.grip_target[1],
+               grip_z=o.grip_target[2])
+    return out
+
+
+class RobotNode(Node):
+    def setup(self, ctx: NodeContext) -> None:
+        self.scene = RobotScene(scene_params(ctx.parameters))
+        q0 = ctx.parameters.get("q0_deg")
+        if q0 is not None:
+            self.scene.set_state(np.radians(np.asarray(q0, dtype=float)), kr6.GRIPPER_OPEN, 0.0)
+        self.last = self.scene.outputs(False)
+
+    def outputs(self) -> dict[str, Any]:
+        return scene_output_dict(self.last)
+
+    def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
+        q_cmd = np.array([float(inputs.get(f"q_cmd{i + 1}", self.scene.q[i])) for i in range(6)])
+        self.last = self.scene.step(h, q_cmd, float(inputs.get("grip_cmd", 0.0)) > 0.5,
+                                    float(inputs.get("rod_angle", 0.0)))

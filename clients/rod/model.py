@@ -1,0 +1,159 @@
+"""The swinging wooden rod in MuJoCo (the paper's Adams model).
+
+A uniform rod (cylinder) hangs from a hinge whose axis is world x, so it swings in the
+y–z plane: at angle φ (0 hanging down, positive about +x) a point s metres down the rod is
+at pivot + s·(0, sin φ, −cos φ).
+
+Free, the rod follows its own dynamics (implicitfast integrator, 1 ms steps, joint
+damping). Driven, a ``connect`` equality ties the grasp point to a mocap body placed at
+the gripper: the rod's state is never reset, so angle and angular velocity are continuous
+at both switches (only the forces change). A measurement of the real rod's angle
+corrects the twin through a Luenberger observer on (φ, ω) with error dynamics
+ë + 2l·ė + l²·e = 0 (critically damped, rate ``observer_gain`` l in 1/s; 0 turns it off).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+
+@dataclass(frozen=True)
+class RodParams:
+    length: float = 0.6          # m
+    mass: float = 0.3            # kg
+    radius: float = 0.01         # m
+    damping: float = 0.002       # N·m·s/rad at the hinge
+    pivot: tuple[float, float, float] = (0.62, 0.0, 1.0)  # m, world (the robot base at the origin)
+    grasp_distance: float = 0.4   # m from the pivot along the rod
+    initial_angle: float = math.radians(40.0)  # rad
+    initial_omega: float = 0.0   # rad/s
+    timestep: float = 0.001      # s, MuJoCo's integrator step
+    observer_gain: float = 0.0   # 1/s; 0: no correction
+    gravity: float = 9.81
+
+    def inertia_about_pivot(self) -> float:
+        """Uniform solid cylinder about a transverse axis through one end."""
+        return self.mass * (3 * self.radius ** 2 + self.length ** 2) / 12 + self.mass * (self.length / 2) ** 2
+
+
+def rod_mjcf(p: RodParams, name: str = "rod") -> str:
+    """MJCF of the rod scene: pivot, hinge, cylinder, grasp and tip sites, and the gripper mocap."""
+    px, py, pz = p.pivot
+    return f"""
+<mujoco model="{name}">
+  <option timestep="{p.timestep}" integrator="implicitfast" gravity="0 0 {-p.gravity}"/>
+  <worldbody>
+    <body name="rod" pos="{px} {py} {pz}">
+      <joint name="hinge" type="hinge" axis="1 0 0" damping="{p.damping}"/>
+      <geom name="rod" type="cylinder" fromto="0 0 0 0 0 {-p.length}" size="{p.radius}" mass="{p.mass}"
+            rgba="0.85 0.1 0.1 1" contype="0" conaffinity="0"/>
+      <site name="grasp" pos="0 0 {-p.grasp_distance}" size="0.005"/>
+      <site name="tip" pos="0 0 {-p.length}" size="0.005"/>
+    </body>
+    <body name="gripper" mocap="true" pos="{px} {py} {pz - p.grasp_distance}"/>
+  </worldbody>
+  <equality>
+    <connect name="grip" body1="rod" body2="gripper" anchor="0 0 {-p.grasp_distance}" active="false"
+             solref="0.02 1"/>
+  </equality>
+</mujoco>
+"""
+
+
+@dataclass
+class RodOutputs:
+    angle: float
+    omega: float
+    grasp: np.ndarray = field(repr=False)
+    tip: np.ndarray = field(repr=False)
+
+
+class RodModel:
+    """One rod simulation; :meth:`advance` integrates a macro step."""
+
+    def __init__(self, params: RodParams | None = None):
+        self.p = params or RodParams()
+        self.model = mujoco.MjModel.from_xml_string(rod_mjcf(self.p))
+        self.data = mujoco.MjData(self.model)
+        self._hinge = self.model.joint("hinge").qposadr[0]
+        self._dof = self.model.joint("hinge").dofadr[0]
+        self._grasp = self.model.site("grasp").id
+        self._tip = self.model.site("tip").id
+        self._eq = self.model.equality("grip").id
+        self.reset(self.p.initial_angle, self.p.initial_omega)
+
+    def reset(self, angle: float, omega: float = 0.0) -> None:
+        mujoco.mj_resetData(self.model, self.data)
+        self.data.qpos[self._hinge] = angle
+        self.data.qvel[self._dof] = omega
+        self.data.eq_active[self._eq] = 0
+        mujoco.mj_forward(self.model, self.data)
+
+    @property
+    def angle(self) -> float:
+        return float(self.data.qpos[self._hinge])
+
+    @property
+    def omega(self) -> float:
+        return float(self.data.qvel[self._dof])
+
+    @property
+    def time(self) -> float:
+        return float(self.data.time)
+
+    @property
+    def driven(self) -> bool:
+        return bool(self.data.eq_active[self._eq])
+
+    def set_driven(self, driven: bool) -> None:
+        """Switch between free swinging and following the gripper; the state is untouched."""
+        self.data.eq_active[self._eq] = 1 if driven else 0
+
+    def set_gripper(self, position: np.ndarray) -> None:
+        self.data.mocap_pos[0] = position
+
+    def correct(self, measured_angle: float, h: float) -> None:
+        """One macro step of observer correction towards a measured angle."""
+        l = self.p.observer_gain
+        if l <= 0:
+            return
+        e = measured_angle - self.angle
+        self.data.qpos[self._hinge] += 2 * l * e * h
+        self.data.qvel[self._dof] += l * l * e * h
+
+    def advance(self, h: float) -> None:
+        """Integrate h seconds with MuJoCo's own steps (the macro step's micro-steps)."""
+        n = max(1, round(h / self.model.opt.timestep))
+        mujoco.mj_step(self.model, self.data, nstep=n)
+        mujoco.mj_kinematics(self.model, self.data)
+
+    def outputs(self) -> RodOutputs:
+        return RodOutputs(self.angle, self.omega, self.data.site_xpos[self._grasp].copy(),
+                          self.data.site_xpos[self._tip].copy())
+
+    def energy(self) -> float:
+        """Kinetic + potential energy about the pivot (J)."""
+        p = self.p
+        return 0.5 * p.inertia_about_pivot() * self.omega ** 2 + p.mass * p.gravity * (p.length / 2) * (1 - math.cos(self.angle))
+
+    def point(self, s: float, angle: float | None = None) -> np.ndarray:
+        """World position of the point s metres down the rod, at the given (or current) angle."""
+        a = self.angle if angle is None else angle
+        return np.asarray(self.p.pivot) + s * np.array([0.0, math.sin(a), -math.cos(a)])
+
+
+def pendulum_period(p: RodParams, amplitude: float) -> float:
+    """Undamped period of the rod as a physical pendulum, exact for any amplitude.
+
+    T = 2π·sqrt(I / (m·g·d)) / AGM(1, cos(θ0/2)), the arithmetic–geometric mean form of
+    the complete elliptic integral (the large-angle correction).
+    """
+    t0 = 2 * math.pi * math.sqrt(p.inertia_about_pivot() / (p.mass * p.gravity * p.length / 2))
+    a, b = 1.0, math.cos(amplitude / 2)
+    while abs(a - b) > 1e-15:
+        a, b = (a + b) / 2, math.sqrt(a * b)
+    return t0 / a

@@ -1,0 +1,69 @@
+"""The rod as a hycosim node (the same RodModel the FMU and the RL environment use).
+
+Inputs: ``driven`` (also set by the coordinator's mode), ``grip_x/y/z`` (where the gripper
+holds the grasp point), ``meas_angle`` and ``meas_valid`` (the camera's measurement).
+Outputs: ``angle``, ``omega``, ``grasp_x/y/z``, ``tip_x/y/z``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from clients.node import Node, NodeContext
+from clients.rod.model import RodModel, RodParams
+
+
+def rod_params(parameters: dict[str, Any]) -> RodParams:
+    """RodParams from a node's ``parameters`` (angles in degrees, as people write them)."""
+    d = RodParams()
+    return RodParams(
+        length=float(parameters.get("length", d.length)),
+        mass=float(parameters.get("mass", d.mass)),
+        radius=float(parameters.get("radius", d.radius)),
+        damping=float(parameters.get("damping", d.damping)),
+        pivot=tuple(float(v) for v in parameters.get("pivot", d.pivot)),
+        grasp_distance=float(parameters.get("grasp_distance", d.grasp_distance)),
+        initial_angle=math.radians(float(parameters.get("initial_angle_deg", math.degrees(d.initial_angle)))),
+        initial_omega=float(parameters.get("initial_omega", d.initial_omega)),
+        observer_gain=float(parameters.get("observer_gain", d.observer_gain)),
+    )
+
+
+class RodNode(Node):
+    def setup(self, ctx: NodeContext) -> None:
+        self.rod = RodModel(rod_params(ctx.parameters))
+        self.mode_driven = False
+
+    def set_mode(self, mode: str, driven: bool) -> None:
+        self.mode_driven = driven
+
+    def outputs(self) -> dict[str, Any]:
+        o = self.rod.outputs()
+        return {"angle": o.angle, "omega": o.omega, "grasp_x": o.grasp[0], "grasp_y": o.grasp[1],
+                "grasp_z": o.grasp[2], "tip_x": o.tip[0], "tip_y": o.tip[1], "tip_z": o.tip[2]}
+
+    def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
+        driven = self.mode_driven or float(inputs.get("driven", 0.0)) > 0.5
+        if driven:
+            pivot = self.rod.p.pivot
+            self.rod.set_gripper(np.array([float(inputs.get("grip_x", pivot[0])), float(inputs.get("grip_y", 0.0)),
+                                           float(inputs.get("grip_z", 0.0))]))
+        self.rod.set_driven(driven)
+        if float(inputs.get("meas_valid", 0.0)) > 0.5:
+            self.rod.correct(float(inputs["meas_angle"]), h)
+        self.rod.advance(h)
+
+    @property
+    def can_rollback(self) -> bool:
+        return True
+
+    def get_state(self) -> Any:
+        d = self.rod.data
+        return d.time, d.qpos.copy(), d.qvel.copy(), d.qacc_warmstart.copy(), d.eq_active.copy(), d.mocap_pos.copy()
+
+    def set_state(self, state: Any) -> None:
+        d = self.rod.data
+        d.time, d.qpos[:], d.qvel[:], d.qacc_warmstart[:], d.eq_active[:], d.mocap_pos[:] = state
