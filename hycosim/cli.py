@@ -301,5 +301,56 @@ def fmu_inspect(
     out.print(mapping)
 
 
+scene_app = typer.Typer(no_args_is_help=True, help="The robot scene: reachability, FMUs.")
+app.add_typer(scene_app, name="scene")
+
+
+@scene_app.command("reach")
+def scene_reach(
+    file: Path,
+    node: Annotated[str, typer.Option(help="the robot node whose parameters place base and rod")] = "robot",
+    output: Annotated[Optional[Path], typer.Option("-o", "--output", help="PNG to write")] = None,
+) -> None:
+    """Which part of the rod's swing the robot can reach from its base placement: table and PNG."""
+    from clients.robot.node import scene_params
+    from clients.robot.reach import analyse_reach, plot_reach
+
+    loaded = _load(file)
+    try:
+        spec = loaded.project.node(node)
+    except KeyError:
+        err.print(f"[red]error:[/red] {file}: no node named {node!r} (use --node)", highlight=False)
+        raise typer.Exit(2) from None
+    report = analyse_reach(scene_params(spec.parameters))
+    table = Table(title=f"reach of {node!r} over the rod's swing")
+    for col in ("rod angle (°)", "grasp point (m)", "reachable", "IK error (mm)", "A1…A6 (°)", "limit margin (°)"):
+        table.add_column(col)
+    for p in report.points:
+        table.add_row(f"{p.angle_deg:+.1f}", "({:.3f}, {:.3f}, {:.3f})".format(*p.position),
+                      "yes" if p.reachable else "[red]no[/red]", f"{p.position_error_mm:.2f}",
+                      " ".join(f"{v:.0f}" for v in p.q_deg), f"{p.limit_margin_deg:.0f}")
+    out.print(table)
+    rng = report.reachable_range()
+    out.print(("reachable from {:+.1f}° to {:+.1f}°".format(*rng) if rng else "no part of the swing is reachable")
+              + "; share of the swing reachable: " + ", ".join(
+                  f"±{a}°: {100 * report.fraction_of_swing(a):.0f} %" for a in (30, 40, 50, 60)), highlight=False)
+    png = plot_reach(report, output or Path(f"reach-{loaded.name}.png"))
+    out.print(f"wrote {png}", highlight=False)
+
+
+@scene_app.command("fmus")
+def scene_fmus(output: Annotated[Path, typer.Option("-o", "--output")] = Path("build/fmus")) -> None:
+    """Build the rod and robot-scene FMUs (pythonfmu) into a folder."""
+    from fmpy.validation import validate_fmu
+
+    from clients.scene_fmus import build_scene_fmus
+
+    for name, path in build_scene_fmus(output).items():
+        problems = validate_fmu(str(path))
+        out.print(f"{name}: {path} ({'valid' if not problems else 'INVALID: ' + '; '.join(problems)})", highlight=False)
+        if problems:
+            raise typer.Exit(4)
+
+
 if __name__ == "__main__":
     app()
