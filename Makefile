@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup run test test-long bench clean
+.PHONY: setup run test test-long bench fmus clean
 
 setup: $(STAMP)
 
@@ -29,6 +29,12 @@ test-long: $(STAMP)
 bench: $(STAMP)
 	$(PY) -m pip install --quiet -e ".[test,bench]"
 	$(PY) benchmarks/barrier.py
+	$(PY) benchmarks/fmu_overhead.py
+	$(PY) benchmarks/scene_fmus.py
+
+# The rod and robot-scene FMUs that configs/grasp-fmu.json uses.
+fmus: $(STAMP)
+	$(VENV)/bin/hycosim scene fmus -o build/fmus
 
 clean:
 	rm -rf $(VENV) build *.egg-info

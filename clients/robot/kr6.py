@@ -6,8 +6,8 @@ Sources of the numbers:
   KR6 R700 sixx (shipped on PyPI in ``rtb-data`` as
   ``rtbdata/xacro/kuka_description/kuka_kr6/urdf/kr6r700sixx_macro.xacro``): A1 at z 0.400,
   A2 x 0.025, A3 x 0.315, A4 z 0.035, A5 x 0.365, A6 x 0.080 to the flange; axes −z, +y, +y,
-  −x, +y, −x. These give the datasheet's reach of 706.7 mm (A2 axis to the wrist centre is
-  0.315 + sqrt(0.365² + 0.035²) = 0.682 m; to the flange 0.7067 m with A5 straight).
+  −x, +y, −x. Stretched, they put the wrist point (A5) 0.025 + hypot(0.680, 0.035) = 0.7059 m
+  from A1 at the height of A2, within 1 mm of the datasheet's maximum reach of 706.7 mm.
 * Joint limits: KUKA KR AGILUS sixx datasheet (KR 6 R700 sixx): A1 ±170°, A2 −190°…+45°,
   A3 −120°…+156°, A4 ±185°, A5 ±120°, A6 ±350°.
 * Axis speeds, same datasheet: 360, 300, 360, 381, 388, 615 °/s.

@@ -1,0 +1,70 @@
+"""The grasp scenario end to end over real Zenoh: rod, robot scene and reference controller as processes."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy import simulate_fmu
+from fmpy.validation import validate_fmu
+
+from clients.rod.model import RodModel, RodParams
+from clients.scene_fmus import build_scene_fmus
+from tests.helpers import REPO, column, read_rows, run_project
+
+
+def _check_grasp(run: Path, rows: list[dict]) -> None:
+    events = [json.loads(line) for line in (run / "events.jsonl").read_text().splitlines()]
+    assert events and events[0]["to"] == "grasp"
+    k = events[0]["step"]
+    dist = column(rows, "robot.dist")
+    assert dist[k] < 0.005  # grasped within 5 mm of the rod's grasp point
+    assert not any(float(r["robot.collision"]) for r in rows)
+    angle = column(rows, "rod.angle")
+    held = angle[k + 20:]
+    assert max(held) - min(held) < math.radians(2)  # the held rod follows the still gripper
+    assert [r["mode"] for r in rows[k:]] == ["grasp"] * (len(rows) - k)
+    # before the grasp the rod swung freely, exactly as the rod model alone does
+    p = RodParams(length=0.6, mass=0.3, damping=0.002, pivot=(0.62, 0.0, 1.0), grasp_distance=0.4,
+                  initial_angle=math.radians(40))
+    alone = RodModel(p)
+    for i in range(1, k):
+        alone.advance(0.01)
+        assert math.isclose(alone.angle, angle[i], abs_tol=1e-9)
+
+
+def _shortened(src: Path, dst: Path, stop: float, replace: dict | None = None) -> Path:
+    doc = json.loads(src.read_text())
+    doc["coSimulation"]["stopTime"] = stop
+    for node in doc["nodeLists"]:
+        if "fmu" in node and replace:
+            node["fmu"] = str(replace[node["nodeName"]])
+    dst.write_text(json.dumps(doc))
+    return dst
+
+
+def test_reference_controller_grasps_the_rod_over_zenoh(tmp_path):
+    cfg = _shortened(REPO / "configs" / "grasp.json", tmp_path / "grasp.json", 2.0)
+    run = run_project(cfg, tmp_path / "runs")
+    _check_grasp(run, read_rows(run))
+
+
+def test_scene_fmus_run_in_plain_fmpy_and_as_nodes(tmp_path):
+    fmus = build_scene_fmus(tmp_path / "fmus")
+    assert all(validate_fmu(str(p)) == [] for p in fmus.values())
+    res = simulate_fmu(str(fmus["rod"]), stop_time=1.0, output_interval=0.01, output=["angle"],
+                       start_values={"initial_angle": math.radians(30), "damping": 0.0})
+    alone = RodModel(RodParams(initial_angle=math.radians(30), damping=0.0))
+    alone.advance(1.0)
+    assert math.isclose(res["angle"][-1], alone.angle, abs_tol=1e-9)
+    res = simulate_fmu(str(fmus["robot"]), stop_time=0.2, output_interval=0.01, output=["q1", "reachable"],
+                       start_values={"q_cmd1": 0.5})
+    assert math.isclose(res["q1"][-1], 0.5) and math.isclose(res["q1"][1], math.radians(360) * 0.01)
+    cfg = _shortened(REPO / "configs" / "grasp-fmu.json", tmp_path / "grasp-fmu.json", 1.5,
+                     {"rod": fmus["rod"], "robot": fmus["robot"]})
+    run = run_project(cfg, tmp_path / "runs")
+    _check_grasp(run, read_rows(run))

@@ -1,0 +1,91 @@
+"""The MuJoCo rod: period, damping, driven-mode continuity, observer correction, its FMU."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from clients.rod.model import RodModel, RodParams, pendulum_period
+
+
+def _period(rod: RodModel, seconds: float = 6.0) -> float:
+    turns = []
+    while rod.time < seconds:
+        w0 = rod.omega
+        rod.advance(rod.model.opt.timestep)
+        w1 = rod.omega
+        if (w0 > 0) != (w1 > 0) and w0 != 0:
+            turns.append(rod.time - rod.model.opt.timestep * abs(w1) / (abs(w0) + abs(w1)))
+    return (turns[-1] - turns[0]) / ((len(turns) - 1) / 2)
+
+
+@pytest.mark.parametrize("deg", [30, 40, 50, 60])
+def test_period_matches_the_large_angle_physical_pendulum(deg):
+    p = RodParams(damping=0.0, initial_angle=math.radians(deg))
+    measured = _period(RodModel(p))
+    expected = pendulum_period(p, math.radians(deg))
+    assert abs(measured / expected - 1) < 0.005
+    small = pendulum_period(p, 1e-6)
+    assert expected > small * (1 + (math.radians(deg) ** 2) / 16 * 0.9)  # the correction matters here
+
+
+def test_damping_dissipates_energy_monotonically_and_none_without_it():
+    damped = RodModel(RodParams(damping=0.01, initial_angle=math.radians(50)))
+    e = [damped.energy()]
+    for _ in range(300):
+        damped.advance(0.01)
+        e.append(damped.energy())
+    assert all(b <= a + 1e-9 for a, b in zip(e, e[1:]))
+    assert e[-1] < 0.9 * e[0]
+    free = RodModel(RodParams(damping=0.0, initial_angle=math.radians(50)))
+    e0 = free.energy()
+    free.advance(3.0)
+    assert abs(free.energy() / e0 - 1) < 1e-3
+
+
+def test_driven_mode_is_continuous_at_both_switches_and_follows_the_gripper():
+    rod = RodModel(RodParams(initial_angle=math.radians(40)))
+    rod.advance(0.2)
+    before = (rod.angle, rod.omega)
+    rod.set_gripper(rod.point(rod.p.grasp_distance))  # the gripper takes the rod where it is
+    rod.set_driven(True)
+    rod.advance(0.001)
+    assert abs(rod.angle - before[0]) < 0.01 and abs(rod.omega - before[1]) < 0.3  # no jump at the switch
+    target = -0.3
+    rod.set_gripper(rod.point(rod.p.grasp_distance, target))
+    rod.advance(1.0)
+    assert abs(rod.angle - target) < 0.01  # follows the gripper
+    held = (rod.angle, rod.omega)
+    rod.set_driven(False)
+    rod.advance(0.001)
+    assert abs(rod.angle - held[0]) < 0.001 and abs(rod.omega - held[1]) < 0.1  # continuous on release
+    rod.advance(0.3)
+    assert abs(rod.omega) > 0.3  # swinging freely again
+
+
+def test_observer_pulls_the_twin_onto_the_measured_rod_and_gain_zero_does_not():
+    truth = RodModel(RodParams(length=0.63, initial_angle=math.radians(43)))
+    twin = RodModel(RodParams(initial_angle=math.radians(40), observer_gain=8.0))
+    blind = RodModel(RodParams(initial_angle=math.radians(40), observer_gain=0.0))
+    h = 0.01
+    errors, blind_errors = [], []
+    for _ in range(300):
+        for m in (twin, blind):
+            m.correct(truth.angle, h)
+            m.advance(h)
+        truth.advance(h)
+        errors.append(abs(twin.angle - truth.angle))
+        blind_errors.append(abs(blind.angle - truth.angle))
+    assert max(errors[-50:]) < math.radians(1.0)
+    assert max(blind_errors[-50:]) > math.radians(3.0)
+    assert errors[-1] < errors[0] / 3
+
+
+def test_grasp_and_tip_positions_follow_the_angle():
+    rod = RodModel(RodParams(initial_angle=math.radians(30)))
+    o = rod.outputs()
+    pivot = np.array(rod.p.pivot)
+    assert np.allclose(o.grasp, pivot + rod.p.grasp_distance * np.array([0, math.sin(o.angle), -math.cos(o.angle)]), atol=1e-9)
+    assert np.allclose(o.tip, pivot + rod.p.length * np.array([0, math.sin(o.angle), -math.cos(o.angle)]), atol=1e-9)
