@@ -15,6 +15,10 @@ REFERENCE_MODELS = {
     "pendulum": "clients.reference.pendulum:Pendulum",
     "bouncing_ball": "clients.reference.bouncing_ball:BouncingBall",
     "ramp_source": "clients.reference.ramp_source:RampSource",
+    "rod": "clients.rod.node:RodNode",
+    "robot": "clients.robot.node:RobotNode",
+    "reference_controller": "clients.robot.controller:ReferenceController",
+    "camera": "clients.camera.node:CameraNode",
 }
 
 

@@ -76,6 +76,8 @@ class NodeRuntime:
         except Exception as exc:
             if isinstance(exc, (NodeRunError, FmuError)):
                 raise
+            if type(exc).__name__ == "CameraError":  # a clear message of its own
+                raise NodeRunError(str(exc)) from None
             raise NodeRunError(f"node {self.name!r}: its model failed to set up: {type(exc).__name__}: {exc}") from exc
         session = open_session(client_config(self.endpoint, timeout_s=self.cosim.attachTimeout), self.endpoint)
         try:

@@ -7,6 +7,7 @@ failed (timeout, lost node, server gone), 130 Ctrl-C.
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import asdict
 from pathlib import Path
 from typing import Annotated, Optional
@@ -350,6 +351,80 @@ def scene_fmus(output: Annotated[Path, typer.Option("-o", "--output")] = Path("b
         out.print(f"{name}: {path} ({'valid' if not problems else 'INVALID: ' + '; '.join(problems)})", highlight=False)
         if problems:
             raise typer.Exit(4)
+
+
+@app.command()
+def camera(
+    source: Annotated[str, typer.Option(help="'emulated', a video file, or a camera device index")] = "emulated",
+    annotate: Annotated[Optional[Path], typer.Option(help="write the frames with the detected rod drawn, .mp4 or .avi")] = None,
+    seconds: Annotated[float, typer.Option(help="how much to process (emulated: simulated seconds)")] = 3.0,
+    calibration: Annotated[Optional[Path], typer.Option(help="calibration JSON (real sources)")] = None,
+    initial_angle: Annotated[float, typer.Option(help="emulated rod's release angle, degrees")] = 45.0,
+    noise: Annotated[float, typer.Option(help="emulated image noise σ (grey levels)")] = 25.0,
+    fps: Annotated[float, typer.Option(help="emulated frame rate")] = 60.0,
+) -> None:
+    """Run the camera node alone: detect the rod in each frame and summarise (and annotate)."""
+    import math
+
+    import cv2
+    import numpy as np
+
+    from clients.camera.calibration import Calibration, CalibrationError
+    from clients.camera.detect import RodDetector, annotate as draw
+    from clients.camera.emulated import CameraSetup, EmulatedRodCamera
+    from clients.camera.sources import CameraError, DeviceSource, VideoFileSource
+    from clients.camera.tracker import Tracker
+    from clients.rod.model import RodParams
+
+    try:
+        if source == "emulated":
+            emu = EmulatedRodCamera(RodParams(initial_angle=math.radians(initial_angle)),
+                                    CameraSetup(noise_sigma=noise, fps=fps))
+            frames = emu.frames_until(seconds)
+            cal = emu.calibration
+        else:
+            if calibration is None:
+                err.print("[red]error:[/red] a real source needs --calibration FILE", highlight=False)
+                raise typer.Exit(2)
+            cal = Calibration.load(calibration)
+            src = DeviceSource(int(source)) if source.isdigit() else VideoFileSource(Path(source))
+            frames = []
+            for frame in src.frames():
+                if frame.t > seconds:
+                    break
+                frames.append(frame)
+            src.close()
+    except (CameraError, CalibrationError) as exc:
+        err.print(f"[red]error:[/red] {exc}", highlight=False)
+        raise typer.Exit(3) from None
+    detector, tracker = RodDetector(cal), Tracker()
+    writer = None
+    errors, detected, t_detect = [], 0, 0.0
+    for frame in frames:
+        start = time.perf_counter()
+        found = detector.detect(frame.image)
+        t_detect += time.perf_counter() - start
+        m = tracker.update(frame.t, found)
+        if m is not None:
+            detected += 1
+            if not math.isnan(frame.true_angle):
+                errors.append(abs(math.degrees(m.angle - frame.true_angle)))
+        if annotate is not None and frame.image is not None:
+            if writer is None:
+                h, w = frame.image.shape[:2]
+                fourcc = cv2.VideoWriter_fourcc(*("mp4v" if annotate.suffix == ".mp4" else "MJPG"))
+                writer = cv2.VideoWriter(str(annotate), fourcc, fps if source == "emulated" else 30.0, (w, h))
+            writer.write(draw(frame.image, found, cal, f"t={frame.t:.3f}s"))
+    if writer is not None:
+        writer.release()
+    usable = sum(f.image is not None for f in frames)
+    out.print(f"{len(frames)} frames ({len(frames) - usable} dropped), {detected} confident detections, "
+              f"detection {usable / t_detect if t_detect else 0:,.0f} frames/s", highlight=False)
+    if errors:
+        out.print(f"angle error against the emulated rod: mean {np.mean(errors):.3f}°, max {np.max(errors):.3f}°",
+                  highlight=False)
+    if annotate is not None:
+        out.print(f"wrote {annotate}", highlight=False)
 
 
 if __name__ == "__main__":

@@ -10,11 +10,14 @@ the gripper: the rod's state is never reset, so angle and angular velocity are c
 at both switches (only the forces change). A measurement of the real rod's angle
 corrects the twin through a Luenberger observer on (φ, ω) with error dynamics
 ë + 2l·ė + l²·e = 0 (critically damped, rate ``observer_gain`` l in 1/s; 0 turns it off).
+A measurement carries its capture time: it is compared with the twin's own angle at that
+time (kept for the last second), so camera latency does not bias the correction.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 import mujoco
@@ -84,6 +87,8 @@ class RodModel:
         self._grasp = self.model.site("grasp").id
         self._tip = self.model.site("tip").id
         self._eq = self.model.equality("grip").id
+        self._history: deque[tuple[float, float]] = deque(maxlen=1000)
+        self._last_measurement = -math.inf
         self.reset(self.p.initial_angle, self.p.initial_omega)
 
     def reset(self, angle: float, omega: float = 0.0) -> None:
@@ -92,6 +97,9 @@ class RodModel:
         self.data.qvel[self._dof] = omega
         self.data.eq_active[self._eq] = 0
         mujoco.mj_forward(self.model, self.data)
+        self._history.clear()
+        self._history.append((self.time, self.angle))
+        self._last_measurement = -math.inf
 
     @property
     def angle(self) -> float:
@@ -116,20 +124,43 @@ class RodModel:
     def set_gripper(self, position: np.ndarray) -> None:
         self.data.mocap_pos[0] = position
 
-    def correct(self, measured_angle: float, h: float) -> None:
-        """One macro step of observer correction towards a measured angle."""
+    def angle_at(self, t: float) -> float:
+        """The twin's angle at a recent time t (linear between macro-step points)."""
+        hist = self._history
+        if t >= hist[-1][0]:
+            return hist[-1][1]
+        for (t0, a0), (t1, a1) in zip(reversed(list(hist)[:-1]), reversed(hist)):
+            if t0 <= t <= t1:
+                return a0 + (a1 - a0) * (t - t0) / (t1 - t0) if t1 > t0 else a1
+        return hist[0][1]
+
+    def correct(self, measured_angle: float, h: float, measured_at: float | None = None) -> None:
+        """Observer correction towards a measured angle.
+
+        Without a capture time the measurement is taken as of now and applied over h; with
+        one, each new measurement is compared with the twin at its capture time and applied
+        over the time since the previous measurement.
+        """
         l = self.p.observer_gain
         if l <= 0:
             return
-        e = measured_angle - self.angle
-        self.data.qpos[self._hinge] += 2 * l * e * h
-        self.data.qvel[self._dof] += l * l * e * h
+        if measured_at is None:
+            e, dt = measured_angle - self.angle, h
+        else:
+            if measured_at <= self._last_measurement:
+                return  # already used
+            dt = min(measured_at - self._last_measurement, 0.1)
+            self._last_measurement = measured_at
+            e = measured_angle - self.angle_at(measured_at)
+        self.data.qpos[self._hinge] += 2 * l * e * dt
+        self.data.qvel[self._dof] += l * l * e * dt
 
     def advance(self, h: float) -> None:
         """Integrate h seconds with MuJoCo's own steps (the macro step's micro-steps)."""
         n = max(1, round(h / self.model.opt.timestep))
         mujoco.mj_step(self.model, self.data, nstep=n)
         mujoco.mj_kinematics(self.model, self.data)
+        self._history.append((self.time, self.angle))
 
     def outputs(self) -> RodOutputs:
         return RodOutputs(self.angle, self.omega, self.data.site_xpos[self._grasp].copy(),

@@ -1,7 +1,8 @@
 """The rod as a hycosim node (the same RodModel the FMU and the RL environment use).
 
 Inputs: ``driven`` (also set by the coordinator's mode), ``grip_x/y/z`` (where the gripper
-holds the grasp point), ``meas_angle`` and ``meas_valid`` (the camera's measurement).
+holds the grasp point), ``meas_angle``, ``meas_t`` (capture time, optional) and
+``meas_valid`` (the camera's measurement).
 Outputs: ``angle``, ``omega``, ``grasp_x/y/z``, ``tip_x/y/z``.
 """
 
@@ -53,7 +54,8 @@ class RodNode(Node):
                                            float(inputs.get("grip_z", 0.0))]))
         self.rod.set_driven(driven)
         if float(inputs.get("meas_valid", 0.0)) > 0.5:
-            self.rod.correct(float(inputs["meas_angle"]), h)
+            at = inputs.get("meas_t")
+            self.rod.correct(float(inputs["meas_angle"]), h, None if at is None else float(at))
         self.rod.advance(h)
 
     @property

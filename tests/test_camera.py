@@ -1,0 +1,157 @@
+"""The camera node: detection on rendered frames, video files, dropped and empty frames, errors,
+and the correction loop over real Zenoh bringing the twin onto the emulated rod."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from clients.camera.calibration import Calibration, calibrate_from_image
+from clients.camera.detect import RodDetector
+from clients.camera.emulated import CameraSetup, EmulatedRodCamera
+from clients.camera.sources import CameraError, DeviceSource, VideoFileSource
+from clients.camera.tracker import Tracker
+from clients.rod.model import RodModel, RodParams
+from tests.helpers import column, hycosim, meta, read_rows, run_project, write_project
+
+
+@pytest.fixture(scope="module")
+def camera():
+    cam = EmulatedRodCamera(RodParams(), CameraSetup(noise_sigma=25, seed=3))
+    yield cam
+    cam.close()
+
+
+def test_detection_on_rendered_frames_with_known_angles(camera):
+    detector = RodDetector(camera.calibration)
+    for deg in range(-70, 71, 10):
+        d = detector.detect(camera.render(math.radians(deg)))
+        assert d is not None and d.confidence > 0.5
+        assert abs(math.degrees(d.angle) - deg) < 0.5, deg
+
+
+def test_empty_and_dropped_frames_give_no_measurement(camera):
+    detector, tracker = RodDetector(camera.calibration), Tracker()
+    blank = np.full((240, 320, 3), 200, np.uint8)
+    noise = np.random.default_rng(0).integers(0, 255, (240, 320, 3), dtype=np.uint8)
+    assert detector.detect(blank) is None
+    assert detector.detect(noise) is None
+    assert detector.detect(None) is None
+    assert detector.detect(np.zeros((0, 0, 3), np.uint8)) is None
+    assert tracker.update(0.0, None) is None
+    dropping = EmulatedRodCamera(RodParams(), CameraSetup(drop_probability=0.5, seed=1))
+    frames = dropping.frames_until(1.0)
+    dropped = [f for f in frames if f.image is None]
+    assert 15 < len(dropped) < 45 and len(frames) == 61
+    kept = [detector.detect(f.image) for f in frames if f.image is not None]
+    assert all(k is not None for k in kept)
+    dropping.close()
+
+
+def test_tracker_estimates_angular_velocity_and_restarts_after_gaps(camera):
+    rod = RodModel(RodParams())
+    detector, tracker = RodDetector(camera.calibration), Tracker(max_gap=0.05)
+    omegas = []
+    for k in range(20):
+        rod.advance(1 / 60)
+        m = tracker.update(rod.time, detector.detect(camera.render(rod.angle)))
+        omegas.append((m.omega, rod.omega))
+    assert omegas[0][0] == 0.0
+    assert all(abs(est - true) < 0.35 for est, true in omegas[2:])
+    rod.advance(0.2)
+    m = tracker.update(rod.time, detector.detect(camera.render(rod.angle)))
+    assert m.omega == 0.0  # too long since the last detection: no velocity from it
+
+
+def test_video_file_written_and_read_back_through_the_file_source(tmp_path, camera):
+    path = tmp_path / "swing.avi"
+    angles = [math.radians(a) for a in range(-50, 51, 5)]
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (320, 240))
+    for a in angles:
+        writer.write(camera.render(a))
+    writer.release()
+    source = VideoFileSource(path)
+    frames = list(source.frames())
+    source.close()
+    assert len(frames) == len(angles)
+    assert math.isclose(frames[3].t, 3 / 30.0)
+    detector = RodDetector(camera.calibration)
+    for frame, a in zip(frames, angles):
+        d = detector.detect(frame.image)
+        assert d is not None and abs(d.angle - a) < math.radians(1.0)
+
+
+def test_calibration_from_an_image_and_from_a_file(tmp_path, camera):
+    rest = EmulatedRodCamera(RodParams(), CameraSetup(noise_sigma=0)).render(0.0)
+    cal = calibrate_from_image(rest, RodDetector, known_angle=0.0, rod_length_m=0.6)
+    true_u, true_v = camera.calibration.pivot_px
+    assert abs(cal.pivot_px[0] - true_u) < 3 and abs(cal.pivot_px[1] - true_v) < 6
+    assert abs(cal.metres_per_px / camera.calibration.metres_per_px - 1) < 0.1
+    cal.save(tmp_path / "cal.json")
+    again = Calibration.load(tmp_path / "cal.json")
+    d = RodDetector(again).detect(camera.render(math.radians(30)))
+    assert abs(math.degrees(d.angle) - 30) < 1.0
+
+
+def test_missing_file_or_device_gives_a_clear_error(tmp_path):
+    with pytest.raises(CameraError, match="video file .*nope.mp4 does not exist"):
+        VideoFileSource(tmp_path / "nope.mp4")
+    (tmp_path / "bad.mp4").write_bytes(b"not a video")
+    with pytest.raises(CameraError, match="cannot be opened"):
+        VideoFileSource(tmp_path / "bad.mp4")
+    with pytest.raises(CameraError, match="camera device 57 cannot be opened"):
+        DeviceSource(57)
+    cal = tmp_path / "cal.json"
+    Calibration(1, 1, 0, 0, (0, 0), 1).save(cal)
+    res = hycosim("camera", "--source", str(tmp_path / "nope.mp4"), "--calibration", str(cal))
+    assert res.returncode == 3 and "nope.mp4 does not exist" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_camera_cli_annotates_frames(tmp_path):
+    out = tmp_path / "annotated.avi"
+    res = hycosim("camera", "--seconds", "0.5", "--annotate", str(out))
+    assert res.returncode == 0, res.stderr
+    assert "31 confident detections" in res.stdout
+    frames = list(VideoFileSource(out).frames())
+    assert len(frames) == 31
+
+
+def _correction_project(tmp_path, gain: float):
+    twin = {"length": 0.6, "initial_angle_deg": 40.0, "observer_gain": gain}
+    physical = {"length": 0.63, "initial_angle_deg": 43.0}
+    return write_project(tmp_path / f"twin{gain}.json", [
+        {"nodeName": "rod", "UID": 1, "model": "rod", "parameters": twin,
+         "input": ["meas_angle", "meas_t", {"name": "meas_valid", "type": "Boolean"}], "output": ["angle", "omega"]},
+        {"nodeName": "camera", "UID": 2, "model": "camera", "async": True, "rate": 60,
+         "parameters": {"source": "emulated", "physical": physical, "noise_sigma": 25, "seed": 2},
+         "output": ["meas_angle", "meas_omega", "meas_t", "meas_conf", {"name": "meas_valid", "type": "Boolean"},
+                    "latency", "true_angle"]},
+    ], [{"from": "camera", "to": "rod", "pairs": [["meas_angle", "meas_angle"], ["meas_t", "meas_t"],
+                                                   ["meas_valid", "meas_valid"]]}],
+        # Paced: an asynchronous source lives on the wall clock; unpaced, the barrier outruns it.
+        cosim={"stepSize": 0.01, "stopTime": 2.5, "realTime": 0.5}, name="twin")
+
+
+def test_camera_correction_over_zenoh_brings_the_twin_onto_the_emulated_rod(tmp_path):
+    truth = RodModel(RodParams(length=0.63, initial_angle=math.radians(43.0)))
+    errors = {}
+    for gain in (12.0, 0.0):
+        run = run_project(_correction_project(tmp_path, gain), tmp_path / f"runs{gain}")
+        rows = read_rows(run)
+        t, angle = column(rows, "t"), column(rows, "rod.angle")
+        truth.reset(math.radians(43.0))
+        err = []
+        for k in range(len(rows)):
+            if k:
+                truth.advance(t[k] - t[k - 1])
+            err.append(abs(angle[k] - truth.angle))
+        errors[gain] = sum(err[-50:]) / 50  # mean over the last half second
+        m = meta(run)
+        assert m["samples_received"]["camera"] > 100
+        latency = column(rows, "camera.latency")
+        assert 0 < max(latency) < 0.05
+    assert errors[12.0] < math.radians(0.5)
+    assert errors[0.0] > math.radians(2.0)
