@@ -7,6 +7,7 @@ from pathlib import Path
 from fmu_bridge import logs
 from fmu_bridge.config import LoadedProject, server_endpoint
 from fmu_bridge.fmu_loader import FmuError
+from fmu_bridge.security import SecurityError, node_password
 from fmu_bridge.session import ConnectError
 
 from clients.loader import NodeLoadError, load_node
@@ -14,7 +15,7 @@ from clients.runtime import NodeRunError, NodeRuntime
 
 
 def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
-             log_file: Path | None = None) -> tuple[int, str]:
+             log_file: Path | None = None, password_file: Path | None = None) -> tuple[int, str]:
     """Run one node to the end of the co-simulation; return (exit code, message)."""
     logs.configure(log_file)
     try:
@@ -24,10 +25,11 @@ def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
         return 2, f"{loaded.path}: no node named {name!r} (nodes: {names})"
     endpoint = connect or server_endpoint(loaded.project.serverIP)
     try:
+        password = node_password(loaded, name, password_file)
         impl = load_node(spec, loaded.path.parent if loaded.path else Path.cwd())
-        runtime = NodeRuntime(loaded, name, impl, endpoint)
+        runtime = NodeRuntime(loaded, name, impl, endpoint, password=password)
         runtime.run()
-    except (NodeLoadError, NodeRunError, ConnectError, FmuError) as exc:
+    except (NodeLoadError, NodeRunError, ConnectError, FmuError, SecurityError) as exc:
         return 3, str(exc)
     except KeyboardInterrupt:
         return 130, f"node {name!r} interrupted by Ctrl-C"

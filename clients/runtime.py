@@ -19,7 +19,7 @@ from fmu_bridge.config import LoadedProject, PortType
 from fmu_bridge.fmu_loader import FmuError
 from fmu_bridge.inbox import Inbox
 from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
-from fmu_bridge.session import client_config, open_session
+from fmu_bridge.session import ConnectError, client_config, open_session
 
 from clients.node import AsyncSource, Node, NodeContext
 
@@ -37,18 +37,21 @@ class NodeRunError(RuntimeError):
 
 
 class NodeRuntime:
-    def __init__(self, loaded: LoadedProject, node_name: str, impl: Node | AsyncSource, endpoint: str):
+    def __init__(self, loaded: LoadedProject, node_name: str, impl: Node | AsyncSource, endpoint: str,
+                 password: str | None = None):
         self.loaded = loaded
         self.spec = loaded.project.node(node_name)
         self.name = node_name
         self.impl = impl
         self.endpoint = endpoint
+        self.password = password
         self.cosim = loaded.project.coSimulation
         self.keys = ProjectKeys(loaded.project.projectName)
         self._out_ports = [(p.name, _COERCE[p.type]) for p in self.spec.output]
         self._in_names = self.spec.input_names()
         self._log = structlog.get_logger("node").bind(node=node_name)
         self.steps = 0
+        self._server_lost: float | None = None
 
     def context(self) -> NodeContext:
         params = dict(self.spec.parameters)
@@ -67,8 +70,7 @@ class NodeRuntime:
         return packed
 
     def _on_server_liveliness(self, sample: zenoh.Sample) -> None:
-        if sample.kind == zenoh.SampleKind.DELETE:
-            self.inbox.inject(frames.encode(frames.LIVE, SERVER_TOKEN, False))
+        self.inbox.inject(frames.encode(frames.LIVE, SERVER_TOKEN, sample.kind == zenoh.SampleKind.PUT))
 
     def run(self) -> None:
         try:
@@ -79,7 +81,15 @@ class NodeRuntime:
             if type(exc).__name__ == "CameraError":  # a clear message of its own
                 raise NodeRunError(str(exc)) from None
             raise NodeRunError(f"node {self.name!r}: its model failed to set up: {type(exc).__name__}: {exc}") from exc
-        session = open_session(client_config(self.endpoint, timeout_s=self.cosim.attachTimeout), self.endpoint)
+        conf = client_config(self.endpoint, timeout_s=self.cosim.attachTimeout,
+                             user=self.name if self.password is not None else None, password=self.password)
+        try:
+            session = open_session(conf, self.endpoint)
+        except ConnectError as exc:
+            if self.password is not None:
+                raise ConnectError(f"{exc} (node {self.name!r} authenticates as user {self.name!r}: "
+                                   "wrong credentials are refused this way too)") from None
+            raise
         try:
             self.inbox = Inbox(session, self.keys.down, self.keys.down)
             publisher = session.declare_publisher(self.keys.up(self.name),
@@ -108,11 +118,23 @@ class NodeRuntime:
                 session.close()
 
     def _wait(self, timeout: float, what: str) -> frames.Frame:
-        """The next frame from the server (skipping ones not for us); STOP ends the wait too."""
+        """The next frame from the server (skipping ones not for us); STOP ends the wait too.
+
+        If the server's token goes (a link cut), wait up to linkGrace for it to come back.
+        """
         deadline = time.monotonic() + timeout
+        grace = self.cosim.linkGrace
         while True:
-            msg = self.inbox.recv(deadline - time.monotonic())
+            wait = deadline - time.monotonic()
+            if self._server_lost is not None:
+                if time.monotonic() - self._server_lost > grace:
+                    raise NodeRunError(f"node {self.name!r}: the server went away after step {self.steps} and did not "
+                                       f"come back within the link grace of {grace:g} s")
+                wait = min(wait, self._server_lost + grace - time.monotonic() + 0.01)
+            msg = self.inbox.recv(max(wait, 0.0))
             if msg is None:
+                if self._server_lost is not None and time.monotonic() < deadline:
+                    continue
                 raise NodeRunError(f"node {self.name!r}: no {what} from the server at {self.endpoint} "
                                    f"within {timeout:g} s (after step {self.steps})")
             try:
@@ -121,7 +143,19 @@ class NodeRuntime:
                 self._log.warning("frame dropped", reason=str(exc), step=self.steps)
                 continue
             if frame.kind == frames.LIVE:
-                raise NodeRunError(f"node {self.name!r}: the server went away after step {self.steps}")
+                if frame.fields[1]:
+                    self._server_lost = None
+                    self._log.info("server back", step=self.steps)
+                elif grace > 0:
+                    self._server_lost = time.monotonic()
+                    self._log.warning("server lost, waiting for it", step=self.steps, grace_s=grace)
+                else:
+                    raise NodeRunError(f"node {self.name!r}: the server went away after step {self.steps}")
+                continue
+            if frame.kind == frames.REPLAY:
+                if frame.fields[0] != self.name:
+                    continue
+                return frames.Frame(frames.REPLAY, (frame.fields[0], frames.decode(frame.fields[1])))
             return frame
 
     def _run_stepping(self, publisher: zenoh.Publisher, checkpoint: bool) -> None:
@@ -130,8 +164,10 @@ class NodeRuntime:
         checkpoint = checkpoint and impl.can_rollback
         saved_step, saved = -1, None
         publisher.put(frames.encode(frames.HELLO, self.spec.UID, {"rollback": impl.can_rollback}))
-        publisher.put(frames.encode(frames.OUTPUTS, self.spec.UID, 0, self.cosim.startTime,
-                                    self._pack_outputs(impl.outputs())))
+        last_out = frames.encode(frames.OUTPUTS, self.spec.UID, 0, self.cosim.startTime,
+                                 self._pack_outputs(impl.outputs()))
+        publisher.put(last_out)
+        done = -1  # the last step integrated
         # The server enforces step timeouts; a node only needs to notice the server is gone,
         # which liveliness tells; this bound is the last resort for a frozen server.
         silence = self.cosim.stepTimeout + 30.0
@@ -141,6 +177,15 @@ class NodeRuntime:
             if frame.kind == frames.STOP:
                 self._log.info("stop", step=self.steps, reason=frame.fields[1])
                 return
+            if frame.kind == frames.REPLAY:
+                # Back after a link cut: the release we may have missed, or already answered.
+                inner = frame.fields[1]
+                if inner.kind == frames.STEP and inner.fields[0] > done:
+                    frame = inner
+                else:
+                    publisher.put(last_out)
+                    self._log.info("outputs re-sent", step=done + 1)
+                    continue
             if frame.kind == frames.ROLLBACK:
                 k, t = frame.fields
                 if saved_step != k:
@@ -165,9 +210,9 @@ class NodeRuntime:
             except Exception as exc:
                 raise NodeRunError(f"node {self.name!r}: its model failed at step {k} (t={t:g} s): "
                                    f"{type(exc).__name__}: {exc}") from exc
-            self.steps = k + 1
-            publisher.put(frames.encode(frames.OUTPUTS, self.spec.UID, k + 1, t + h,
-                                        self._pack_outputs(impl.outputs())))
+            self.steps, done = k + 1, k
+            last_out = frames.encode(frames.OUTPUTS, self.spec.UID, k + 1, t + h, self._pack_outputs(impl.outputs()))
+            publisher.put(last_out)
 
     def _run_async(self, publisher: zenoh.Publisher, start: frames.Frame) -> None:
         impl = self.impl

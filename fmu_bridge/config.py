@@ -131,6 +131,9 @@ class CoSimulation(_Strict):
     # stepping node can save and restore its state); None: fixed macro steps.
     eventTolerance: float | None = Field(default=None, gt=0)
     attachTimeout: float = Field(default=30.0, gt=0)
+    # A node (or the server) whose link drops may come back within this many seconds and
+    # the run resumes without losing a step; 0: a lost node stops the run at once.
+    linkGrace: float = Field(default=0.0, ge=0)
 
     def real_time_factor(self) -> float | None:
         if self.realTime is False:
@@ -148,6 +151,16 @@ class Event(_Strict):
     description: str | None = None
 
 
+class Security(_Strict):
+    """Remote attach with credentials: Zenoh user/password and per-node access control."""
+
+    # Zenoh's dictionary file, "user:password" per line: "server", each node by its name,
+    # and any other user (a monitor for `hycosim status`). Relative to the project JSON.
+    credentials: str
+    # Access control at the router: each node may publish only on its own keys.
+    acl: bool = True
+
+
 class Project(_Strict):
     projectName: str = Field(default="project", pattern=r"^[A-Za-z0-9_\-]+$")
     serverIP: str = "127.0.0.1"
@@ -159,6 +172,7 @@ class Project(_Strict):
     linkLists: list[Link] = Field(default_factory=list)
     coSimulation: CoSimulation = Field(default_factory=CoSimulation)
     events: list[Event] = Field(default_factory=list)
+    security: Security | None = None
     description: str | None = None
 
     def node(self, name: str) -> Node:

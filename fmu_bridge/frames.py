@@ -15,6 +15,8 @@ Kinds and layouts (after version and kind):
 * ``LIVE``     local only, server: ``node, alive`` (liveliness changes fed into the inbox)
 * ``HELLO``    node → server, before its first outputs: ``uid, capabilities`` (``{"rollback": bool}``)
 * ``ROLLBACK`` server → nodes: ``step, t``: restore the state saved before that step
+* ``REPLAY``   server → one node: ``node, release``: the last START/STEP again, for a node that
+  came back after a link cut (it may have missed the release, or the server its outputs)
 """
 
 from __future__ import annotations
@@ -34,8 +36,9 @@ STOP = 5
 LIVE = 6
 HELLO = 7
 ROLLBACK = 8
+REPLAY = 9
 
-_ARITY = {OUTPUTS: 4, SAMPLE: 4, START: 6, STEP: 6, STOP: 2, LIVE: 2, HELLO: 2, ROLLBACK: 2}
+_ARITY = {OUTPUTS: 4, SAMPLE: 4, START: 6, STEP: 6, STOP: 2, LIVE: 2, HELLO: 2, ROLLBACK: 2, REPLAY: 2}
 
 
 class FrameError(ValueError):

@@ -18,30 +18,40 @@ def _config(settings: dict[str, object]) -> zenoh.Config:
     return conf
 
 
-def router_config(listen: str) -> zenoh.Config:
+def router_config(listen: str, *, lease_ms: int = 1000, security: dict | None = None) -> zenoh.Config:
     """Config for the relay server: a Zenoh router listening on exactly one endpoint.
 
-    Multicast scouting is off so that nothing beyond the named endpoint is reached.
+    Multicast scouting is off so that nothing beyond the named endpoint is reached; a
+    short lease lets nodes notice a cut link within about a second. ``security`` adds
+    ``transport/auth/usrpwd`` and ``access_control`` blocks (see fmu_bridge.security).
     """
-    return _config({
+    settings: dict[str, object] = {
         "mode": "router",
         "listen/endpoints": [listen],
         "scouting/multicast/enabled": False,
-    })
+        "transport/link/tx/lease": lease_ms,
+    }
+    settings.update(security or {})
+    return _config(settings)
 
 
-def client_config(connect: str, *, timeout_s: float = 10.0, lease_ms: int = 1000) -> zenoh.Config:
+def client_config(connect: str, *, timeout_s: float = 10.0, lease_ms: int = 1000,
+                  user: str | None = None, password: str | None = None) -> zenoh.Config:
     """Config for a node: a Zenoh client of the relay server.
 
     A short link lease lets the server notice a frozen node within about a second.
+    ``user``/``password`` authenticate the node to a server that requires it.
     """
-    return _config({
+    settings: dict[str, object] = {
         "mode": "client",
         "connect/endpoints": [connect],
         "connect/timeout_ms": int(timeout_s * 1000),
         "scouting/multicast/enabled": False,
         "transport/link/tx/lease": lease_ms,
-    })
+    }
+    if user is not None:
+        settings["transport/auth/usrpwd"] = {"user": user, "password": password or ""}
+    return _config(settings)
 
 
 def open_session(conf: zenoh.Config, endpoint: str) -> zenoh.Session:

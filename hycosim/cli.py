@@ -72,12 +72,14 @@ def node(
     file: Path,
     connect: Annotated[Optional[str], typer.Option(help="server endpoint, e.g. tcp/HOST:7447")] = None,
     log_file: Annotated[Optional[Path], typer.Option(help="append JSON-lines logs here (default: stderr)")] = None,
+    password_file: Annotated[Optional[Path], typer.Option(help="this node's password (user = node name), "
+                                                               "when the project has 'security'")] = None,
 ) -> None:
-    """Attach one node of the project to a running server."""
+    """Attach one node of the project to a running server (local or on another host)."""
     from clients.main import run_node
 
     loaded = _load(file)
-    code, message = run_node(loaded, name, connect, log_file)
+    code, message = run_node(loaded, name, connect, log_file, password_file)
     (err if code else out).print(("[red]error:[/red] " if code else "") + message, highlight=False)
     raise typer.Exit(code)
 
@@ -177,13 +179,16 @@ def status(
     endpoint: str,
     project: Annotated[str, typer.Option(help="project name")] = "*",
     timeout: Annotated[float, typer.Option(help="seconds to wait for an answer")] = 3.0,
+    user: Annotated[Optional[str], typer.Option(help="user, when the server requires credentials")] = None,
+    password_file: Annotated[Optional[Path], typer.Option(help="that user's password")] = None,
 ) -> None:
     """Ask a running server who is attached."""
     from fmu_bridge.keys import ProjectKeys
     from fmu_bridge.session import ConnectError, client_config, open_session
 
     try:
-        session = open_session(client_config(endpoint, timeout_s=timeout), endpoint)
+        password = password_file.read_text().strip() if password_file else None
+        session = open_session(client_config(endpoint, timeout_s=timeout, user=user, password=password), endpoint)
     except ConnectError as exc:
         err.print(f"[red]error:[/red] {exc}", highlight=False)
         raise typer.Exit(3) from None

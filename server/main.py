@@ -14,6 +14,7 @@ import structlog
 
 from fmu_bridge import logs
 from fmu_bridge.config import LoadedProject, gateway_endpoint, server_endpoint, split_host_port
+from fmu_bridge.security import router_security
 from fmu_bridge.session import open_session, router_config
 
 from server.recorder import Recorder
@@ -53,8 +54,8 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         def on_progress(p: Any) -> None:
             print(json.dumps({"progress": asdict(p), "run_dir": str(run_dir)}), flush=True)
     try:
-        session = open_session(router_config(endpoint), endpoint)
-    except Exception as exc:
+        session = open_session(router_config(endpoint, security=router_security(loaded)), endpoint)
+    except Exception as exc:  # SecurityError or ConnectError, both with their own message
         recorder.close("failed", reason=str(exc))
         return 3, run_dir, str(exc)
     relay = Relay(loaded, session, recorder, progress_every_s=0.1, on_progress=on_progress,

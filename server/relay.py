@@ -71,6 +71,9 @@ class Relay:
             n.nodeName: [p.start_value() for p in n.output] for n in self.project.nodeLists}
         self.alive: set[str] = set()
         self.capabilities: dict[str, dict[str, Any]] = {}
+        self.lost: dict[str, float] = {}  # node → when its token went, while within linkGrace
+        self.reattached: dict[str, int] = {}
+        self._last_release: bytes | None = None
         self.progress = Progress()
         self._progress_every = progress_every_s
         self._on_progress = on_progress
@@ -124,6 +127,7 @@ class Relay:
             if self.gateway is not None:
                 self.gateway.close(reason or status_text)
             self.recorder.close(status_text, reason=reason, dropped_frames=dict(self.intake.dropped),
+                                reattached=dict(self.reattached),
                                 samples_received={n: h.received for n, h in self.histories.items()})
             for decl in (status, watcher, token):
                 try:
@@ -177,10 +181,18 @@ class Relay:
             if alive:
                 self.alive.add(node)
                 self.progress.attached = sorted(self.alive)
-                self._log.info("node attached", node=node)
+                self._log.info("node attached", node=node, step=step)
+                if node in self.lost:
+                    del self.lost[node]
+                    self.reattached[node] = self.reattached.get(node, 0) + 1
+                    if self._last_release is not None:
+                        self.release.put(frames.encode(frames.REPLAY, node, self._last_release))
             elif node in self.alive:
                 self.alive.discard(node)
-                if collecting or step >= 0:
+                if step >= 0 and self.cosim.linkGrace > 0:
+                    self.lost[node] = time.monotonic()
+                    self._log.warning("node lost, waiting for it", node=node, step=step, grace_s=self.cosim.linkGrace)
+                elif collecting or step >= 0:
                     raise RunError(f"node {node!r} was lost at step {step} (t={self._time(step):g} s): "
                                    "its liveliness token disappeared (process killed or link lost)")
             return None
@@ -207,9 +219,19 @@ class Relay:
         pending = set(self.stepping)
         arrivals: dict[str, float] = {}
         deadline = time.monotonic() + self.cosim.stepTimeout
+        grace = self.cosim.linkGrace
         while pending:
-            msg = self.inbox.recv(deadline - time.monotonic())
+            wait = deadline - time.monotonic()
+            if self.lost:
+                node, since = min(self.lost.items(), key=lambda item: item[1])
+                if time.monotonic() - since > grace:
+                    raise RunError(f"node {node!r} was lost at step {step} (t={self._time(step):g} s) and did not "
+                                   f"come back within the link grace of {grace:g} s")
+                wait = min(wait, since + grace - time.monotonic() + 0.01)
+            msg = self.inbox.recv(max(wait, 0.0))
             if msg is None:
+                if self.lost:
+                    continue  # the grace check above reports it
                 raise RunError(f"timed out after {self.cosim.stepTimeout:g} s at step {step} "
                                f"(t={self._time(step):g} s) waiting for outputs of {', '.join(sorted(pending))}")
             got = self._handle_side_message(*msg, step=step, collecting=True)
@@ -247,7 +269,8 @@ class Relay:
         """Release step k (t → t+h) and gather the outputs at t+h; return arrivals and wait."""
         inputs = {n: self.router.inputs[n] for n in self.stepping}
         released_at = time.perf_counter()
-        self.release.put(frames.encode(frames.STEP, k, t, h, mode, inputs, self.coordinator.driven_nodes()))
+        self._last_release = frames.encode(frames.STEP, k, t, h, mode, inputs, self.coordinator.driven_nodes())
+        self.release.put(self._last_release)
         arrivals = self._collect(k + 1, released_at)
         return arrivals, time.perf_counter() - released_at
 
@@ -284,8 +307,9 @@ class Relay:
         rt = cosim.real_time_factor()
         wall0 = time.time()
         checkpoint = cosim.eventTolerance is not None
-        self.release.put(frames.encode(frames.START, self.recorder.run_dir.name, cosim.startTime,
-                                       H, wall0, rt, {"checkpoint": checkpoint}))
+        self._last_release = frames.encode(frames.START, self.recorder.run_dir.name, cosim.startTime,
+                                           H, wall0, rt, {"checkpoint": checkpoint})
+        self.release.put(self._last_release)
         released_at = time.perf_counter()
         arrivals = self._collect(0, released_at)
         wait = time.perf_counter() - released_at

@@ -1,0 +1,78 @@
+"""Scale: 8, 16, 32 trivial nodes (a gain ring) spread over network namespaces, server in its own.
+
+Each node is its own process in one of four client namespaces, joined to the server's
+namespace by a veth pair (root and ``ip netns`` needed). Reports macro steps/s and how
+the cost per step grows with N (linear growth doubles it per doubling of N).
+
+    sudo python benchmarks/scale.py [--n 8 16 32] [--steps 1000] [--hosts 4] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from tests.helpers import env  # noqa: E402
+from tests.netns import hosts, netns_available  # noqa: E402
+
+
+def ring(n: int, steps: int, path: Path) -> Path:
+    nodes = [{"nodeName": f"n{i}", "UID": i + 1, "model": "gain", "parameters": {"k": 0.5, "b": 1.0},
+              "input": ["u"], "output": ["y"]} for i in range(n)]
+    links = [{"from": f"n{i}.y", "to": f"n{(i + 1) % n}.u"} for i in range(n)]
+    path.write_text(json.dumps({"projectName": f"scale{n}", "nodeNum": n, "nodeLists": nodes, "linkNum": n,
+                                "linkLists": links, "coSimulation": {"stepSize": 1.0, "stopTime": float(steps),
+                                                                     "stepTimeout": 60.0, "attachTimeout": 120.0}}))
+    return path
+
+
+def run(n: int, steps: int, n_hosts: int) -> float:
+    py = [sys.executable, "-m", "hycosim"]
+    with tempfile.TemporaryDirectory() as tmp, hosts([f"h{i}" for i in range(n_hosts)], subnet=214) as h:
+        cfg = ring(n, steps, Path(tmp) / "ring.json")
+        run_dir = Path(tmp) / "run"
+        server = subprocess.Popen(h.exec(h.server) + py + ["server", str(cfg), "--listen", "tcp/0.0.0.0:7447",
+                                                            "--run-dir", str(run_dir)],
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env(), cwd=REPO)
+        nodes = []
+        for i in range(n):
+            host = f"h{i % n_hosts}"
+            nodes.append(subprocess.Popen(h.exec(h.clients[host]) + py + ["node", f"n{i}", str(cfg), "--connect",
+                                                                           f"tcp/{h.server_address[host]}:7447"],
+                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env(), cwd=REPO))
+        _, err = server.communicate(timeout=900)
+        for p in nodes:
+            p.wait(timeout=60)
+        if server.returncode:
+            raise RuntimeError(err)
+        return float(json.loads((run_dir / "meta.json").read_text())["steps_per_s"])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, nargs="+", default=[8, 16, 32])
+    ap.add_argument("--steps", type=int, default=1000)
+    ap.add_argument("--hosts", type=int, default=4)
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    if not netns_available():
+        sys.exit("benchmarks/scale.py needs root and ip netns")
+    rates = {n: run(n, args.steps, args.hosts) for n in args.n}
+    base = args.n[0]
+    for n, rate in rates.items():
+        if args.json:
+            print(json.dumps({"system": "hycosim-netns", "n": n, "steps_per_s": rate}))
+        else:
+            print(f"N={n:>3}: {rate:8.0f} steps/s   cost per step {1e3 / rate:6.2f} ms   "
+                  f"× {rates[base] / rate:.2f} of N={base} (linear: × {n / base:.0f})")
+
+
+if __name__ == "__main__":
+    main()

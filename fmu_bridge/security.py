@@ -1,0 +1,102 @@
+"""Credentials and access control for remote attach.
+
+The server is a Zenoh router with ``transport/auth/usrpwd``: a client without the right
+user and password never gets a session. With ``acl`` on, the router's access control lets
+each node (user = node name) publish only on its own ``up/<node>`` key and declare only
+its own liveliness token, so an authenticated node cannot inject values for another; the
+server's UID check stays as a second line.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from fmu_bridge.config import LoadedProject
+from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
+
+SERVER_USER = "server"
+PASSWORD_ENV = "HYCOSIM_PASSWORD"
+
+
+class SecurityError(RuntimeError):
+    """Credentials that cannot be read or are incomplete; names the file or user."""
+
+
+def read_credentials(path: Path) -> dict[str, str]:
+    """``user:password`` lines of a Zenoh dictionary file."""
+    try:
+        lines = path.read_text().splitlines()
+    except OSError as exc:
+        raise SecurityError(f"{path}: cannot read credentials ({exc.strerror or exc})") from None
+    users = {}
+    for n, line in enumerate(lines, 1):
+        if not line.strip() or line.startswith("#"):
+            continue
+        user, sep, password = line.partition(":")
+        if not sep or not user:
+            raise SecurityError(f"{path}:{n}: expected 'user:password'")
+        users[user.strip()] = password.strip()
+    return users
+
+
+def credentials_path(loaded: LoadedProject) -> Path | None:
+    sec = loaded.project.security
+    return loaded.resolve(sec.credentials) if sec else None
+
+
+def router_security(loaded: LoadedProject) -> dict:
+    """The router's ``transport/auth/usrpwd`` and ``access_control`` settings, or {}."""
+    path = credentials_path(loaded)
+    if path is None:
+        return {}
+    users = read_credentials(path)
+    if SERVER_USER not in users:
+        raise SecurityError(f"{path}: no '{SERVER_USER}' user (the relay server's own credentials)")
+    settings: dict = {"transport/auth/usrpwd": {"user": SERVER_USER, "password": users[SERVER_USER],
+                                                "dictionary_file": str(path)}}
+    if not loaded.project.security.acl:
+        return settings
+    keys = ProjectKeys(loaded.name)
+    nodes = [n.nodeName for n in loaded.project.nodeLists]
+    rules, subjects, policies = [], [], []
+    everything_out = {"id": "to-all", "flows": ["egress"], "permission": "allow", "key_exprs": [f"{keys.root}/**"],
+                      "messages": ["put", "declare_subscriber", "liveliness_token", "declare_liveliness_subscriber",
+                                   "reply", "declare_queryable"]}
+    rules.append(everything_out)
+    for node in nodes:
+        rules.append({"id": f"from-{node}", "flows": ["ingress"], "permission": "allow",
+                      "messages": ["put", "declare_subscriber", "liveliness_token", "declare_liveliness_subscriber",
+                                   "liveliness_query", "query"],
+                      "key_exprs": [keys.up(node), keys.down, keys.alive(node), keys.alive(SERVER_TOKEN), keys.status]})
+        subjects.append({"id": node, "usernames": [node]})
+        policies.append({"id": f"node-{node}", "rules": [f"from-{node}", "to-all"], "subjects": [node]})
+    monitors = sorted(set(users) - set(nodes) - {SERVER_USER})
+    if monitors:
+        rules.append({"id": "monitor", "flows": ["ingress"], "permission": "allow", "messages": ["query"],
+                      "key_exprs": [keys.status]})
+        subjects.append({"id": "monitors", "usernames": monitors})
+        policies.append({"id": "monitors", "rules": ["monitor", "to-all"], "subjects": ["monitors"]})
+    settings["access_control"] = {"enabled": True, "default_permission": "deny", "rules": rules,
+                                  "subjects": subjects, "policies": policies}
+    return settings
+
+
+def node_password(loaded: LoadedProject, node: str, password_file: Path | None) -> str | None:
+    """A node's password: --password-file, else $HYCOSIM_PASSWORD, else the project's
+    credentials file when it is at hand (local runs); None when the project needs none."""
+    if loaded.project.security is None:
+        return None
+    if password_file is not None:
+        try:
+            return password_file.read_text().strip()
+        except OSError as exc:
+            raise SecurityError(f"{password_file}: cannot read the password ({exc.strerror or exc})") from None
+    if os.environ.get(PASSWORD_ENV):
+        return os.environ[PASSWORD_ENV]
+    path = credentials_path(loaded)
+    if path is not None and path.exists():
+        users = read_credentials(path)
+        if node in users:
+            return users[node]
+    raise SecurityError(f"node {node!r}: the project requires credentials; give --password-file or ${PASSWORD_ENV}")

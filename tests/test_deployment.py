@@ -1,0 +1,192 @@
+"""Deployment: the compose services as local processes, remote attach across network namespaces
+with link cuts, and authenticated attach with access control."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+import zenoh
+
+from fmu_bridge import frames
+from fmu_bridge.keys import ProjectKeys
+from fmu_bridge.session import client_config
+from tests.helpers import REPO, env, free_endpoint, hycosim, meta, read_rows, spawn, wait_for, write_project
+from tests.netns import hosts, netns_available
+
+COMPOSE = REPO / "docker" / "docker-compose.yml"
+
+
+def test_compose_file_is_valid_against_the_compose_schema():
+    res = subprocess.run([sys.executable, "-m", "check_jsonschema", "--builtin-schema", "vendor.compose-spec",
+                          str(COMPOSE)], capture_output=True, text=True)
+    assert res.returncode == 0, res.stdout + res.stderr
+    spec = yaml.safe_load(COMPOSE.read_text())
+    assert set(spec["services"]) == {"server", "rod", "robot", "controller"}
+    grasp = json.loads((REPO / "configs" / "grasp.json").read_text())
+    assert {n["nodeName"] for n in grasp["nodeLists"]} == set(spec["services"]) - {"server"}
+
+
+def test_compose_services_run_together_as_local_processes(tmp_path):
+    """No Docker engine here: run each service's exact command, with the compose network's
+    names mapped onto loopback and the volumes onto folders."""
+    spec = yaml.safe_load(COMPOSE.read_text())
+    endpoint = free_endpoint()
+    port = endpoint.rsplit(":", 1)[1]
+    doc = json.loads((REPO / "configs" / "grasp.json").read_text())
+    doc["coSimulation"]["stopTime"] = 1.5
+    config_dir = tmp_path / "config"
+    config_dir.mkdir()
+    (config_dir / "grasp.json").write_text(json.dumps(doc))
+
+    def local(args: list[str]) -> list[str]:
+        mapped = []
+        for a in args:
+            a = a.replace("/config/", f"{config_dir}/").replace("tcp/server:7447", endpoint)
+            a = a.replace("tcp/0.0.0.0:7447", endpoint).replace("/runs", str(tmp_path / "runs"))
+            mapped.append(a)
+        return mapped
+
+    procs = {}
+    try:
+        for name, service in spec["services"].items():
+            procs[name] = subprocess.Popen([sys.executable, "-m", "hycosim", *local(service["command"])],
+                                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env(), cwd=REPO)
+        outs = {name: p.communicate(timeout=120) for name, p in procs.items()}
+    finally:
+        for p in procs.values():
+            if p.poll() is None:
+                p.kill()
+    assert all(p.returncode == 0 for p in procs.values()), {n: o[1][-500:] for n, o in outs.items()}
+    run = next((tmp_path / "runs").iterdir())
+    assert meta(run)["status"] == "completed" and len(read_rows(run)) == 151
+    assert port in meta(run)["endpoint"]
+
+
+def _chain(tmp_path: Path, grace: float, stop: float) -> Path:
+    return write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+    ], [{"from": "clock.y", "to": "g.u"}],
+        cosim={"stepSize": 0.01, "stopTime": stop, "realTime": True, "linkGrace": grace, "stepTimeout": 20.0},
+        name="remote")
+
+
+def _remote_run(tmp_path: Path, grace: float, stop: float, cut_after: float, cut_for: float):
+    cfg = _chain(tmp_path, grace, stop)
+    run_dir = tmp_path / "run"
+    py = [sys.executable, "-m", "hycosim"]
+    with hosts(["clock", "g"]) as h:
+        server = subprocess.Popen(h.exec(h.server) + py + ["server", str(cfg), "--listen", "tcp/0.0.0.0:7447",
+                                                            "--run-dir", str(run_dir)],
+                                  stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env(), cwd=REPO)
+        nodes = {n: subprocess.Popen(h.exec(h.clients[n]) + py + ["node", n, str(cfg), "--connect",
+                                                                   f"tcp/{h.server_address[n]}:7447"],
+                                     stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env(), cwd=REPO)
+                 for n in ("clock", "g")}
+        try:
+            wait_for(lambda: (run_dir / "values.csv").exists() and len(read_rows(run_dir)) > cut_after * 100, 30,
+                     "steps before the cut")
+            h.cut("clock")
+            time.sleep(cut_for)
+            h.restore("clock")
+            _, err = server.communicate(timeout=60)
+            node_out = {n: p.communicate(timeout=30) for n, p in nodes.items()}
+        finally:
+            for p in (server, *nodes.values()):
+                if p.poll() is None:
+                    p.kill()
+    return server.returncode, err, {n: (p.returncode, node_out[n][1]) for n, p in nodes.items()}, run_dir
+
+
+needs_netns = pytest.mark.skipif(not netns_available(), reason="needs root and ip netns")
+
+
+@needs_netns
+def test_cosimulation_across_namespaces_survives_a_short_link_cut(tmp_path):
+    code, err, nodes, run_dir = _remote_run(tmp_path, grace=5.0, stop=4.0, cut_after=1.0, cut_for=2.0)
+    assert code == 0, err
+    assert all(c == 0 for c, _ in nodes.values()), nodes
+    rows = read_rows(run_dir)
+    assert [int(r["step"]) for r in rows] == list(range(401))  # no step lost
+    assert all(rows[k]["g.y"] == rows[k - 1]["clock.y"] for k in range(1, len(rows)))
+    m = meta(run_dir)
+    assert m["status"] == "completed" and m["reattached"] == {"clock": 1}
+    lateness = [float(r["lateness_s"]) for r in read_rows(run_dir, "timing.csv")]
+    assert max(lateness) > 0.5  # the cut shows up as lateness, not as lost steps
+
+
+@needs_netns
+def test_link_cut_beyond_the_grace_stops_with_a_clear_message_and_results(tmp_path):
+    code, err, nodes, run_dir = _remote_run(tmp_path, grace=1.0, stop=6.0, cut_after=1.0, cut_for=4.0)
+    assert code == 3
+    assert "node 'clock' was lost at step" in err and "did not come back within the link grace of 1 s" in err
+    assert nodes["g"][0] == 0  # told to stop
+    assert nodes["clock"][0] == 3 and "did not come back within the link grace" in nodes["clock"][1]
+    m = meta(run_dir)
+    rows = read_rows(run_dir)
+    assert m["status"] == "failed" and len(rows) == m["steps"] >= 100
+    assert all(rows[k]["g.y"] == rows[k - 1]["clock.y"] for k in range(1, len(rows)))
+
+
+def _secure(tmp_path: Path) -> Path:
+    (tmp_path / "creds.txt").write_text("server:srv-pw\nclock:clock-pw\ng:g-pw\nwatcher:w-pw\n")
+    return write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+    ], [{"from": "clock.y", "to": "g.u"}], cosim={"stepSize": 0.01, "stopTime": 6.0, "realTime": True,
+                                                 "attachTimeout": 20.0},
+        name="secure", security={"credentials": "creds.txt"})
+
+
+def test_wrong_or_missing_credentials_cannot_attach_and_a_forged_frame_is_dropped(tmp_path):
+    cfg = _secure(tmp_path)
+    endpoint = json.loads(cfg.read_text())["serverIP"]
+    run_dir = tmp_path / "run"
+    (tmp_path / "wrong.txt").write_text("not-the-password")
+    # The same project with a short attach timeout, so the refused node gives up quickly.
+    quick = json.loads(cfg.read_text())
+    quick["coSimulation"]["attachTimeout"] = 2.0
+    (tmp_path / "quick.json").write_text(json.dumps(quick))
+    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
+    nodes = [spawn("node", n, str(cfg)) for n in ("clock", "g")]  # passwords from the credentials file
+    try:
+        wait_for(lambda: (run_dir / "values.csv").exists() and len(read_rows(run_dir)) > 30, 30, "30 steps")
+        bad = hycosim("node", "clock", str(tmp_path / "quick.json"), "--password-file", str(tmp_path / "wrong.txt"),
+                      timeout=90)
+        assert bad.returncode == 3 and "cannot open Zenoh session" in bad.stderr and "user 'clock'" in bad.stderr
+        with pytest.raises(Exception):
+            zenoh.open(client_config(endpoint, timeout_s=2.0))  # no credentials at all
+        keys = ProjectKeys("secure")
+        # Authenticated as clock, try to write g's outputs: the router's access control drops it.
+        with zenoh.open(client_config(endpoint, user="clock", password="clock-pw")) as forger:
+            for _ in range(5):
+                forger.put(keys.up("g"), frames.encode(frames.OUTPUTS, 2, 10**6, 0.0, [123.0]),
+                           congestion_control=zenoh.CongestionControl.BLOCK)
+        status = hycosim("status", endpoint, "--project", "secure", "--user", "watcher", "--password-file",
+                         str(_pw(tmp_path, "w-pw")))
+        assert status.returncode == 0 and "attached 2/2" in status.stdout, status.stderr
+        _, err = server.communicate(timeout=60)
+        for p in nodes:
+            assert p.wait(timeout=30) == 0
+    finally:
+        for p in [server, *nodes]:
+            if p.poll() is None:
+                p.kill()
+    assert server.returncode == 0, err
+    m = meta(run_dir)
+    assert m["dropped_frames"] == {}  # never reached the server
+    rows = read_rows(run_dir)
+    assert all(r["g.y"] != "123.0" for r in rows)
+    assert all(rows[k]["g.y"] == rows[k - 1]["clock.y"] for k in range(1, len(rows)))
+
+
+def _pw(tmp_path: Path, password: str) -> Path:
+    path = tmp_path / f"pw-{password}"
+    path.write_text(password)
+    return path
