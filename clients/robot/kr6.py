@@ -31,9 +31,14 @@ AXIS_DIRS = ((0, 0, -1), (0, 1, 0), (0, 1, 0), (-1, 0, 0), (0, 1, 0), (-1, 0, 0)
 LIMITS_DEG = ((-170, 170), (-190, 45), (-120, 156), (-185, 185), (-120, 120), (-350, 350))
 SPEED_DEG = (360, 300, 360, 381, 388, 615)
 HOME_DEG = (0.0, -90.0, 90.0, 0.0, 0.0, 0.0)
+# The cell's ready pose: TCP at (0.45, 0, 0.70) m, jaws level, 17 cm in front of the rod's
+# swing plane. From HOME the jaws sit 6 cm from the plane, and the first move of the
+# independent axes can sweep the gripper into the passing rod.
+READY_DEG = (0.0, -110.8, 115.4, 0.0, -4.6, 0.0)
 LIMITS = np.radians(np.array(LIMITS_DEG, dtype=float))
 SPEEDS = np.radians(np.array(SPEED_DEG, dtype=float))
 HOME = np.radians(np.array(HOME_DEG, dtype=float))
+READY = np.radians(np.array(READY_DEG, dtype=float))
 REACH = 0.7067  # m, datasheet
 TCP_OFFSET = 0.09  # m from the flange along its x axis: mid-jaw
 GRIPPER_OPEN = 0.08  # m between the jaws
@@ -103,7 +108,7 @@ def scene_mjcf(base: tuple[float, float, float] = (0.0, 0.0, 0.0), rod_length: f
                 <body name="link6" pos="0.080 0 0">
                   {j[5]}
                   <site name="flange" pos="0 0 0" size="0.01"/>
-                  {_capsule((0.0, 0, 0), (0.045, 0, 0), 0.035, "gripper_body", "0.2 0.2 0.2 1")}
+                  {_capsule((0.0, 0, 0), (0.02, 0, 0), 0.03, "gripper_body", "0.2 0.2 0.2 1")}
                   <body name="finger_l" pos="0.06 {GRIPPER_OPEN / 2 + 0.005} 0">
                     <joint name="finger_l" type="slide" axis="0 -1 0" range="0 0.045"/>
                     <geom name="finger_l" type="box" pos="0.03 0.005 0" size="0.03 0.005 0.012" rgba="0.2 0.2 0.2 1"/>

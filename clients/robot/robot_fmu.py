@@ -29,7 +29,7 @@ class RobotScene6(Fmi2Slave):
         for name in _PARAMS:
             self.register_variable(Real(name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
         for i in range(6):
-            setattr(self, f"q_cmd{i + 1}", float(kr6.HOME[i]))
+            setattr(self, f"q_cmd{i + 1}", float(kr6.READY[i]))
             self.register_variable(Real(f"q_cmd{i + 1}", causality=Fmi2Causality.input))
         self.grip_cmd = False
         self.rod_angle = 0.0

@@ -76,8 +76,8 @@ class RobotScene:
         self._fingers = {geom("finger_l").id, geom("finger_r").id}
         self._robot_geoms = {i for i in range(self.model.ngeom)
                              if self.model.geom_bodyid[i] not in (0, self.model.body("rod").id)}
-        self.q = kr6.HOME.copy()
-        self._reach_q = kr6.HOME.copy()  # continuation: the last reach solution seeds the next
+        self.q = kr6.READY.copy()
+        self._reach_q = kr6.READY.copy()  # continuation: the last reach solution seeds the next
         self.gap = kr6.GRIPPER_OPEN
         self.rod_angle = 0.0
         self._last_distance = math.inf
@@ -170,11 +170,13 @@ class RobotScene:
             found.append((self.model.geom(g1).name, self.model.geom(g2).name))
         return found
 
-    def reach(self, angle: float | None = None, q0: np.ndarray | None = None) -> IkResult:
-        """IK for the TCP on the rod's grasp point (at ``angle``, default the current one)."""
+    def reach(self, angle: float | None = None, q0: np.ndarray | None = None, back_off: float = 0.0) -> IkResult:
+        """IK for the TCP on the rod's grasp point (at ``angle``, default the current one),
+        or ``back_off`` metres behind it along the approach (a pre-grasp pose)."""
         a = self.rod_angle if angle is None else angle
         c, _ = self._rod_frame()
         target = c + self.p.grasp_distance * np.array([0.0, math.sin(a), -math.cos(a)])
+        target[0] -= back_off
         mujoco.mj_copyData(self._scratch, self.model, self.data)
         result = solve_ik(self.model, self._scratch, "tcp", target, grasp_rotation(a),
                           q0=self._reach_q if q0 is None else q0, limits=kr6.LIMITS, iterations=60)

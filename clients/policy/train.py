@@ -1,0 +1,166 @@
+"""Training the grasp policy (``hycosim train``): demonstrations, behaviour cloning, then DDPG.
+
+Checkpoints (``last.pt``, ``best.pt``) hold the weights, optimiser states, normalisation
+statistics, the training config and its hash, episodes done and metrics; a run resumes
+from ``last.pt``. At the end ``learning_curve.png`` shows episode return and evaluation
+success per release angle.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+
+from clients.policy.ddpg import DDPG, DDPGConfig, ReplayBuffer
+from clients.policy.env import GraspEnv
+
+EVAL_ANGLES = (30.0, 40.0, 50.0, 60.0)
+
+
+@dataclass
+class TrainConfig:
+    demo_episodes: int = 60
+    bc_steps: int = 3000
+    critic_warmup_steps: int = 2000
+    episodes: int = 300
+    eval_every: int = 50
+    eval_trials: int = 10
+    seed: int = 0
+    ddpg: DDPGConfig = field(default_factory=DDPGConfig)
+
+    def digest(self) -> str:
+        return hashlib.sha256(json.dumps(asdict(self), sort_keys=True).encode()).hexdigest()[:16]
+
+
+def evaluate(agent: DDPG | None, env: GraspEnv, trials: int, seed: int = 10_000,
+             expert: bool = False) -> dict[str, dict[str, float]]:
+    """Success rate, mean time and mean final distance per release angle (deterministic policy)."""
+    results = {}
+    for angle in EVAL_ANGLES:
+        wins, times, dists = 0, [], []
+        for i in range(trials):
+            obs, _ = env.reset(seed=seed + i, options={"angle_deg": angle})
+            done = False
+            while not done:
+                action = env.expert_action() if expert else agent.act(obs)
+                obs, _, term, trunc, info = env.step(action)
+                done = term or trunc
+            wins += info["success"]
+            times.append(info["time"])
+            dists.append(info["distance"])
+        results[f"{angle:g}"] = {"success": wins / trials, "time_s": float(np.mean(times)),
+                                 "distance_mm": 1000 * float(np.mean(dists))}
+    return results
+
+
+def _episode(env: GraspEnv, act: Callable[[np.ndarray], np.ndarray], seed: int, buffer: ReplayBuffer | None,
+             demo: bool = False, norm=None) -> tuple[float, bool, list]:
+    obs, _ = env.reset(seed=seed)
+    total, done, seen = 0.0, False, []
+    while not done:
+        a = act(obs)
+        nxt, r, term, trunc, info = env.step(a)
+        if buffer is not None:
+            buffer.add(obs, a, r, nxt, float(term), demo)
+        seen.append((obs, a))
+        total += r
+        obs, done = nxt, term or trunc
+    return total, bool(info["success"]), seen
+
+
+def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | None = None) -> dict:
+    """Train into ``out``; resume from ``out/last.pt`` when it exists. Returns the final metrics."""
+    out.mkdir(parents=True, exist_ok=True)
+    env = GraspEnv()
+    agent = DDPG(config.ddpg)
+    buffer = ReplayBuffer()
+    history: dict = {"returns": [], "evals": []}
+    episodes_done, started = 0, time.monotonic()
+    last = out / "last.pt"
+    if last.exists():
+        state = torch.load(last, map_location="cpu", weights_only=False)
+        if state.get("config_hash") != config.digest():
+            raise ValueError(f"{last} was trained with another config (hash {state.get('config_hash')}); "
+                             "use another output folder")
+        agent.load_state(state)
+        history = state["history"]
+        episodes_done = state["episodes"]
+    report = progress or (lambda _: None)
+    # Demonstrations (also on resume: the buffer is not checkpointed).
+    demo_obs, demo_act = [], []
+    for i in range(config.demo_episodes):
+        _, _, seen = _episode(env, lambda _o: env.expert_action(), config.seed * 100_000 + i, buffer, demo=True)
+        for o, a in seen:
+            demo_obs.append(o)
+            demo_act.append(a)
+        report({"phase": "demonstrations", "done": i + 1, "total": config.demo_episodes})
+    demo_obs_arr, demo_act_arr = np.array(demo_obs), np.array(demo_act)
+    if episodes_done == 0:
+        agent.norm.update(demo_obs_arr)
+        bc = agent.pretrain_actor(demo_obs_arr, demo_act_arr, config.bc_steps)
+        for _ in range(config.critic_warmup_steps):
+            agent.update(buffer, train_actor=False)
+        ev = evaluate(agent, env, config.eval_trials)
+        mean = float(np.mean([v["success"] for v in ev.values()]))
+        history["evals"].append({"episode": 0, "per_angle": ev, "mean_success": mean})
+        torch.save(agent.state(config_hash=config.digest(), episodes=0, history=history, metrics=ev,
+                               trained_s=time.monotonic() - started, train_config=asdict(config)), out / "best.pt")
+        report({"phase": "pretrained", "bc_mse": bc, "per_angle": ev, "mean_success": mean})
+    best = max((e["mean_success"] for e in history["evals"]), default=-1.0)
+    rng_seed = config.seed * 1_000_000 + 50_000
+    for ep in range(episodes_done, config.episodes):
+        ret, success, seen = _episode(env, lambda o: agent.act(o, explore=True), rng_seed + ep, buffer)
+        agent.norm.update(np.array([o for o, _ in seen]))
+        for _ in range(len(seen)):
+            agent.update(buffer)
+        history["returns"].append({"episode": ep + 1, "return": ret, "success": success})
+        report({"phase": "ddpg", "episode": ep + 1, "total": config.episodes, "return": ret, "success": success})
+        if (ep + 1) % config.eval_every == 0 or ep + 1 == config.episodes:
+            ev = evaluate(agent, env, config.eval_trials)
+            mean = float(np.mean([v["success"] for v in ev.values()]))
+            history["evals"].append({"episode": ep + 1, "per_angle": ev, "mean_success": mean})
+            report({"phase": "eval", "episode": ep + 1, "per_angle": ev, "mean_success": mean})
+            extra = dict(config_hash=config.digest(), episodes=ep + 1, history=history,
+                         trained_s=time.monotonic() - started, metrics=ev, train_config=asdict(config))
+            if mean >= best:
+                best = mean
+                torch.save(agent.state(**extra), out / "best.pt")
+            torch.save(agent.state(**extra), last)
+    plot_learning_curve(history, out / "learning_curve.png")
+    return {"best_mean_success": best, "evals": history["evals"], "trained_s": time.monotonic() - started}
+
+
+def plot_learning_curve(history: dict, path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    if history["returns"]:
+        eps = [r["episode"] for r in history["returns"]]
+        rets = np.array([r["return"] for r in history["returns"]])
+        a1.plot(eps, rets, color="0.7", lw=0.8, label="episode return")
+        k = max(1, len(rets) // 20)
+        a1.plot(eps[k - 1:], np.convolve(rets, np.ones(k) / k, mode="valid"), color="tab:blue", label=f"mean of {k}")
+        a1.legend(fontsize=8)
+    a1.set_ylabel("return (Eq. 6)")
+    for angle in EVAL_ANGLES:
+        pts = [(e["episode"], e["per_angle"][f"{angle:g}"]["success"]) for e in history["evals"]]
+        if pts:
+            a2.plot(*zip(*pts), marker="o", label=f"{angle:g}°")
+    a2.set_ylabel("evaluation success")
+    a2.set_xlabel("DDPG episode")
+    a2.set_ylim(-0.05, 1.05)
+    a2.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
