@@ -19,6 +19,7 @@ REFERENCE_MODELS = {
     "robot": "clients.robot.node:RobotNode",
     "reference_controller": "clients.robot.controller:ReferenceController",
     "camera": "clients.camera.node:CameraNode",
+    "policy": "clients.policy.node:PolicyNode",
 }
 
 

@@ -1,3 +1,3 @@
-from hycosim.cli import app
+from hycosim.cli import main
 
-app(prog_name="hycosim")
+main()

@@ -432,5 +432,177 @@ def camera(
         out.print(f"wrote {annotate}", highlight=False)
 
 
+@app.command()
+def train(
+    output: Annotated[Path, typer.Option("-o", "--output", help="folder for checkpoints and the learning curve")] = Path("runs/train"),
+    episodes: Annotated[int, typer.Option(help="DDPG episodes after the demonstrations")] = 200,
+    demos: Annotated[int, typer.Option(help="reference-controller episodes to learn from")] = 60,
+    eval_every: Annotated[int, typer.Option(help="evaluate every N episodes")] = 20,
+    eval_trials: Annotated[int, typer.Option(help="evaluation episodes per release angle")] = 10,
+    seed: Annotated[int, typer.Option()] = 0,
+) -> None:
+    """Train the DDPG grasp policy (demonstrations, behaviour cloning, DDPG); resumes from OUTPUT/last.pt."""
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from clients.policy.train import TrainConfig, train as run_training
+
+    config = TrainConfig(demo_episodes=demos, episodes=episodes, eval_every=eval_every, eval_trials=eval_trials,
+                         seed=seed)
+    config.ddpg.seed = seed
+    stats = {"returns": [], "successes": []}
+    with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                  TextColumn("{task.fields[info]}"), TimeElapsedColumn(), console=err) as progress:
+        demo_task = progress.add_task("demonstrations", total=demos, info="")
+        task = progress.add_task("DDPG", total=episodes, info="")
+
+        def report(d: dict) -> None:
+            if d["phase"] == "demonstrations":
+                progress.update(demo_task, completed=d["done"])
+            elif d["phase"] == "ddpg":
+                stats["returns"].append(d["return"])
+                stats["successes"].append(d["success"])
+                last = stats["returns"][-20:]
+                rate = sum(stats["successes"][-20:]) / len(stats["successes"][-20:])
+                progress.update(task, completed=d["episode"],
+                                info=f"mean return {sum(last) / len(last):7.1f}  success {100 * rate:3.0f} %")
+            elif d["phase"] in ("eval", "pretrained"):
+                text = ", ".join(f"{k}°: {100 * v['success']:.0f} %" for k, v in d["per_angle"].items())
+                progress.console.print(f"evaluation after {d.get('episode', 0)} episodes: {text}", highlight=False)
+
+        try:
+            result = run_training(output, config, report)
+        except ValueError as exc:
+            err.print(f"[red]error:[/red] {exc}", highlight=False)
+            raise typer.Exit(2) from None
+    out.print(f"best mean evaluation success {100 * result['best_mean_success']:.0f} % in "
+              f"{result['trained_s']:.0f} s; checkpoints and learning_curve.png in {output}", highlight=False)
+
+
+krl_app = typer.Typer(no_args_is_help=True, help="KUKA EthernetKRL: export a run's path; an emulated controller.")
+app.add_typer(krl_app, name="krl")
+
+
+@krl_app.command("export")
+def krl_export(run_dir: Path, output: Annotated[Path, typer.Option("-o", "--output")] = Path("krl")) -> None:
+    """Write the EKI configuration, the KRL program (Table 1) and the XML frame stream of a run."""
+    from clients.krl.export import ExportError, export
+
+    try:
+        files = export(run_dir, output)
+    except ExportError as exc:
+        err.print(f"[red]error:[/red] {exc}", highlight=False)
+        raise typer.Exit(2) from None
+    for kind, path in files.items():
+        out.print(f"{kind}: {path}", highlight=False)
+
+
+@krl_app.command("controller")
+def krl_controller(
+    eki: Annotated[Path, typer.Option(help="the EKI configuration (port, RECEIVE elements)")],
+    port: Annotated[Optional[int], typer.Option(help="override the EKI file's port")] = None,
+    host: Annotated[str, typer.Option(help="address to listen on")] = "127.0.0.1",
+    length: Annotated[float, typer.Option(help="physical rod length (m)")] = 0.6,
+    angle: Annotated[float, typer.Option(help="physical rod release angle (deg)")] = 40.0,
+    programs: Annotated[int, typer.Option(help="stop after this many programs (0: run until Ctrl-C)")] = 0,
+) -> None:
+    """Listen as the robot's EKI endpoint and execute programs against the emulated physical rod."""
+    import math
+
+    from clients.krl.controller import EmulatedController
+    from clients.krl.eki import EkiConfig, EkiError
+    from clients.rod.model import RodParams
+
+    try:
+        config = EkiConfig.parse(eki.read_text(), str(eki))
+    except (OSError, EkiError) as exc:
+        err.print(f"[red]error:[/red] {exc}", highlight=False)
+        raise typer.Exit(2) from None
+    controller = EmulatedController(config, RodParams(length=length, initial_angle=math.radians(angle)),
+                                    host=host, port=port)
+    out.print(f"emulated KUKA controller listening on {host}:{controller.address[1]} ({eki.name})", highlight=False)
+    try:
+        while programs == 0 or len(controller.results) < programs:
+            conn, peer = controller.listener.accept()
+            with conn:
+                result = controller.handle(conn, str(peer))
+            if result is not None:
+                out.print(f"program ended: {'grasped' if result.grasped else 'missed'}, error "
+                          f"{result.grasp_error_mm if result.grasp_error_mm is not None else '-'} mm, "
+                          f"{result.frames} frames, {len(result.rejected)} rejected", highlight=False)
+            else:
+                err.print(f"rejected: {controller.errors[-1]}", highlight=False)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        controller.stop()
+
+
+@app.command()
+def trials(
+    angles: Annotated[str, typer.Option(help="initial angles in degrees: --angles 30 40 50 60")] = "30,40,50,60",
+    n: Annotated[int, typer.Option("--trials", help="trials per angle")] = 20,
+    correction: Annotated[bool, typer.Option("--correction/--no-correction", help="camera correction of the twin")] = True,
+    driver: Annotated[str, typer.Option(help="'policy' (pretrained DDPG) or 'reference' (scripted)")] = "policy",
+    output: Annotated[Path, typer.Option("-o", "--output")] = Path("runs/trials"),
+) -> None:
+    """Rerun the paper's trials: co-simulation, EthernetKRL export, emulated controller, Table 2."""
+    from hycosim.trials import PAPER, run_trials, summarise, write_outputs
+
+    if driver not in ("policy", "reference"):
+        err.print("[red]error:[/red] --driver is 'policy' or 'reference'", highlight=False)
+        raise typer.Exit(2)
+    try:
+        angle_list = [float(a) for a in angles.replace(",", " ").split()]
+    except ValueError:
+        err.print(f"[red]error:[/red] --angles {angles!r}: give numbers in degrees", highlight=False)
+        raise typer.Exit(2) from None
+    done = []
+
+    def progress(r) -> None:
+        done.append(r)
+        err.print(f"{r.angle:g}° #{r.trial}: {'grasped' if r.success else 'missed'}"
+                  + (f", {r.grasp_error_mm:.1f} mm, {r.execution_time_s:.2f} s" if r.success else ""), highlight=False)
+
+    try:
+        results = run_trials(angle_list, n, output, correction, driver, progress)
+    except RuntimeError as exc:
+        err.print(f"[red]error:[/red] {exc}", highlight=False)
+        if done:
+            write_outputs(done, output)
+        raise typer.Exit(3) from None
+    csv_path, png = write_outputs(results, output)
+    table = Table(title=f"grasping trials ({'with' if correction else 'without'} camera correction, {driver})")
+    for col in ("angle", "error (mm)", "time (s)", "success", "paper error", "paper time", "paper success"):
+        table.add_column(col)
+    for angle, row in summarise(results).items():
+        p = PAPER.get(int(angle), (float("nan"),) * 3)
+        table.add_row(f"{angle:g}°", f"{row['error_mm']:.1f}", f"{row['time_s']:.2f}",
+                      f"{row['success_pct']:.0f} % of {row['trials']}", f"{p[0]}", f"{p[1]}", f"{p[2]} %")
+    out.print(table)
+    out.print(f"wrote {csv_path} and {png}", highlight=False)
+
+
+def _join_multi_value_options(argv: list[str]) -> list[str]:
+    # `--angles 30 40 50 60` as the paper's trials are written; click options take one value.
+    out, i = [], 0
+    while i < len(argv):
+        out.append(argv[i])
+        if argv[i] == "--angles":
+            values = []
+            while i + 1 < len(argv) and not argv[i + 1].startswith("--"):
+                i += 1
+                values.append(argv[i])
+            out.append(",".join(values))
+        i += 1
+    return out
+
+
+def main() -> None:
+    """Console entry point."""
+    import sys
+
+    app(args=_join_multi_value_options(sys.argv[1:]), prog_name="hycosim")
+
+
 if __name__ == "__main__":
-    app()
+    main()

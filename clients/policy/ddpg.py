@@ -100,11 +100,11 @@ class ReplayBuffer:
 class DDPGConfig:
     gamma: float = 0.98
     tau: float = 0.005
-    actor_lr: float = 1e-4
+    actor_lr: float = 1e-5
     critic_lr: float = 1e-3
     batch: int = 256
-    noise: float = 0.1
-    bc_weight: float = 1.0
+    noise: float = 0.05
+    bc_weight: float = 5.0
     hidden: int = 256
     seed: int = 0
     extra: dict = field(default_factory=dict)
@@ -162,7 +162,7 @@ class DDPG:
         self.critic_opt.zero_grad()
         critic_loss.backward()
         self.critic_opt.step()
-        stats = {"critic_loss": float(critic_loss)}
+        stats = {"critic_loss": float(critic_loss.detach())}
         if train_actor:
             pi = self.actor(o)
             q_pi = self.critic(torch.cat([o, pi], 1))
@@ -175,7 +175,7 @@ class DDPG:
             self.actor_opt.zero_grad()
             actor_loss.backward()
             self.actor_opt.step()
-            stats["actor_loss"] = float(actor_loss)
+            stats["actor_loss"] = float(actor_loss.detach())
         with torch.no_grad():
             for net, tgt in ((self.actor, self.actor_target), (self.critic, self.critic_target)):
                 for p, tp in zip(net.parameters(), tgt.parameters()):

@@ -28,9 +28,9 @@ EVAL_ANGLES = (30.0, 40.0, 50.0, 60.0)
 class TrainConfig:
     demo_episodes: int = 60
     bc_steps: int = 3000
-    critic_warmup_steps: int = 2000
-    episodes: int = 300
-    eval_every: int = 50
+    critic_warmup_steps: int = 5000
+    episodes: int = 200
+    eval_every: int = 20
     eval_trials: int = 10
     seed: int = 0
     ddpg: DDPGConfig = field(default_factory=DDPGConfig)

@@ -79,6 +79,7 @@ class RobotScene:
         self.q = kr6.READY.copy()
         self._reach_q = kr6.READY.copy()  # continuation: the last reach solution seeds the next
         self.gap = kr6.GRIPPER_OPEN
+        self.holding = False  # jaws closed on the rod: it stays held until they open
         self.rod_angle = 0.0
         self._last_distance = math.inf
         self._update()
@@ -93,16 +94,18 @@ class RobotScene:
         self._set_pose()
         within, _, _ = self._rod_between_jaws()
         if grip_close:
-            floor_gap = 2 * self.p.rod_radius if within else 0.0
+            floor_gap = 2 * self.p.rod_radius if within or self.holding else 0.0
             self.gap = max(floor_gap, self.gap - kr6.FINGER_SPEED * h)
         else:
             self.gap = min(kr6.GRIPPER_OPEN, self.gap + kr6.FINGER_SPEED * h)
+            self.holding = False
         self._update()
         return self.outputs(grip_close)
 
     def set_state(self, q: np.ndarray, gap: float, rod_angle: float) -> None:
         self.q = np.asarray(q, dtype=float).copy()
         self.gap = gap
+        self.holding = False
         self.rod_angle = rod_angle
         self._update()
 
@@ -186,7 +189,10 @@ class RobotScene:
 
     def outputs(self, grip_close: bool = False) -> SceneOutputs:
         within, rod_distance, _ = self._rod_between_jaws()
-        grasped = bool(grip_close and within and self.gap <= 2 * self.p.rod_radius + 1e-6)
+        # Once the jaws have closed on the rod it is held (the rod node follows the gripper,
+        # one macro step behind): the grasp lasts until the jaws open.
+        self.holding = bool(grip_close and self.gap <= 2 * self.p.rod_radius + 1e-6 and (within or self.holding))
+        grasped = self.holding
         tcp = self.tcp
         distance = float(np.linalg.norm(tcp - self.data.site_xpos[self._grasp]))
         near_miss = bool(not within and rod_distance < self.p.near_miss_radius)

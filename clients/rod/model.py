@@ -149,7 +149,9 @@ class RodModel:
         else:
             if measured_at <= self._last_measurement:
                 return  # already used
-            dt = min(measured_at - self._last_measurement, 0.1)
+            # The discrete update is stable while 2·l·dt < 1: after a gap (or at the first
+            # measurement) apply at most a quarter of the error's remaining time constant.
+            dt = min(measured_at - self._last_measurement, 0.25 / l)
             self._last_measurement = measured_at
             e = measured_angle - self.angle_at(measured_at)
         self.data.qpos[self._hinge] += 2 * l * e * dt

@@ -53,7 +53,9 @@ class RodNode(Node):
             self.rod.set_gripper(np.array([float(inputs.get("grip_x", pivot[0])), float(inputs.get("grip_y", 0.0)),
                                            float(inputs.get("grip_z", 0.0))]))
         self.rod.set_driven(driven)
-        if float(inputs.get("meas_valid", 0.0)) > 0.5:
+        # Held by the gripper, the rod follows the gripper (s_A = g_B(s_B)); the camera's view
+        # of the physical rod corrects the free swing only.
+        if not driven and float(inputs.get("meas_valid", 0.0)) > 0.5:
             at = inputs.get("meas_t")
             self.rod.correct(float(inputs["meas_angle"]), h, None if at is None else float(at))
         self.rod.advance(h)

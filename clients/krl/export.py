@@ -1,0 +1,66 @@
+"""``hycosim krl export RUN_DIR -o DIR``: a run's joint path as EthernetKRL files.
+
+Writes ``<name>.xml`` (the EKI configuration), ``<name>.src`` (the KRL program of the
+paper's Table 1) and ``frames.xml`` (the frame stream, one frame a line, ending with the
+empty-A1 frame). The path is the robot's recorded joint angles up to the grasp (when
+``robot.grasped`` first holds), one frame per macro step, with the gripper command that was
+routed to the robot at that step.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from clients.krl.eki import EkiConfig, frame, krl_program
+from clients.robot import kr6
+
+
+class ExportError(RuntimeError):
+    """A run directory without a robot path; names the file."""
+
+
+@dataclass
+class JointPath:
+    t: list[float]
+    q_deg: list[list[float]]
+    close: list[bool]
+    grasp_index: int | None
+
+
+def read_path(run_dir: Path, robot: str = "robot") -> JointPath:
+    path = run_dir / "values.csv"
+    try:
+        with open(path, newline="") as f:
+            rows = list(csv.DictReader(f))
+    except OSError as exc:
+        raise ExportError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    cols = [f"{robot}.q{i}" for i in range(1, 7)]
+    if not rows or any(c not in rows[0] for c in cols):
+        raise ExportError(f"{path}: no joint path ({', '.join(cols)}) recorded for node {robot!r}")
+    t0 = float(rows[0]["t"])
+    t, q, close, grasp = [], [], [], None
+    for i, r in enumerate(rows):
+        held = float(r.get(f"{robot}.grasped", 0) or 0) > 0.5
+        t.append(float(r["t"]) - t0)
+        q.append([math.degrees(float(r[c])) for c in cols])
+        close.append(float(r.get(f"{robot}.grip_cmd", 0) or 0) > 0.5)
+        if held and grasp is None:
+            grasp = i
+            break
+    return JointPath(t, q, close, grasp)
+
+
+def export(run_dir: Path, out: Path, config: EkiConfig | None = None) -> dict[str, Path]:
+    config = config or EkiConfig()
+    jp = read_path(run_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    files = {"eki": out / f"{config.name}.xml", "krl": out / f"{config.name}.src", "frames": out / "frames.xml"}
+    files["eki"].write_text(config.to_xml())
+    files["krl"].write_text(krl_program(config, tuple(jp.q_deg[0]) if jp.q_deg else kr6.READY_DEG))
+    lines = [frame(q, t, close) for t, q, close in zip(jp.t, jp.q_deg, jp.close)]
+    lines.append(frame(None))
+    files["frames"].write_text("\n".join(lines) + "\n")
+    return files

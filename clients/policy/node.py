@@ -1,0 +1,61 @@
+"""The DDPG policy as a hycosim node: loads a checkpoint and acts at every macro step.
+
+Inputs: ``rod_angle``, ``rod_omega``, ``grasp_x/y/z`` (from the rod), ``q1``…``q6``,
+``tcp_x/y/z``, ``gap``, ``dist``, ``grasped`` (from the robot scene).
+Outputs: ``q_cmd1``…``q_cmd6``, ``grip_cmd`` and ``infer_ms`` (the policy's inference time
+for this step, so the run records it). Parameters: ``checkpoint`` (relative to the project
+JSON; default the pretrained one shipped with hycosim) and the rod's parameters (for the
+turning-point prediction, as for the rod node).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from clients.node import Node, NodeContext
+from clients.policy.ddpg import load_policy
+from clients.policy.features import Predictor, action_to_targets, grip_reflex, observe
+from clients.robot import kr6
+from clients.robot.node import scene_params
+from clients.robot.scene import RobotScene, SceneParams
+from clients.rod.model import RodModel
+from clients.rod.node import rod_params
+
+PRETRAINED = Path(__file__).with_name("pretrained") / "ddpg_grasp.pt"
+
+
+class PolicyNode(Node):
+    def setup(self, ctx: NodeContext) -> None:
+        given = ctx.parameters.get("checkpoint")
+        path = (ctx.project_dir / given) if given else PRETRAINED
+        self.agent = load_policy(path)
+        params = scene_params(ctx.parameters)
+        self.predictor = Predictor(RodModel(rod_params(ctx.parameters)),
+                                   RobotScene(SceneParams(**{**params.__dict__, "check_reach": False})))
+        self.q_cmd = kr6.READY.copy()
+        self.grip = False
+        self.infer_ms = 0.0
+
+    def outputs(self) -> dict[str, Any]:
+        out: dict[str, Any] = {f"q_cmd{i + 1}": float(self.q_cmd[i]) for i in range(6)}
+        out.update(grip_cmd=self.grip, infer_ms=self.infer_ms)
+        return out
+
+    def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
+        started = time.perf_counter()
+        q = np.array([float(inputs[f"q{i + 1}"]) for i in range(6)])
+        tcp = np.array([float(inputs[k]) for k in ("tcp_x", "tcp_y", "tcp_z")])
+        grasp = np.array([float(inputs[k]) for k in ("grasp_x", "grasp_y", "grasp_z")])
+        angle, omega = float(inputs["rod_angle"]), float(inputs["rod_omega"])
+        if float(inputs.get("grasped", 0.0)) > 0.5:
+            self.grip = True  # hold what we have
+        else:
+            points = self.predictor.update(t, angle, omega, q)
+            obs = observe(t, q, tcp, grasp, angle, omega, float(inputs["gap"]), points)
+            self.q_cmd = action_to_targets(self.agent.act(obs), points, q)
+            self.grip = self.grip or grip_reflex(float(inputs["dist"]), omega)
+        self.infer_ms = 1000 * (time.perf_counter() - started)

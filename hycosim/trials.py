@@ -1,0 +1,189 @@
+"""The paper's trials (Table 2), rerun: ``hycosim trials --angles 30 40 50 60 --trials 20``.
+
+Per trial: the full distributed co-simulation (server and every node as processes over
+Zenoh on loopback: the rod twin, the robot scene, the policy, and, with correction on,
+the camera watching the emulated physical rod), then the robot's path exported as
+EthernetKRL files and streamed over TCP to the emulated controller, which executes it
+against the physical rod. The physical rod differs from the twin per trial (length ±3 %,
+release angle ±2°, damping ±30 %, seeded), as a real rod differs from its model.
+Measured: grasp distance error (TCP to the rod's grasp point when the jaws close, mm),
+execution time (program start to grasp, s) and success (the jaws closed on the rod).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import threading
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from clients.krl.controller import EmulatedController, parse_ack, stream_program
+from clients.krl.eki import EkiConfig
+from clients.krl.export import export
+from clients.rod.model import RodParams
+from fmu_bridge.config import parse_project
+
+PAPER = {30: (3.2, 14.8, 95), 40: (3.8, 15.6, 95), 50: (5.0, 15.4, 90), 60: (5.8, 16.6, 80)}
+REPO = Path(__file__).resolve().parents[1]
+
+
+@dataclass
+class TrialResult:
+    angle: float
+    trial: int
+    correction: bool
+    success: bool
+    grasp_error_mm: float | None
+    execution_time_s: float | None
+    simulated_grasp: bool
+    run_dir: str
+    physical_length: float
+    physical_angle_deg: float
+
+
+def physical_rod(angle: float, seed: int) -> RodParams:
+    rng = np.random.default_rng(seed)
+    return RodParams(length=0.6 * (1 + rng.uniform(-0.03, 0.03)),
+                     initial_angle=math.radians(angle + rng.uniform(-2.0, 2.0)),
+                     damping=0.002 * rng.uniform(0.7, 1.3))
+
+
+def trial_project(angle: float, physical: RodParams, correction: bool, driver: str, seed: int) -> dict:
+    """The project JSON of one trial: grasp-policy.json (or grasp.json) plus, with correction, the camera."""
+    base = json.loads((REPO / "configs" / ("grasp-policy.json" if driver == "policy" else "grasp.json")).read_text())
+    base["projectName"] = f"trial-{angle:g}-{seed}"
+    for node in base["nodeLists"]:
+        if "parameters" in node:
+            node["parameters"] = dict(node["parameters"], initial_angle_deg=angle)
+    rod = base["nodeLists"][0]
+    rod["parameters"]["observer_gain"] = 12.0 if correction else 0.0
+    if not any(p == "meas_t" or (isinstance(p, dict) and p["name"] == "meas_t") for p in rod["input"]):
+        rod["input"].append("meas_t")
+    if correction:
+        base["nodeLists"].append({
+            "nodeName": "camera", "UID": 9, "model": "camera", "async": True, "rate": 60,
+            "parameters": {"source": "emulated", "noise_sigma": 25, "seed": seed,
+                           "physical": {"length": physical.length, "damping": physical.damping,
+                                        "initial_angle_deg": math.degrees(physical.initial_angle)}},
+            "output": ["meas_angle", "meas_omega", "meas_t", "meas_conf", {"name": "meas_valid", "type": "Boolean"},
+                       "latency", "true_angle"]})
+        base["linkLists"].append({"from": "camera", "to": "rod", "pairs": [["meas_angle", "meas_angle"],
+                                                                           ["meas_t", "meas_t"],
+                                                                           ["meas_valid", "meas_valid"]]})
+    base["nodeNum"], base["linkNum"] = len(base["nodeLists"]), len(base["linkLists"])
+    # Paced at twice real time: the camera lives on the wall clock.
+    base["coSimulation"] = {"stepSize": 0.01, "stopTime": 2.6, "realTime": 0.5, "stepTimeout": 20.0,
+                            "attachTimeout": 60.0}
+    return base
+
+
+def run_trial(angle: float, trial: int, out: Path, correction: bool = True, driver: str = "policy",
+              seed_base: int = 1000) -> TrialResult:
+    from hycosim.embedded import run_embedded
+
+    seed = seed_base + int(angle) * 100 + trial
+    physical = physical_rod(angle, seed)
+    doc = trial_project(angle, physical, correction, driver, seed)
+    folder = out / f"{angle:g}deg-{trial:02d}"
+    folder.mkdir(parents=True, exist_ok=True)
+    cfg = folder / "project.json"
+    cfg.write_text(json.dumps(doc, indent=1))
+    loaded = parse_project(doc, str(cfg), cfg.resolve())
+    result = run_embedded(loaded, cfg, runs_dir=folder / "runs", show_progress=False)
+    if result.code:
+        raise RuntimeError(f"trial {angle:g}° #{trial}: co-simulation failed: {result.message}")
+    files = export(result.run_dir, folder / "krl")
+    controller = EmulatedController(EkiConfig(), physical, port=0)
+    thread = threading.Thread(target=controller.serve_forever, daemon=True)
+    thread.start()
+    try:
+        answer = parse_ack(stream_program("127.0.0.1", controller.address[1], files["frames"].read_text()))
+    finally:
+        controller.stop()
+        thread.join(timeout=5)
+    events = (result.run_dir / "events.jsonl").read_text()
+    return TrialResult(angle, trial, correction, answer["grasped"], answer["grasp_error_mm"],
+                       answer["grasp_time_s"], '"to": "grasp"' in events, str(result.run_dir),
+                       physical.length, math.degrees(physical.initial_angle))
+
+
+def summarise(results: list[TrialResult]) -> dict[float, dict[str, float]]:
+    table = {}
+    for angle in sorted({r.angle for r in results}):
+        rs = [r for r in results if r.angle == angle]
+        ok = [r for r in rs if r.success]
+        table[angle] = {
+            "trials": len(rs), "success_pct": 100 * len(ok) / len(rs),
+            "error_mm": float(np.mean([r.grasp_error_mm for r in ok])) if ok else float("nan"),
+            "time_s": float(np.mean([r.execution_time_s for r in ok])) if ok else float("nan"),
+        }
+    return table
+
+
+def write_outputs(results: list[TrialResult], out: Path) -> tuple[Path, Path]:
+    csv_path = out / "trials.csv"
+    with open(csv_path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(asdict(results[0]).keys()))
+        w.writeheader()
+        for r in results:
+            w.writerow(asdict(r))
+    return csv_path, plot(results, out / "trials.png")
+
+
+def plot(results: list[TrialResult], path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from server.report import read_values
+
+    table = summarise(results)
+    angles = list(table)
+    fig, axes = plt.subplots(1, 4, figsize=(16, 4))
+    x = np.arange(len(angles))
+    for ax, key, label, paper_i in ((axes[0], "success_pct", "success (%)", 2), (axes[1], "error_mm", "grasp error (mm)", 0),
+                                    (axes[2], "time_s", "execution time (s)", 1)):
+        ax.bar(x - 0.2, [table[a][key] for a in angles], 0.4, label="hycosim")
+        ax.bar(x + 0.2, [PAPER.get(int(a), (np.nan,) * 3)[paper_i] for a in angles], 0.4, label="paper (real robot)")
+        ax.set_xticks(x, [f"{a:g}°" for a in angles])
+        ax.set_title(label)
+        ax.legend(fontsize=7)
+    example = next((r for r in results if r.success), results[0])
+    columns, data = read_values(Path(example.run_dir))
+    t = np.array(data["t"])
+    ax = axes[3]
+    ax.plot(t, np.degrees(data["rod.angle"]), label="rod twin angle (°)")
+    if "camera.true_angle" in data:
+        ax.plot(t, np.degrees(data["camera.true_angle"]), "--", label="physical rod (°)")
+    ax2 = ax.twinx()
+    ax2.plot(t, 1000 * np.array(data["robot.dist"]), color="tab:red", lw=0.8, label="TCP to grasp point (mm)")
+    ax2.set_ylabel("mm")
+    ax.set_xlabel("t (s)")
+    ax.set_title(f"trial {example.angle:g}° #{example.trial}")
+    ax.legend(fontsize=7, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def run_trials(angles: list[float], trials: int, out: Path, correction: bool = True, driver: str = "policy",
+               progress: Callable[[TrialResult], None] | None = None) -> list[TrialResult]:
+    from fmu_bridge import logs
+
+    out.mkdir(parents=True, exist_ok=True)
+    logs.configure(out / "trials.log.jsonl")
+    results = []
+    for angle in angles:
+        for i in range(trials):
+            r = run_trial(angle, i, out, correction, driver)
+            results.append(r)
+            if progress:
+                progress(r)
+    return results

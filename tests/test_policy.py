@@ -1,0 +1,172 @@
+"""The DDPG policy: environment, reward terms, training, checkpoints, and the node in a co-simulation."""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+
+import numpy as np
+import pytest
+import torch
+from gymnasium.utils.env_checker import check_env
+
+from clients.policy.ddpg import DDPG, CheckpointError, load_policy
+from clients.policy.env import MAX_STEPS, GraspEnv, reward
+from clients.policy.features import ACT_DIM, OBS_DIM, choice_action
+from clients.policy.node import PRETRAINED
+from clients.policy.train import TrainConfig, evaluate, train
+from clients.robot import kr6
+from tests.helpers import REPO, column, hycosim, read_rows, run_project
+
+
+def test_gymnasium_env_checker_passes_and_episodes_are_reproducible():
+    env = GraspEnv()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # unbounded Box: observations are normalised by the agent
+        check_env(env, skip_render_check=True)
+    assert env.observation_space.shape == (OBS_DIM,) and env.action_space.shape == (ACT_DIM,)
+    runs = []
+    for _ in range(2):
+        obs, info = env.reset(seed=42)
+        trace = [obs]
+        for _ in range(20):
+            obs, *_ = env.step(np.full(ACT_DIM, 0.3, np.float32))
+            trace.append(obs)
+        runs.append((np.array(trace), info["angle_deg"]))
+    assert np.array_equal(runs[0][0], runs[1][0]) and runs[0][1] == runs[1][1]
+    assert 30 <= runs[0][1] <= 60
+
+
+def test_each_reward_term_of_equation_6():
+    assert reward(True, False, False, False, 1, 0.1, 0.2) == -2.0            # collision
+    assert reward(False, True, False, False, 1, 0.1, 0.2) == -1.0            # out of bounds
+    assert reward(False, False, True, False, 1, 0.1, 0.2) == -1.0            # near miss
+    assert reward(False, False, False, True, 1, 0.1, 0.2) == 100.0           # reaching the object
+    assert reward(False, False, False, False, MAX_STEPS + 1, 0.3, 0.3) == -10.0  # past 256 steps
+    assert math.isclose(reward(False, False, False, False, 5, 0.2, 0.3), 0.1 / 0.2)  # distance shrinks
+    assert math.isclose(reward(False, False, False, False, 5, 0.001, 0.3), 0.1 / 0.01)  # D floored at 1 cm
+    assert reward(False, False, False, False, 5, 0.3, 0.2) == -0.01          # otherwise
+
+
+def test_reward_terms_from_constructed_states_in_the_env():
+    env = GraspEnv()
+    env.reset(seed=1, options={"angle_deg": 40, "phase": 0.0})
+    # Collision: stretch the arm through the hanging rod.
+    env.rod.reset(0.0)
+    env.scene.set_state(np.zeros(6), kr6.GRIPPER_OPEN, 0.0)
+    env.pending = np.zeros(6)
+    env.out = env.scene.outputs(False)
+    _, r, term, _, info = env.step(np.zeros(ACT_DIM))
+    assert r == -2.0 and term and info["collision"]
+    # Reaching the object: jaws around the rod at a turning point, closing by reflex.
+    env.reset(seed=1, options={"angle_deg": 40, "phase": 0.0})
+    ik = env.scene.reach(env.rod.angle)
+    env.scene.set_state(ik.q, kr6.GRIPPER_OPEN, env.rod.angle)
+    env.pending = ik.q.copy()
+    env.out = env.scene.outputs(False)
+    rewards = []
+    for _ in range(12):
+        _, r, term, _, info = env.step(np.zeros(ACT_DIM))
+        rewards.append(r)
+        if term:
+            break
+    assert info["success"] and rewards[-1] == 100.0
+    # Out of bounds: an axis at its limit.
+    env.reset(seed=2)
+    q = kr6.READY.copy()
+    q[0] = kr6.LIMITS[0, 1]
+    env.scene.set_state(q, kr6.GRIPPER_OPEN, env.rod.angle)
+    env.pending = q
+    env.out = env.scene.outputs(False)
+    _, r, *_ = env.step(np.zeros(ACT_DIM))
+    assert r == -1.0
+
+
+@pytest.fixture(scope="module")
+def short_training(tmp_path_factory):
+    out = tmp_path_factory.mktemp("train")
+    config = TrainConfig(demo_episodes=12, bc_steps=800, critic_warmup_steps=200, episodes=4, eval_every=4,
+                         eval_trials=2)
+    result = train(out, config)
+    return out, result
+
+
+def test_short_training_beats_a_random_policy(short_training):
+    out, result = short_training
+    env = GraspEnv()
+    rng = np.random.default_rng(0)
+    random_wins = 0
+    for i in range(8):
+        env.reset(seed=500 + i)
+        done = False
+        while not done:
+            _, _, term, trunc, info = env.step(rng.uniform(-1, 1, ACT_DIM).astype(np.float32))
+            done = term or trunc
+        random_wins += info["success"]
+    trained = load_policy(out / "best.pt")
+    results = evaluate(trained, env, trials=2, seed=900)
+    trained_rate = np.mean([v["success"] for v in results.values()])
+    assert trained_rate >= 0.5 > random_wins / 8
+    assert (out / "learning_curve.png").stat().st_size > 10_000
+    state = torch.load(out / "last.pt", weights_only=False)
+    assert state["episodes"] == 4 and state["config_hash"] and "norm" in state and "metrics" in state
+
+
+def test_checkpoint_round_trip_and_resume(short_training, tmp_path):
+    out, _ = short_training
+    a = load_policy(out / "best.pt")
+    b = load_policy(out / "best.pt")
+    obs = np.random.default_rng(3).normal(size=OBS_DIM).astype(np.float32)
+    assert np.array_equal(a.act(obs), b.act(obs))
+    agent = DDPG()
+    path = tmp_path / "x.pt"
+    torch.save(agent.state(), path)
+    assert np.array_equal(load_policy(path).act(obs), agent.act(obs))
+    # Resuming with another config is refused, naming the checkpoint.
+    with pytest.raises(ValueError, match="trained with another config"):
+        train(out, TrainConfig(episodes=5, demo_episodes=1))
+
+
+def test_missing_or_incompatible_checkpoint_gives_a_clear_error(tmp_path):
+    with pytest.raises(CheckpointError, match="does not exist"):
+        load_policy(tmp_path / "none.pt")
+    (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(CheckpointError, match="not readable"):
+        load_policy(tmp_path / "junk.pt")
+    state = DDPG().state()
+    state["obs_dim"] = 10
+    torch.save(state, tmp_path / "old.pt")
+    with pytest.raises(CheckpointError, match="expects 10 observations"):
+        load_policy(tmp_path / "old.pt")
+    doc = json.loads((REPO / "configs" / "grasp-policy.json").read_text())
+    doc["nodeLists"][2]["parameters"]["checkpoint"] = str(tmp_path / "none.pt")
+    cfg = tmp_path / "p.json"
+    cfg.write_text(json.dumps(doc))
+    res = hycosim("node", "policy", str(cfg), timeout=60)
+    assert res.returncode == 3 and "none.pt does not exist" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_pretrained_policy_node_grasps_inside_a_cosimulation(tmp_path):
+    assert PRETRAINED.is_file()
+    doc = json.loads((REPO / "configs" / "grasp-policy.json").read_text())
+    doc["coSimulation"]["stopTime"] = 1.5
+    cfg = tmp_path / "p.json"
+    cfg.write_text(json.dumps(doc))
+    run = run_project(cfg, tmp_path / "runs")
+    rows = read_rows(run)
+    events = [json.loads(line) for line in (run / "events.jsonl").read_text().splitlines()]
+    assert events and events[0]["to"] == "grasp"
+    assert column(rows, "robot.dist")[events[0]["step"]] < 0.01
+    infer = column(rows, "policy.infer_ms")[1:]
+    assert all(x > 0 for x in infer) and np.mean(infer) < 50
+    assert len({r["policy.q_cmd1"] for r in rows}) > 3  # it acted
+
+
+@pytest.mark.long
+def test_full_training_reaches_the_target(tmp_path):
+    result = train(tmp_path / "full", TrainConfig())
+    best = result["evals"][-1]
+    assert result["best_mean_success"] >= 0.95
+    assert result["trained_s"] < 1800
+    assert best["per_angle"]
