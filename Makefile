@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup run test test-long bench fmus clean
+.PHONY: setup run test test-long bench fmus trials train clean
 
 setup: $(STAMP)
 
@@ -17,8 +17,19 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet -e ".[test]"
 	touch $(STAMP)
 
+# The whole scenario on loopback: one trial at 40° with the pretrained policy, camera
+# correction, EthernetKRL export and the emulated controller; ends with the table and figure.
 run: $(STAMP)
-	$(VENV)/bin/hycosim run configs/grasp.json
+	$(VENV)/bin/hycosim trials --angles 40 --trials 1 -o runs/demo
+
+# The paper's 80 trials, with and without camera correction (about 20 minutes).
+trials: $(STAMP)
+	$(VENV)/bin/hycosim trials --angles 30 40 50 60 --trials 20 -o runs/trials
+	$(VENV)/bin/hycosim trials --angles 30 40 50 60 --trials 20 --no-correction -o runs/trials-no-correction
+
+# Train the policy from scratch (demonstrations, behaviour cloning, DDPG).
+train: $(STAMP)
+	$(VENV)/bin/hycosim train -o runs/train
 
 test: $(STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider

@@ -440,6 +440,7 @@ def train(
     eval_every: Annotated[int, typer.Option(help="evaluate every N episodes")] = 20,
     eval_trials: Annotated[int, typer.Option(help="evaluation episodes per release angle")] = 10,
     seed: Annotated[int, typer.Option()] = 0,
+    ship: Annotated[Optional[Path], typer.Option(help="also write a small copy of the best checkpoint here")] = None,
 ) -> None:
     """Train the DDPG grasp policy (demonstrations, behaviour cloning, DDPG); resumes from OUTPUT/last.pt."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
@@ -474,6 +475,10 @@ def train(
         except ValueError as exc:
             err.print(f"[red]error:[/red] {exc}", highlight=False)
             raise typer.Exit(2) from None
+    if ship is not None:
+        from clients.policy.ddpg import strip_checkpoint
+
+        strip_checkpoint(output / "best.pt", ship)
     out.print(f"best mean evaluation success {100 * result['best_mean_success']:.0f} % in "
               f"{result['trained_s']:.0f} s; checkpoints and learning_curve.png in {output}", highlight=False)
 

@@ -44,6 +44,7 @@ class TrialResult:
     run_dir: str
     physical_length: float
     physical_angle_deg: float
+    physical_damping: float
 
 
 def physical_rod(angle: float, seed: int) -> RodParams:
@@ -109,7 +110,7 @@ def run_trial(angle: float, trial: int, out: Path, correction: bool = True, driv
     events = (result.run_dir / "events.jsonl").read_text()
     return TrialResult(angle, trial, correction, answer["grasped"], answer["grasp_error_mm"],
                        answer["grasp_time_s"], '"to": "grasp"' in events, str(result.run_dir),
-                       physical.length, math.degrees(physical.initial_angle))
+                       physical.length, math.degrees(physical.initial_angle), physical.damping)
 
 
 def summarise(results: list[TrialResult]) -> dict[float, dict[str, float]]:
@@ -159,8 +160,16 @@ def plot(results: list[TrialResult], path: Path) -> Path:
     t = np.array(data["t"])
     ax = axes[3]
     ax.plot(t, np.degrees(data["rod.angle"]), label="rod twin angle (°)")
-    if "camera.true_angle" in data:
-        ax.plot(t, np.degrees(data["camera.true_angle"]), "--", label="physical rod (°)")
+    from clients.rod.model import RodModel
+
+    physical = RodModel(RodParams(length=example.physical_length, damping=example.physical_damping,
+                                  initial_angle=math.radians(example.physical_angle_deg)))
+    truth = []
+    for k, tk in enumerate(t):
+        if k:
+            physical.advance(tk - t[k - 1])
+        truth.append(math.degrees(physical.angle))
+    ax.plot(t, truth, "--", label="physical rod, free (°)")
     ax2 = ax.twinx()
     ax2.plot(t, 1000 * np.array(data["robot.dist"]), color="tab:red", lw=0.8, label="TCP to grasp point (mm)")
     ax2.set_ylabel("mm")

@@ -59,19 +59,21 @@ def test_reward_terms_from_constructed_states_in_the_env():
     env.out = env.scene.outputs(False)
     _, r, term, _, info = env.step(np.zeros(ACT_DIM))
     assert r == -2.0 and term and info["collision"]
-    # Reaching the object: jaws around the rod at a turning point, closing by reflex.
-    env.reset(seed=1, options={"angle_deg": 40, "phase": 0.0})
-    ik = env.scene.reach(env.rod.angle)
-    env.scene.set_state(ik.q, kr6.GRIPPER_OPEN, env.rod.angle)
-    env.pending = ik.q.copy()
+    # Reaching the object: the arm placed at the pose that catches the next turning point,
+    # holding it; the rod swings in and stops between the jaws, which close by reflex.
+    env.reset(seed=1, options={"angle_deg": 40, "phase": 0.3})
+    catch = env.predictor.points[0]
+    env.scene.set_state(catch.q, kr6.GRIPPER_OPEN, env.rod.angle)
+    env.pending = catch.q.copy()
     env.out = env.scene.outputs(False)
     rewards = []
-    for _ in range(12):
-        _, r, term, _, info = env.step(np.zeros(ACT_DIM))
+    for _ in range(120):
+        _, r, term, trunc, info = env.step(choice_action(0))
         rewards.append(r)
-        if term:
+        if term or trunc:
             break
     assert info["success"] and rewards[-1] == 100.0
+    assert any(0 < r < 100 for r in rewards)  # 0.1/D while the rod approached
     # Out of bounds: an axis at its limit.
     env.reset(seed=2)
     q = kr6.READY.copy()

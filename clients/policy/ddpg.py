@@ -202,6 +202,14 @@ class DDPG:
         self.norm = RunningNorm.from_state(state["norm"])
 
 
+def strip_checkpoint(src, dst) -> None:
+    """A small copy of a checkpoint for acting and evaluation: no optimiser or target networks."""
+    state = torch.load(src, map_location="cpu", weights_only=False)
+    keep = ("version", "obs_dim", "act_dim", "hidden", "actor", "critic", "norm", "config", "config_hash",
+            "episodes", "metrics", "trained_s", "train_config")
+    torch.save({k: state[k] for k in keep if k in state}, dst)
+
+
 class CheckpointError(RuntimeError):
     """A checkpoint that is missing, unreadable or made for another observation/action layout."""
 

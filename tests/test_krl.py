@@ -1,0 +1,138 @@
+"""EthernetKRL: exported files checked against the format, the frame stream through the emulated
+controller over TCP, each malformed input, and a short trials run producing the table and files."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import socket
+import threading
+import xml.etree.ElementTree as ET
+
+import pytest
+
+from clients.krl.controller import EmulatedController, parse_ack, stream_program
+from clients.krl.eki import AXES, EkiConfig, EkiError, frame, parse_frame
+from clients.krl.export import ExportError, export
+from clients.rod.model import RodParams
+from tests.helpers import REPO, hycosim, run_project
+
+TWIN = RodParams(length=0.6, mass=0.3, damping=0.002, pivot=(0.62, 0.0, 1.0), grasp_distance=0.4,
+                 initial_angle=math.radians(40))
+
+
+@pytest.fixture(scope="module")
+def grasp_run(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("krl")
+    doc = json.loads((REPO / "configs" / "grasp.json").read_text())
+    doc["coSimulation"]["stopTime"] = 1.2
+    cfg = tmp / "grasp.json"
+    cfg.write_text(json.dumps(doc))
+    run = run_project(cfg, tmp / "runs")
+    return run, export(run, tmp / "krl")
+
+
+@pytest.fixture
+def controller():
+    c = EmulatedController(EkiConfig(), TWIN, port=0)
+    t = threading.Thread(target=c.serve_forever, daemon=True)
+    t.start()
+    yield c
+    c.stop()
+    t.join(timeout=5)
+
+
+def test_eki_file_and_krl_program_follow_the_format(grasp_run):
+    _, files = grasp_run
+    root = ET.parse(files["eki"]).getroot()
+    assert root.tag == "ETHERNETKRL"
+    assert root.findtext("CONFIGURATION/EXTERNAL/TYPE") == "Client"
+    assert root.findtext("CONFIGURATION/EXTERNAL/PORT") == root.findtext("CONFIGURATION/INTERNAL/PORT") == "54600"
+    assert root.find("CONFIGURATION/INTERNAL/BUFFERING") is not None
+    tags = {e.get("Tag"): e.get("Type") for e in root.findall("RECEIVE/XML/ELEMENT")}
+    assert all(tags[f"Robot/Pos/@{a}"] == "REAL" for a in AXES)
+    assert EkiConfig.parse(files["eki"].read_text(), str(files["eki"])).port == 54600
+    krl = files["krl"].read_text()
+    for piece in ("DEF HycosimGrasp()", "DECL E6AXIS XP1", "PTP XP1", 'EKI_Init("HycosimGrasp")',
+                  'EKI_Open("HycosimGrasp")', "LOOP", "IF RET.Buff == 0 THEN", "EXIT", "ENDLOOP",
+                  'EKI_Close("HycosimGrasp")', "END"):
+        assert piece in krl, piece
+    assert all(f"XP1.{a}" in krl for a in AXES[1:])
+    assert krl.index("PTP XP1") < krl.index("EKI_Open") < krl.index("LOOP")  # reset, open, loop (Table 1)
+    lines = files["frames"].read_text().splitlines()
+    config = EkiConfig()
+    parsed = [parse_frame(line, config) for line in lines]
+    assert parsed[-1].q_deg is None and all(p.q_deg is not None for p in parsed[:-1])
+    assert [p.t for p in parsed[:-1]] == sorted(p.t for p in parsed[:-1])
+    assert any(p.close for p in parsed[:-1])
+
+
+def test_frame_stream_round_trip_through_the_controller(grasp_run, controller):
+    run, files = grasp_run
+    answer = parse_ack(stream_program("127.0.0.1", controller.address[1], files["frames"].read_text()))
+    n = len(files["frames"].read_text().splitlines()) - 1
+    assert answer["frames"] == n and answer["rejected"] == 0
+    # The controller's rod is the twin itself here: the exported path grasps it, as in the simulation.
+    assert answer["grasped"] and answer["grasp_error_mm"] < 5.0
+    assert len(controller.results) == 1
+
+
+def test_malformed_inputs_are_rejected_and_the_controller_keeps_running(grasp_run, controller):
+    _, files = grasp_run
+    host, port = "127.0.0.1", controller.address[1]
+    good = files["frames"].read_text().splitlines()
+    bad = [
+        "<Robot><Pos A1='1' <broken></Robot>",                                   # malformed XML
+        frame([200.0, -90, 90, 0, 0, 0], 0.0),                                    # A1 beyond ±170°
+        good[0].replace('A3="', 'A3="x'),                                         # not a REAL
+        "<Other/></Robot>",                                                       # not a Robot frame
+    ]
+    answer = stream_program(host, port, "\n".join([*bad, *good]) + "\n")
+    assert "outside its limits" in answer and "malformed XML" in answer and "is not REAL" in answer
+    ack = parse_ack(answer)
+    assert ack["rejected"] == 4 and ack["grasped"]
+    # A connection that drops mid-program is rejected too; the next program still runs.
+    with socket.create_connection((host, port)) as s:
+        s.sendall("\n".join(good[:5]).encode())
+    for _ in range(100):
+        if any("dropped" in e for e in controller.errors):
+            break
+        threading.Event().wait(0.05)
+    assert any("dropped before the program ended (5 frames executed)" in e for e in controller.errors)
+    assert parse_ack(stream_program(host, port, "\n".join(good) + "\n"))["grasped"]
+    with pytest.raises(EkiError, match="lacks REAL elements for A6"):
+        EkiConfig.parse(EkiConfig(elements=[(f"Robot/Pos/@{a}", "REAL") for a in AXES[:5]]).to_xml())
+
+
+def test_export_and_controller_cli_errors(tmp_path):
+    with pytest.raises(ExportError, match="cannot read"):
+        export(tmp_path, tmp_path / "out")
+    res = hycosim("krl", "export", str(tmp_path))
+    assert res.returncode == 2 and "values.csv" in res.stderr
+    (tmp_path / "bad.xml").write_text("<NOT/>")
+    res = hycosim("krl", "controller", "--eki", str(tmp_path / "bad.xml"))
+    assert res.returncode == 2 and "expected <ETHERNETKRL>" in res.stderr
+
+
+def test_short_trials_run_produces_the_table_and_files(tmp_path):
+    out = tmp_path / "trials"
+    res = hycosim("trials", "--angles", "30", "40", "50", "60", "--trials", "2", "-o", str(out), timeout=900)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "paper success" in res.stdout and "95 %" in res.stdout
+    with open(out / "trials.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 8 and {r["angle"] for r in rows} == {"30.0", "40.0", "50.0", "60.0"}
+    assert sum(r["success"] == "True" for r in rows) >= 6
+    assert (out / "trials.png").stat().st_size > 20_000
+    one = next(out.glob("30deg-00/krl/frames.xml"))
+    assert one.read_text().strip().splitlines()[-1].startswith('<Robot><Pos A1=""')
+
+
+@pytest.mark.long
+def test_the_papers_eighty_trials(tmp_path):
+    from hycosim.trials import run_trials, summarise
+
+    table = summarise(run_trials([30, 40, 50, 60], 20, tmp_path / "trials"))
+    assert all(row["success_pct"] >= 95 for row in table.values())
+    assert all(row["error_mm"] <= 3.0 for row in table.values())
