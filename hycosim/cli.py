@@ -576,13 +576,14 @@ def trials(
             write_outputs(done, output)
         raise typer.Exit(3) from None
     csv_path, png = write_outputs(results, output)
-    table = Table(title=f"grasping trials ({'with' if correction else 'without'} camera correction, {driver})")
-    for col in ("angle", "error (mm)", "time (s)", "success", "paper error", "paper time", "paper success"):
-        table.add_column(col)
+    table = Table(title=f"grasping trials ({'with' if correction else 'without'} camera correction, {driver}): "
+                        "grasp distance error, execution time, success")
+    for col in ("angle", "mm", "s", "success", "paper mm", "paper s", "paper %"):
+        table.add_column(col, no_wrap=True)
     for angle, row in summarise(results).items():
         p = PAPER.get(int(angle), (float("nan"),) * 3)
         table.add_row(f"{angle:g}°", f"{row['error_mm']:.1f}", f"{row['time_s']:.2f}",
-                      f"{row['success_pct']:.0f} % of {row['trials']}", f"{p[0]}", f"{p[1]}", f"{p[2]} %")
+                      f"{row['success_pct']:.0f} % of {row['trials']}", f"{p[0]}", f"{p[1]}", f"{p[2]}")
     out.print(table)
     out.print(f"wrote {csv_path} and {png}", highlight=False)
 

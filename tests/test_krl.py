@@ -119,7 +119,7 @@ def test_short_trials_run_produces_the_table_and_files(tmp_path):
     out = tmp_path / "trials"
     res = hycosim("trials", "--angles", "30", "40", "50", "60", "--trials", "2", "-o", str(out), timeout=900)
     assert res.returncode == 0, res.stderr[-2000:]
-    assert "paper success" in res.stdout and "95 %" in res.stdout
+    assert "paper %" in res.stdout and "│ 60°" in res.stdout
     with open(out / "trials.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     assert len(rows) == 8 and {r["angle"] for r in rows} == {"30.0", "40.0", "50.0", "60.0"}
