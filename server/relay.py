@@ -124,6 +124,7 @@ class Relay:
             raise
         finally:
             self._broadcast_stop(status_text if not reason else reason)
+            self._await_departures()
             if self.gateway is not None:
                 self.gateway.close(reason or status_text)
             self.recorder.close(status_text, reason=reason, dropped_frames=dict(self.intake.dropped),
@@ -135,6 +136,22 @@ class Relay:
                 except Exception:
                     pass
             self.inbox.close()
+
+    def _await_departures(self, timeout: float = 3.0) -> None:
+        """After STOP, give the nodes a moment to leave before this session closes: closing at
+        once can drop the STOP still queued for a node, which then sees only the server vanish."""
+        deadline = time.monotonic() + timeout
+        try:
+            while self.alive and time.monotonic() < deadline:
+                msg = self.inbox.recv(deadline - time.monotonic())
+                if msg is None:
+                    break
+                if msg[0] == self._local_key:
+                    node, alive = frames.decode(msg[1]).fields
+                    if not alive:
+                        self.alive.discard(node)
+        except Exception:  # shutting down: never mask the run's own outcome
+            pass
 
     def _start_gateway(self) -> None:
         if self._gateway_address is None:
