@@ -297,8 +297,8 @@ def _resolve_routes(project: Project, issues: list[Issue]) -> list[Route]:
             src = _split_port_ref(link.source)
             dst = _split_port_ref(link.target)
             if src is None or dst is None:
-                bad = "from" if src is None else "to"
-                issues.append(Issue(f"{where}.{bad}", f"{getattr(link, 'source' if bad == 'from' else 'target')!r} is not 'node.port'",
+                key, ref = ("from", link.source) if src is None else ("to", link.target)
+                issues.append(Issue(f"{where}.{key}", f"{ref!r} is not 'node.port'",
                                     "write 'node.port', or name nodes and give 'pairs'"))
                 continue
             pairs = [(src[0], src[1], dst[0], dst[1])]

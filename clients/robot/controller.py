@@ -27,18 +27,11 @@ from clients.rod.model import RodModel
 from clients.rod.node import rod_params
 
 
-APPROACH_TIME = 0.2  # s before the turning point when a pre-grasp pose is left for the grasp pose
-
-
 @dataclass
 class Plan:
     t_turn: float      # absolute time of the turning point
     angle: float       # rod angle there
     q: np.ndarray      # joint target at the turning point
-    q_pre: np.ndarray | None  # an optional pre-grasp pose to wait in
-
-    def target(self, now: float) -> np.ndarray:
-        return self.q if self.t_turn - now <= APPROACH_TIME or self.q_pre is None else self.q_pre
 
 
 def turning_points(rod: RodModel, angle: float, omega: float, horizon: float) -> list[tuple[float, float]]:
@@ -72,7 +65,7 @@ def plan_grasp(rod: RodModel, scene: RobotScene, t: float, angle: float, omega: 
         if not (ik.position_error < 1e-3 and ik.rotation_error < math.radians(1)):
             continue
         if travel_time(q, ik.q) + margin <= dt:
-            return Plan(t + dt, a, ik.q, None)
+            return Plan(t + dt, a, ik.q)
     return None
 
 
@@ -102,13 +95,13 @@ class ReferenceController(Node):
             return
         now = t + h
         q = np.array([float(inputs.get(f"q{i + 1}", self.q_cmd[i])) for i in range(6)])
-        committed = self.plan is not None and self.plan.t_turn - now < APPROACH_TIME + 0.1
+        committed = self.plan is not None and self.plan.t_turn - now < 0.3
         if not committed and now - self.planned_at >= self.replan_every:
             self.plan = plan_grasp(self.rod, self.scene, t, float(inputs["rod_angle"]), float(inputs["rod_omega"]), q)
             self.planned_at = now
         if self.plan is None:
             return
-        self.q_cmd = self.plan.target(now)
+        self.q_cmd = self.plan.q
         self.grip = self.plan.t_turn - now <= self.close_lead
         if now > self.plan.t_turn + 0.2:  # missed it: open and plan again
             self.plan, self.grip = None, False

@@ -81,7 +81,6 @@ class RobotScene:
         self.gap = kr6.GRIPPER_OPEN
         self.holding = False  # jaws closed on the rod: it stays held until they open
         self.rod_angle = 0.0
-        self._last_distance = math.inf
         self._update()
 
     # --- stepping -------------------------------------------------------------------
@@ -200,6 +199,5 @@ class RobotScene:
         if self.p.check_reach:
             r = self.reach()
             reachable = bool(r.position_error < 2e-3 and r.rotation_error < math.radians(2))
-        self._last_distance = distance
         return SceneOutputs(self.q.copy(), tcp, self.tcp_rot, distance, grasped, bool(self.collisions()),
                             reachable, near_miss, self.gap, self.grip_target())
