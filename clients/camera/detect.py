@@ -40,15 +40,20 @@ class RodDetector:
         high = cv2.inRange(hsv, (168, 110, 60), (180, 255, 255))
         return cv2.morphologyEx(low | high, cv2.MORPH_OPEN, self._kernel)
 
-    def segment(self, image: np.ndarray) -> tuple[tuple[float, float], tuple[float, float]] | None:
-        """Endpoints of the rod's image line (largest red blob), or None."""
+    def _blob(self, image: np.ndarray | None) -> np.ndarray | None:
+        """Pixels of the largest red blob, or None."""
         if image is None or image.size == 0:
             return None
         contours, _ = cv2.findContours(self._mask(image), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
         if not contours:
             return None
         blob = max(contours, key=cv2.contourArea)
-        if len(blob) < 5:
+        return blob if len(blob) >= 5 and cv2.contourArea(blob) > 0 else None
+
+    def segment(self, image: np.ndarray) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        """Endpoints of the rod's image line (largest red blob), or None."""
+        blob = self._blob(image)
+        if blob is None:
             return None
         vx, vy, x0, y0 = cv2.fitLine(blob, cv2.DIST_L2, 0, 0.01, 0.01).ravel()
         pts = blob.reshape(-1, 2).astype(np.float64)
@@ -58,14 +63,8 @@ class RodDetector:
 
     def detect(self, image: np.ndarray | None) -> Detection | None:
         """The rod's angle in this frame, or None when no confident detection."""
-        if image is None or image.size == 0:
-            return None
-        contours, _ = cv2.findContours(self._mask(image), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-        if not contours:
-            return None
-        blob = max(contours, key=cv2.contourArea)
-        area = cv2.contourArea(blob)
-        if len(blob) < 5 or area <= 0:
+        blob = self._blob(image)
+        if blob is None:
             return None
         vx, vy, x0, y0 = (float(v) for v in cv2.fitLine(blob, cv2.DIST_L2, 0, 0.01, 0.01).ravel())
         pts = blob.reshape(-1, 2).astype(np.float64)
