@@ -60,10 +60,9 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         return 3, run_dir, str(exc)
     relay = Relay(loaded, session, recorder, progress_every_s=0.1, on_progress=on_progress,
                   gateway_address=gateway_address, gateway_required=gateway_required)
-    code, message = 0, f"completed {recorder.meta.get('steps', 0)} steps"
     try:
         relay.run()
-        message = f"completed {recorder.meta['steps']} macro steps"
+        code, message = 0, f"completed {recorder.meta['steps']} macro steps"
     except RunError as exc:
         log.error("run failed", error=str(exc))
         code, message = 3, str(exc)
