@@ -24,7 +24,16 @@ def test_report_names_the_node_that_holds_the_barrier_and_plot_draws(tmp_path):
     assert s["holder_share"]["slow"] > 0.8
     assert s["mean_arrival_ms"]["slow"] > 4.0 > s["mean_arrival_ms"]["fast"]
     assert [e["to"] for e in s["mode_switches"]] == ["late", "free"]
-    assert all(row["holder"] == "slow" for row in s["slowest_steps"])
+    # the ranking is the report's; who held each step is the scheduler's, so a stray
+    # preemption of another node may own one of them on a loaded machine
+    slowest = s["slowest_steps"]
+    waits = [row["wait_ms"] for row in slowest]
+    assert len(slowest) == 5 and waits == sorted(waits, reverse=True)
+    by_step = {int(r["step"]): r for r in read_rows(run, "timing.csv")}
+    assert all(by_step[row["step"]]["holder"] == row["holder"] for row in slowest)
+    assert min(waits) >= max(1000 * float(r["wait_s"]) for n, r in by_step.items()
+                             if n > 0 and n not in {row["step"] for row in slowest})
+    assert sum(row["holder"] == "slow" for row in slowest) >= 3
     text = hycosim("report", str(run))
     assert text.returncode == 0 and "who held the barrier" in text.stdout and "slow" in text.stdout
     png = tmp_path / "plot.png"
