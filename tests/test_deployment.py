@@ -139,7 +139,7 @@ def _secure(tmp_path: Path) -> Path:
     return write_project(tmp_path / "p.json", [
         {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
         {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
-    ], [{"from": "clock.y", "to": "g.u"}], cosim={"stepSize": 0.01, "stopTime": 6.0, "realTime": True,
+    ], [{"from": "clock.y", "to": "g.u"}], cosim={"stepSize": 0.01, "stopTime": 15.0, "realTime": True,
                                                  "attachTimeout": 20.0},
         name="secure", security={"credentials": "creds.txt"})
 
@@ -157,6 +157,10 @@ def test_wrong_or_missing_credentials_cannot_attach_and_a_forged_frame_is_droppe
     nodes = [spawn("node", n, str(cfg)) for n in ("clock", "g")]  # passwords from the credentials file
     try:
         wait_for(lambda: (run_dir / "values.csv").exists() and len(read_rows(run_dir)) > 30, 30, "30 steps")
+        # Paced at real time for 15 s: long enough for all that follows on a loaded machine.
+        status = hycosim("status", endpoint, "--project", "secure", "--user", "watcher", "--password-file",
+                         str(_pw(tmp_path, "w-pw")))
+        assert status.returncode == 0 and "attached 2/2" in status.stdout, status.stderr
         bad = hycosim("node", "clock", str(tmp_path / "quick.json"), "--password-file", str(tmp_path / "wrong.txt"),
                       timeout=90)
         assert bad.returncode == 3 and "cannot open Zenoh session" in bad.stderr and "user 'clock'" in bad.stderr
@@ -168,9 +172,7 @@ def test_wrong_or_missing_credentials_cannot_attach_and_a_forged_frame_is_droppe
             for _ in range(5):
                 forger.put(keys.up("g"), frames.encode(frames.OUTPUTS, 2, 10**6, 0.0, [123.0]),
                            congestion_control=zenoh.CongestionControl.BLOCK)
-        status = hycosim("status", endpoint, "--project", "secure", "--user", "watcher", "--password-file",
-                         str(_pw(tmp_path, "w-pw")))
-        assert status.returncode == 0 and "attached 2/2" in status.stdout, status.stderr
+        running = len(read_rows(run_dir))
         _, err = server.communicate(timeout=60)
         for p in nodes:
             assert p.wait(timeout=30) == 0
@@ -182,6 +184,7 @@ def test_wrong_or_missing_credentials_cannot_attach_and_a_forged_frame_is_droppe
     m = meta(run_dir)
     assert m["dropped_frames"] == {}  # never reached the server
     rows = read_rows(run_dir)
+    assert running < len(rows)  # the forger wrote while the run was going on
     assert all(r["g.y"] != "123.0" for r in rows)
     assert all(rows[k]["g.y"] == rows[k - 1]["clock.y"] for k in range(1, len(rows)))
 

@@ -78,6 +78,19 @@ def test_frame_stream_round_trip_through_the_controller(grasp_run, controller):
     assert len(controller.results) == 1
 
 
+def test_the_gripper_follows_every_frame_so_a_path_may_reopen_after_closing_on_nothing(grasp_run, controller):
+    _, files = grasp_run
+    config = EkiConfig()
+    lines = files["frames"].read_text().splitlines()
+    parsed = [parse_frame(line, config) for line in lines[:-1]]
+    assert next(i for i, p in enumerate(parsed) if p.close) > 30
+    # The jaws close on nothing for the first 0.15 s, open again, and close on the rod as exported.
+    edited = [frame(p.q_deg, p.t, i < 15 or p.close) for i, p in enumerate(parsed)]
+    ack = parse_ack(stream_program("127.0.0.1", controller.address[1], "\n".join([*edited, lines[-1]]) + "\n"))
+    assert ack["grasped"] and ack["grasp_error_mm"] < 5.0
+    assert "$OUT[1] = CLOSE" in files["krl"].read_text()
+
+
 def test_malformed_inputs_are_rejected_and_the_controller_keeps_running(grasp_run, controller):
     _, files = grasp_run
     host, port = "127.0.0.1", controller.address[1]

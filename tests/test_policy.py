@@ -85,6 +85,35 @@ def test_reward_terms_from_constructed_states_in_the_env():
     assert r == -1.0
 
 
+def test_jaws_meet_the_rod_at_its_turning_point_and_reopen_after_closing_on_nothing():
+    env = GraspEnv()
+    # The reference choice at each release angle: the timed reflex puts the grasp within a
+    # millimetre of the grasp point (closing on "the rod has all but stopped" missed it by
+    # up to 3 mm at 30°, where the rod is slow long before it stops).
+    for angle in (30, 45, 60):
+        env.reset(seed=3, options={"angle_deg": angle, "phase": 0.0})
+        done = False
+        while not done:
+            _, _, term, trunc, info = env.step(env.expert_action())
+            done = term or trunc
+        assert info["success"] and info["distance"] < 1e-3, (angle, info)
+    # Jaws closed far too early catch nothing, open again, and close on the rod in time.
+    env.reset(seed=1, options={"angle_deg": 40, "phase": 0.0})
+    catch = env.predictor.points[0]
+    env.scene.set_state(catch.q, kr6.GRIPPER_OPEN, env.rod.angle)
+    env.pending = catch.q.copy()
+    env.out = env.scene.outputs(False)
+    env.grip = True
+    gaps = []
+    for _ in range(150):
+        _, r, term, trunc, info = env.step(choice_action(0))
+        gaps.append(env.out.gap)
+        if term or trunc:
+            break
+    assert min(gaps) < 0.015 and max(gaps[gaps.index(min(gaps)):]) == kr6.GRIPPER_OPEN
+    assert info["success"] and r == 100.0 and info["distance"] < 1e-3
+
+
 @pytest.fixture(scope="module")
 def short_training(tmp_path_factory):
     out = tmp_path_factory.mktemp("train")

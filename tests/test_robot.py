@@ -99,6 +99,24 @@ def test_grasp_detection_closes_on_the_rod_only_when_it_is_between_the_jaws():
     assert out.near_miss
 
 
+def test_jaws_closed_on_nothing_cannot_catch_a_rod_swinging_through_them():
+    scene = RobotScene(SceneParams(check_reach=False))
+    angle = math.radians(-35)
+    _at_grasp(scene, angle)
+    away = angle + 0.15 / scene.p.grasp_distance
+    for _ in range(10):
+        out = scene.step(0.01, scene.q, True, away)
+    assert out.gap == 0.0 and not out.grasped
+    for a in np.linspace(away, angle - 0.1, 40):  # the rod swings through where the jaws met
+        out = scene.step(0.01, scene.q, True, a)
+        assert not out.grasped and out.gap == 0.0
+    for _ in range(10):  # opened, and closed again with the rod between them
+        scene.step(0.01, scene.q, False, angle)
+    for _ in range(10):
+        out = scene.step(0.01, scene.q, True, angle)
+    assert out.grasped and math.isclose(out.gap, 2 * scene.p.rod_radius)
+
+
 def test_ik_reaches_targets_within_limits():
     scene = RobotScene(SceneParams(check_reach=False))
     for deg in (-45, 0, 30):

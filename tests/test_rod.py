@@ -83,6 +83,22 @@ def test_observer_pulls_the_twin_onto_the_measured_rod_and_gain_zero_does_not():
     assert errors[-1] < errors[0] / 3
 
 
+def test_a_measurement_captured_ahead_of_the_twin_waits_until_the_twin_reaches_its_time():
+    twin = RodModel(RodParams(initial_angle=math.radians(40), observer_gain=12.0))
+    free = RodModel(RodParams(initial_angle=math.radians(40)))
+    twin.advance(0.1)
+    free.advance(0.1)
+    truth_later = math.radians(20)  # what a camera saw at t = 0.2, while the twin is at 0.1
+    twin.correct(truth_later, 0.01, measured_at=0.2)
+    assert (twin.angle, twin.omega) == (free.angle, free.omega)  # not dragged towards the future
+    for _ in range(10):
+        twin.advance(0.01)
+        free.advance(0.01)
+    twin.correct(truth_later, 0.01, measured_at=0.2)  # the same sample, still routed: now it applies
+    assert twin.angle != free.angle
+    assert abs(twin.angle - truth_later) < abs(free.angle - truth_later)
+
+
 def test_grasp_and_tip_positions_follow_the_angle():
     rod = RodModel(RodParams(initial_angle=math.radians(30)))
     o = rod.outputs()

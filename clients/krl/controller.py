@@ -3,7 +3,7 @@
 ``hycosim krl controller --eki FILE`` listens on TCP as the EKI endpoint configured in the
 file, parses frames per its RECEIVE elements, and executes the KRL program of Table 1 on
 its own robot model: reset to the first point, then for each frame wait for its time,
-move towards the axes within the axis speed limits, close the gripper when told; an empty
+move towards the axes within the axis speed limits, close or open the gripper as told; an empty
 A1 ends the program. Meanwhile the physical rod (a RodModel whose parameters differ from
 the twin's) swings. The controller reports whether the gripper closed on the rod, when,
 and how far the TCP was from the rod's grasp point, then waits for the next program.
@@ -79,7 +79,7 @@ class Program:
             self.scene.set_state(q, kr6.GRIPPER_OPEN, self.rod.angle)
             self.started = True
         self.run_until(t)  # WAIT FOR $TIMER >= T
-        self.target, self.close = q, close or self.close
+        self.target, self.close = q, close
         self.result.frames += 1
 
     def finish(self, settle: float = 0.3) -> ProgramResult:

@@ -178,9 +178,7 @@ DEF {n}()
     RET = EKI_GetBool("{n}", "Robot/Gripper/@Close", CLOSE)
     WAIT FOR $TIMER[1] >= T * 1000         ; keep the path's timing
     PTP XP1 C_PTP                          ; point-to-point to XP1
-    IF CLOSE THEN
-      $OUT[1] = TRUE                       ; gripper closes
-    ENDIF
+    $OUT[1] = CLOSE                        ; gripper closes (TRUE) or opens (FALSE)
   ENDLOOP
   RET = EKI_Close("{n}")
   RET = EKI_Clear("{n}")

@@ -17,7 +17,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from clients.policy.features import ACT_DIM, OBS_DIM
+from clients.policy.features import ACT_DIM, OBS_DIM, RESIDUAL_DEG
 
 CHECKPOINT_VERSION = 1
 
@@ -105,6 +105,7 @@ class DDPGConfig:
     batch: int = 256
     noise: float = 0.05
     bc_weight: float = 5.0
+    bc_lr: float = 1e-3  # behaviour cloning fits the demonstrations; DDPG's actor_lr is for fine changes
     hidden: int = 256
     seed: int = 0
     extra: dict = field(default_factory=dict)
@@ -144,12 +145,16 @@ class DDPG:
         """Behaviour cloning on demonstrations; returns the final mean squared error."""
         x, y = torch.from_numpy(self.norm(obs)), torch.from_numpy(actions.astype(np.float32))
         loss = torch.tensor(0.0)
+        opt = torch.optim.Adam(self.actor.parameters(), lr=self.cfg.bc_lr)
+        # Decay to a tenth: millimetre grasps need the residual outputs fitted closely.
+        sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, max(steps, 1), eta_min=self.cfg.bc_lr / 10)
         for _ in range(steps):
             idx = torch.from_numpy(self.rng.integers(0, len(x), min(self.cfg.batch, len(x))))
             loss = ((self.actor(x[idx]) - y[idx]) ** 2).mean()
-            self.actor_opt.zero_grad()
+            opt.zero_grad()
             loss.backward()
-            self.actor_opt.step()
+            opt.step()
+            sched.step()
         self.actor_target.load_state_dict(self.actor.state_dict())
         return float(loss.detach())
 
@@ -186,6 +191,7 @@ class DDPG:
 
     def state(self, **extra) -> dict:
         return {"version": CHECKPOINT_VERSION, "obs_dim": OBS_DIM, "act_dim": ACT_DIM, "hidden": self.cfg.hidden,
+                "residual_deg": RESIDUAL_DEG,
                 "actor": self.actor.state_dict(), "critic": self.critic.state_dict(),
                 "actor_target": self.actor_target.state_dict(), "critic_target": self.critic_target.state_dict(),
                 "actor_opt": self.actor_opt.state_dict(), "critic_opt": self.critic_opt.state_dict(),
@@ -205,7 +211,7 @@ class DDPG:
 def strip_checkpoint(src, dst) -> None:
     """A small copy of a checkpoint for acting and evaluation: no optimiser or target networks."""
     state = torch.load(src, map_location="cpu", weights_only=False)
-    keep = ("version", "obs_dim", "act_dim", "hidden", "actor", "critic", "norm", "config", "config_hash",
+    keep = ("version", "obs_dim", "act_dim", "hidden", "residual_deg", "actor", "critic", "norm", "config", "config_hash",
             "episodes", "metrics", "trained_s", "train_config")
     torch.save({k: state[k] for k in keep if k in state}, dst)
 
@@ -230,6 +236,9 @@ def load_policy(path, hidden: int | None = None) -> DDPG:
     if state.get("obs_dim") != OBS_DIM or state.get("act_dim") != ACT_DIM:
         raise CheckpointError(f"checkpoint {path} expects {state.get('obs_dim')} observations and "
                               f"{state.get('act_dim')} actions; this policy has {OBS_DIM} and {ACT_DIM}")
+    if state.get("residual_deg", 15.0) != RESIDUAL_DEG:
+        raise CheckpointError(f"checkpoint {path} was trained for joint corrections of ±{state.get('residual_deg', 15.0)}°; "
+                              f"this policy applies ±{RESIDUAL_DEG}° (retrain with `hycosim train`)")
     agent = DDPG(DDPGConfig(hidden=state.get("hidden", hidden or 256)))
     try:
         agent.load_state(state, optimisers=False)

@@ -22,7 +22,7 @@ import gymnasium as gym
 import numpy as np
 
 from clients.policy.features import (ACT_DIM, OBS_DIM, Predictor, action_to_targets, choice_action, grip_reflex,
-                                     observe)
+                                     missed, observe)
 from clients.robot import kr6
 from clients.robot.scene import RobotScene, SceneParams
 from clients.rod.model import RodModel, RodParams, pendulum_period
@@ -93,7 +93,11 @@ class GraspEnv(gym.Env):
 
     def step(self, action: np.ndarray):
         targets, self.pending = self.pending, action_to_targets(action, self.predictor.points, self.out.q)
-        self.grip = self.grip or grip_reflex(self.out.distance, self.rod.omega)
+        if self.grip and missed(self.out.gap, self.rod_params.radius):
+            self.grip = False
+        # The jaws start moving in this very step (no exchange between decision and servo).
+        self.grip = self.grip or grip_reflex(self.rod.time, self.out.tcp, self.out.gap, self.predictor.points,
+                                             self.rod_params.radius, delay=H / 2)
         self.rod.advance(H)
         self.out = self.scene.step(H, targets, self.grip, self.rod.angle)
         self.steps += 1

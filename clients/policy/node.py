@@ -18,7 +18,7 @@ import numpy as np
 
 from clients.node import Node, NodeContext
 from clients.policy.ddpg import load_policy
-from clients.policy.features import Predictor, action_to_targets, grip_reflex, observe
+from clients.policy.features import Predictor, action_to_targets, grip_reflex, missed, observe
 from clients.robot import kr6
 from clients.robot.node import scene_params
 from clients.robot.scene import RobotScene, SceneParams
@@ -34,6 +34,7 @@ class PolicyNode(Node):
         path = (ctx.project_dir / given) if given else PRETRAINED
         self.agent = load_policy(path)
         params = scene_params(ctx.parameters)
+        self.rod_radius = params.rod_radius
         self.predictor = Predictor(RodModel(rod_params(ctx.parameters)),
                                    RobotScene(SceneParams(**{**params.__dict__, "check_reach": False})))
         self.q_cmd = kr6.READY.copy()
@@ -57,5 +58,9 @@ class PolicyNode(Node):
             points = self.predictor.update(t, angle, omega, q)
             obs = observe(t, q, tcp, grasp, angle, omega, float(inputs["gap"]), points)
             self.q_cmd = action_to_targets(self.agent.act(obs), points, q)
-            self.grip = self.grip or grip_reflex(float(inputs["dist"]), omega)
+            gap = float(inputs["gap"])
+            if self.grip and missed(gap, self.rod_radius):
+                self.grip = False
+            # Decided on the values at t, the command reaches the robot at t + h: one step late.
+            self.grip = self.grip or grip_reflex(t, tcp, gap, points, self.rod_radius, delay=1.5 * h)
         self.infer_ms = 1000 * (time.perf_counter() - started)

@@ -71,13 +71,16 @@ def plan_grasp(rod: RodModel, scene: RobotScene, t: float, angle: float, omega: 
 
 class ReferenceController(Node):
     """Parameters: the rod's (as for the rod node), ``close_lead`` s before the turning point
-    to start closing (0.03), ``replan_every`` s (0.1)."""
+    to start closing (default: the jaws' closing time plus half a step, so that they meet the
+    rod at the turning point), ``replan_every`` s (0.1)."""
 
     def setup(self, ctx: NodeContext) -> None:
         self.rod = RodModel(rod_params(ctx.parameters))
         params = scene_params(ctx.parameters)
         self.scene = RobotScene(SceneParams(**{**params.__dict__, "check_reach": False}))
-        self.close_lead = float(ctx.parameter("close_lead", 0.03))
+        lead = ctx.parameter("close_lead", None)
+        self.close_lead = None if lead is None else float(lead)
+        self.rod_radius = params.rod_radius
         self.replan_every = float(ctx.parameter("replan_every", 0.1))
         self.q_cmd = kr6.READY.copy()
         self.grip = False
@@ -102,6 +105,10 @@ class ReferenceController(Node):
         if self.plan is None:
             return
         self.q_cmd = self.plan.q
-        self.grip = self.plan.t_turn - now <= self.close_lead
+        # The command output now takes effect at ``now``: the jaws need their closing time.
+        lead = self.close_lead
+        if lead is None:
+            lead = (kr6.GRIPPER_OPEN - 2 * self.rod_radius) / kr6.FINGER_SPEED + h / 2
+        self.grip = self.plan.t_turn - now <= lead
         if now > self.plan.t_turn + 0.2:  # missed it: open and plan again
             self.plan, self.grip = None, False

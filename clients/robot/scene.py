@@ -92,9 +92,12 @@ class RobotScene:
         self.rod_angle = float(rod_angle)
         self._set_pose()
         within, _, _ = self._rod_between_jaws()
+        rod_gap = 2 * self.p.rod_radius
         if grip_close:
-            floor_gap = 2 * self.p.rod_radius if within or self.holding else 0.0
-            self.gap = max(floor_gap, self.gap - kr6.FINGER_SPEED * h)
+            # The rod stops the jaws only if it is between them while they are still wider
+            # than it: jaws that closed on nothing cannot catch a rod swinging through them.
+            caught = (within or self.holding) and self.gap >= rod_gap - 1e-9
+            self.gap = max(rod_gap if caught else 0.0, self.gap - kr6.FINGER_SPEED * h)
         else:
             self.gap = min(kr6.GRIPPER_OPEN, self.gap + kr6.FINGER_SPEED * h)
             self.holding = False
@@ -172,12 +175,16 @@ class RobotScene:
             found.append((self.model.geom(g1).name, self.model.geom(g2).name))
         return found
 
+    def grasp_point(self, angle: float) -> np.ndarray:
+        """Where the rod's grasp point is when the rod hangs at ``angle``."""
+        return np.asarray(self.p.pivot, dtype=float) + self.p.grasp_distance * np.array(
+            [0.0, math.sin(angle), -math.cos(angle)])
+
     def reach(self, angle: float | None = None, q0: np.ndarray | None = None, back_off: float = 0.0) -> IkResult:
         """IK for the TCP on the rod's grasp point (at ``angle``, default the current one),
         or ``back_off`` metres behind it along the approach (a pre-grasp pose)."""
         a = self.rod_angle if angle is None else angle
-        c, _ = self._rod_frame()
-        target = c + self.p.grasp_distance * np.array([0.0, math.sin(a), -math.cos(a)])
+        target = self.grasp_point(a)
         target[0] -= back_off
         mujoco.mj_copyData(self._scratch, self.model, self.data)
         result = solve_ik(self.model, self._scratch, "tcp", target, grasp_rotation(a),
@@ -190,7 +197,7 @@ class RobotScene:
         within, rod_distance, _ = self._rod_between_jaws()
         # Once the jaws have closed on the rod it is held (the rod node follows the gripper,
         # one macro step behind): the grasp lasts until the jaws open.
-        self.holding = bool(grip_close and self.gap <= 2 * self.p.rod_radius + 1e-6 and (within or self.holding))
+        self.holding = bool(grip_close and abs(self.gap - 2 * self.p.rod_radius) <= 1e-6 and (within or self.holding))
         grasped = self.holding
         tcp = self.tcp
         distance = float(np.linalg.norm(tcp - self.data.site_xpos[self._grasp]))

@@ -149,6 +149,11 @@ class RodModel:
         else:
             if measured_at <= self._last_measurement:
                 return  # already used
+            if measured_at > self.time + 1e-9:
+                # Captured at a time the twin has not reached (the co-simulation fell behind
+                # the wall clock the camera lives on): comparing it with the twin's present
+                # would drag the twin to the future. It stays routed; use it once reached.
+                return
             # The discrete update is stable while 2·l·dt < 1: after a gap (or at the first
             # measurement) apply at most a quarter of the error's remaining time constant.
             dt = min(measured_at - self._last_measurement, 0.25 / l)
