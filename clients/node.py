@@ -18,6 +18,7 @@ the samples it has taken up to a time and publishes them with their timestamps.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -84,8 +85,9 @@ class AsyncSource(ABC):
         """Prepare the source; called once before the node attaches."""
 
     @abstractmethod
-    def samples_until(self, t: float) -> list[tuple[float, dict[str, Any]]]:
-        """Samples taken since the last call, up to simulated time t, oldest first."""
+    def samples_until(self, t: float) -> Iterable[tuple[float, dict[str, Any]]]:
+        """Samples taken since the last call, up to simulated time t, oldest first. A
+        generator's samples are published one by one as it yields them."""
 
     def teardown(self) -> None:
         """Release resources; called once at the end."""

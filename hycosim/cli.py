@@ -566,20 +566,14 @@ def trials(
     except ValueError:
         err.print(f"[red]error:[/red] --angles {angles!r}: give numbers in degrees", highlight=False)
         raise typer.Exit(2) from None
-    done = []
-
     def progress(r) -> None:
-        done.append(r)
+        if r.error:
+            err.print(f"{r.angle:g}° #{r.trial}: [red]not run[/red]: {r.error}", highlight=False)
+            return
         err.print(f"{r.angle:g}° #{r.trial}: {'grasped' if r.success else 'missed'}"
                   + (f", {r.grasp_error_mm:.1f} mm, {r.execution_time_s:.2f} s" if r.success else ""), highlight=False)
 
-    try:
-        results = run_trials(angle_list, n, output, correction, driver, progress)
-    except RuntimeError as exc:
-        err.print(f"[red]error:[/red] {exc}", highlight=False)
-        if done:
-            write_outputs(done, output)
-        raise typer.Exit(3) from None
+    results = run_trials(angle_list, n, output, correction, driver, progress)
     csv_path, png = write_outputs(results, output)
     table = Table(title=f"grasping trials ({'with' if correction else 'without'} camera correction, {driver}): "
                         "grasp distance error, execution time, success")
@@ -591,6 +585,11 @@ def trials(
                       f"{row['success_pct']:.0f} % of {row['trials']}", f"{p[0]}", f"{p[1]}", f"{p[2]}")
     out.print(table)
     out.print(f"wrote {csv_path} and {png}", highlight=False)
+    failed = [r for r in results if r.error]
+    if failed:
+        err.print(f"[red]error:[/red] {len(failed)} of {len(results)} trials could not be run (counted as missed): "
+                  + "; ".join(f"{r.angle:g}° #{r.trial}" for r in failed), highlight=False)
+        raise typer.Exit(3)
 
 
 def _join_multi_value_options(argv: list[str]) -> list[str]:

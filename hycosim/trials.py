@@ -45,6 +45,7 @@ class TrialResult:
     physical_length: float
     physical_angle_deg: float
     physical_damping: float
+    error: str = ""  # why the trial could not be carried out (it counts as not grasped)
 
 
 def physical_rod(angle: float, seed: int) -> RodParams:
@@ -126,14 +127,20 @@ def summarise(results: list[TrialResult]) -> dict[float, dict[str, float]]:
     return table
 
 
-def write_outputs(results: list[TrialResult], out: Path) -> tuple[Path, Path]:
+def write_csv(results: list[TrialResult], out: Path) -> Path:
     csv_path = out / "trials.csv"
-    with open(csv_path, "w", newline="") as f:
+    tmp = csv_path.with_suffix(".csv.tmp")
+    with open(tmp, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(asdict(results[0]).keys()))
         w.writeheader()
         for r in results:
             w.writerow(asdict(r))
-    return csv_path, plot(results, out / "trials.png")
+    tmp.replace(csv_path)
+    return csv_path
+
+
+def write_outputs(results: list[TrialResult], out: Path) -> tuple[Path, Path]:
+    return write_csv(results, out), plot(results, out / "trials.png")
 
 
 def plot(results: list[TrialResult], path: Path) -> Path:
@@ -155,10 +162,16 @@ def plot(results: list[TrialResult], path: Path) -> Path:
         ax.set_xticks(x, [f"{a:g}°" for a in angles])
         ax.set_title(label)
         ax.legend(fontsize=7)
-    example = next((r for r in results if r.success), results[0])
+    example = next((r for r in results if r.success), next((r for r in results if not r.error), None))
+    ax = axes[3]
+    if example is None:  # no trial ran: nothing to draw
+        ax.set_title("no trial ran")
+        fig.tight_layout()
+        fig.savefig(path, dpi=100)
+        plt.close(fig)
+        return path
     columns, data = read_values(Path(example.run_dir))
     t = np.array(data["t"])
-    ax = axes[3]
     ax.plot(t, np.degrees(data["rod.angle"]), label="rod twin angle (°)")
     from clients.rod.model import RodModel
 
@@ -184,6 +197,8 @@ def plot(results: list[TrialResult], path: Path) -> Path:
 
 def run_trials(angles: list[float], trials: int, out: Path, correction: bool = True, driver: str = "policy",
                progress: Callable[[TrialResult], None] | None = None) -> list[TrialResult]:
+    """Every trial, in order; one that fails to run is recorded as not grasped, with its error,
+    and the others go on. ``trials.csv`` is rewritten after each trial."""
     from fmu_bridge import logs
 
     out.mkdir(parents=True, exist_ok=True)
@@ -191,8 +206,15 @@ def run_trials(angles: list[float], trials: int, out: Path, correction: bool = T
     results = []
     for angle in angles:
         for i in range(trials):
-            r = run_trial(angle, i, out, correction, driver)
+            try:
+                r = run_trial(angle, i, out, correction, driver)
+            except (RuntimeError, OSError, ValueError) as exc:
+                physical = physical_rod(angle, 1000 + int(angle) * 100 + i)
+                r = TrialResult(angle, i, correction, False, None, None, False, str(out / f"{angle:g}deg-{i:02d}"),
+                                physical.length, math.degrees(physical.initial_angle), physical.damping,
+                                error=str(exc))
             results.append(r)
+            write_csv(results, out)
             if progress:
                 progress(r)
     return results

@@ -346,8 +346,9 @@ class Relay:
         k = 0
         while True:
             for node, history in self.histories.items():
-                if history.latest is not None:
-                    self.outputs[node] = history.latest[1]
+                held = history.at(t)
+                if held is not None:
+                    self.outputs[node] = held[1]
             view = OutputView(self.router.output_index, self.outputs)
             switch = self.coordinator.update(k, t, view)
             if switch is not None:
@@ -361,9 +362,10 @@ class Relay:
             lateness = None
             if rt is not None:
                 target = wall0 + (t - cosim.startTime) * rt
-                lateness = max(0.0, time.time() - target)
-                if time.time() < target:
-                    time.sleep(target - time.time())
+                ahead = target - time.time()  # read once: a second reading may have passed target
+                lateness = max(0.0, -ahead)
+                if ahead > 0:
+                    time.sleep(ahead)
             holder = max(arrivals, key=arrivals.get) if arrivals else ""
             if t >= end or self._stop_requested.is_set():
                 self.recorder.row(k, t, mode, self.outputs, self.router.inputs)

@@ -18,6 +18,15 @@ def test_sample_history_hold_and_linear():
     assert math.isclose(value, 2.5) and math.isclose(age, 0.05)
     assert not hist.add(0.15, [9.0])  # older than the latest: ignored
     assert hist.value_at(0, 0.3, "hold")[0] == 2.0
+    # A sample from ahead of the point (a paced run behind its source) waits for its time.
+    hist.add(0.4, [4.0])
+    assert hist.value_at(0, 0.3, "hold") == (2.0, 0.3 - 0.2)
+    value, _ = hist.value_at(0, 0.3, "linear")
+    assert math.isclose(value, 3.0)  # from 0.1 and 0.2, not through the sample at 0.4
+    assert hist.at(0.3) == (0.2, [2.0]) and hist.at(0.45) == (0.4, [4.0])
+    early = SampleHistory([0.0])
+    early.add(0.5, [5.0])
+    assert early.value_at(0, 0.3, "hold") == (5.0, 0.3 - 0.5)  # only newer samples: the oldest
 
 
 def test_extrapolated_and_held_samples_over_zenoh(tmp_path):

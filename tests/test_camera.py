@@ -51,6 +51,19 @@ def test_empty_and_dropped_frames_give_no_measurement(camera):
     dropping.close()
 
 
+def test_a_reader_that_falls_behind_skips_old_frames_and_sees_the_rest_one_by_one():
+    cam = EmulatedRodCamera(RodParams(), CameraSetup(seed=2))
+    assert cam.skip_until(0.5) == 30  # frames at 0, 1/60 … 29/60 go by unrendered
+    frames = cam.iter_frames(0.55)
+    first = next(frames)  # rendered on demand: the rest are not captured yet
+    assert math.isclose(first.t, 0.5, abs_tol=1e-3) and first.image is not None
+    assert cam.index == 31
+    rest = list(frames)
+    assert [round(f.t * 60) for f in rest] == [31, 32, 33]
+    assert cam.skip_until(0.3) == 0  # never back in time
+    cam.close()
+
+
 def test_tracker_estimates_angular_velocity_and_restarts_after_gaps(camera):
     rod = RodModel(RodParams())
     detector, tracker = RodDetector(camera.calibration), Tracker(max_gap=0.05)

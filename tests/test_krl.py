@@ -142,6 +142,21 @@ def test_short_trials_run_produces_the_table_and_files(tmp_path):
     assert one.read_text().strip().splitlines()[-1].startswith('<Robot><Pos A1=""')
 
 
+def test_a_trial_that_cannot_run_is_recorded_and_the_others_go_on(tmp_path):
+    out = tmp_path / "trials"
+    out.mkdir()
+    (out / "30deg-00").write_text("a file where the first trial's folder goes")
+    res = hycosim("trials", "--angles", "30", "--trials", "2", "-o", str(out), timeout=300)
+    assert res.returncode == 3 and "30° #0: not run" in res.stderr and "1 of 2 trials could not be run" in res.stderr
+    assert "Traceback" not in res.stderr
+    with open(out / "trials.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert [r["trial"] for r in rows] == ["0", "1"]
+    assert rows[0]["success"] == "False" and "30deg-00" in rows[0]["error"]
+    assert rows[1]["error"] == "" and rows[1]["success"] == "True"
+    assert "50 % of 2" in res.stdout
+
+
 @pytest.mark.long
 def test_the_papers_eighty_trials(tmp_path):
     from hycosim.trials import run_trials, summarise

@@ -117,8 +117,8 @@ def test_jaws_meet_the_rod_at_its_turning_point_and_reopen_after_closing_on_noth
 @pytest.fixture(scope="module")
 def short_training(tmp_path_factory):
     out = tmp_path_factory.mktemp("train")
-    config = TrainConfig(demo_episodes=12, bc_steps=800, critic_warmup_steps=200, episodes=4, eval_every=4,
-                         eval_trials=2)
+    config = TrainConfig(demo_episodes=12, bc_steps=800, dagger_rounds=1, dagger_episodes=4, critic_warmup_steps=200,
+                         episodes=4, eval_every=4, eval_trials=2)
     result = train(out, config)
     return out, result
 
@@ -170,6 +170,11 @@ def test_missing_or_incompatible_checkpoint_gives_a_clear_error(tmp_path):
     torch.save(state, tmp_path / "old.pt")
     with pytest.raises(CheckpointError, match="expects 10 observations"):
         load_policy(tmp_path / "old.pt")
+    state = DDPG().state()
+    state["residual_deg"] = 15.0  # the action's scale before the policy was retrained
+    torch.save(state, tmp_path / "scale.pt")
+    with pytest.raises(CheckpointError, match="trained for joint corrections of ±15.0°"):
+        load_policy(tmp_path / "scale.pt")
     doc = json.loads((REPO / "configs" / "grasp-policy.json").read_text())
     doc["nodeLists"][2]["parameters"]["checkpoint"] = str(tmp_path / "none.pt")
     cfg = tmp_path / "p.json"

@@ -13,6 +13,7 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")  # before mujoco is imported: no display here
 
 import math  # noqa: E402
+from collections.abc import Iterator  # noqa: E402
 from dataclasses import dataclass, field  # noqa: E402
 
 import mujoco  # noqa: E402
@@ -110,7 +111,11 @@ class EmulatedRodCamera:
 
     def frames_until(self, t: float) -> list[Frame]:
         """The frames captured since the last call, up to simulated time t."""
-        out = []
+        return list(self.iter_frames(t))
+
+    def iter_frames(self, t: float) -> Iterator[Frame]:
+        """The same frames, each rendered only when asked for: a consumer that processes
+        each before taking the next sees them one by one, not as a burst after the last."""
         period = 1.0 / self.cam.fps
         while self.index * period <= t + 1e-12:
             t_frame = self.index * period
@@ -121,10 +126,18 @@ class EmulatedRodCamera:
             # The rod integrates in whole 1 ms steps: the capture instant is where it is.
             t_capture = self.rod.time
             if self.cam.drop_probability > 0 and self.rng.random() < self.cam.drop_probability:
-                out.append(Frame(t_capture, None, self.rod.angle))
+                yield Frame(t_capture, None, self.rod.angle)
                 continue
-            out.append(Frame(t_capture, self.render(self.rod.angle), self.rod.angle))
-        return out
+            yield Frame(t_capture, self.render(self.rod.angle), self.rod.angle)
+
+    def skip_until(self, t: float) -> int:
+        """Let the frames captured before t go by unrendered (a camera driver's ring buffer
+        overwritten by a reader that fell behind); returns how many."""
+        period = 1.0 / self.cam.fps
+        first_kept = max(self.index, math.ceil(t / period - 1e-9))
+        skipped = first_kept - self.index
+        self.index = first_kept
+        return skipped
 
     def close(self) -> None:
         self.renderer.close()

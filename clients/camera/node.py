@@ -9,14 +9,20 @@ calibrates itself). Outputs: ``meas_angle``, ``meas_omega``, ``meas_t`` (capture
 and ``true_angle`` (the emulated rod's angle: ground truth for tests and benchmarks).
 
 A frame without a confident detection emits no sample: the server keeps the last one and
-records its age.
+records its age. Each frame's sample is published as soon as it is measured. Like a camera
+driver's ring buffer, the node keeps only the last ``buffer_frames`` (4) frames: when it
+falls behind (a loaded machine), older frames go by unmeasured rather than arriving late;
+how many is logged at the end.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterator
 from typing import Any
+
+import structlog
 
 from clients.camera.calibration import Calibration
 from clients.camera.detect import RodDetector
@@ -55,31 +61,34 @@ class CameraNode(AsyncSource):
                            else VideoFileSource(ctx.project_dir / source)).frames()
         self.detector = RodDetector(calibration)
         self.tracker = Tracker()
-        self.pending: list[Frame] = []
+        self.buffer_frames = int(params.get("buffer_frames", 4))
+        self.skipped = 0
+        self.log = structlog.get_logger("camera").bind(node=ctx.name)
 
-    def _frames_until(self, t: float) -> list[Frame]:
+    def _frames_until(self, t: float) -> Iterator[Frame]:
         if self.emulated is not None:
-            return self.emulated.frames_until(t)
-        out = []
+            if self.buffer_frames > 0:
+                self.skipped += self.emulated.skip_until(t - (self.buffer_frames - 1) / self.emulated.cam.fps)
+            yield from self.emulated.iter_frames(t)
+            return
         for frame in self.stream:
-            out.append(frame)
+            yield frame
             if frame.t >= t:
                 break
-        return out
 
-    def samples_until(self, t: float) -> list[tuple[float, dict[str, Any]]]:
-        samples = []
+    def samples_until(self, t: float) -> Iterator[tuple[float, dict[str, Any]]]:
         for frame in self._frames_until(t):
             captured = time.perf_counter()
             m = self.tracker.update(frame.t, self.detector.detect(frame.image))
             if m is None:
                 continue
-            samples.append((m.t, {"meas_angle": m.angle, "meas_omega": m.omega, "meas_t": m.t,
-                                  "meas_conf": m.confidence, "meas_valid": True,
-                                  "latency": time.perf_counter() - captured,
-                                  "true_angle": frame.true_angle if not math.isnan(frame.true_angle) else m.angle}))
-        return samples
+            yield m.t, {"meas_angle": m.angle, "meas_omega": m.omega, "meas_t": m.t,
+                        "meas_conf": m.confidence, "meas_valid": True,
+                        "latency": time.perf_counter() - captured,
+                        "true_angle": frame.true_angle if not math.isnan(frame.true_angle) else m.angle}
 
     def teardown(self) -> None:
+        if self.skipped:
+            self.log.warning("camera fell behind", frames_skipped=self.skipped)
         if self.emulated is not None:
             self.emulated.close()
