@@ -53,14 +53,15 @@ def test_empty_and_dropped_frames_give_no_measurement(camera):
 
 def test_a_reader_that_falls_behind_skips_old_frames_and_sees_the_rest_one_by_one():
     cam = EmulatedRodCamera(RodParams(), CameraSetup(seed=2))
-    assert cam.skip_until(0.5) == 30  # frames at 0, 1/60 … 29/60 go by unrendered
+    assert cam.keep_newest(0.51, 2) == 29  # frames 0 … 28 (of 0 … 30 captured by 0.51 s) go by
     frames = cam.iter_frames(0.55)
     first = next(frames)  # rendered on demand: the rest are not captured yet
-    assert math.isclose(first.t, 0.5, abs_tol=1e-3) and first.image is not None
-    assert cam.index == 31
+    assert math.isclose(first.t, 29 / 60, abs_tol=1e-3) and first.image is not None
+    assert cam.index == 30
     rest = list(frames)
-    assert [round(f.t * 60) for f in rest] == [31, 32, 33]
-    assert cam.skip_until(0.3) == 0  # never back in time
+    assert [round(f.t * 60) for f in rest] == [30, 31, 32, 33]
+    assert cam.keep_newest(0.3, 2) == 0  # never back in time
+    assert cam.keep_newest(34.5 / 60, 1) == 0 and len(cam.frames_until(34.5 / 60)) == 1
     cam.close()
 
 

@@ -130,11 +130,13 @@ class EmulatedRodCamera:
                 continue
             yield Frame(t_capture, self.render(self.rod.angle), self.rod.angle)
 
-    def skip_until(self, t: float) -> int:
-        """Let the frames captured before t go by unrendered (a camera driver's ring buffer
-        overwritten by a reader that fell behind); returns how many."""
+    def keep_newest(self, t: float, keep: int) -> int:
+        """Of the frames captured up to t and not yet taken, let all but the newest ``keep``
+        go by unrendered (a camera driver's ring buffer overwritten by a reader that fell
+        behind); returns how many went by."""
         period = 1.0 / self.cam.fps
-        first_kept = max(self.index, math.ceil(t / period - 1e-9))
+        newest = math.floor(t / period + 1e-9)
+        first_kept = max(self.index, newest - keep + 1)
         skipped = first_kept - self.index
         self.index = first_kept
         return skipped

@@ -10,9 +10,9 @@ and ``true_angle`` (the emulated rod's angle: ground truth for tests and benchma
 
 A frame without a confident detection emits no sample: the server keeps the last one and
 records its age. Each frame's sample is published as soon as it is measured. Like a camera
-driver's ring buffer, the node keeps only the last ``buffer_frames`` (4) frames: when it
-falls behind (a loaded machine), older frames go by unmeasured rather than arriving late;
-how many is logged at the end.
+driver's ring buffer, the node keeps only the newest ``buffer_frames`` (2) frames: when it
+falls behind (a loaded machine), older frames go by unmeasured rather than arriving late
+(a late measurement is worth less to the observer than a fresh one); how many is logged.
 """
 
 from __future__ import annotations
@@ -61,14 +61,14 @@ class CameraNode(AsyncSource):
                            else VideoFileSource(ctx.project_dir / source)).frames()
         self.detector = RodDetector(calibration)
         self.tracker = Tracker()
-        self.buffer_frames = int(params.get("buffer_frames", 4))
+        self.buffer_frames = int(params.get("buffer_frames", 2))
         self.skipped = 0
         self.log = structlog.get_logger("camera").bind(node=ctx.name)
 
     def _frames_until(self, t: float) -> Iterator[Frame]:
         if self.emulated is not None:
             if self.buffer_frames > 0:
-                self.skipped += self.emulated.skip_until(t - (self.buffer_frames - 1) / self.emulated.cam.fps)
+                self.skipped += self.emulated.keep_newest(t, self.buffer_frames)
             yield from self.emulated.iter_frames(t)
             return
         for frame in self.stream:
