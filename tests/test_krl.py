@@ -164,3 +164,4 @@ def test_the_papers_eighty_trials(tmp_path):
     table = summarise(run_trials([30, 40, 50, 60], 20, tmp_path / "trials"))
     assert all(row["success_pct"] >= 95 for row in table.values())
     assert all(row["error_mm"] <= 3.0 for row in table.values())
+    assert all(row["time_s"] <= 5.0 for row in table.values())
