@@ -55,6 +55,11 @@ def physical_rod(angle: float, seed: int) -> RodParams:
                      damping=0.002 * rng.uniform(0.7, 1.3))
 
 
+def trial_seed(angle: float, trial: int, seed_base: int = 1000) -> int:
+    """The seed of one trial: its physical rod and its camera noise."""
+    return seed_base + int(angle) * 100 + trial
+
+
 def trial_project(angle: float, physical: RodParams, correction: bool, driver: str, seed: int) -> dict:
     """The project JSON of one trial: grasp-policy.json (or grasp.json) plus, with correction, the camera."""
     base = json.loads((REPO / "configs" / ("grasp-policy.json" if driver == "policy" else "grasp.json")).read_text())
@@ -90,7 +95,7 @@ def run_trial(angle: float, trial: int, out: Path, correction: bool = True, driv
               seed_base: int = 1000) -> TrialResult:
     from hycosim.embedded import run_embedded
 
-    seed = seed_base + int(angle) * 100 + trial
+    seed = trial_seed(angle, trial, seed_base)
     physical = physical_rod(angle, seed)
     doc = trial_project(angle, physical, correction, driver, seed)
     folder = out / f"{angle:g}deg-{trial:02d}"
@@ -211,7 +216,7 @@ def run_trials(angles: list[float], trials: int, out: Path, correction: bool = T
             try:
                 r = run_trial(angle, i, out, correction, driver)
             except (RuntimeError, OSError, ValueError) as exc:
-                physical = physical_rod(angle, 1000 + int(angle) * 100 + i)
+                physical = physical_rod(angle, trial_seed(angle, i))
                 r = TrialResult(angle, i, correction, False, None, None, False, str(out / f"{angle:g}deg-{i:02d}"),
                                 physical.length, math.degrees(physical.initial_angle), physical.damping,
                                 error=str(exc))

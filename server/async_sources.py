@@ -37,8 +37,7 @@ class SampleHistory:
         """Index of the newest sample taken at or before t (0 if all are newer)."""
         if self._samples[-1][0] <= t + 1e-12:
             return len(self._samples) - 1  # the usual case: nothing from ahead of t
-        times = [s[0] for s in self._samples]
-        return max(bisect_right(times, t + 1e-12) - 1, 0)
+        return max(bisect_right(self._samples, t + 1e-12, key=lambda s: s[0]) - 1, 0)
 
     def at(self, t: float) -> tuple[float, list[Any]] | None:
         """The sample held at time t (None before the first)."""

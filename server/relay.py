@@ -282,17 +282,12 @@ class Relay:
         self.recorder.meta["event_localisation"] = f"rollback and bisection to {tol:g} s"
         return True
 
-    def _send_step(self, k: int, t: float, h: float, mode: str) -> float:
-        """Release step k (t → t+h) to every node; return when (perf_counter)."""
+    def _release(self, k: int, t: float, h: float, mode: str) -> tuple[dict[str, float], float]:
+        """Release step k (t → t+h) and gather the outputs at t+h; return arrivals and wait."""
         inputs = {n: self.router.inputs[n] for n in self.stepping}
         released_at = time.perf_counter()
         self._last_release = frames.encode(frames.STEP, k, t, h, mode, inputs, self.coordinator.driven_nodes())
         self.release.put(self._last_release)
-        return released_at
-
-    def _release(self, k: int, t: float, h: float, mode: str) -> tuple[dict[str, float], float]:
-        """Release step k (t → t+h) and gather the outputs at t+h; return arrivals and wait."""
-        released_at = self._send_step(k, t, h, mode)
         arrivals = self._collect(k + 1, released_at)
         return arrivals, time.perf_counter() - released_at
 
@@ -359,6 +354,7 @@ class Relay:
                 self._log.info("mode switch", step=k, t=t, name=switch.event, to=switch.to_mode, values=switch.values)
             mode = self.coordinator.mode
             ages = self.router.route(mode, t, self.outputs, self.histories)
+            self.recorder.row(k, t, mode, self.outputs, self.router.inputs)
             lateness = None
             if rt is not None:
                 target = wall0 + (t - cosim.startTime) * rt
@@ -367,17 +363,6 @@ class Relay:
                 if ahead > 0:
                     time.sleep(ahead)
             holder = max(arrivals, key=arrivals.get) if arrivals else ""
-            if t >= end or self._stop_requested.is_set():
-                self.recorder.row(k, t, mode, self.outputs, self.router.inputs)
-                self.recorder.timing(k, t, wait, holder, lateness, arrivals, ages)
-                break
-            next_t = min(origin + (j + 1) * H, cosim.stopTime)
-            h = next_t - t
-            watched = localise and self.coordinator.pending_guard_holds(view)
-            released_at = self._send_step(k, t, h, mode)
-            # Point k is recorded while the nodes integrate: off the barrier's critical path.
-            # Collecting replaces self.outputs' entries only after this.
-            self.recorder.row(k, t, mode, self.outputs, self.router.inputs)
             self.recorder.timing(k, t, wait, holder, lateness, arrivals, ages)
             self.progress.step, self.progress.t, self.progress.mode = k, t, mode
             now = time.perf_counter()
@@ -385,8 +370,12 @@ class Relay:
                 last_progress = now
                 self.progress.steps_per_s = k / (now - perf0) if now > perf0 else 0.0
                 self._on_progress(self.progress)
-            arrivals = self._collect(k + 1, released_at)
-            wait = time.perf_counter() - released_at
+            if t >= end or self._stop_requested.is_set():
+                break
+            next_t = min(origin + (j + 1) * H, cosim.stopTime)
+            h = next_t - t
+            watched = localise and self.coordinator.pending_guard_holds(view)
+            arrivals, wait = self._release(k, t, h, mode)
             localised = {}
             if localise:
                 h_used, arrivals, wait, localised = self._localise(k, t, h, mode, watched, arrivals, wait)

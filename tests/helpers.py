@@ -49,6 +49,13 @@ def spawn(*args: str, **kw: Any) -> subprocess.Popen:
                             env=env(), cwd=REPO, **kw)
 
 
+def reap(*procs: subprocess.Popen) -> None:
+    """Kill whichever of the processes is still running (a test's ``finally``)."""
+    for p in procs:
+        if p.poll() is None:
+            p.kill()
+
+
 def run_project(cfg: Path, runs: Path, timeout: float = 120) -> Path:
     """``hycosim run`` the project; assert success and return its run directory."""
     res = hycosim("run", str(cfg), "--runs-dir", str(runs), "--no-progress", timeout=timeout)

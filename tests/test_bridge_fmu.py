@@ -18,7 +18,7 @@ from fmpy.validation import validate_fmu
 from fmu_bridge import gateway_protocol as gp
 from fmu_bridge.bridge_fmu import BridgeBuildError, build_bridge_fmu
 from fmu_bridge.config import load_project
-from tests.helpers import REPO, column, env, hycosim, meta, read_rows, spawn, write_project
+from tests.helpers import REPO, column, env, hycosim, meta, read_rows, reap, spawn, write_project
 
 FMI_HEADERS = Path(__import__("fmpy").__file__).parent / "c-code"
 
@@ -102,9 +102,7 @@ def _finish(procs, timeout=60):
         for p in procs:
             outs.append(p.communicate(timeout=timeout))
     finally:
-        for p in procs:
-            if p.poll() is None:
-                p.kill()
+        reap(*procs)
     return outs
 
 

@@ -16,7 +16,7 @@ import zenoh
 from fmu_bridge import frames
 from fmu_bridge.keys import ProjectKeys
 from fmu_bridge.session import client_config
-from tests.helpers import REPO, env, free_endpoint, hycosim, meta, read_rows, spawn, wait_for, write_project
+from tests.helpers import REPO, env, free_endpoint, hycosim, meta, read_rows, reap, spawn, wait_for, write_project
 from tests.netns import hosts, netns_available
 
 COMPOSE = REPO / "docker" / "docker-compose.yml"
@@ -59,9 +59,7 @@ def test_compose_services_run_together_as_local_processes(tmp_path):
                                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env(), cwd=REPO)
         outs = {name: p.communicate(timeout=120) for name, p in procs.items()}
     finally:
-        for p in procs.values():
-            if p.poll() is None:
-                p.kill()
+        reap(*procs.values())
     assert all(p.returncode == 0 for p in procs.values()), {n: o[1][-500:] for n, o in outs.items()}
     run = next((tmp_path / "runs").iterdir())
     assert meta(run)["status"] == "completed" and len(read_rows(run)) == 151
@@ -98,9 +96,7 @@ def _remote_run(tmp_path: Path, grace: float, stop: float, cut_after: float, cut
             _, err = server.communicate(timeout=60)
             node_out = {n: p.communicate(timeout=30) for n, p in nodes.items()}
         finally:
-            for p in (server, *nodes.values()):
-                if p.poll() is None:
-                    p.kill()
+            reap(server, *nodes.values())
     return server.returncode, err, {n: (p.returncode, node_out[n][1]) for n, p in nodes.items()}, run_dir
 
 
@@ -177,9 +173,7 @@ def test_wrong_or_missing_credentials_cannot_attach_and_a_forged_frame_is_droppe
         for p in nodes:
             assert p.wait(timeout=30) == 0
     finally:
-        for p in [server, *nodes]:
-            if p.poll() is None:
-                p.kill()
+        reap(server, *nodes)
     assert server.returncode == 0, err
     m = meta(run_dir)
     assert m["dropped_frames"] == {}  # never reached the server

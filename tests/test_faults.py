@@ -13,7 +13,7 @@ import zenoh
 from fmu_bridge import frames
 from fmu_bridge.keys import ProjectKeys
 from fmu_bridge.session import client_config
-from tests.helpers import hycosim, meta, read_rows, spawn, wait_for, write_project
+from tests.helpers import hycosim, meta, read_rows, reap, spawn, wait_for, write_project
 
 
 def _pair(tmp_path, **cosim):
@@ -56,9 +56,7 @@ def test_node_killed_mid_run_stops_with_its_name_and_step(tmp_path):
         assert len(rows) == step  # every step before the loss is on disk, none after
         assert nodes["clock"].wait(timeout=20) == 0  # told to stop
     finally:
-        for p in (server, *nodes.values()):
-            if p.poll() is None:
-                p.kill()
+        reap(server, *nodes.values())
 
 
 def test_malformed_frames_are_dropped_counted_and_the_run_goes_on(tmp_path):
@@ -97,9 +95,7 @@ def test_malformed_frames_are_dropped_counted_and_the_run_goes_on(tmp_path):
         log = (run_dir / "server.log.jsonl").read_text()
         assert log.count('"frame dropped"') == 8
     finally:
-        for p in (server, *nodes):
-            if p.poll() is None:
-                p.kill()
+        reap(server, *nodes)
 
 
 def test_node_that_never_attaches_times_out_naming_it(tmp_path):
@@ -115,9 +111,7 @@ def test_node_that_never_attaches_times_out_naming_it(tmp_path):
         assert meta(run_dir)["status"] == "failed"
         assert node.wait(timeout=20) == 0  # the server's STOP reaches the node that did attach
     finally:
-        for p in (server, node):
-            if p.poll() is None:
-                p.kill()
+        reap(server, node)
 
 
 def test_ctrl_c_shuts_down_cleanly_with_results_flushed(tmp_path):
@@ -137,9 +131,7 @@ def test_ctrl_c_shuts_down_cleanly_with_results_flushed(tmp_path):
         for p in nodes:
             assert p.wait(timeout=20) == 0
     finally:
-        for p in (server, *nodes):
-            if p.poll() is None:
-                p.kill()
+        reap(server, *nodes)
 
 
 def test_node_without_server_fails_clearly(tmp_path):

@@ -69,7 +69,7 @@ def grip_reflex(t: float, tcp: np.ndarray, gap: float, points: list["TurningPoin
 
     ``delay``: seconds from this decision to the jaws starting to move, plus half a step so
     that the macro-step grid spreads the meeting around the turning point, not after it."""
-    lead = max(0.0, gap - 2 * rod_radius) / kr6.FINGER_SPEED + delay
+    lead = kr6.closing_time(gap, rod_radius) + delay
     return any(0.0 <= p.t - t <= lead and float(np.linalg.norm(tcp - p.grasp)) < REFLEX_DISTANCE
                for p in points if p.ok)
 
@@ -105,11 +105,7 @@ class Predictor:
             self._refine_next(t, angle, omega)
         elif stale:
             found = turning_points(self.rod, angle, omega, 2.0)[:2]
-            self.points = []
-            for dt, a in found:
-                ik = self.scene.reach(a, q0=q)
-                ok = ik.position_error < 1e-3 and ik.rotation_error < math.radians(1)
-                self.points.append(TurningPoint(t + dt, a, ik.q, ok, self.scene.grasp_point(a)))
+            self.points = [self._point(t + dt, a, q) for dt, a in found]
             self.predicted_at = t
         return self.points
 
@@ -117,12 +113,14 @@ class Predictor:
         """Re-predict only the next turning point, over a horizon just past it, with IK from its pose."""
         first = self.points[0]
         found = turning_points(self.rod, angle, omega, first.t - t + 0.05)[:1]
-        if not found:
-            return
-        dt, a = found[0]
-        ik = self.scene.reach(a, q0=first.q)
+        if found:
+            dt, a = found[0]
+            self.points[0] = self._point(t + dt, a, first.q)
+
+    def _point(self, t_turn: float, angle: float, q0: np.ndarray) -> TurningPoint:
+        ik = self.scene.reach(angle, q0=q0)
         ok = ik.position_error < 1e-3 and ik.rotation_error < math.radians(1)
-        self.points[0] = TurningPoint(t + dt, a, ik.q, ok, self.scene.grasp_point(a))
+        return TurningPoint(t_turn, angle, ik.q, ok, self.scene.grasp_point(angle))
 
 
 def observe(t: float, q: np.ndarray, tcp: np.ndarray, grasp: np.ndarray, angle: float, omega: float, gap: float,

@@ -156,8 +156,9 @@ def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | Non
             report({"phase": "eval", "episode": ep + 1, "per_angle": ev, "mean_success": mean})
             extra = dict(config_hash=config.digest(), episodes=ep + 1, history=history,
                          trained_s=time.monotonic() - started, metrics=ev, train_config=asdict(config))
-            if _score(history["evals"][-1]) >= best:
-                best = _score(history["evals"][-1])
+            score = _score(history["evals"][-1])
+            if score >= best:
+                best = score
                 torch.save(agent.state(**extra), out / "best.pt")
             torch.save(agent.state(**extra), last)
     plot_learning_curve(history, out / "learning_curve.png")

@@ -108,7 +108,7 @@ class ReferenceController(Node):
         # The command output now takes effect at ``now``: the jaws need their closing time.
         lead = self.close_lead
         if lead is None:
-            lead = (kr6.GRIPPER_OPEN - 2 * self.rod_radius) / kr6.FINGER_SPEED + h / 2
+            lead = kr6.closing_time(kr6.GRIPPER_OPEN, self.rod_radius) + h / 2
         self.grip = self.plan.t_turn - now <= lead
         if now > self.plan.t_turn + 0.2:  # missed it: open and plan again
             self.plan, self.grip = None, False

@@ -45,6 +45,11 @@ GRIPPER_OPEN = 0.08  # m between the jaws
 FINGER_SPEED = 1.0  # m/s, jaws closing
 
 
+def closing_time(gap: float, rod_radius: float) -> float:
+    """Seconds for jaws ``gap`` apart to close onto a rod of ``rod_radius``."""
+    return max(0.0, gap - 2 * rod_radius) / FINGER_SPEED
+
+
 def _rot(axis: tuple[int, int, int], angle: float) -> np.ndarray:
     a = np.asarray(axis, dtype=float)
     a /= np.linalg.norm(a)
