@@ -1,7 +1,8 @@
 """The floor for a Zenoh barrier in Python: one step message out, N replies back, nothing else.
 
-Same transport choices as hycosim (router server, BLOCK + express publishers, FifoChannel
-read in the main thread, msgpack) but no config, routing, checking or recording.
+Same transport choices as hycosim (its router and client session configs, so the
+low-latency transport; its shared Zenoh runtime; BLOCK + express publishers;
+FifoChannel read in the main thread; msgpack) but no config, routing, checking or recording.
 """
 
 import subprocess
@@ -11,13 +12,11 @@ import time
 import msgpack
 import zenoh
 
+from fmu_bridge.session import client_config, prefer_shared_runtime, router_config
+
 
 def _conf(endpoint: str, router: bool) -> zenoh.Config:
-    c = zenoh.Config()
-    c.insert_json5("mode", '"router"' if router else '"client"')
-    c.insert_json5("scouting/multicast/enabled", "false")
-    c.insert_json5("listen/endpoints" if router else "connect/endpoints", f'["{endpoint}"]')
-    return c
+    return router_config(endpoint) if router else client_config(endpoint)
 
 
 def node(endpoint: str, i: int) -> None:
@@ -56,6 +55,7 @@ def server(endpoint: str, n: int, steps: int) -> float:
 
 
 if __name__ == "__main__":
+    prefer_shared_runtime()
     if sys.argv[1] == "node":
         node(sys.argv[2], int(sys.argv[3]))
     else:

@@ -5,7 +5,11 @@ one float in and out each, y = 0.5·u + 1, for 3000 macro steps; N = 2, 4, 8, 16
 Rates count macro steps per second of the stepping loop only (start-up excluded).
 Processes are not pinned to cores: on 2 cores the scheduler decides, as it would for a user.
 
-    python benchmarks/barrier.py [--n 2 4] [--steps 3000] [--systems hycosim helics-tcp ...] [--json]
+    python benchmarks/barrier.py [--n 2 4] [--steps 3000] [--repeat 3] [--systems hycosim helics-tcp ...] [--json]
+
+On a small machine one run of any system scatters by ±20 % (who shares a core with whom
+is the scheduler's choice), so every system runs ``--repeat`` times, the rounds
+interleaved (system after system, then again), and the table shows the median.
 
 HELICS and mosaik come from the optional extra: pip install -e '.[bench]'.
 """
@@ -111,42 +115,60 @@ RUNNERS = {
 }
 
 
+def _median(values: list[float]) -> float:
+    ordered = sorted(values)
+    mid = len(ordered) // 2
+    return ordered[mid] if len(ordered) % 2 else 0.5 * (ordered[mid - 1] + ordered[mid])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, nargs="+", default=[2, 4, 8, 16])
     ap.add_argument("--steps", type=int, default=3000)
+    ap.add_argument("--repeat", type=int, default=3, help="rounds per system and N; the median is reported")
     ap.add_argument("--systems", nargs="+", default=SYSTEMS, choices=SYSTEMS)
-    ap.add_argument("--json", action="store_true", help="one JSON object per line: system, n, steps_per_s")
+    ap.add_argument("--json", action="store_true",
+                    help="one JSON object per line: system, n, steps_per_s (the median), runs")
     args = ap.parse_args()
-    results: dict[tuple[str, int], float | None] = {}
+    runs: dict[tuple[str, int], list[float]] = {(system, n): [] for n in args.n for system in args.systems}
+    skipped: set[str] = set()
     for n in args.n:
+        for _ in range(args.repeat):
+            for system in args.systems:
+                if system in skipped:
+                    continue
+                try:
+                    runs[(system, n)].append(RUNNERS[system](n, args.steps))
+                except ImportError as exc:
+                    skipped.add(system)
+                    print(f"# {system}: skipped ({exc}; pip install -e '.[bench]')", file=sys.stderr)
+                except Exception as exc:  # report and go on with the other systems
+                    print(f"# {system} n={n}: failed:\n{str(exc).strip()[-3000:]}", file=sys.stderr)
+                time.sleep(0.5)  # let sockets of the last run close
         for system in args.systems:
-            try:
-                rate = RUNNERS[system](n, args.steps)
-            except ImportError as exc:
-                rate = None
-                print(f"# {system}: skipped ({exc}; pip install -e '.[bench]')", file=sys.stderr)
-            except Exception as exc:  # report and go on with the other systems
-                rate = None
-                print(f"# {system} n={n}: failed:\n{str(exc).strip()[-3000:]}", file=sys.stderr)
-            results[(system, n)] = rate
             if args.json:
-                print(json.dumps({"system": system, "n": n, "steps_per_s": rate}), flush=True)
-            time.sleep(0.5)  # let sockets of the last run close
+                rates = runs[(system, n)]
+                print(json.dumps({"system": system, "n": n, "steps_per_s": _median(rates) if rates else None,
+                                  "runs": [round(r, 1) for r in rates]}), flush=True)
     if args.json:
         return
-    print(f"{'system':<12}" + "".join(f"{'N=' + str(n):>12}" for n in args.n))
+    results = {key: (_median(rates) if rates else None) for key, rates in runs.items()}
+    print(f"median of {args.repeat} runs, macro steps/s (min–max in brackets)")
+    print(f"{'system':<12}" + "".join(f"{'N=' + str(n):>24}" for n in args.n))
     for system in args.systems:
-        cells = [results[(system, n)] for n in args.n]
-        print(f"{system:<12}" + "".join(f"{c:>12,.0f}" if c else f"{'-':>12}" for c in cells))
-    print("\nratios (hycosim / other):")
+        cells = []
+        for n in args.n:
+            rates = runs[(system, n)]
+            cells.append(f"{_median(rates):>8,.0f} [{min(rates):,.0f}–{max(rates):,.0f}]" if rates else "-")
+        print(f"{system:<12}" + "".join(f"{c:>24}" for c in cells))
+    print("\nratios of the medians (hycosim / other):")
     for system in args.systems:
         if system == "hycosim":
             continue
         cells = []
         for n in args.n:
-            a, b = results[("hycosim", n)] if "hycosim" in args.systems else None, results[(system, n)]
-            cells.append(f"{a / b:>12.2f}" if a and b else f"{'-':>12}")
+            a, b = results.get(("hycosim", n)), results[(system, n)]
+            cells.append(f"{a / b:>24.2f}" if a and b else f"{'-':>24}")
         print(f"{system:<12}" + "".join(cells))
     if "hycosim" in args.systems and len(args.n) > 1:
         base_n = args.n[0]

@@ -11,6 +11,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
+import msgpack
 import structlog
 import zenoh
 
@@ -19,7 +20,7 @@ from fmu_bridge.config import LoadedProject, PortType
 from fmu_bridge.fmu_loader import FmuError
 from fmu_bridge.inbox import Inbox
 from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
-from fmu_bridge.session import ConnectError, client_config, open_session
+from fmu_bridge.session import ConnectError, FramePublisher, FrameTooLarge, client_config, open_session
 
 from clients.node import AsyncSource, Node, NodeContext
 
@@ -81,7 +82,7 @@ class NodeRuntime:
             if type(exc).__name__ == "CameraError":  # a clear message of its own
                 raise NodeRunError(str(exc)) from None
             raise NodeRunError(f"node {self.name!r}: its model failed to set up: {type(exc).__name__}: {exc}") from exc
-        conf = client_config(self.endpoint, timeout_s=self.cosim.attachTimeout,
+        conf = client_config(self.endpoint, timeout_s=self.cosim.attachTimeout, low_latency=self.cosim.lowLatency,
                              user=self.name if self.password is not None else None, password=self.password)
         try:
             session = open_session(conf, self.endpoint)
@@ -92,8 +93,7 @@ class NodeRuntime:
             raise
         try:
             self.inbox = Inbox(session, self.keys.down, self.keys.down)
-            publisher = session.declare_publisher(self.keys.up(self.name),
-                                                  congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+            self._publisher = FramePublisher(session, self.keys.up(self.name), low_latency=self.cosim.lowLatency)
             watch = session.liveliness().declare_subscriber(self.keys.alive(SERVER_TOKEN), self._on_server_liveliness)
             # Declared after the subscriber: the server starts once it sees this token.
             token = session.liveliness().declare_token(self.keys.alive(self.name))
@@ -104,9 +104,9 @@ class NodeRuntime:
                 if start.kind == frames.STOP:
                     return
                 if isinstance(self.impl, AsyncSource):
-                    self._run_async(publisher, start)
+                    self._run_async(start)
                 else:
-                    self._run_stepping(publisher, checkpoint=bool(start.fields[5].get("checkpoint")))
+                    self._run_stepping(checkpoint=bool(start.fields[5].get("checkpoint")))
             finally:
                 token.undeclare()
                 watch.undeclare()
@@ -116,6 +116,19 @@ class NodeRuntime:
                 self.impl.teardown()
             finally:
                 session.close()
+
+    def _send(self, payload: bytes) -> None:
+        """Publish one frame; one too large for the link stops the node, naming its largest outputs."""
+        try:
+            self._publisher.put(payload)
+        except FrameTooLarge as exc:
+            frame = frames.decode(payload)
+            values = frame.fields[3] if frame.kind in (frames.OUTPUTS, frames.SAMPLE) else []
+            sizes = sorted(((len(msgpack.packb(v, use_bin_type=True)), port) for (port, _), v in zip(self._out_ports, values)),
+                           reverse=True)
+            largest = ", ".join(f"{port} ({size} bytes)" for size, port in sizes[:3]) or "-"
+            raise NodeRunError(f"node {self.name!r}: its outputs at step {self.steps} are {exc}; "
+                               f"largest: {largest}") from None
 
     def _wait(self, timeout: float, what: str) -> frames.Frame:
         """The next frame from the server (skipping ones not for us); STOP ends the wait too.
@@ -158,15 +171,15 @@ class NodeRuntime:
                 return frames.Frame(frames.REPLAY, (frame.fields[0], frames.decode(frame.fields[1])))
             return frame
 
-    def _run_stepping(self, publisher: zenoh.Publisher, checkpoint: bool) -> None:
+    def _run_stepping(self, checkpoint: bool) -> None:
         impl = self.impl
         assert isinstance(impl, Node)
         checkpoint = checkpoint and impl.can_rollback
         saved_step, saved = -1, None
-        publisher.put(frames.encode(frames.HELLO, self.spec.UID, {"rollback": impl.can_rollback}))
+        self._send(frames.encode(frames.HELLO, self.spec.UID, {"rollback": impl.can_rollback}))
         last_out = frames.encode(frames.OUTPUTS, self.spec.UID, 0, self.cosim.startTime,
                                  self._pack_outputs(impl.outputs()))
-        publisher.put(last_out)
+        self._send(last_out)
         done = -1  # the last step integrated
         # The server enforces step timeouts; a node only needs to notice the server is gone,
         # which liveliness tells; this bound is the last resort for a frozen server.
@@ -183,7 +196,7 @@ class NodeRuntime:
                 if inner.kind == frames.STEP and inner.fields[0] > done:
                     frame = inner
                 else:
-                    publisher.put(last_out)
+                    self._send(last_out)
                     self._log.info("outputs re-sent", step=done + 1)
                     continue
             if frame.kind == frames.ROLLBACK:
@@ -212,9 +225,9 @@ class NodeRuntime:
                                    f"{type(exc).__name__}: {exc}") from exc
             self.steps, done = k + 1, k
             last_out = frames.encode(frames.OUTPUTS, self.spec.UID, k + 1, t + h, self._pack_outputs(impl.outputs()))
-            publisher.put(last_out)
+            self._send(last_out)
 
-    def _run_async(self, publisher: zenoh.Publisher, start: frames.Frame) -> None:
+    def _run_async(self, start: frames.Frame) -> None:
         impl = self.impl
         assert isinstance(impl, AsyncSource)
         _, t0, _, wall0, rt, _ = start.fields
@@ -222,7 +235,7 @@ class NodeRuntime:
         period = 1.0 / float(self.spec.rate or 30.0)
         while True:
             for ts, values in impl.samples_until(sim_now):
-                publisher.put(frames.encode(frames.SAMPLE, self.spec.UID, seq, ts, self._pack_outputs(values)))
+                self._send(frames.encode(frames.SAMPLE, self.spec.UID, seq, ts, self._pack_outputs(values)))
                 seq += 1
             if rt:
                 # Real time: sample by the wall clock, and look for STOP in between.

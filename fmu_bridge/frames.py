@@ -21,8 +21,7 @@ Kinds and layouts (after version and kind):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import msgpack
 
@@ -45,8 +44,9 @@ class FrameError(ValueError):
     """Bytes that are not a well-formed hycosim frame."""
 
 
-@dataclass(frozen=True)
-class Frame:
+class Frame(NamedTuple):
+    """One decoded frame (a named tuple: decoded for every message, it must be cheap to make)."""
+
     kind: int
     fields: tuple[Any, ...]
 

@@ -49,8 +49,9 @@ class Inbox:
 
     def recv(self, timeout: float) -> tuple[str, bytes] | None:
         """The next sample as (key, payload), or None once ``timeout`` seconds pass."""
-        deadline = time.monotonic() + timeout
-        self._last_wake = time.monotonic()
+        now = time.monotonic()
+        deadline = now + timeout
+        self._last_wake = now
         self._deadline = deadline
         try:
             while True:

@@ -3,12 +3,63 @@
 from __future__ import annotations
 
 import json
+import os
 
 import zenoh
+
+# Zenoh's low-latency transport writes each message in one batch and cannot fragment: on
+# loopback a 50 kB message was dropped without an error. Frames are kept well below that.
+LOW_LATENCY_MAX_FRAME = 32 * 1024
+
+
+# Zenoh runs its I/O on five Tokio runtimes (tx, rx, acceptor, net, app), each with its
+# own threads. A hycosim process exchanges a few small frames per macro step; handing the
+# receiving side (rx, acceptor, net) over to the app runtime's one worker saves a
+# cross-thread wake-up on every message (on 2 cores: about a fifth more macro steps/s with
+# four nodes; benchmarks/barrier.py). tx keeps its own thread: while a link is cut, its
+# writer holds the thread it runs on, and with tx handed over too, every other link of the
+# process missed its lease meanwhile (tests/test_deployment.py's link cuts).
+SHARED_RUNTIME = "(rx: (handover: app), acc: (handover: app), net: (handover: app), app: (worker_threads: 1))"
+
+
+def prefer_shared_runtime() -> None:
+    """Ask Zenoh to receive on one shared worker thread, unless ``ZENOH_RUNTIME`` is set.
+
+    Zenoh reads the variable once, when its runtime first starts: call this before the
+    process opens its first session. Child processes inherit it.
+    """
+    os.environ.setdefault("ZENOH_RUNTIME", SHARED_RUNTIME)
 
 
 class ConnectError(RuntimeError):
     """A Zenoh session that could not be opened, with the endpoint it was for."""
+
+
+class FrameTooLarge(RuntimeError):
+    """A frame over the size the low-latency transport can carry; the caller adds who sent it."""
+
+    def __init__(self, size: int, limit: int):
+        super().__init__(f"{size} bytes, over the {limit} bytes a low-latency link carries "
+                         '(set "lowLatency": false in the project\'s coSimulation to send larger frames)')
+        self.size, self.limit = size, limit
+
+
+class FramePublisher:
+    """A Zenoh publisher that refuses frames its transport would drop silently."""
+
+    def __init__(self, session: zenoh.Session, key: str, *, low_latency: bool):
+        self._pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+        self._limit = LOW_LATENCY_MAX_FRAME if low_latency else None
+
+    def put(self, payload: bytes) -> None:
+        """Send one frame; raise FrameTooLarge (nothing sent) if it cannot be carried."""
+        if self._limit is not None and len(payload) > self._limit:
+            raise FrameTooLarge(len(payload), self._limit)
+        self._pub.put(payload)
+
+    def undeclare(self) -> None:
+        """Withdraw the publisher."""
+        self._pub.undeclare()
 
 
 def _config(settings: dict[str, object]) -> zenoh.Config:
@@ -18,29 +69,42 @@ def _config(settings: dict[str, object]) -> zenoh.Config:
     return conf
 
 
-def router_config(listen: str, *, lease_ms: int = 1000, security: dict | None = None) -> zenoh.Config:
+def _transport(low_latency: bool) -> dict[str, object]:
+    # Low latency needs QoS off (it has a single queue). Each side only offers it: a peer
+    # configured otherwise still connects, over the standard transport.
+    if not low_latency:
+        return {}
+    return {"transport/unicast/lowlatency": True, "transport/unicast/qos/enabled": False}
+
+
+def router_config(listen: str, *, lease_ms: int = 1000, security: dict | None = None,
+                  low_latency: bool = True) -> zenoh.Config:
     """Config for the relay server: a Zenoh router listening on exactly one endpoint.
 
     Multicast scouting is off so that nothing beyond the named endpoint is reached; a
     short lease lets nodes notice a cut link within about a second. ``security`` adds
     ``transport/auth/usrpwd`` and ``access_control`` blocks (see fmu_bridge.security).
+    ``low_latency`` offers Zenoh's low-latency transport (frames up to
+    LOW_LATENCY_MAX_FRAME bytes).
     """
     settings: dict[str, object] = {
         "mode": "router",
         "listen/endpoints": [listen],
         "scouting/multicast/enabled": False,
         "transport/link/tx/lease": lease_ms,
+        **_transport(low_latency),
     }
     settings.update(security or {})
     return _config(settings)
 
 
 def client_config(connect: str, *, timeout_s: float = 10.0, lease_ms: int = 1000,
-                  user: str | None = None, password: str | None = None) -> zenoh.Config:
+                  user: str | None = None, password: str | None = None, low_latency: bool = True) -> zenoh.Config:
     """Config for a node: a Zenoh client of the relay server.
 
     A short link lease lets the server notice a frozen node within about a second.
     ``user``/``password`` authenticate the node to a server that requires it.
+    ``low_latency`` as in :func:`router_config`.
     """
     settings: dict[str, object] = {
         "mode": "client",
@@ -48,6 +112,7 @@ def client_config(connect: str, *, timeout_s: float = 10.0, lease_ms: int = 1000
         "connect/timeout_ms": int(timeout_s * 1000),
         "scouting/multicast/enabled": False,
         "transport/link/tx/lease": lease_ms,
+        **_transport(low_latency),
     }
     if user is not None:
         settings["transport/auth/usrpwd"] = {"user": user, "password": password or ""}

@@ -64,7 +64,9 @@ class Gateway:
         except OSError as exc:
             raise GatewayError(f"cannot listen for bridge FMUs on {host}:{port}: {exc.strerror or exc}") from None
         self.address = f"{host}:{self._listener.getsockname()[1]}"
-        self._down = session.declare_subscriber(keys.down, self._on_down)
+        # Declared when the first bridge FMU attaches: a callback subscriber on ``down`` runs
+        # inside every release the relay puts, which cost a gateway-less run ~40 µs a step.
+        self._down: zenoh.Subscriber | None = None
         self._accepter = threading.Thread(target=self._accept, name="gateway-accept", daemon=True)
         self._accepter.start()
 
@@ -113,6 +115,9 @@ class Gateway:
                 return None
             sock.settimeout(None)
             self._conns[name] = _Connection(sock, node)
+            if self._down is None:
+                # Before the node is announced, so the release that follows reaches it.
+                self._down = self._session.declare_subscriber(self._keys.down, self._on_down)
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         sock.sendall(gp.frame(gp.WELCOME))
         return node
@@ -189,8 +194,11 @@ class Gateway:
 
     def close(self, reason: str = "the server stopped") -> None:
         self._closing.set()
+        with self._lock:
+            down, self._down = self._down, None
         try:
-            self._down.undeclare()
+            if down is not None:
+                down.undeclare()
         except Exception:
             pass
         self._listener.close()

@@ -8,19 +8,19 @@ logged; the run goes on.
 from __future__ import annotations
 
 from collections import Counter
-from typing import Any, Callable
 
 import structlog
 
 from fmu_bridge import frames
 from fmu_bridge.config import Node, PortType
 
-_CHECKS: dict[PortType, Callable[[Any], bool]] = {
-    PortType.REAL: lambda v: isinstance(v, (float, int)) and not isinstance(v, bool),
-    PortType.INTEGER: lambda v: isinstance(v, int) and not isinstance(v, bool),
-    PortType.BOOLEAN: lambda v: isinstance(v, bool),
-    PortType.STRING: lambda v: isinstance(v, str),
-    PortType.BINARY: lambda v: isinstance(v, (bytes, bytearray, list)),
+# Exact types as msgpack decodes them (it never yields subclasses): REAL takes ints too.
+_TYPES: dict[PortType, tuple[type, ...]] = {
+    PortType.REAL: (float, int),
+    PortType.INTEGER: (int,),
+    PortType.BOOLEAN: (bool,),
+    PortType.STRING: (str,),
+    PortType.BINARY: (bytes, list),
 }
 
 
@@ -36,7 +36,7 @@ class Dropped(Exception):
 class Intake:
     def __init__(self, nodes: list[Node]):
         self._nodes = {n.nodeName: n for n in nodes}
-        self._checks = {n.nodeName: [(p.name, _CHECKS[p.type]) for p in n.output] for n in nodes}
+        self._types = {n.nodeName: [(p.name, _TYPES[p.type]) for p in n.output] for n in nodes}
         self.dropped: Counter[str] = Counter()
         self._log = structlog.get_logger("server.intake")
 
@@ -63,12 +63,13 @@ class Intake:
         _, _, t, values = frame.fields
         if (frame.kind == frames.SAMPLE) != spec.asynchronous:
             raise Dropped("wrong kind", f"{node} is {'' if spec.asynchronous else 'not '}asynchronous")
-        if not isinstance(t, (int, float)) or isinstance(t, bool):
+        if type(t) not in (float, int):
             raise Dropped("wrong type", f"from {node}: time {t!r} is not a number")
-        if not isinstance(values, list) or len(values) != len(self._checks[node]):
+        ports = self._types[node]
+        if type(values) is not list or len(values) != len(ports):
             raise Dropped("unknown ports", f"from {node}: {len(values) if isinstance(values, list) else values!r} "
-                                           f"values for {len(self._checks[node])} outputs")
-        for value, (port, check) in zip(values, self._checks[node]):
-            if not check(value):
+                                           f"values for {len(ports)} outputs")
+        for value, (port, types) in zip(values, ports):
+            if type(value) not in types:
                 raise Dropped("wrong type", f"{node}.{port} got {type(value).__name__} {value!r:.40}")
         return frame

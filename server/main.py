@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import platform
 import sys
 from dataclasses import asdict
@@ -31,6 +32,20 @@ def _versions() -> dict[str, str]:
     return found
 
 
+# The relay is on the critical path of every macro step: when nodes outnumber cores, a
+# server that waits for a core delays all of them (4 nodes on 2 cores: ~10 % more steps/s).
+SERVER_NICE = -10
+
+
+def _raise_priority() -> str:
+    """Ask the OS to run the server ahead of the nodes; say what it got (it needs CAP_SYS_NICE)."""
+    try:
+        os.nice(SERVER_NICE)
+    except OSError as exc:
+        return f"nice unchanged ({exc.strerror or exc})"
+    return f"nice {os.getpriority(os.PRIO_PROCESS, 0)}"
+
+
 def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = Path("runs"),
           run_dir: Path | None = None, progress_jsonl: bool = False,
           gateway: str | None = None) -> tuple[int, Path, str]:
@@ -46,7 +61,7 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         "project": loaded.name, "config": str(loaded.path) if loaded.path else None,
         "config_sha256": loaded.digest, "endpoint": endpoint, "versions": _versions(),
         "stepSize": loaded.project.coSimulation.stepSize, "stopTime": loaded.project.coSimulation.stopTime,
-        "realTime": loaded.project.coSimulation.realTime,
+        "realTime": loaded.project.coSimulation.realTime, "server_priority": _raise_priority(),
     }
     recorder = Recorder(run_dir, loaded, meta)
     on_progress = None
@@ -54,7 +69,8 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         def on_progress(p: Any) -> None:
             print(json.dumps({"progress": asdict(p), "run_dir": str(run_dir)}), flush=True)
     try:
-        session = open_session(router_config(endpoint, security=router_security(loaded)), endpoint)
+        session = open_session(router_config(endpoint, security=router_security(loaded),
+                                             low_latency=loaded.project.coSimulation.lowLatency), endpoint)
     except Exception as exc:  # SecurityError or ConnectError, both with their own message
         recorder.close("failed", reason=str(exc))
         return 3, run_dir, str(exc)

@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from fmu_bridge.config import LoadedProject
+from fmu_bridge.config import LoadedProject, PortType
 
 
 FLUSH_EVERY_S = 0.1
@@ -36,6 +36,10 @@ class Recorder:
         run_dir.mkdir(parents=True, exist_ok=True)
         project = loaded.project
         self._nodes = [n.nodeName for n in project.nodeLists]
+        # Numbers go to the CSV as they are; only nodes with boolean or byte ports need _cell.
+        plain = (PortType.REAL, PortType.INTEGER, PortType.STRING)
+        self._plain_out = {n.nodeName: all(p.type in plain for p in n.output) for n in project.nodeLists}
+        self._plain_in = {n.nodeName: all(p.type in plain for p in n.input) for n in project.nodeLists}
         self._stepping = [n.nodeName for n in project.stepping_nodes()]
         self._async_labels = [f"{r.dst_node}.{r.dst_port}" for r in loaded.routes
                               if project.node(r.src_node).asynchronous]
@@ -58,9 +62,9 @@ class Recorder:
     def row(self, step: int, t: float, mode: str, outputs: dict[str, list[Any]], inputs: dict[str, list[Any]]) -> None:
         cells: list[Any] = [step, repr(t), mode]
         for n in self._nodes:
-            cells.extend(_cell(v) for v in outputs[n])
+            cells.extend(outputs[n] if self._plain_out[n] else map(_cell, outputs[n]))
         for n in self._nodes:
-            cells.extend(_cell(v) for v in inputs[n])
+            cells.extend(inputs[n] if self._plain_in[n] else map(_cell, inputs[n]))
         self._values.writerow(cells)
         self.meta["steps"] = step + 1
 

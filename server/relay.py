@@ -17,8 +17,9 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
+import msgpack
 import structlog
 import zenoh
 
@@ -26,6 +27,7 @@ from fmu_bridge import frames
 from fmu_bridge.config import FREE_MODE, LoadedProject
 from fmu_bridge.inbox import Inbox
 from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
+from fmu_bridge.session import FramePublisher, FrameTooLarge
 
 from server.async_sources import SampleHistory
 from server.coordinator import Coordinator
@@ -105,8 +107,7 @@ class Relay:
 
     def run(self) -> None:
         self.inbox = Inbox(self.session, self.keys.up_all, self._local_key)
-        self.release = self.session.declare_publisher(
-            self.keys.down, congestion_control=zenoh.CongestionControl.BLOCK, express=True)
+        self.release = FramePublisher(self.session, self.keys.down, low_latency=self.cosim.lowLatency)
         token = self.session.liveliness().declare_token(self.keys.alive(SERVER_TOKEN))
         watcher = self.session.liveliness().declare_subscriber(self.keys.alive_all, self._on_liveliness, history=True)
         status = self.session.declare_queryable(self.keys.status, self._on_status)
@@ -203,7 +204,10 @@ class Relay:
                     del self.lost[node]
                     self.reattached[node] = self.reattached.get(node, 0) + 1
                     if self._last_release is not None:
-                        self.release.put(frames.encode(frames.REPLAY, node, self._last_release))
+                        try:
+                            self.release.put(frames.encode(frames.REPLAY, node, self._last_release))
+                        except FrameTooLarge as exc:
+                            raise RunError(f"cannot replay the last release to {node!r}: {exc}") from None
             elif node in self.alive:
                 self.alive.discard(node)
                 if step >= 0 and self.cosim.linkGrace > 0:
@@ -245,13 +249,13 @@ class Relay:
                     raise RunError(f"node {node!r} was lost at step {step} (t={self._time(step):g} s) and did not "
                                    f"come back within the link grace of {grace:g} s")
                 wait = min(wait, since + grace - time.monotonic() + 0.01)
-            msg = self.inbox.recv(max(wait, 0.0))
+            msg = self.inbox.recv(wait if wait > 0.0 else 0.0)
             if msg is None:
                 if self.lost:
                     continue  # the grace check above reports it
                 raise RunError(f"timed out after {self.cosim.stepTimeout:g} s at step {step} "
                                f"(t={self._time(step):g} s) waiting for outputs of {', '.join(sorted(pending))}")
-            got = self._handle_side_message(*msg, step=step, collecting=True)
+            got = self._handle_side_message(msg[0], msg[1], step, True)
             if got is None:
                 continue
             node, frame = got
@@ -282,12 +286,27 @@ class Relay:
         self.recorder.meta["event_localisation"] = f"rollback and bisection to {tol:g} s"
         return True
 
-    def _release(self, k: int, t: float, h: float, mode: str) -> tuple[dict[str, float], float]:
-        """Release step k (t → t+h) and gather the outputs at t+h; return arrivals and wait."""
+    def _release(self, k: int, t: float, h: float, mode: str,
+                 meanwhile: Callable[[], None] | None = None) -> tuple[dict[str, float], float]:
+        """Release step k (t → t+h) and gather the outputs at t+h; return arrivals and wait.
+
+        ``meanwhile`` runs after the release is sent, while the nodes integrate: work there
+        (recording the point) is off the barrier's critical path.
+        """
         inputs = {n: self.router.inputs[n] for n in self.stepping}
         released_at = time.perf_counter()
         self._last_release = frames.encode(frames.STEP, k, t, h, mode, inputs, self.coordinator.driven_nodes())
-        self.release.put(self._last_release)
+        failure = None
+        try:
+            self.release.put(self._last_release)
+        except FrameTooLarge as exc:
+            sizes = sorted(((len(msgpack.packb(v, use_bin_type=True)), n) for n, v in inputs.items()), reverse=True)
+            largest = ", ".join(f"{n} ({size} bytes)" for size, n in sizes[:3])
+            failure = RunError(f"the release of step {k} (t={t:g} s) is {exc}; largest inputs, by node: {largest}")
+        if meanwhile is not None:
+            meanwhile()
+        if failure is not None:
+            raise failure
         arrivals = self._collect(k + 1, released_at)
         return arrivals, time.perf_counter() - released_at
 
@@ -347,14 +366,13 @@ class Relay:
             view = OutputView(self.router.output_index, self.outputs)
             switch = self.coordinator.update(k, t, view)
             if switch is not None:
-                record = switch.as_record()
+                entry = switch.as_record()
                 if localised:
-                    record["localised"] = localised
-                self.recorder.event(record)
+                    entry["localised"] = localised
+                self.recorder.event(entry)
                 self._log.info("mode switch", step=k, t=t, name=switch.event, to=switch.to_mode, values=switch.values)
             mode = self.coordinator.mode
             ages = self.router.route(mode, t, self.outputs, self.histories)
-            self.recorder.row(k, t, mode, self.outputs, self.router.inputs)
             lateness = None
             if rt is not None:
                 target = wall0 + (t - cosim.startTime) * rt
@@ -363,19 +381,25 @@ class Relay:
                 if ahead > 0:
                     time.sleep(ahead)
             holder = max(arrivals, key=arrivals.get) if arrivals else ""
-            self.recorder.timing(k, t, wait, holder, lateness, arrivals, ages)
             self.progress.step, self.progress.t, self.progress.mode = k, t, mode
             now = time.perf_counter()
             if self._on_progress is not None and now - last_progress >= self._progress_every:
                 last_progress = now
                 self.progress.steps_per_s = k / (now - perf0) if now > perf0 else 0.0
                 self._on_progress(self.progress)
+
+            def record() -> None:
+                # Point k as it is now: called before the next collect replaces outputs and arrivals.
+                self.recorder.row(k, t, mode, self.outputs, self.router.inputs)
+                self.recorder.timing(k, t, wait, holder, lateness, arrivals, ages)
+
             if t >= end or self._stop_requested.is_set():
+                record()
                 break
             next_t = min(origin + (j + 1) * H, cosim.stopTime)
             h = next_t - t
             watched = localise and self.coordinator.pending_guard_holds(view)
-            arrivals, wait = self._release(k, t, h, mode)
+            arrivals, wait = self._release(k, t, h, mode, meanwhile=record)
             localised = {}
             if localise:
                 h_used, arrivals, wait, localised = self._localise(k, t, h, mode, watched, arrivals, wait)

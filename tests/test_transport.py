@@ -1,0 +1,52 @@
+"""The low-latency transport: its frame limit is enforced with a clear error, and can be lifted."""
+
+from __future__ import annotations
+
+from tests.helpers import hycosim, meta, read_rows, write_project
+
+LIMIT = 32 * 1024
+
+
+def _text_node(name: str, uid: int, size: int, outputs: list[str], inputs: list[str] | None = None) -> dict:
+    return {"nodeName": name, "UID": uid, "model": "tests.nodes:Text", "parameters": {"size": size},
+            "input": [{"name": p, "type": "String"} for p in inputs or []],
+            "output": [{"name": p, "type": "String"} for p in outputs]}
+
+
+def _run(tmp_path, nodes, links=None, **cosim):
+    cfg = write_project(tmp_path / "p.json", nodes, links,
+                        cosim={"stepSize": 0.1, "stopTime": 0.5, "stepTimeout": 10.0, **cosim})
+    res = hycosim("run", str(cfg), "--runs-dir", str(tmp_path / "runs"), "--no-progress", timeout=120)
+    return res, sorted((tmp_path / "runs").iterdir())[0]
+
+
+def test_outputs_over_the_low_latency_limit_stop_the_run_naming_node_and_port(tmp_path):
+    res, run_dir = _run(tmp_path, [_text_node("big", 1, 40_000, ["small", "blob"])])
+    text = res.stdout + res.stderr
+    assert res.returncode != 0
+    assert "'big'" in text and "blob (40" in text and f"{LIMIT} bytes" in text and '"lowLatency": false' in text
+    assert meta(run_dir)["status"] == "failed"
+
+
+def test_a_release_over_the_limit_names_the_node_whose_inputs_fill_it(tmp_path):
+    # 20 kB out of "src" is within the limit; fanned out to two inputs of "dst", the release is not.
+    nodes = [_text_node("src", 1, 20_000, ["s"]), _text_node("dst", 2, 5, ["y"], inputs=["a", "b"])]
+    links = [{"from": "src.s", "to": "dst.a"}, {"from": "src.s", "to": "dst.b"}]
+    res, run_dir = _run(tmp_path, nodes, links)
+    text = res.stdout + res.stderr
+    assert res.returncode == 3
+    assert "release of step 0" in text and "dst (40" in text and '"lowLatency": false' in text
+    rows = read_rows(run_dir)  # the point whose release failed is still recorded
+    assert [r["step"] for r in rows] == ["0"] and rows[0]["dst.a"].startswith("0:xxx")
+
+
+def test_the_standard_transport_carries_large_frames(tmp_path):
+    nodes = [_text_node("src", 1, 40_000, ["s"]), _text_node("dst", 2, 5, ["y"], inputs=["a", "b"])]
+    links = [{"from": "src.s", "to": "dst.a"}, {"from": "src.s", "to": "dst.b"}]
+    res, run_dir = _run(tmp_path, nodes, links, lowLatency=False)
+    assert res.returncode == 0, res.stdout + res.stderr
+    rows = read_rows(run_dir)
+    assert len(rows) == 6
+    # Jacobi: the input at step k is src's output at step k, which counts steps in its first characters.
+    assert [r["dst.a"][:2] for r in rows] == [f"{k}:" for k in range(6)]
+    assert all(len(r["dst.b"]) == 40_000 for r in rows)
