@@ -32,20 +32,6 @@ def _versions() -> dict[str, str]:
     return found
 
 
-# The relay is on the critical path of every macro step: when nodes outnumber cores, a
-# server that waits for a core delays all of them (4 nodes on 2 cores: ~10 % more steps/s).
-SERVER_NICE = -10
-
-
-def _raise_priority() -> str:
-    """Ask the OS to run the server ahead of the nodes; say what it got (it needs CAP_SYS_NICE)."""
-    try:
-        os.nice(SERVER_NICE)
-    except OSError as exc:
-        return f"nice unchanged ({exc.strerror or exc})"
-    return f"nice {os.getpriority(os.PRIO_PROCESS, 0)}"
-
-
 def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = Path("runs"),
           run_dir: Path | None = None, progress_jsonl: bool = False,
           gateway: str | None = None) -> tuple[int, Path, str]:
@@ -61,7 +47,8 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         "project": loaded.name, "config": str(loaded.path) if loaded.path else None,
         "config_sha256": loaded.digest, "endpoint": endpoint, "versions": _versions(),
         "stepSize": loaded.project.coSimulation.stepSize, "stopTime": loaded.project.coSimulation.stopTime,
-        "realTime": loaded.project.coSimulation.realTime, "server_priority": _raise_priority(),
+        "realTime": loaded.project.coSimulation.realTime,
+        "lowLatency": loaded.project.coSimulation.lowLatency, "zenoh_runtime": os.environ.get("ZENOH_RUNTIME"),
     }
     recorder = Recorder(run_dir, loaded, meta)
     on_progress = None

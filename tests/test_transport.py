@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from tests.helpers import hycosim, meta, read_rows, write_project
+from tests.helpers import hycosim, meta, read_rows, run_project, write_project
 
 LIMIT = 32 * 1024
 
@@ -50,3 +50,10 @@ def test_the_standard_transport_carries_large_frames(tmp_path):
     # Jacobi: the input at step k is src's output at step k, which counts steps in its first characters.
     assert [r["dst.a"][:2] for r in rows] == [f"{k}:" for k in range(6)]
     assert all(len(r["dst.b"]) == 40_000 for r in rows)
+
+
+def test_runs_record_their_transport(tmp_path):
+    cfg = write_project(tmp_path / "p.json", [{"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]}],
+                        cosim={"stepSize": 0.1, "stopTime": 0.3})
+    m = meta(run_project(cfg, tmp_path / "runs"))
+    assert m["lowLatency"] is True and "handover" in m["zenoh_runtime"]

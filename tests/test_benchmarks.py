@@ -1,0 +1,23 @@
+"""The barrier benchmark runs end to end at a small scale and reports what --json promises."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+from tests.helpers import REPO, env
+
+
+def test_barrier_benchmark_json_reports_medians_of_its_runs():
+    res = subprocess.run([sys.executable, "benchmarks/barrier.py", "--n", "2", "--steps", "200", "--repeat", "2",
+                          "--systems", "hycosim", "zenoh-floor", "--json"],
+                         capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
+    assert res.returncode == 0, res.stderr
+    lines = [json.loads(line) for line in res.stdout.splitlines()]
+    assert [(r["system"], r["n"]) for r in lines] == [("hycosim", 2), ("zenoh-floor", 2)]
+    for r in lines:
+        assert set(r) == {"system", "n", "steps_per_s", "runs"}
+        assert len(r["runs"]) == 2 and all(x > 0 for x in r["runs"])
+        assert min(r["runs"]) <= r["steps_per_s"] <= max(r["runs"])
+
