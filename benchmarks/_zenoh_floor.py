@@ -1,7 +1,7 @@
 """The floor for a Zenoh barrier in Python: one step message out, N replies back, nothing else.
 
 Same transport choices as hycosim (its router and client session configs, so the
-low-latency transport; its shared Zenoh runtime; BLOCK + express publishers;
+low-latency transport; BLOCK + express publishers;
 FifoChannel read in the main thread; msgpack) but no config, routing, checking or recording.
 """
 
@@ -12,7 +12,7 @@ import time
 import msgpack
 import zenoh
 
-from fmu_bridge.session import client_config, prefer_shared_runtime, router_config
+from fmu_bridge.session import client_config, router_config
 
 
 def _conf(endpoint: str, router: bool) -> zenoh.Config:
@@ -55,7 +55,6 @@ def server(endpoint: str, n: int, steps: int) -> float:
 
 
 if __name__ == "__main__":
-    prefer_shared_runtime()
     if sys.argv[1] == "node":
         node(sys.argv[2], int(sys.argv[3]))
     else:

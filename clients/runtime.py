@@ -11,7 +11,6 @@ from __future__ import annotations
 import time
 from typing import Any
 
-import msgpack
 import structlog
 import zenoh
 
@@ -124,9 +123,7 @@ class NodeRuntime:
         except FrameTooLarge as exc:
             frame = frames.decode(payload)
             values = frame.fields[3] if frame.kind in (frames.OUTPUTS, frames.SAMPLE) else []
-            sizes = sorted(((len(msgpack.packb(v, use_bin_type=True)), port) for (port, _), v in zip(self._out_ports, values)),
-                           reverse=True)
-            largest = ", ".join(f"{port} ({size} bytes)" for size, port in sizes[:3]) or "-"
+            largest = frames.largest_values(zip((port for port, _ in self._out_ports), values))
             raise NodeRunError(f"node {self.name!r}: its outputs at step {self.steps} are {exc}; "
                                f"largest: {largest}") from None
 

@@ -21,6 +21,7 @@ Kinds and layouts (after version and kind):
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any, NamedTuple
 
 import msgpack
@@ -73,3 +74,9 @@ def decode(payload: bytes) -> Frame:
     if len(fields) != _ARITY[kind]:
         raise FrameError(f"frame kind {kind} has {len(fields)} fields, expected {_ARITY[kind]}")
     return Frame(kind, fields)
+
+
+def largest_values(named: Iterable[tuple[str, Any]], count: int = 3) -> str:
+    """``name (N bytes), ...`` for the ``count`` values that take most room in a frame."""
+    sizes = sorted(((len(msgpack.packb(v, use_bin_type=True)), name) for name, v in named), reverse=True)
+    return ", ".join(f"{name} ({size} bytes)" for size, name in sizes[:count]) or "-"

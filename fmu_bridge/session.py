@@ -3,32 +3,12 @@
 from __future__ import annotations
 
 import json
-import os
 
 import zenoh
 
 # Zenoh's low-latency transport writes each message in one batch and cannot fragment: on
 # loopback a 50 kB message was dropped without an error. Frames are kept well below that.
 LOW_LATENCY_MAX_FRAME = 32 * 1024
-
-
-# Zenoh runs its I/O on five Tokio runtimes (tx, rx, acceptor, net, app), each with its
-# own threads. A hycosim process exchanges a few small frames per macro step; handing the
-# receiving side (rx, acceptor, net) over to the app runtime's one worker saves a
-# cross-thread wake-up on every message (2 cores, ring of gains: +22 % macro steps/s with
-# two nodes, +32 % with four, medians of four runs each). tx keeps its own thread: while a link is cut, its
-# writer holds the thread it runs on, and with tx handed over too, every other link of the
-# process missed its lease meanwhile (tests/test_deployment.py's link cuts).
-SHARED_RUNTIME = "(rx: (handover: app), acc: (handover: app), net: (handover: app), app: (worker_threads: 1))"
-
-
-def prefer_shared_runtime() -> None:
-    """Ask Zenoh to receive on one shared worker thread, unless ``ZENOH_RUNTIME`` is set.
-
-    Zenoh reads the variable once, when its runtime first starts: call this before the
-    process opens its first session. Child processes inherit it.
-    """
-    os.environ.setdefault("ZENOH_RUNTIME", SHARED_RUNTIME)
 
 
 class ConnectError(RuntimeError):
@@ -56,10 +36,6 @@ class FramePublisher:
         if self._limit is not None and len(payload) > self._limit:
             raise FrameTooLarge(len(payload), self._limit)
         self._pub.put(payload)
-
-    def undeclare(self) -> None:
-        """Withdraw the publisher."""
-        self._pub.undeclare()
 
 
 def _config(settings: dict[str, object]) -> zenoh.Config:

@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-import msgpack
 import structlog
 import zenoh
 
@@ -296,17 +295,14 @@ class Relay:
         inputs = {n: self.router.inputs[n] for n in self.stepping}
         released_at = time.perf_counter()
         self._last_release = frames.encode(frames.STEP, k, t, h, mode, inputs, self.coordinator.driven_nodes())
-        failure = None
         try:
             self.release.put(self._last_release)
         except FrameTooLarge as exc:
-            sizes = sorted(((len(msgpack.packb(v, use_bin_type=True)), n) for n, v in inputs.items()), reverse=True)
-            largest = ", ".join(f"{n} ({size} bytes)" for size, n in sizes[:3])
-            failure = RunError(f"the release of step {k} (t={t:g} s) is {exc}; largest inputs, by node: {largest}")
-        if meanwhile is not None:
-            meanwhile()
-        if failure is not None:
-            raise failure
+            raise RunError(f"the release of step {k} (t={t:g} s) is {exc}; largest inputs, by node: "
+                           f"{frames.largest_values(inputs.items())}") from None
+        finally:
+            if meanwhile is not None:
+                meanwhile()  # a release that could not be sent still leaves its point recorded
         arrivals = self._collect(k + 1, released_at)
         return arrivals, time.perf_counter() - released_at
 
