@@ -1,8 +1,8 @@
 """The floor for a Zenoh barrier in Python: one step message out, N replies back, nothing else.
 
 Same transport choices as hycosim (its router and client session configs, so the
-low-latency transport; BLOCK + express publishers;
-FifoChannel read in the main thread; msgpack) but no config, routing, checking or recording.
+low-latency transport; BLOCK + express publishers; the same reader, an Inbox that polls
+before it blocks, in the main thread; msgpack) but no config, routing, checking or recording.
 """
 
 import subprocess
@@ -12,6 +12,7 @@ import time
 import msgpack
 import zenoh
 
+from fmu_bridge.inbox import Inbox
 from fmu_bridge.session import client_config, router_config
 
 
@@ -22,19 +23,20 @@ def _conf(endpoint: str, router: bool) -> zenoh.Config:
 def node(endpoint: str, i: int) -> None:
     with zenoh.open(_conf(endpoint, False)) as s:
         pub = s.declare_publisher(f"floor/out/{i}", congestion_control=zenoh.CongestionControl.BLOCK, express=True)
-        sub = s.declare_subscriber("floor/step", zenoh.handlers.FifoChannel(64))
+        inbox = Inbox(s, "floor/step/**", f"floor/step/local{i}")
         s.liveliness().declare_token(f"floor/alive/{i}")
         while True:
-            m = msgpack.unpackb(sub.recv().payload.to_bytes())
+            m = msgpack.unpackb(inbox.recv(60.0)[1])
             if m[0] < 0:
                 break
             pub.put(msgpack.packb([m[0], i, 0.5 * m[1][i] + 1.0]))
+        inbox.close()
 
 
 def server(endpoint: str, n: int, steps: int) -> float:
     with zenoh.open(_conf(endpoint, True)) as s:
         pub = s.declare_publisher("floor/step", congestion_control=zenoh.CongestionControl.BLOCK, express=True)
-        sub = s.declare_subscriber("floor/out/*", zenoh.handlers.FifoChannel(256))
+        inbox = Inbox(s, "floor/out/**", "floor/out/local")
         alive = s.liveliness().declare_subscriber("floor/alive/*", zenoh.handlers.FifoChannel(64), history=True)
         procs = [subprocess.Popen([sys.executable, __file__, "node", endpoint, str(i)]) for i in range(n)]
         seen = set()
@@ -45,12 +47,13 @@ def server(endpoint: str, n: int, steps: int) -> float:
         for k in range(steps):
             pub.put(msgpack.packb([k, [y[(i - 1) % n] for i in range(n)]]))
             for _ in range(n):
-                _, i, value = msgpack.unpackb(sub.recv().payload.to_bytes())
+                _, i, value = msgpack.unpackb(inbox.recv(60.0)[1])
                 y[i] = value
         rate = steps / (time.perf_counter() - t0)
         pub.put(msgpack.packb([-1, []]))
         for p in procs:
             p.wait(timeout=30)
+        inbox.close()
     return rate
 
 
