@@ -1,10 +1,12 @@
 """The floor for a Zenoh barrier in Python: one step message out, N replies back, nothing else.
 
 Same transport choices as hycosim (its router and client session configs, so the
-low-latency transport; BLOCK + express publishers; the same reader, an Inbox that polls
-before it blocks, in the main thread; msgpack) but no config, routing, checking or recording.
+low-latency transport; BLOCK + express publishers; the same reader, an Inbox in the main
+thread that polls before it blocks when hycosim's "auto" waitStrategy would; msgpack) but
+no config, routing, checking or recording.
 """
 
+import os
 import subprocess
 import sys
 import time
@@ -12,6 +14,7 @@ import time
 import msgpack
 import zenoh
 
+from fmu_bridge.config import polls_before_blocking
 from fmu_bridge.inbox import Inbox
 from fmu_bridge.session import client_config, router_config
 
@@ -20,10 +23,14 @@ def _conf(endpoint: str, router: bool) -> zenoh.Config:
     return router_config(endpoint) if router else client_config(endpoint)
 
 
-def node(endpoint: str, i: int) -> None:
+def _polls(n: int) -> bool:
+    return polls_before_blocking("auto", n + 1, os.cpu_count())
+
+
+def node(endpoint: str, i: int, n: int) -> None:
     with zenoh.open(_conf(endpoint, False)) as s:
         pub = s.declare_publisher(f"floor/out/{i}", congestion_control=zenoh.CongestionControl.BLOCK, express=True)
-        inbox = Inbox(s, "floor/step/**", f"floor/step/local{i}")
+        inbox = Inbox(s, "floor/step/**", f"floor/step/local{i}", poll=_polls(n))
         s.liveliness().declare_token(f"floor/alive/{i}")
         while True:
             m = msgpack.unpackb(inbox.recv(60.0)[1])
@@ -36,9 +43,9 @@ def node(endpoint: str, i: int) -> None:
 def server(endpoint: str, n: int, steps: int) -> float:
     with zenoh.open(_conf(endpoint, True)) as s:
         pub = s.declare_publisher("floor/step", congestion_control=zenoh.CongestionControl.BLOCK, express=True)
-        inbox = Inbox(s, "floor/out/**", "floor/out/local")
+        inbox = Inbox(s, "floor/out/**", "floor/out/local", poll=_polls(n))
         alive = s.liveliness().declare_subscriber("floor/alive/*", zenoh.handlers.FifoChannel(64), history=True)
-        procs = [subprocess.Popen([sys.executable, __file__, "node", endpoint, str(i)]) for i in range(n)]
+        procs = [subprocess.Popen([sys.executable, __file__, "node", endpoint, str(i), str(n)]) for i in range(n)]
         seen = set()
         while len(seen) < n:
             seen.add(str(alive.recv().key_expr))
@@ -59,6 +66,6 @@ def server(endpoint: str, n: int, steps: int) -> float:
 
 if __name__ == "__main__":
     if sys.argv[1] == "node":
-        node(sys.argv[2], int(sys.argv[3]))
+        node(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))
     else:
         print(server(sys.argv[2], int(sys.argv[3]), int(sys.argv[4])), flush=True)

@@ -8,6 +8,7 @@ server going away. Every wait has a timeout.
 
 from __future__ import annotations
 
+import os
 import time
 from typing import Any
 
@@ -91,7 +92,8 @@ class NodeRuntime:
                                    "wrong credentials are refused this way too)") from None
             raise
         try:
-            self.inbox = Inbox(session, self.keys.down, self.keys.down)
+            self.inbox = Inbox(session, self.keys.down, self.keys.down,
+                               poll=self.loaded.project.polls_before_blocking(os.cpu_count()))
             self._publisher = FramePublisher(session, self.keys.up(self.name), low_latency=self.cosim.lowLatency)
             watch = session.liveliness().declare_subscriber(self.keys.alive(SERVER_TOKEN), self._on_server_liveliness)
             # Declared after the subscriber: the server starts once it sees this token.

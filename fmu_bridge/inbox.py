@@ -7,12 +7,13 @@ thread puts a session-local wake sample on the same key space when a deadline pa
 other threads hand events to the loop the same way (:meth:`inject`), so the loop
 has exactly one place to wait.
 
-Before blocking, ``recv`` polls the channel a few times, yielding the CPU between polls:
-a sample that comes while it polls is taken without the reading thread going to sleep
-and being woken again, which on a small machine costs more than the rest of a
-macro step's Python. The number of polls adapts: it doubles when polling caught a
-sample and halves when the thread had to block, so a node that waits long for each
-release (many nodes, slow peers, real-time pacing) soon polls only a few times.
+With ``poll=True`` (the project's ``waitStrategy``), ``recv`` polls the channel before it
+blocks, yielding the CPU between polls: a sample that comes while it polls is taken
+without the reading thread going to sleep and being woken again, which on a small
+machine costs more than the rest of a macro step's Python. The number of polls adapts:
+it doubles when polling caught a sample and halves when the thread had to block, down
+to none, with a short probe every so often; so a process that waits long for each frame
+(slow peers, real-time pacing) soon stops polling.
 """
 
 from __future__ import annotations
@@ -24,25 +25,29 @@ import time
 import zenoh
 
 _WAKE = b"\x00wake"
-# Each poll is a try_recv and a sched_yield, about 1–2 µs when nothing else runs.
-# Measured with benchmarks/barrier.py (medians of three interleaved runs, 2 cores):
-# 8/400 gave +30 % steps/s at N = 2, +23 % at N = 4 and no loss at N = 16, where a
-# fixed 400 polls per wait lost half the rate to polling.
-_POLLS_MIN = 8
+# A poll is a sched_yield and a try_recv: 1–2 µs when no other process is runnable, a
+# hand-over of the core to one that is. Measured with benchmarks/barrier.py on 2 cores
+# (medians of interleaved runs): +20–50 % steps/s at N = 2, about even at N = 4, a fifth
+# lost at N = 16; a fixed 400 polls per wait lost half the rate at N = 16.
+_PROBE = 8
+_PROBE_EVERY = 16
 _POLLS_MAX = 400
 
 
 class Inbox:
     """Samples for ``key_expr`` in arrival order; ``recv(timeout)`` returns None on timeout."""
 
-    def __init__(self, session: zenoh.Session, key_expr: str, local_key: str, capacity: int = 8192):
+    def __init__(self, session: zenoh.Session, key_expr: str, local_key: str, capacity: int = 8192,
+                 poll: bool = False):
         # local_key must match key_expr; it carries wake-ups and injected events.
         self._session = session
         self._local_key = local_key
         self._sub = session.declare_subscriber(key_expr, zenoh.handlers.FifoChannel(capacity))
         self._deadline: float | None = None
         self._last_wake = 0.0
-        self._polls = _POLLS_MIN
+        self._poll = poll
+        self._polls = _PROBE if poll else 0
+        self._idle_waits = 0
         self._closed = threading.Event()
         self._watchdog = threading.Thread(target=self._watch, name="inbox-watchdog", daemon=True)
         self._watchdog.start()
@@ -86,13 +91,21 @@ class Inbox:
             self._deadline = None
 
     def _next(self) -> zenoh.Sample:
-        for _ in range(self._polls):
+        sample = self._sub.try_recv()
+        if sample is not None:  # already queued: says nothing about polling
+            return sample
+        polls = self._polls
+        if polls == 0 and self._poll:
+            self._idle_waits += 1
+            if self._idle_waits % _PROBE_EVERY == 0:
+                polls = _PROBE
+        for _ in range(polls):
+            os.sched_yield()
             sample = self._sub.try_recv()
             if sample is not None:
-                self._polls = min(_POLLS_MAX, 2 * self._polls)
+                self._polls = min(_POLLS_MAX, max(_PROBE, 2 * polls))
                 return sample
-            os.sched_yield()
-        self._polls = max(_POLLS_MIN, self._polls // 2)
+        self._polls = polls // 2 if polls > _PROBE else 0
         return self._sub.recv()
 
     def close(self) -> None:

@@ -48,7 +48,8 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         "config_sha256": loaded.digest, "endpoint": endpoint, "versions": _versions(),
         "stepSize": loaded.project.coSimulation.stepSize, "stopTime": loaded.project.coSimulation.stopTime,
         "realTime": loaded.project.coSimulation.realTime,
-        "lowLatency": loaded.project.coSimulation.lowLatency, "zenoh_runtime": os.environ.get("ZENOH_RUNTIME"),
+        "lowLatency": loaded.project.coSimulation.lowLatency,
+        "waitStrategy": loaded.project.coSimulation.waitStrategy, "zenoh_runtime": os.environ.get("ZENOH_RUNTIME"),
     }
     recorder = Recorder(run_dir, loaded, meta)
     on_progress = None

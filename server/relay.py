@@ -13,6 +13,7 @@ Read top to bottom, :meth:`Relay.run` is the whole algorithm (Jacobi coupling):
 from __future__ import annotations
 
 import json
+import os
 import threading
 import time
 from dataclasses import dataclass, field
@@ -105,7 +106,9 @@ class Relay:
     # --- the loop -----------------------------------------------------------------
 
     def run(self) -> None:
-        self.inbox = Inbox(self.session, self.keys.up_all, self._local_key)
+        polls = self.project.polls_before_blocking(os.cpu_count())
+        self.recorder.meta["server_polls"] = polls
+        self.inbox = Inbox(self.session, self.keys.up_all, self._local_key, poll=polls)
         self.release = FramePublisher(self.session, self.keys.down, low_latency=self.cosim.lowLatency)
         token = self.session.liveliness().declare_token(self.keys.alive(SERVER_TOKEN))
         watcher = self.session.liveliness().declare_subscriber(self.keys.alive_all, self._on_liveliness, history=True)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from fmu_bridge.config import ConfigError, load_project, server_endpoint
+from fmu_bridge.config import ConfigError, load_project, polls_before_blocking, server_endpoint
 from tests.helpers import REPO, hycosim
 
 GOOD = {
@@ -83,6 +83,8 @@ CASES = {
                          "not allowed"),
     "unknown mode": (lambda d: d["linkLists"][1].update(activeIn=["grab"]), "linkLists[1].activeIn", "unknown mode 'grab'"),
     "event drives unknown node": (lambda d: d["events"][0].update(drives="ghost"), "events[0].drives", "unknown node"),
+    "unknown wait strategy": (lambda d: d.update(coSimulation={"waitStrategy": "spin"}),
+                              "coSimulation.waitStrategy", "Input should be 'auto', 'block' or 'yield'"),
     "bad port type": (lambda d: d["nodeLists"][1].update(input=[{"name": "u", "type": "Float"}]),
                       "nodeLists[1].input[0].type", "Input should be"),
 }
@@ -132,3 +134,17 @@ def test_server_ip_forms():
     assert server_endpoint("10.0.0.5") == "tcp/10.0.0.5:7447"
     assert server_endpoint("10.0.0.5:9000") == "tcp/10.0.0.5:9000"
     assert server_endpoint("tcp/127.0.0.1:7448") == "tcp/127.0.0.1:7448"
+
+
+def test_wait_strategy_polls_only_where_the_processes_fit_the_cores(tmp_path):
+    # auto: the server and the nodes may outnumber the cores by one.
+    assert polls_before_blocking("auto", 3, 2) is True
+    assert polls_before_blocking("auto", 4, 2) is False
+    assert polls_before_blocking("auto", 17, 16) is True
+    assert polls_before_blocking("auto", 2, None) is True
+    assert polls_before_blocking("yield", 17, 2) is True
+    assert polls_before_blocking("block", 2, 64) is False
+    doc = copy.deepcopy(GOOD)  # 3 nodes and the server: 4 processes
+    doc["coSimulation"] = {"waitStrategy": "auto"}
+    project = load_project(_write(tmp_path, doc)).project
+    assert project.polls_before_blocking(2) is False and project.polls_before_blocking(3) is True

@@ -5,6 +5,7 @@ from __future__ import annotations
 import threading
 import time
 
+import pytest
 import zenoh
 
 from fmu_bridge.inbox import Inbox
@@ -19,9 +20,10 @@ def _pair():
     return router, client
 
 
-def test_samples_from_another_session_arrive_complete_and_in_order_while_polling_and_blocking():
+@pytest.mark.parametrize("poll", [True, False])
+def test_samples_from_another_session_arrive_complete_and_in_order(poll):
     router, client = _pair()
-    inbox = Inbox(router, "t/up/**", "t/up/local")
+    inbox = Inbox(router, "t/up/**", "t/up/local", poll=poll)
     try:
         pub = FramePublisher(client, "t/up/a", low_latency=True)
         for _ in range(50):  # until the subscription has reached the client
@@ -54,21 +56,86 @@ def test_samples_from_another_session_arrive_complete_and_in_order_while_polling
         router.close()
 
 
-def test_a_long_wait_blocks_instead_of_polling_and_times_out():
-    router, client = _pair()
-    inbox = Inbox(router, "t/up/**", "t/up/local")
+class _Scripted:
+    """A channel whose samples come after a given number of empty polls.
+
+    Whether a real sample comes while a reader polls depends on the scheduler; the
+    adaptation rule is checked against a script instead, behind a real Inbox.
+    """
+
+    def __init__(self, empties: list[int]):
+        self.empties, self.blocked, self.tries = list(empties), 0, 0
+
+    def try_recv(self):
+        self.tries += 1
+        if self.empties and self.empties[0] > 0:
+            self.empties[0] -= 1
+            return None
+        if self.empties:
+            self.empties.pop(0)
+            return _Sample()
+        return None
+
+    def recv(self):
+        self.blocked += 1
+        self.empties.pop(0)
+        return _Sample()
+
+    def undeclare(self):
+        pass
+
+
+class _Sample:
+    key_expr = "t/up/a"
+    payload = zenoh.ZBytes(b"x")
+
+
+def _scripted_inbox(router, poll: bool, empties: list[int]) -> tuple[Inbox, _Scripted]:
+    inbox = Inbox(router, "t/up/**", "t/up/local", poll=poll)
+    inbox._sub.undeclare()
+    inbox._sub = script = _Scripted(empties)
+    return inbox, script
+
+
+def test_polls_follow_how_soon_frames_come_and_stop_when_waits_are_long():
+    router = open_session(router_config(free_endpoint()), "router")
     try:
-        for _ in range(20):  # a fast stream grows the number of polls before blocking ...
-            inbox.inject(b"x")
-            assert inbox.recv(timeout=1.0) == ("t/up/local", b"x")
-        assert inbox.polls > 8
+        # Frames that come after 3 empty polls: the reader keeps polling and never blocks.
+        inbox, script = _scripted_inbox(router, True, [3] * 50)
+        for _ in range(50):
+            assert inbox.recv(timeout=1.0) == ("t/up/a", b"x")
+        assert script.blocked == 0 and inbox.polls == 400  # doubled from 8, capped
+        inbox.close()
+        # Frames that come only after 10,000 polls: it blocks, halving its polls down to none ...
+        inbox, script = _scripted_inbox(router, True, [10_000] * 40)
+        for _ in range(40):
+            assert inbox.recv(timeout=1.0) == ("t/up/a", b"x")
+        assert inbox.polls == 0
+        # ... probing again only every 16th wait: one look per wait, 8 polls at the first
+        # and at the two probes, not 8 per wait.
+        assert script.blocked == 40 and script.tries == 40 + 3 * 8
+        inbox.close()
+        # A blocking reader never polls.
+        inbox, script = _scripted_inbox(router, False, [3] * 20)
+        for _ in range(20):
+            assert inbox.recv(timeout=1.0) == ("t/up/a", b"x")
+        assert script.blocked == 20 and inbox.polls == 0
+        inbox.close()
+    finally:
+        router.close()
+
+
+def test_a_polling_reader_waiting_long_costs_no_cpu_and_times_out():
+    router, client = _pair()
+    inbox = Inbox(router, "t/up/**", "t/up/local", poll=True)
+    try:
         cpu0, wall0 = time.process_time(), time.monotonic()
-        for _ in range(6):  # ... and waits that end in a timeout shrink it again
+        for _ in range(6):
             assert inbox.recv(timeout=0.1) is None
         wall = time.monotonic() - wall0
         cpu = time.process_time() - cpu0
         assert wall >= 0.6
-        assert inbox.polls == 8
+        assert inbox.polls == 0
         # Every thread of the process counts here: a reader that kept polling would use ~all of it.
         assert cpu < 0.5 * wall, f"{cpu:.2f} s of CPU in {wall:.2f} s of waiting"
     finally:

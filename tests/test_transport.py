@@ -57,3 +57,4 @@ def test_runs_record_their_transport(tmp_path):
                         cosim={"stepSize": 0.1, "stopTime": 0.3})
     m = meta(run_project(cfg, tmp_path / "runs"))
     assert m["lowLatency"] is True and "zenoh_runtime" in m
+    assert m["waitStrategy"] == "auto" and isinstance(m["server_polls"], bool)
