@@ -2,7 +2,7 @@
 
 Same transport choices as hycosim (its router and client session configs, so the
 low-latency transport; BLOCK + express publishers; the same reader, an Inbox in the main
-thread that polls before it blocks when hycosim's "auto" waitStrategy would; msgpack) but
+thread that polls before it blocks as hycosim's waitStrategy says; msgpack) but
 no config, routing, checking or recording.
 """
 
@@ -23,14 +23,10 @@ def _conf(endpoint: str, router: bool) -> zenoh.Config:
     return router_config(endpoint) if router else client_config(endpoint)
 
 
-def _polls(n: int) -> bool:
-    return polls_before_blocking("auto", n + 1, os.cpu_count())
-
-
-def node(endpoint: str, i: int, n: int) -> None:
+def node(endpoint: str, i: int, polls: bool) -> None:
     with zenoh.open(_conf(endpoint, False)) as s:
         pub = s.declare_publisher(f"floor/out/{i}", congestion_control=zenoh.CongestionControl.BLOCK, express=True)
-        inbox = Inbox(s, "floor/step/**", f"floor/step/local{i}", poll=_polls(n))
+        inbox = Inbox(s, "floor/step/**", f"floor/step/local{i}", poll=polls)
         s.liveliness().declare_token(f"floor/alive/{i}")
         while True:
             m = msgpack.unpackb(inbox.recv(60.0)[1])
@@ -40,12 +36,13 @@ def node(endpoint: str, i: int, n: int) -> None:
         inbox.close()
 
 
-def server(endpoint: str, n: int, steps: int) -> float:
+def server(endpoint: str, n: int, steps: int, wait_strategy: str) -> float:
+    polls = polls_before_blocking(wait_strategy, n + 1, os.cpu_count())
     with zenoh.open(_conf(endpoint, True)) as s:
         pub = s.declare_publisher("floor/step", congestion_control=zenoh.CongestionControl.BLOCK, express=True)
-        inbox = Inbox(s, "floor/out/**", "floor/out/local", poll=_polls(n))
+        inbox = Inbox(s, "floor/out/**", "floor/out/local", poll=polls)
         alive = s.liveliness().declare_subscriber("floor/alive/*", zenoh.handlers.FifoChannel(64), history=True)
-        procs = [subprocess.Popen([sys.executable, __file__, "node", endpoint, str(i), str(n)]) for i in range(n)]
+        procs = [subprocess.Popen([sys.executable, __file__, "node", endpoint, str(i), str(int(polls))]) for i in range(n)]
         seen = set()
         while len(seen) < n:
             seen.add(str(alive.recv().key_expr))
@@ -66,6 +63,6 @@ def server(endpoint: str, n: int, steps: int) -> float:
 
 if __name__ == "__main__":
     if sys.argv[1] == "node":
-        node(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]))
+        node(sys.argv[2], int(sys.argv[3]), sys.argv[4] == "1")
     else:
-        print(server(sys.argv[2], int(sys.argv[3]), int(sys.argv[4])), flush=True)
+        print(server(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), sys.argv[5]), flush=True)

@@ -5,7 +5,8 @@ one float in and out each, y = 0.5·u + 1, for 3000 macro steps; N = 2, 4, 8, 16
 Rates count macro steps per second of the stepping loop only (start-up excluded).
 Processes are not pinned to cores: on 2 cores the scheduler decides, as it would for a user.
 
-    python benchmarks/barrier.py [--n 2 4] [--steps 3000] [--repeat 3] [--systems hycosim helics-tcp ...] [--json]
+    python benchmarks/barrier.py [--n 2 4] [--steps 3000] [--repeat 3] [--systems hycosim helics-tcp ...]
+                                 [--wait-strategy auto|block|yield] [--json]
 
 On a small machine one run of any system scatters by ±20 % (who shares a core with whom
 is the scheduler's choice), so every system runs ``--repeat`` times, the rounds
@@ -36,20 +37,21 @@ def _port() -> int:
         return s.getsockname()[1]
 
 
-def ring_config(n: int, steps: int, path: Path) -> Path:
+def ring_config(n: int, steps: int, path: Path, wait_strategy: str = "auto") -> Path:
     nodes = [{"nodeName": f"n{i}", "UID": i + 1, "model": "gain", "parameters": {"k": 0.5, "b": 1.0},
               "input": ["u"], "output": ["y"]} for i in range(n)]
     links = [{"from": f"n{i}.y", "to": f"n{(i + 1) % n}.u"} for i in range(n)]
     doc = {"projectName": f"ring{n}", "serverIP": f"127.0.0.1:{_port()}", "nodeNum": n, "nodeLists": nodes,
            "linkNum": n, "linkLists": links,
-           "coSimulation": {"stepSize": 1.0, "stopTime": float(steps), "stepTimeout": 30.0}}
+           "coSimulation": {"stepSize": 1.0, "stopTime": float(steps), "stepTimeout": 30.0,
+                            "waitStrategy": wait_strategy}}
     path.write_text(json.dumps(doc))
     return path
 
 
-def run_hycosim(n: int, steps: int) -> float:
+def run_hycosim(n: int, steps: int, wait_strategy: str) -> float:
     with tempfile.TemporaryDirectory() as tmp:
-        cfg = ring_config(n, steps, Path(tmp) / "ring.json")
+        cfg = ring_config(n, steps, Path(tmp) / "ring.json", wait_strategy)
         res = subprocess.run([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", tmp, "--no-progress"],
                              capture_output=True, text=True, timeout=600, cwd=REPO)
         if res.returncode:
@@ -59,9 +61,9 @@ def run_hycosim(n: int, steps: int) -> float:
         return float(meta["steps_per_s"])
 
 
-def run_zenoh_floor(n: int, steps: int) -> float:
+def run_zenoh_floor(n: int, steps: int, wait_strategy: str) -> float:
     res = subprocess.run([sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{_port()}",
-                          str(n), str(steps)], capture_output=True, text=True, timeout=600)
+                          str(n), str(steps), wait_strategy], capture_output=True, text=True, timeout=600)
     if res.returncode:
         raise RuntimeError(res.stderr)
     return float(res.stdout.split()[-1])
@@ -109,9 +111,9 @@ print({steps} / (time.perf_counter() - t0))
 RUNNERS = {
     "hycosim": run_hycosim,
     "zenoh-floor": run_zenoh_floor,
-    "helics-tcp": lambda n, s: run_helics("tcp", n, s),
-    "helics-zmq": lambda n, s: run_helics("zmq", n, s),
-    "mosaik": run_mosaik,
+    "helics-tcp": lambda n, s, w: run_helics("tcp", n, s),
+    "helics-zmq": lambda n, s, w: run_helics("zmq", n, s),
+    "mosaik": lambda n, s, w: run_mosaik(n, s),
 }
 
 
@@ -127,6 +129,8 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=3000)
     ap.add_argument("--repeat", type=int, default=3, help="rounds per system and N; the median is reported")
     ap.add_argument("--systems", nargs="+", default=SYSTEMS, choices=SYSTEMS)
+    ap.add_argument("--wait-strategy", default="auto", choices=["auto", "block", "yield"],
+                    help="coSimulation.waitStrategy for hycosim and the Zenoh floor")
     ap.add_argument("--json", action="store_true",
                     help="one JSON object per line: system, n, steps_per_s (the median), runs")
     args = ap.parse_args()
@@ -138,7 +142,7 @@ def main() -> None:
                 if system in skipped:
                     continue
                 try:
-                    runs[(system, n)].append(RUNNERS[system](n, args.steps))
+                    runs[(system, n)].append(RUNNERS[system](n, args.steps, args.wait_strategy))
                 except ImportError as exc:
                     skipped.add(system)
                     print(f"# {system}: skipped ({exc}; pip install -e '.[bench]')", file=sys.stderr)

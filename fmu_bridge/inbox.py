@@ -27,8 +27,9 @@ import zenoh
 _WAKE = b"\x00wake"
 # A poll is a sched_yield and a try_recv: 1–2 µs when no other process is runnable, a
 # hand-over of the core to one that is. Measured with benchmarks/barrier.py on 2 cores
-# (medians of interleaved runs): +20–50 % steps/s at N = 2, about even at N = 4, a fifth
-# lost at N = 16; a fixed 400 polls per wait lost half the rate at N = 16.
+# (medians of interleaved runs): +20–50 % steps/s at N = 2, +25 % at N = 4, a sixth lost
+# at N = 8 and a fifth at N = 16 (hence config.polls_before_blocking); a fixed minimum of
+# 8 polls per wait, without probing, lost more at N = 16.
 _PROBE = 8
 _PROBE_EVERY = 16
 _POLLS_MAX = 400

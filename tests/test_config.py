@@ -137,14 +137,14 @@ def test_server_ip_forms():
 
 
 def test_wait_strategy_polls_only_where_the_processes_fit_the_cores(tmp_path):
-    # auto: the server and the nodes may outnumber the cores by one.
-    assert polls_before_blocking("auto", 3, 2) is True
-    assert polls_before_blocking("auto", 4, 2) is False
-    assert polls_before_blocking("auto", 17, 16) is True
-    assert polls_before_blocking("auto", 2, None) is True
+    # auto: up to two processes (the server and the nodes) per core, and one more.
+    assert polls_before_blocking("auto", 5, 2) is True
+    assert polls_before_blocking("auto", 6, 2) is False
+    assert polls_before_blocking("auto", 33, 16) is True
+    assert polls_before_blocking("auto", 3, None) is True and polls_before_blocking("auto", 4, None) is False
     assert polls_before_blocking("yield", 17, 2) is True
     assert polls_before_blocking("block", 2, 64) is False
     doc = copy.deepcopy(GOOD)  # 3 nodes and the server: 4 processes
     doc["coSimulation"] = {"waitStrategy": "auto"}
     project = load_project(_write(tmp_path, doc)).project
-    assert project.polls_before_blocking(2) is False and project.polls_before_blocking(3) is True
+    assert project.polls_before_blocking(1) is False and project.polls_before_blocking(2) is True
