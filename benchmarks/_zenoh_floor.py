@@ -65,5 +65,4 @@ if __name__ == "__main__":
     if sys.argv[1] == "node":
         node(sys.argv[2], int(sys.argv[3]), sys.argv[4] == "1")
     else:
-        print(server(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), sys.argv[5] if len(sys.argv) > 5 else "auto"),
-              flush=True)
+        print(server(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), sys.argv[5]), flush=True)

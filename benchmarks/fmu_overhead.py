@@ -117,7 +117,9 @@ def main() -> None:
                                         "input": ["u"], "output": ["y"]}, args.steps), tmp)
         bridge_rate = bridge(tmp, args.steps)
         floor = subprocess.run([sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{_port()}",
-                                "1", str(args.steps)], capture_output=True, text=True, timeout=600)
+                                "1", str(args.steps), "auto"], capture_output=True, text=True, timeout=600)
+        if floor.returncode:
+            raise SystemExit(f"the Zenoh floor failed:\n{floor.stderr[-2000:]}")
         floor_rate = float(floor.stdout.split()[-1])
     figures = {
         "python_node_step_us": py_step * 1e6, "fmu_node_step_us": fmu_step * 1e6,

@@ -92,11 +92,13 @@ class Inbox:
             self._deadline = None
 
     def _next(self) -> zenoh.Sample:
+        if not self._poll:
+            return self._sub.recv()
         sample = self._sub.try_recv()
         if sample is not None:  # already queued: says nothing about polling
             return sample
         polls = self._polls
-        if polls == 0 and self._poll:
+        if polls == 0:
             self._idle_waits += 1
             if self._idle_waits % _PROBE_EVERY == 0:
                 polls = _PROBE
