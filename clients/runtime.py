@@ -187,7 +187,7 @@ class NodeRuntime:
         while True:
             frame = self._wait(silence, "release")
             if frame.kind == frames.STOP:
-                self._log.info("stop", step=self.steps, reason=frame.fields[1])
+                self._log.info("stop", step=self.steps, reason=frame.fields[1], waits=self.inbox.waits)
                 return
             if frame.kind == frames.REPLAY:
                 # Back after a link cut: the release we may have missed, or already answered.

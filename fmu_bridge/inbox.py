@@ -14,6 +14,10 @@ machine costs more than the rest of a macro step's Python. The number of polls a
 it doubles when polling caught a sample and halves when the thread had to block, down
 to none, with a short probe every so often; so a process that waits long for each frame
 (slow peers, real-time pacing) soon stops polling.
+
+:attr:`Inbox.waits` counts how each ``recv`` got its sample, so a run can say whether
+polling paid: ``queued`` (already there), ``polled`` (caught while polling), ``slept``
+(the thread blocked; a blocking Inbox counts every wait here, queued or not).
 """
 
 from __future__ import annotations
@@ -49,6 +53,7 @@ class Inbox:
         self._poll = poll
         self._polls = _PROBE if poll else 0
         self._idle_waits = 0
+        self._waits = {"queued": 0, "polled": 0, "slept": 0}
         self._closed = threading.Event()
         self._watchdog = threading.Thread(target=self._watch, name="inbox-watchdog", daemon=True)
         self._watchdog.start()
@@ -62,6 +67,11 @@ class Inbox:
             if deadline is not None and (now >= deadline or now - self._last_wake >= 0.25):
                 self._last_wake = now
                 self.inject(_WAKE)
+
+    @property
+    def waits(self) -> dict[str, int]:
+        """How the samples so far were had: ``queued``, ``polled`` or ``slept`` (see the module doc)."""
+        return dict(self._waits)
 
     @property
     def polls(self) -> int:
@@ -92,10 +102,13 @@ class Inbox:
             self._deadline = None
 
     def _next(self) -> zenoh.Sample:
+        waits = self._waits
         if not self._poll:
+            waits["slept"] += 1
             return self._sub.recv()
         sample = self._sub.try_recv()
         if sample is not None:  # already queued: says nothing about polling
+            waits["queued"] += 1
             return sample
         polls = self._polls
         if polls == 0:
@@ -107,8 +120,10 @@ class Inbox:
             sample = self._sub.try_recv()
             if sample is not None:
                 self._polls = min(_POLLS_MAX, max(_PROBE, 2 * polls))
+                waits["polled"] += 1
                 return sample
         self._polls = polls // 2 if polls > _PROBE else 0
+        waits["slept"] += 1
         return self._sub.recv()
 
     def close(self) -> None:

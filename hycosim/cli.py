@@ -153,6 +153,12 @@ def report(
     if s.async_age_ms:
         out.print("mean age of asynchronous values: " + ", ".join(f"{k} {v:.1f} ms" for k, v in s.async_age_ms.items()),
                   highlight=False)
+    total = sum(s.server_waits.values())
+    if total:
+        shares = ", ".join(f"{100 * s.server_waits.get(k, 0) / total:.0f} % {label}" for k, label in
+                           (("queued", "already queued"), ("polled", "caught while polling"), ("slept", "slept")))
+        out.print(f"how the server had its {total:,} frames (waitStrategy {s.wait_strategy or '?'}): {shares}",
+                  highlight=False)
     if s.dropped_frames:
         out.print("dropped frames: " + ", ".join(f"{k}: {v}" for k, v in s.dropped_frames.items()), highlight=False)
 

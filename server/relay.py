@@ -131,7 +131,7 @@ class Relay:
             if self.gateway is not None:
                 self.gateway.close(reason or status_text)
             self.recorder.close(status_text, reason=reason, dropped_frames=dict(self.intake.dropped),
-                                reattached=dict(self.reattached),
+                                reattached=dict(self.reattached), server_waits=self.inbox.waits,
                                 samples_received={n: h.received for n, h in self.histories.items()})
             for decl in (status, watcher, token):
                 try:

@@ -35,6 +35,8 @@ class RunSummary:
     mode_switches: list[dict[str, Any]] = field(default_factory=list)
     dropped_frames: dict[str, int] = field(default_factory=dict)
     async_age_ms: dict[str, float] = field(default_factory=dict)
+    wait_strategy: str = ""
+    server_waits: dict[str, int] = field(default_factory=dict)
 
 
 def _read_csv(path: Path) -> list[dict[str, str]]:
@@ -102,6 +104,8 @@ def summarise(run_dir: Path, slowest: int = 5) -> RunSummary:
         lateness=lateness, mode_switches=read_events(run_dir),
         dropped_frames=meta.get("dropped_frames", {}) or {},
         async_age_ms={k: 1000 * sum(v) / len(v) for k, v in ages.items()},
+        wait_strategy=str(meta.get("waitStrategy", "")),
+        server_waits=meta.get("server_waits", {}) or {},
     )
 
 

@@ -105,6 +105,7 @@ def test_polls_follow_how_soon_frames_come_and_stop_when_waits_are_long():
         for _ in range(50):
             assert inbox.recv(timeout=1.0) == ("t/up/a", b"x")
         assert script.blocked == 0 and inbox.polls == 400  # doubled from 8, capped
+        assert inbox.waits == {"queued": 0, "polled": 50, "slept": 0}
         inbox.close()
         # Frames that come only after 10,000 polls: it blocks, halving its polls down to none ...
         inbox, script = _scripted_inbox(router, True, [10_000] * 40)
@@ -114,12 +115,20 @@ def test_polls_follow_how_soon_frames_come_and_stop_when_waits_are_long():
         # ... probing again only every 16th wait: one look per wait, 8 polls at the first
         # and at the two probes, not 8 per wait.
         assert script.blocked == 40 and script.tries == 40 + 3 * 8
+        assert inbox.waits == {"queued": 0, "polled": 0, "slept": 40}
+        inbox.close()
+        # Frames already there when it looks are counted as queued, whatever it polls.
+        inbox, script = _scripted_inbox(router, True, [0] * 10 + [3] * 5)
+        for _ in range(15):
+            assert inbox.recv(timeout=1.0) == ("t/up/a", b"x")
+        assert inbox.waits == {"queued": 10, "polled": 5, "slept": 0}
         inbox.close()
         # A blocking reader never polls.
         inbox, script = _scripted_inbox(router, False, [3] * 20)
         for _ in range(20):
             assert inbox.recv(timeout=1.0) == ("t/up/a", b"x")
         assert script.blocked == 20 and inbox.polls == 0
+        assert inbox.waits == {"queued": 0, "polled": 0, "slept": 20}
         inbox.close()
     finally:
         router.close()

@@ -34,8 +34,12 @@ def test_report_names_the_node_that_holds_the_barrier_and_plot_draws(tmp_path):
     assert min(waits) >= max(1000 * float(r["wait_s"]) for n, r in by_step.items()
                              if n > 0 and n not in {row["step"] for row in slowest})
     assert sum(row["holder"] == "slow" for row in slowest) >= 3
+    # Every frame the server read is counted once: at least 3 outputs at each of 101 points.
+    assert s["wait_strategy"] == "auto" and set(s["server_waits"]) == {"queued", "polled", "slept"}
+    assert sum(s["server_waits"].values()) >= 303 and s["server_waits"]["slept"] > 0  # waiting for slow
     text = hycosim("report", str(run))
     assert text.returncode == 0 and "who held the barrier" in text.stdout and "slow" in text.stdout
+    assert "how the server had its" in text.stdout and "% slept" in text.stdout
     png = tmp_path / "plot.png"
     res = hycosim("plot", str(run), "clock.y", "slow.y", "-o", str(png))
     assert res.returncode == 0, res.stderr
