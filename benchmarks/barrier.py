@@ -6,11 +6,13 @@ Rates count macro steps per second of the stepping loop only (start-up excluded)
 Processes are not pinned to cores: on 2 cores the scheduler decides, as it would for a user.
 
     python benchmarks/barrier.py [--n 2 4] [--steps 3000] [--repeat 3] [--systems hycosim helics-tcp ...]
-                                 [--wait-strategy auto|block|yield] [--json]
+                                 [--wait-strategy auto|block|yield] [--timeout 120] [--json]
 
 On a small machine one run of any system scatters by ±20 % (who shares a core with whom
 is the scheduler's choice), so every system runs ``--repeat`` times, the rounds
 interleaved (system after system, then again), and the table shows the median.
+A run that fails or passes ``--timeout`` (its whole process group is killed) is reported
+and left out of the median; the exit status is 1 when some system and N has no run left.
 
 HELICS and mosaik come from the optional extra: pip install -e '.[bench]'.
 """
@@ -19,6 +21,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import signal
 import socket
 import subprocess
 import sys
@@ -37,6 +41,21 @@ def _port() -> int:
         return s.getsockname()[1]
 
 
+def _run(cmd: list[str], timeout: float, **kwargs) -> subprocess.CompletedProcess:
+    """subprocess.run in a process group of its own, all of which is killed on timeout: the
+    server and nodes of a timed-out ``hycosim run`` (or mosaik's simulators) must not live on
+    to load the machine under the runs that follow."""
+    with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                          start_new_session=True, **kwargs) as proc:
+        try:
+            out, err = proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+            raise RuntimeError(f"timed out after {timeout:g} s (--timeout): {' '.join(cmd[:4])} ...") from None
+        return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
+
+
 def ring_config(n: int, steps: int, path: Path, wait_strategy: str = "auto") -> Path:
     nodes = [{"nodeName": f"n{i}", "UID": i + 1, "model": "gain", "parameters": {"k": 0.5, "b": 1.0},
               "input": ["u"], "output": ["y"]} for i in range(n)]
@@ -49,11 +68,11 @@ def ring_config(n: int, steps: int, path: Path, wait_strategy: str = "auto") -> 
     return path
 
 
-def run_hycosim(n: int, steps: int, wait_strategy: str) -> float:
+def run_hycosim(n: int, steps: int, wait_strategy: str, timeout: float) -> float:
     with tempfile.TemporaryDirectory() as tmp:
         cfg = ring_config(n, steps, Path(tmp) / "ring.json", wait_strategy)
-        res = subprocess.run([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", tmp, "--no-progress"],
-                             capture_output=True, text=True, timeout=600, cwd=REPO)
+        res = _run([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", tmp, "--no-progress"],
+                   timeout, cwd=REPO)
         if res.returncode:
             logs = "".join(f"--- {p.name}\n{p.read_text()[-800:]}" for p in Path(tmp).glob("ring*/*.stderr.txt"))
             raise RuntimeError(res.stderr + logs)
@@ -61,15 +80,15 @@ def run_hycosim(n: int, steps: int, wait_strategy: str) -> float:
         return float(meta["steps_per_s"])
 
 
-def run_zenoh_floor(n: int, steps: int, wait_strategy: str) -> float:
-    res = subprocess.run([sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{_port()}",
-                          str(n), str(steps), wait_strategy], capture_output=True, text=True, timeout=600)
+def run_zenoh_floor(n: int, steps: int, wait_strategy: str, timeout: float) -> float:
+    res = _run([sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{_port()}",
+                str(n), str(steps), wait_strategy], timeout)
     if res.returncode:
         raise RuntimeError(res.stderr)
     return float(res.stdout.split()[-1])
 
 
-def run_helics(core: str, n: int, steps: int) -> float:
+def run_helics(core: str, n: int, steps: int, timeout: float) -> float:
     port = _port()
     script = str(HERE / "_helics_fed.py")
     broker = subprocess.Popen([sys.executable, script, "broker", core, str(n), str(port)],
@@ -77,10 +96,12 @@ def run_helics(core: str, n: int, steps: int) -> float:
     feds = [subprocess.Popen([sys.executable, script, "fed", core, str(n), str(i), str(steps), str(port)],
                              stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True) for i in range(n)]
     try:
-        out = feds[0].communicate(timeout=600)[0]
+        out = feds[0].communicate(timeout=timeout)[0]
         for f in feds[1:]:
             f.wait(timeout=60)
         broker.wait(timeout=60)
+    except subprocess.TimeoutExpired:
+        raise RuntimeError(f"timed out after {timeout:g} s (--timeout): HELICS {core} with {n} federates") from None
     finally:
         for p in (broker, *feds):
             if p.poll() is None:
@@ -88,7 +109,7 @@ def run_helics(core: str, n: int, steps: int) -> float:
     return float(out.split()[0])
 
 
-def run_mosaik(n: int, steps: int) -> float:
+def run_mosaik(n: int, steps: int, timeout: float) -> float:
     code = f"""
 import sys, time, mosaik, logging
 from loguru import logger
@@ -102,7 +123,7 @@ t0 = time.perf_counter()
 world.run(until={steps}, print_progress=False)
 print({steps} / (time.perf_counter() - t0))
 """
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=900)
+    res = _run([sys.executable, "-c", code], timeout)
     if res.returncode:
         raise RuntimeError(res.stderr[-2000:])
     return float(res.stdout.split()[-1])
@@ -111,9 +132,9 @@ print({steps} / (time.perf_counter() - t0))
 RUNNERS = {
     "hycosim": run_hycosim,
     "zenoh-floor": run_zenoh_floor,
-    "helics-tcp": lambda n, s, w: run_helics("tcp", n, s),
-    "helics-zmq": lambda n, s, w: run_helics("zmq", n, s),
-    "mosaik": lambda n, s, w: run_mosaik(n, s),
+    "helics-tcp": lambda n, s, w, timeout: run_helics("tcp", n, s, timeout),
+    "helics-zmq": lambda n, s, w, timeout: run_helics("zmq", n, s, timeout),
+    "mosaik": lambda n, s, w, timeout: run_mosaik(n, s, timeout),
 }
 
 
@@ -133,6 +154,9 @@ def main() -> None:
                     help="coSimulation.waitStrategy for hycosim and the Zenoh floor")
     ap.add_argument("--json", action="store_true",
                     help="one JSON object per line: system, n, steps_per_s (the median), runs")
+    ap.add_argument("--timeout", type=float, default=120.0,
+                    help="seconds one run of one system may take; a run past it is reported as failed "
+                         "and left out of the median (a HELICS zmq run once hung here for good)")
     args = ap.parse_args()
     runs: dict[tuple[str, int], list[float]] = {(system, n): [] for n in args.n for system in args.systems}
     skipped: set[str] = set()
@@ -142,7 +166,7 @@ def main() -> None:
                 if system in skipped:
                     continue
                 try:
-                    runs[(system, n)].append(RUNNERS[system](n, args.steps, args.wait_strategy))
+                    runs[(system, n)].append(RUNNERS[system](n, args.steps, args.wait_strategy, args.timeout))
                 except ImportError as exc:
                     skipped.add(system)
                     print(f"# {system}: skipped ({exc}; pip install -e '.[bench]')", file=sys.stderr)
@@ -154,8 +178,15 @@ def main() -> None:
                 rates = runs[(system, n)]
                 print(json.dumps({"system": system, "n": n, "steps_per_s": _median(rates) if rates else None,
                                   "runs": [round(r, 1) for r in rates]}), flush=True)
-    if args.json:
-        return
+    empty = sorted(f"{system} N={n}" for (system, n), rates in runs.items() if not rates and system not in skipped)
+    if not args.json:
+        _print_table(args, runs, skipped)
+    if empty:
+        print(f"# no run completed for {', '.join(empty)}", file=sys.stderr)
+        sys.exit(1)
+
+
+def _print_table(args: argparse.Namespace, runs: dict[tuple[str, int], list[float]], skipped: set[str]) -> None:
     results = {key: (_median(rates) if rates else None) for key, rates in runs.items()}
     print(f"median of {args.repeat} runs, macro steps/s (min–max in brackets)")
     print(f"{'system':<12}" + "".join(f"{'N=' + str(n):>24}" for n in args.n))
@@ -165,6 +196,10 @@ def main() -> None:
             rates = runs[(system, n)]
             cells.append(f"{_median(rates):>8,.0f} [{min(rates):,.0f}–{max(rates):,.0f}]" if rates else "-")
         print(f"{system:<12}" + "".join(f"{c:>24}" for c in cells))
+    short = [f"{system} N={n}: {len(rates)} of {args.repeat}" for (system, n), rates in runs.items()
+             if len(rates) < args.repeat and system not in skipped]
+    if short:
+        print("runs that failed are left out (see above): " + "; ".join(short))
     print("\nratios of the medians (hycosim / other):")
     for system in args.systems:
         if system == "hycosim":

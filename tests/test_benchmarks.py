@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 
 from tests.helpers import REPO, env
 
@@ -22,6 +23,19 @@ def test_barrier_benchmark_json_reports_medians_of_its_runs():
         assert min(r["runs"]) <= r["steps_per_s"] <= max(r["runs"])
 
 
+def test_barrier_benchmark_kills_a_run_past_its_timeout_and_says_so():
+    res = subprocess.run([sys.executable, "benchmarks/barrier.py", "--n", "2", "--steps", "200", "--repeat", "1",
+                          "--systems", "hycosim", "zenoh-floor", "--timeout", "0.5"],
+                         capture_output=True, text=True, timeout=120, cwd=REPO, env=env())
+    assert res.returncode == 1
+    assert "# hycosim n=2: failed:\ntimed out after 0.5 s (--timeout)" in res.stderr
+    assert "# zenoh-floor n=2: failed:\ntimed out after 0.5 s (--timeout)" in res.stderr
+    assert "# no run completed for hycosim N=2, zenoh-floor N=2" in res.stderr
+    assert "hycosim N=2: 0 of 1" in res.stdout
+    # The server and nodes of the killed runs went with them (the floor's are named by its script).
+    time.sleep(0.5)
+    left = subprocess.run(["pgrep", "-f", "_zenoh_floor.py"], capture_output=True, text=True).stdout.split()
+    assert left == []
 
 def test_fmu_overhead_benchmark_runs_every_measurement():
     res = subprocess.run([sys.executable, "benchmarks/fmu_overhead.py", "--steps", "200", "--json"],
