@@ -17,7 +17,8 @@ to none, with a short probe every so often; so a process that waits long for eac
 
 :attr:`Inbox.waits` counts how each ``recv`` got its sample, so a run can say whether
 polling paid: ``queued`` (already there), ``polled`` (caught while polling), ``slept``
-(the thread blocked; a blocking Inbox counts every wait here, queued or not).
+(the thread blocked; a blocking Inbox counts every wait here, queued or not). Wake-ups and
+injected events count like frames; in a busy run they are a handful.
 """
 
 from __future__ import annotations
