@@ -95,11 +95,11 @@ def run_helics(core: str, n: int, steps: int, timeout: float) -> float:
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     feds = [subprocess.Popen([sys.executable, script, "fed", core, str(n), str(i), str(steps), str(port)],
                              stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True) for i in range(n)]
+    deadline = time.monotonic() + timeout  # one limit for the whole run, as for the other systems
     try:
         out = feds[0].communicate(timeout=timeout)[0]
-        for f in feds[1:]:
-            f.wait(timeout=60)
-        broker.wait(timeout=60)
+        for p in (*feds[1:], broker):
+            p.wait(timeout=max(0.0, deadline - time.monotonic()))
     except subprocess.TimeoutExpired:
         raise RuntimeError(f"timed out after {timeout:g} s (--timeout): HELICS {core} with {n} federates") from None
     finally:

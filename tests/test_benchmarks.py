@@ -37,6 +37,7 @@ def test_barrier_benchmark_kills_a_run_past_its_timeout_and_says_so():
     left = subprocess.run(["pgrep", "-f", "_zenoh_floor.py"], capture_output=True, text=True).stdout.split()
     assert left == []
 
+
 def test_fmu_overhead_benchmark_runs_every_measurement():
     res = subprocess.run([sys.executable, "benchmarks/fmu_overhead.py", "--steps", "200", "--json"],
                          capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
