@@ -1,9 +1,9 @@
 """The floor for a Zenoh barrier in Python: one step message out, N replies back, nothing else.
 
 Same transport choices as hycosim (its router and client session configs, so the
-low-latency transport; BLOCK + express publishers; the same reader, an Inbox in the main
-thread that polls before it blocks as hycosim's waitStrategy says; msgpack) but
-no config, routing, checking or recording.
+low-latency transport; its Zenoh runtime threads; BLOCK + express publishers; the same
+reader, an Inbox in the main thread that polls before it blocks as hycosim's
+waitStrategy says; msgpack) but no config, routing, checking or recording.
 """
 
 import os
@@ -16,7 +16,7 @@ import zenoh
 
 from fmu_bridge.config import polls_before_blocking
 from fmu_bridge.inbox import Inbox
-from fmu_bridge.session import client_config, router_config
+from fmu_bridge.session import client_config, prefer_shared_runtime, router_config
 
 
 def _conf(endpoint: str, router: bool) -> zenoh.Config:
@@ -62,6 +62,7 @@ def server(endpoint: str, n: int, steps: int, wait_strategy: str) -> float:
 
 
 if __name__ == "__main__":
+    prefer_shared_runtime()  # the nodes it starts inherit it
     if sys.argv[1] == "node":
         node(sys.argv[2], int(sys.argv[3]), sys.argv[4] == "1")
     else:

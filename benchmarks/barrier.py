@@ -21,46 +21,24 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import signal
-import socket
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+from _procs import free_port, kill_group, run, start
+
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 SYSTEMS = ["hycosim", "zenoh-floor", "helics-tcp", "helics-zmq", "mosaik"]
-
-
-def _port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _run(cmd: list[str], timeout: float, **kwargs) -> subprocess.CompletedProcess:
-    """subprocess.run in a process group of its own, all of which is killed on timeout: the
-    server and nodes of a timed-out ``hycosim run`` (or mosaik's simulators) must not live on
-    to load the machine under the runs that follow."""
-    with subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                          start_new_session=True, **kwargs) as proc:
-        try:
-            out, err = proc.communicate(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.communicate()
-            raise RuntimeError(f"timed out after {timeout:g} s (--timeout): {' '.join(cmd[:4])} ...") from None
-        return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
 
 
 def ring_config(n: int, steps: int, path: Path, wait_strategy: str = "auto") -> Path:
     nodes = [{"nodeName": f"n{i}", "UID": i + 1, "model": "gain", "parameters": {"k": 0.5, "b": 1.0},
               "input": ["u"], "output": ["y"]} for i in range(n)]
     links = [{"from": f"n{i}.y", "to": f"n{(i + 1) % n}.u"} for i in range(n)]
-    doc = {"projectName": f"ring{n}", "serverIP": f"127.0.0.1:{_port()}", "nodeNum": n, "nodeLists": nodes,
+    doc = {"projectName": f"ring{n}", "serverIP": f"127.0.0.1:{free_port()}", "nodeNum": n, "nodeLists": nodes,
            "linkNum": n, "linkLists": links,
            "coSimulation": {"stepSize": 1.0, "stopTime": float(steps), "stepTimeout": 30.0,
                             "waitStrategy": wait_strategy}}
@@ -71,7 +49,7 @@ def ring_config(n: int, steps: int, path: Path, wait_strategy: str = "auto") -> 
 def run_hycosim(n: int, steps: int, wait_strategy: str, timeout: float) -> float:
     with tempfile.TemporaryDirectory() as tmp:
         cfg = ring_config(n, steps, Path(tmp) / "ring.json", wait_strategy)
-        res = _run([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", tmp, "--no-progress"],
+        res = run([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", tmp, "--no-progress"],
                    timeout, cwd=REPO)
         if res.returncode:
             logs = "".join(f"--- {p.name}\n{p.read_text()[-800:]}" for p in Path(tmp).glob("ring*/*.stderr.txt"))
@@ -81,7 +59,7 @@ def run_hycosim(n: int, steps: int, wait_strategy: str, timeout: float) -> float
 
 
 def run_zenoh_floor(n: int, steps: int, wait_strategy: str, timeout: float) -> float:
-    res = _run([sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{_port()}",
+    res = run([sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{free_port()}",
                 str(n), str(steps), wait_strategy], timeout)
     if res.returncode:
         raise RuntimeError(res.stderr)
@@ -89,12 +67,12 @@ def run_zenoh_floor(n: int, steps: int, wait_strategy: str, timeout: float) -> f
 
 
 def run_helics(core: str, n: int, steps: int, timeout: float) -> float:
-    port = _port()
+    port = free_port()
     script = str(HERE / "_helics_fed.py")
-    broker = subprocess.Popen([sys.executable, script, "broker", core, str(n), str(port)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    feds = [subprocess.Popen([sys.executable, script, "fed", core, str(n), str(i), str(steps), str(port)],
-                             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True) for i in range(n)]
+    broker = start([sys.executable, script, "broker", core, str(n), str(port)],
+                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    feds = [start([sys.executable, script, "fed", core, str(n), str(i), str(steps), str(port)],
+                  stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True) for i in range(n)]
     deadline = time.monotonic() + timeout  # one limit for the whole run, as for the other systems
     try:
         out = feds[0].communicate(timeout=timeout)[0]
@@ -105,7 +83,7 @@ def run_helics(core: str, n: int, steps: int, timeout: float) -> float:
     finally:
         for p in (broker, *feds):
             if p.poll() is None:
-                p.kill()
+                kill_group(p)
     return float(out.split()[0])
 
 
@@ -123,7 +101,7 @@ t0 = time.perf_counter()
 world.run(until={steps}, print_progress=False)
 print({steps} / (time.perf_counter() - t0))
 """
-    res = _run([sys.executable, "-c", code], timeout)
+    res = run([sys.executable, "-c", code], timeout)
     if res.returncode:
         raise RuntimeError(res.stderr[-2000:])
     return float(res.stdout.split()[-1])

@@ -6,14 +6,16 @@
 2. A generated native bridge FMU driven by a C-only importer through the TCP gateway,
    against a Zenoh Python node and the raw Zenoh round trip (benchmarks/_zenoh_floor.py).
 
-    python benchmarks/fmu_overhead.py [--steps 3000] [--json]
+    python benchmarks/fmu_overhead.py [--steps 3000] [--timeout 300] [--json]
+
+Each co-simulation has ``--timeout`` seconds; past it, its processes are killed (all of
+them: benchmarks/_procs.py) and the benchmark stops with a message naming the measurement.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import socket
 import subprocess
 import sys
 import tempfile
@@ -29,16 +31,12 @@ from fmu_bridge.bridge_fmu import build_bridge_fmu  # noqa: E402
 from fmu_bridge.config import load_project, parse_project  # noqa: E402
 from fmu_bridge.model_fmu import build_model_fmu  # noqa: E402
 
-
-def _port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+from _procs import free_port, kill_group, run, start  # noqa: E402
 
 
 def _project(tmp: Path, node: dict, steps: int) -> Path:
-    port = _port()
-    doc = {"projectName": "bench", "serverIP": f"127.0.0.1:{port}", "gatewayIP": f"127.0.0.1:{_port()}",
+    port = free_port()
+    doc = {"projectName": "bench", "serverIP": f"127.0.0.1:{port}", "gatewayIP": f"127.0.0.1:{free_port()}",
            "nodeNum": 1, "nodeLists": [node], "linkNum": 1,
            "linkLists": [{"from": f"{node['nodeName']}.y", "to": f"{node['nodeName']}.u"}],
            "coSimulation": {"stepSize": 1.0, "stopTime": float(steps), "stepTimeout": 30.0}}
@@ -47,9 +45,9 @@ def _project(tmp: Path, node: dict, steps: int) -> Path:
     return path
 
 
-def _run(cfg: Path, tmp: Path) -> float:
-    res = subprocess.run([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", str(tmp / "runs"),
-                          "--no-progress"], capture_output=True, text=True, timeout=600, cwd=REPO)
+def cosim(cfg: Path, tmp: Path, timeout: float) -> float:
+    res = run([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", str(tmp / "runs"), "--no-progress"],
+              timeout, cwd=REPO)
     if res.returncode:
         raise RuntimeError(res.stderr)
     metas = sorted((tmp / "runs").glob("bench-*/meta.json"), key=lambda p: p.stat().st_mtime)
@@ -79,7 +77,7 @@ def in_process(fmu: Path, steps: int) -> tuple[float, float]:
     return results[0], results[1]
 
 
-def bridge(tmp: Path, steps: int) -> float:
+def bridge(tmp: Path, steps: int, timeout: float) -> float:
     node = {"nodeName": "tool", "UID": 9, "input": ["u"], "output": ["y"]}
     cfg = _project(tmp, node, steps)
     built = build_bridge_fmu(load_project(cfg), "tool", tmp / "fmus")
@@ -90,46 +88,77 @@ def bridge(tmp: Path, steps: int) -> float:
     subprocess.run(["gcc", "-O2", f"-I{headers}", "-o", str(exe), str(REPO / "tests" / "c" / "importer.c"), "-ldl"],
                    check=True)
     doc = json.loads(cfg.read_text())
-    server = subprocess.Popen([sys.executable, "-m", "hycosim", "server", str(cfg), "--run-dir", str(tmp / "bridge-run")],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=REPO)
-    imp = subprocess.run([str(exe), str(tmp / "bridge" / "binaries" / "linux64" / "hycosim_tool.so"), built.guid,
-                          (tmp / "bridge").as_uri(), doc["gatewayIP"], str(steps), "1.0"],
-                         capture_output=True, text=True, timeout=600)
-    server.wait(timeout=60)
+    server = start([sys.executable, "-m", "hycosim", "server", str(cfg), "--run-dir", str(tmp / "bridge-run")],
+                   stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=REPO)
+    deadline = time.monotonic() + timeout  # one limit for the importer and the server together
+    try:
+        imp = run([str(exe), str(tmp / "bridge" / "binaries" / "linux64" / "hycosim_tool.so"), built.guid,
+                   (tmp / "bridge").as_uri(), doc["gatewayIP"], str(steps), "1.0"], timeout)
+        _, server_err = server.communicate(timeout=max(0.0, deadline - time.monotonic()))
+    except subprocess.TimeoutExpired:
+        raise RuntimeError(f"timed out after {timeout:g} s (--timeout): the bridge FMU's server") from None
+    finally:
+        if server.poll() is None:
+            kill_group(server)
+            server.communicate()
     if imp.returncode or server.returncode:
-        raise RuntimeError(imp.stderr + server.stderr.read())
+        raise RuntimeError(imp.stderr + server_err)
     return float(json.loads((tmp / "bridge-run" / "meta.json").read_text())["steps_per_s"])
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=3000)
+    ap.add_argument("--timeout", type=float, default=300.0, help="seconds per co-simulation before it is killed")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
+    try:
+        figures = measure(args.steps, args.timeout)
+    except RuntimeError as exc:
+        raise SystemExit(f"fmu_overhead: {exc}") from None
+    if args.json:
+        print(json.dumps(figures))
+        return
+    report(figures)
+
+
+def measure(steps: int, timeout: float) -> dict[str, float]:
     with tempfile.TemporaryDirectory() as tmpname:
         tmp = Path(tmpname)
         fmu = build_model_fmu(REPO / "tests" / "models" / "gain_model.py", tmp)
-        py_step, fmu_step = in_process(fmu, args.steps)
-        py_cosim = _run(_project(tmp, {"nodeName": "py", "UID": 1, "model": "gain",
-                                       "parameters": {"k": 0.5, "b": 1.0}, "input": ["u"], "output": ["y"]},
-                                 args.steps), tmp)
-        fmu_cosim = _run(_project(tmp, {"nodeName": "fmu", "UID": 1, "fmu": str(fmu),
-                                        "input": ["u"], "output": ["y"]}, args.steps), tmp)
-        bridge_rate = bridge(tmp, args.steps)
-        floor = subprocess.run([sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{_port()}",
-                                "1", str(args.steps), "auto"], capture_output=True, text=True, timeout=600)
+        py_step, fmu_step = in_process(fmu, steps)
+        try:
+            py_cosim = cosim(_project(tmp, {"nodeName": "py", "UID": 1, "model": "gain",
+                                            "parameters": {"k": 0.5, "b": 1.0}, "input": ["u"], "output": ["y"]},
+                                      steps), tmp, timeout)
+        except RuntimeError as exc:
+            raise RuntimeError(f"the Python node's co-simulation failed: {exc}") from None
+        try:
+            fmu_cosim = cosim(_project(tmp, {"nodeName": "fmu", "UID": 1, "fmu": str(fmu),
+                                             "input": ["u"], "output": ["y"]}, steps), tmp, timeout)
+        except RuntimeError as exc:
+            raise RuntimeError(f"the FMU node's co-simulation failed: {exc}") from None
+        try:
+            bridge_rate = bridge(tmp, steps, timeout)
+        except RuntimeError as exc:
+            raise RuntimeError(f"the bridge FMU's co-simulation failed: {exc}") from None
+        floor = run([sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{free_port()}",
+                     "1", str(steps), "auto"], timeout)
         if floor.returncode:
-            raise SystemExit(f"the Zenoh floor failed:\n{floor.stderr[-2000:]}")
+            raise RuntimeError(f"the Zenoh floor failed:\n{floor.stderr[-2000:]}")
         floor_rate = float(floor.stdout.split()[-1])
-    figures = {
+    return {
         "python_node_step_us": py_step * 1e6, "fmu_node_step_us": fmu_step * 1e6,
         "python_node_cosim_steps_per_s": py_cosim, "fmu_node_cosim_steps_per_s": fmu_cosim,
         "bridge_fmu_cosim_steps_per_s": bridge_rate, "zenoh_floor_steps_per_s": floor_rate,
     }
-    if args.json:
-        print(json.dumps(figures))
-        return
-    print(f"node step alone:   Python {py_step * 1e6:8.1f} µs   FMU (pythonfmu via fmpy) {fmu_step * 1e6:8.1f} µs"
+
+
+def report(f: dict[str, float]) -> None:
+    py_step, fmu_step = f["python_node_step_us"], f["fmu_node_step_us"]
+    py_cosim, fmu_cosim = f["python_node_cosim_steps_per_s"], f["fmu_node_cosim_steps_per_s"]
+    bridge_rate, floor_rate = f["bridge_fmu_cosim_steps_per_s"], f["zenoh_floor_steps_per_s"]
+    print(f"node step alone:   Python {py_step:8.1f} µs   FMU (pythonfmu via fmpy) {fmu_step:8.1f} µs"
           f"   ratio {fmu_step / py_step:.1f}×")
     print(f"one-node co-sim:   Python {py_cosim:8.0f} steps/s   FMU {fmu_cosim:8.0f} steps/s"
           f"   overhead {1e6 / fmu_cosim - 1e6 / py_cosim:+.1f} µs/step")

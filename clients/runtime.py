@@ -53,6 +53,7 @@ class NodeRuntime:
         self._log = structlog.get_logger("node").bind(node=node_name)
         self.steps = 0
         self._server_lost: float | None = None
+        self._server_seen = False  # its liveliness token, which tells this node when it goes
 
     def context(self) -> NodeContext:
         params = dict(self.spec.parameters)
@@ -95,7 +96,12 @@ class NodeRuntime:
             self.inbox = Inbox(session, self.keys.down, self.keys.down,
                                poll=self.loaded.project.polls_before_blocking(os.cpu_count()))
             self._publisher = FramePublisher(session, self.keys.up(self.name), low_latency=self.cosim.lowLatency)
-            watch = session.liveliness().declare_subscriber(self.keys.alive(SERVER_TOKEN), self._on_server_liveliness)
+            # history: fetch the server's token now. Without it this session learnt of the token
+            # only if the router's announcement won a race with the subscription (it lost about one
+            # attach in fifteen with Zenoh receiving on the app runtime), and a session that never
+            # knew the token never reports it gone, so a cut link went unnoticed.
+            watch = session.liveliness().declare_subscriber(self.keys.alive(SERVER_TOKEN), self._on_server_liveliness,
+                                                            history=True)
             # Declared after the subscriber: the server starts once it sees this token.
             token = session.liveliness().declare_token(self.keys.alive(self.name))
             try:
@@ -156,8 +162,8 @@ class NodeRuntime:
                 continue
             if frame.kind == frames.LIVE:
                 if frame.fields[1]:
-                    self._server_lost = None
-                    self._log.info("server back", step=self.steps)
+                    self._log.info("server back" if self._server_seen else "server seen", step=self.steps)
+                    self._server_lost, self._server_seen = None, True
                 elif grace > 0:
                     self._server_lost = time.monotonic()
                     self._log.warning("server lost, waiting for it", step=self.steps, grace_s=grace)
@@ -249,6 +255,9 @@ class NodeRuntime:
                     sim_now = t + h
                     self.steps = frame.fields[0] + 1
             if frame is not None and frame.kind == frames.LIVE:
-                raise NodeRunError(f"node {self.name!r}: the server went away after step {self.steps}")
+                if not frame.fields[1]:
+                    raise NodeRunError(f"node {self.name!r}: the server went away after step {self.steps}")
+                self._log.info("server seen", step=self.steps)  # its token, fetched after START
+                self._server_seen = True
             if frame is not None and frame.kind == frames.STOP:
                 return

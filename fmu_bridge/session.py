@@ -3,12 +3,33 @@
 from __future__ import annotations
 
 import json
+import os
 
 import zenoh
 
 # Zenoh's low-latency transport writes each message in one batch and cannot fragment: on
 # loopback a 50 kB message was dropped without an error. Frames are kept well below that.
 LOW_LATENCY_MAX_FRAME = 32 * 1024
+
+
+# Zenoh runs its I/O on Tokio runtimes (tx, rx, acc, net, app), each with its own threads,
+# and by default a received frame crosses two or three of them (the runtime that owns
+# the socket, then an rx worker) before Python sees it. A hycosim process exchanges a few
+# small frames per macro step, so those hand-offs are most of its cost: receiving on the
+# app runtime instead gave +25-50 % macro steps/s on 2 cores (ring of gains, N = 2 to 16;
+# benchmarks/barrier.py, medians of interleaved runs). tx keeps its own thread: while a
+# link is cut its writer holds the thread it runs on. app keeps two workers so that one
+# busy task never stalls the leases of the others.
+SHARED_RUNTIME = "(rx: (handover: app), acc: (handover: app), net: (handover: app), app: (worker_threads: 2))"
+
+
+def prefer_shared_runtime() -> str:
+    """Ask Zenoh to receive on the app runtime (SHARED_RUNTIME) unless ``ZENOH_RUNTIME`` is set.
+
+    Zenoh reads the variable once, when its runtime first starts: call this before the
+    process opens its first session. Child processes inherit it. Returns the setting in use.
+    """
+    return os.environ.setdefault("ZENOH_RUNTIME", SHARED_RUNTIME)
 
 
 class ConnectError(RuntimeError):

@@ -617,6 +617,9 @@ def main() -> None:
     """Console entry point."""
     import sys
 
+    from fmu_bridge.session import prefer_shared_runtime
+
+    prefer_shared_runtime()  # before any session opens; the server and nodes it starts inherit it
     app(args=_join_multi_value_options(sys.argv[1:]), prog_name="hycosim")
 
 

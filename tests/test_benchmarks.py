@@ -48,3 +48,14 @@ def test_fmu_overhead_benchmark_runs_every_measurement():
     assert all(v > 0 for v in figures.values())
     # pythonfmu through fmpy does more per step than a plain method call, whatever the machine.
     assert figures["fmu_node_step_us"] > figures["python_node_step_us"]
+
+
+def test_fmu_overhead_benchmark_kills_a_cosimulation_past_its_timeout_and_says_which(tmp_path):
+    res = subprocess.run([sys.executable, "benchmarks/fmu_overhead.py", "--steps", "200", "--timeout", "0.5"],
+                         capture_output=True, text=True, timeout=120, cwd=REPO, env=env())
+    assert res.returncode == 1
+    assert "fmu_overhead: the Python node's co-simulation failed: timed out after 0.5 s (--timeout)" in res.stderr
+    # Its server and node went with it (they run the benchmark's project, bench-*).
+    time.sleep(0.5)
+    left = subprocess.run(["pgrep", "-f", "hycosim (run|server|node) .*py.json"], capture_output=True, text=True)
+    assert left.stdout.split() == []

@@ -1,8 +1,14 @@
-"""The low-latency transport: its frame limit is enforced with a clear error, and can be lifted."""
+"""The transport: the low-latency frame limit (enforced with a clear error, and can be lifted),
+Zenoh's runtime threads, and every node knowing the server's liveliness token."""
 
 from __future__ import annotations
 
-from tests.helpers import hycosim, meta, read_rows, run_project, write_project
+import json
+import os
+import subprocess
+
+from fmu_bridge.session import SHARED_RUNTIME
+from tests.helpers import HYCOSIM, REPO, hycosim, meta, read_rows, run_project, write_project
 
 LIMIT = 32 * 1024
 
@@ -52,9 +58,35 @@ def test_the_standard_transport_carries_large_frames(tmp_path):
     assert all(len(r["dst.b"]) == 40_000 for r in rows)
 
 
-def test_runs_record_their_transport(tmp_path):
+def _run_with_env(tmp_path, cfg, **env):
+    base = {k: v for k, v in os.environ.items() if k != "ZENOH_RUNTIME"}
+    res = subprocess.run([*HYCOSIM, "run", str(cfg), "--runs-dir", str(tmp_path / "runs"), "--no-progress"],
+                         capture_output=True, text=True, timeout=120, cwd=REPO,
+                         env={**base, "PYTHONPATH": str(REPO), **env})
+    assert res.returncode == 0, res.stderr
+    return sorted((tmp_path / "runs").iterdir())[-1]
+
+
+def test_runs_record_their_transport_and_zenoh_runtime(tmp_path):
     cfg = write_project(tmp_path / "p.json", [{"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]}],
                         cosim={"stepSize": 0.1, "stopTime": 0.3})
-    m = meta(run_project(cfg, tmp_path / "runs"))
-    assert m["lowLatency"] is True and "zenoh_runtime" in m
+    m = meta(_run_with_env(tmp_path, cfg))
+    assert m["lowLatency"] is True and m["zenoh_runtime"] == SHARED_RUNTIME
     assert m["waitStrategy"] == "auto" and isinstance(m["server_polls"], bool)
+    # A runtime the user sets is left alone (and is what the server and nodes ran with).
+    own = "(app: (worker_threads: 3))"
+    assert meta(_run_with_env(tmp_path, cfg, ZENOH_RUNTIME=own))["zenoh_runtime"] == own
+
+
+def test_every_node_knows_the_servers_token_from_the_start(tmp_path):
+    # A node learns that the server went (a cut link) only from the server's liveliness token;
+    # a node that attached without hearing of the token would never notice. Eight attaches.
+    n = 8
+    nodes = [{"nodeName": f"n{i}", "UID": i + 1, "model": "gain", "input": ["u"], "output": ["y"]} for i in range(n)]
+    links = [{"from": f"n{i}.y", "to": f"n{(i + 1) % n}.u"} for i in range(n)]
+    run = run_project(write_project(tmp_path / "p.json", nodes, links, cosim={"stepSize": 0.1, "stopTime": 2.0}),
+                      tmp_path / "runs")
+    for i in range(n):
+        events = [json.loads(line)["event"] for line in (run / f"node-n{i}.log.jsonl").read_text().splitlines()]
+        assert events.count("server seen") == 1, (f"n{i}", events)
+        assert "server back" not in events and events.index("server seen") < events.index("stop")

@@ -1,0 +1,45 @@
+"""Process handling shared by the benchmarks: free ports, and runs whose children die with them.
+
+A benchmark run that times out must not leave its server and nodes behind to load the
+machine under the runs that follow, so every child runs in a process group of its own
+and the whole group is killed when the run is given up.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def kill_group(proc: subprocess.Popen) -> None:
+    """SIGKILL ``proc`` and everything it started (it must lead its own group)."""
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+
+
+def start(cmd: list[str], **kwargs) -> subprocess.Popen:
+    """Popen in a process group of its own (stop it with :func:`kill_group`)."""
+    return subprocess.Popen(cmd, start_new_session=True, **kwargs)
+
+
+def run(cmd: list[str], timeout: float, **kwargs) -> subprocess.CompletedProcess:
+    """subprocess.run with text output captured, in a process group of its own, all of
+    which is killed on timeout; the timeout raises RuntimeError naming the command."""
+    with start(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs) as proc:
+        try:
+            out, err = proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            kill_group(proc)
+            proc.communicate()
+            raise RuntimeError(f"timed out after {timeout:g} s (--timeout): {' '.join(cmd[:4])} ...") from None
+        return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
