@@ -6,7 +6,10 @@
 2. A generated native bridge FMU driven by a C-only importer through the TCP gateway,
    against a Zenoh Python node and the raw Zenoh round trip (benchmarks/_zenoh_floor.py).
 
-    python benchmarks/fmu_overhead.py [--steps 3000] [--timeout 300] [--json]
+    python benchmarks/fmu_overhead.py [--steps 3000] [--repeat 3] [--timeout 300] [--json]
+
+One run scatters by tens of per cent on a small machine, so every measurement runs
+``--repeat`` times, the rounds interleaved, and the figures are the medians.
 
 Each co-simulation has ``--timeout`` seconds; past it, its processes are killed (all of
 them: benchmarks/_procs.py) and the benchmark stops with a message naming the measurement.
@@ -16,11 +19,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import subprocess
 import sys
 import tempfile
 import time
 import zipfile
+from dataclasses import dataclass
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -32,6 +37,10 @@ from fmu_bridge.config import load_project, parse_project  # noqa: E402
 from fmu_bridge.model_fmu import build_model_fmu  # noqa: E402
 
 from _procs import free_port, kill_group, run, start  # noqa: E402
+
+KEYS = ["python_node_step_us", "fmu_node_step_us", "python_node_cosim_steps_per_s", "fmu_node_cosim_steps_per_s",
+        "bridge_fmu_cosim_steps_per_s", "zenoh_floor_steps_per_s"]
+BRIDGE_NODE = {"nodeName": "tool", "UID": 9, "input": ["u"], "output": ["y"]}
 
 
 def _project(tmp: Path, node: dict, steps: int) -> Path:
@@ -77,9 +86,18 @@ def in_process(fmu: Path, steps: int) -> tuple[float, float]:
     return results[0], results[1]
 
 
-def bridge(tmp: Path, steps: int, timeout: float) -> float:
-    node = {"nodeName": "tool", "UID": 9, "input": ["u"], "output": ["y"]}
-    cfg = _project(tmp, node, steps)
+@dataclass
+class Bridge:
+    """A generated bridge FMU, extracted, and the C-only importer that drives it."""
+
+    exe: Path
+    binary: Path
+    guid: str
+    resources: str
+
+
+def build_bridge(tmp: Path, steps: int) -> Bridge:
+    cfg = _project(tmp, BRIDGE_NODE, steps)
     built = build_bridge_fmu(load_project(cfg), "tool", tmp / "fmus")
     with zipfile.ZipFile(built.path) as zf:
         zf.extractall(tmp / "bridge")
@@ -87,13 +105,19 @@ def bridge(tmp: Path, steps: int, timeout: float) -> float:
     headers = Path(__import__("fmpy").__file__).parent / "c-code"
     subprocess.run(["gcc", "-O2", f"-I{headers}", "-o", str(exe), str(REPO / "tests" / "c" / "importer.c"), "-ldl"],
                    check=True)
-    doc = json.loads(cfg.read_text())
-    server = start([sys.executable, "-m", "hycosim", "server", str(cfg), "--run-dir", str(tmp / "bridge-run")],
+    return Bridge(exe, tmp / "bridge" / "binaries" / "linux64" / "hycosim_tool.so", built.guid,
+                  (tmp / "bridge").as_uri())
+
+
+def bridge(tmp: Path, built: Bridge, steps: int, timeout: float, run_dir: Path) -> float:
+    cfg = _project(tmp, BRIDGE_NODE, steps)  # fresh ports for every run
+    gateway = json.loads(cfg.read_text())["gatewayIP"]
+    server = start([sys.executable, "-m", "hycosim", "server", str(cfg), "--run-dir", str(run_dir)],
                    stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=REPO)
     deadline = time.monotonic() + timeout  # one limit for the importer and the server together
     try:
-        imp = run([str(exe), str(tmp / "bridge" / "binaries" / "linux64" / "hycosim_tool.so"), built.guid,
-                   (tmp / "bridge").as_uri(), doc["gatewayIP"], str(steps), "1.0"], timeout)
+        imp = run([str(built.exe), str(built.binary), built.guid, built.resources, gateway, str(steps), "1.0"],
+                  timeout)
         _, server_err = server.communicate(timeout=max(0.0, deadline - time.monotonic()))
     except subprocess.TimeoutExpired:
         raise RuntimeError(f"timed out after {timeout:g} s (--timeout): the bridge FMU's server") from None
@@ -103,55 +127,57 @@ def bridge(tmp: Path, steps: int, timeout: float) -> float:
             server.communicate()
     if imp.returncode or server.returncode:
         raise RuntimeError(imp.stderr + server_err)
-    return float(json.loads((tmp / "bridge-run" / "meta.json").read_text())["steps_per_s"])
+    return float(json.loads((run_dir / "meta.json").read_text())["steps_per_s"])
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=3000)
+    ap.add_argument("--repeat", type=int, default=3, help="interleaved rounds; the figures are their medians")
     ap.add_argument("--timeout", type=float, default=300.0, help="seconds per co-simulation before it is killed")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     try:
-        figures = measure(args.steps, args.timeout)
+        figures = measure(args.steps, args.timeout, args.repeat)
     except RuntimeError as exc:
         raise SystemExit(f"fmu_overhead: {exc}") from None
     if args.json:
         print(json.dumps(figures))
         return
+    print(f"medians of {args.repeat} interleaved runs, {args.steps} macro steps each")
     report(figures)
 
 
-def measure(steps: int, timeout: float) -> dict[str, float]:
+def measure(steps: int, timeout: float, repeat: int) -> dict[str, float]:
+    """Median of ``repeat`` interleaved rounds of every measurement."""
+    runs: dict[str, list[float]] = {key: [] for key in KEYS}
     with tempfile.TemporaryDirectory() as tmpname:
         tmp = Path(tmpname)
         fmu = build_model_fmu(REPO / "tests" / "models" / "gain_model.py", tmp)
-        py_step, fmu_step = in_process(fmu, steps)
-        try:
-            py_cosim = cosim(_project(tmp, {"nodeName": "py", "UID": 1, "model": "gain",
-                                            "parameters": {"k": 0.5, "b": 1.0}, "input": ["u"], "output": ["y"]},
-                                      steps), tmp, timeout)
-        except RuntimeError as exc:
-            raise RuntimeError(f"the Python node's co-simulation failed: {exc}") from None
-        try:
-            fmu_cosim = cosim(_project(tmp, {"nodeName": "fmu", "UID": 1, "fmu": str(fmu),
-                                             "input": ["u"], "output": ["y"]}, steps), tmp, timeout)
-        except RuntimeError as exc:
-            raise RuntimeError(f"the FMU node's co-simulation failed: {exc}") from None
-        try:
-            bridge_rate = bridge(tmp, steps, timeout)
-        except RuntimeError as exc:
-            raise RuntimeError(f"the bridge FMU's co-simulation failed: {exc}") from None
-        floor = run([sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{free_port()}",
-                     "1", str(steps), "auto"], timeout)
-        if floor.returncode:
-            raise RuntimeError(f"the Zenoh floor failed:\n{floor.stderr[-2000:]}")
-        floor_rate = float(floor.stdout.split()[-1])
-    return {
-        "python_node_step_us": py_step * 1e6, "fmu_node_step_us": fmu_step * 1e6,
-        "python_node_cosim_steps_per_s": py_cosim, "fmu_node_cosim_steps_per_s": fmu_cosim,
-        "bridge_fmu_cosim_steps_per_s": bridge_rate, "zenoh_floor_steps_per_s": floor_rate,
-    }
+        built = build_bridge(tmp, steps)
+        python_node = {"nodeName": "py", "UID": 1, "model": "gain", "parameters": {"k": 0.5, "b": 1.0},
+                       "input": ["u"], "output": ["y"]}
+        fmu_node = {"nodeName": "fmu", "UID": 1, "fmu": str(fmu), "input": ["u"], "output": ["y"]}
+        for r in range(repeat):
+            py_step, fmu_step = in_process(fmu, steps)
+            runs["python_node_step_us"].append(py_step * 1e6)
+            runs["fmu_node_step_us"].append(fmu_step * 1e6)
+            for key, node, what in (("python_node_cosim_steps_per_s", python_node, "the Python node's"),
+                                    ("fmu_node_cosim_steps_per_s", fmu_node, "the FMU node's")):
+                try:
+                    runs[key].append(cosim(_project(tmp, node, steps), tmp, timeout))
+                except RuntimeError as exc:
+                    raise RuntimeError(f"{what} co-simulation failed: {exc}") from None
+            try:
+                runs["bridge_fmu_cosim_steps_per_s"].append(bridge(tmp, built, steps, timeout, tmp / f"bridge-run-{r}"))
+            except RuntimeError as exc:
+                raise RuntimeError(f"the bridge FMU's co-simulation failed: {exc}") from None
+            floor = run([sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{free_port()}",
+                         "1", str(steps), "auto"], timeout)
+            if floor.returncode:
+                raise RuntimeError(f"the Zenoh floor failed:\n{floor.stderr[-2000:]}")
+            runs["zenoh_floor_steps_per_s"].append(float(floor.stdout.split()[-1]))
+    return {key: statistics.median(values) for key, values in runs.items()}
 
 
 def report(f: dict[str, float]) -> None:
