@@ -50,7 +50,7 @@ def run_hycosim(n: int, steps: int, wait_strategy: str, timeout: float) -> float
     with tempfile.TemporaryDirectory() as tmp:
         cfg = ring_config(n, steps, Path(tmp) / "ring.json", wait_strategy)
         res = run([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", tmp, "--no-progress"],
-                   timeout, cwd=REPO)
+                  timeout, cwd=REPO)
         if res.returncode:
             logs = "".join(f"--- {p.name}\n{p.read_text()[-800:]}" for p in Path(tmp).glob("ring*/*.stderr.txt"))
             raise RuntimeError(res.stderr + logs)
@@ -60,7 +60,7 @@ def run_hycosim(n: int, steps: int, wait_strategy: str, timeout: float) -> float
 
 def run_zenoh_floor(n: int, steps: int, wait_strategy: str, timeout: float) -> float:
     res = run([sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{free_port()}",
-                str(n), str(steps), wait_strategy], timeout)
+               str(n), str(steps), wait_strategy], timeout)
     if res.returncode:
         raise RuntimeError(res.stderr)
     return float(res.stdout.split()[-1])
