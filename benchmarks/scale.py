@@ -4,7 +4,7 @@ Each node is its own process in one of four client namespaces, joined to the ser
 namespace by a veth pair (root and ``ip netns`` needed). Reports macro steps/s and how
 the cost per step grows with N (linear growth doubles it per doubling of N).
 
-    sudo python benchmarks/scale.py [--n 8 16 32] [--steps 1000] [--hosts 4] [--json]
+    sudo python benchmarks/scale.py [--n 8 16 32] [--steps 1000] [--hosts 4] [--timeout 600] [--json]
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import json
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -21,6 +22,8 @@ sys.path.insert(0, str(REPO))
 
 from tests.helpers import env  # noqa: E402
 from tests.netns import hosts, netns_available  # noqa: E402
+
+from _procs import kill_group, start  # noqa: E402
 
 
 def ring(n: int, steps: int, path: Path) -> Path:
@@ -33,25 +36,37 @@ def ring(n: int, steps: int, path: Path) -> Path:
     return path
 
 
-def run(n: int, steps: int, n_hosts: int) -> float:
+def run(n: int, steps: int, n_hosts: int, timeout: float) -> float:
     py = [sys.executable, "-m", "hycosim"]
     with tempfile.TemporaryDirectory() as tmp, hosts([f"h{i}" for i in range(n_hosts)], subnet=214) as h:
         cfg = ring(n, steps, Path(tmp) / "ring.json")
         run_dir = Path(tmp) / "run"
-        server = subprocess.Popen(h.exec(h.server) + py + ["server", str(cfg), "--listen", "tcp/0.0.0.0:7447",
-                                                            "--run-dir", str(run_dir)],
-                                  stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env(), cwd=REPO)
+        # Deleting a namespace does not end its processes: each runs in a group of its own,
+        # killed below if it outlives the run.
+        server = start(h.exec(h.server) + py + ["server", str(cfg), "--listen", "tcp/0.0.0.0:7447",
+                                                "--run-dir", str(run_dir)],
+                       stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env(), cwd=REPO)
         nodes = []
-        for i in range(n):
-            host = f"h{i % n_hosts}"
-            nodes.append(subprocess.Popen(h.exec(h.clients[host]) + py + ["node", f"n{i}", str(cfg), "--connect",
-                                                                           f"tcp/{h.server_address[host]}:7447"],
-                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env(), cwd=REPO))
-        _, err = server.communicate(timeout=900)
-        for p in nodes:
-            p.wait(timeout=60)
+        try:
+            for i in range(n):
+                host = f"h{i % n_hosts}"
+                nodes.append(start(h.exec(h.clients[host]) + py + ["node", f"n{i}", str(cfg), "--connect",
+                                                                   f"tcp/{h.server_address[host]}:7447"],
+                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env(), cwd=REPO))
+            deadline = time.monotonic() + timeout
+            try:
+                _, err = server.communicate(timeout=timeout)
+                for p in nodes:
+                    p.wait(timeout=max(1.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                raise RuntimeError(f"N={n}: timed out after {timeout:g} s (--timeout)") from None
+        finally:
+            for p in (server, *nodes):
+                if p.poll() is None:
+                    kill_group(p)
+                    p.wait()
         if server.returncode:
-            raise RuntimeError(err)
+            raise RuntimeError(f"N={n}: the server failed:\n{err[-2000:]}")
         return float(json.loads((run_dir / "meta.json").read_text())["steps_per_s"])
 
 
@@ -60,11 +75,15 @@ def main() -> None:
     ap.add_argument("--n", type=int, nargs="+", default=[8, 16, 32])
     ap.add_argument("--steps", type=int, default=1000)
     ap.add_argument("--hosts", type=int, default=4)
+    ap.add_argument("--timeout", type=float, default=600.0, help="seconds per run before its processes are killed")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     if not netns_available():
         sys.exit("benchmarks/scale.py needs root and ip netns")
-    rates = {n: run(n, args.steps, args.hosts) for n in args.n}
+    try:
+        rates = {n: run(n, args.steps, args.hosts, args.timeout) for n in args.n}
+    except RuntimeError as exc:
+        sys.exit(f"scale: {exc}")
     base = args.n[0]
     for n, rate in rates.items():
         if args.json:

@@ -7,7 +7,12 @@ import subprocess
 import sys
 import time
 
+import pytest
+
 from tests.helpers import REPO, env
+from tests.netns import netns_available
+
+needs_netns = pytest.mark.skipif(not netns_available(), reason="needs root and ip netns")
 
 
 def test_barrier_benchmark_json_reports_medians_of_its_runs():
@@ -58,4 +63,20 @@ def test_fmu_overhead_benchmark_kills_a_cosimulation_past_its_timeout_and_says_w
     # Its server and node went with it (they run the benchmark's project, bench-*).
     time.sleep(0.5)
     left = subprocess.run(["pgrep", "-f", "hycosim (run|server|node) .*py.json"], capture_output=True, text=True)
+    assert left.stdout.split() == []
+
+
+@needs_netns
+def test_scale_benchmark_over_namespaces_reports_and_kills_a_run_past_its_timeout():
+    res = subprocess.run([sys.executable, "benchmarks/scale.py", "--n", "2", "4", "--steps", "100", "--hosts", "2",
+                          "--json"], capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
+    assert res.returncode == 0, res.stderr
+    lines = [json.loads(line) for line in res.stdout.splitlines()]
+    assert [(r["system"], r["n"]) for r in lines] == [("hycosim-netns", 2), ("hycosim-netns", 4)]
+    assert all(r["steps_per_s"] > 0 for r in lines)
+    res = subprocess.run([sys.executable, "benchmarks/scale.py", "--n", "2", "--steps", "1000000", "--hosts", "2",
+                          "--timeout", "3"], capture_output=True, text=True, timeout=120, cwd=REPO, env=env())
+    assert res.returncode == 1 and "scale: N=2: timed out after 3 s (--timeout)" in res.stderr
+    time.sleep(0.5)  # the server and nodes went with it, though their namespaces did
+    left = subprocess.run(["pgrep", "-f", "hycosim (server|node) .*ring.json"], capture_output=True, text=True)
     assert left.stdout.split() == []
