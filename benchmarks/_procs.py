@@ -11,6 +11,7 @@ import os
 import signal
 import socket
 import subprocess
+import time
 
 
 def free_port() -> int:
@@ -43,3 +44,20 @@ def run(cmd: list[str], timeout: float, **kwargs) -> subprocess.CompletedProcess
             proc.communicate()
             raise RuntimeError(f"timed out after {timeout:g} s (--timeout): {' '.join(cmd[:4])} ...") from None
         return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
+
+
+def wait_all(lead: subprocess.Popen, others: list[subprocess.Popen], timeout: float) -> tuple:
+    """``lead.communicate()``, then wait for ``others``, all within one ``timeout``; every group
+    still running on the way out (a timeout, or a failure) is killed. Raises
+    subprocess.TimeoutExpired past the timeout."""
+    deadline = time.monotonic() + timeout
+    try:
+        out = lead.communicate(timeout=timeout)
+        for p in others:
+            p.wait(timeout=max(0.0, deadline - time.monotonic()))
+        return out
+    finally:
+        for p in (lead, *others):
+            if p.poll() is None:
+                kill_group(p)
+                p.wait()

@@ -27,7 +27,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from _procs import free_port, kill_group, run, start
+from _procs import free_port, run, start, wait_all
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
@@ -73,17 +73,10 @@ def run_helics(core: str, n: int, steps: int, timeout: float) -> float:
                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     feds = [start([sys.executable, script, "fed", core, str(n), str(i), str(steps), str(port)],
                   stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True) for i in range(n)]
-    deadline = time.monotonic() + timeout  # one limit for the whole run, as for the other systems
-    try:
-        out = feds[0].communicate(timeout=timeout)[0]
-        for p in (*feds[1:], broker):
-            p.wait(timeout=max(0.0, deadline - time.monotonic()))
+    try:  # one limit for the whole run, as for the other systems
+        out = wait_all(feds[0], [*feds[1:], broker], timeout)[0]
     except subprocess.TimeoutExpired:
         raise RuntimeError(f"timed out after {timeout:g} s (--timeout): HELICS {core} with {n} federates") from None
-    finally:
-        for p in (broker, *feds):
-            if p.poll() is None:
-                kill_group(p)
     return float(out.split()[0])
 
 

@@ -14,7 +14,6 @@ import json
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -23,7 +22,7 @@ sys.path.insert(0, str(REPO))
 from tests.helpers import env  # noqa: E402
 from tests.netns import hosts, netns_available  # noqa: E402
 
-from _procs import kill_group, start  # noqa: E402
+from _procs import kill_group, start, wait_all  # noqa: E402
 
 
 def ring(n: int, steps: int, path: Path) -> Path:
@@ -53,15 +52,11 @@ def run(n: int, steps: int, n_hosts: int, timeout: float) -> float:
                 nodes.append(start(h.exec(h.clients[host]) + py + ["node", f"n{i}", str(cfg), "--connect",
                                                                    f"tcp/{h.server_address[host]}:7447"],
                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env(), cwd=REPO))
-            deadline = time.monotonic() + timeout
-            try:
-                _, err = server.communicate(timeout=timeout)
-                for p in nodes:
-                    p.wait(timeout=max(1.0, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:
-                raise RuntimeError(f"N={n}: timed out after {timeout:g} s (--timeout)") from None
+            _, err = wait_all(server, nodes, timeout)
+        except subprocess.TimeoutExpired:
+            raise RuntimeError(f"N={n}: timed out after {timeout:g} s (--timeout)") from None
         finally:
-            for p in (server, *nodes):
+            for p in (server, *nodes):  # a failure while starting the nodes
                 if p.poll() is None:
                     kill_group(p)
                     p.wait()
