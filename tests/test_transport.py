@@ -73,7 +73,7 @@ def test_runs_record_their_transport_and_zenoh_runtime(tmp_path):
     m = meta(_run_with_env(tmp_path, cfg))
     assert m["lowLatency"] is True and m["zenoh_runtime"] == SHARED_RUNTIME
     assert m["waitStrategy"] == "auto" and isinstance(m["server_polls"], bool)
-    # A runtime the user sets is left alone (and is what the server and nodes ran with).
+    # A runtime the user sets is left alone (the server records what it ran with).
     own = "(app: (worker_threads: 3))"
     assert meta(_run_with_env(tmp_path, cfg, ZENOH_RUNTIME=own))["zenoh_runtime"] == own
 
