@@ -28,8 +28,16 @@ def kill_group(proc: subprocess.Popen) -> None:
         pass
 
 
+def stop_all(*procs: subprocess.Popen) -> None:
+    """Kill the group of every one of ``procs`` still running, and reap it."""
+    for p in procs:
+        if p.poll() is None:
+            kill_group(p)
+            p.wait()
+
+
 def start(cmd: list[str], **kwargs) -> subprocess.Popen:
-    """Popen in a process group of its own (stop it with :func:`kill_group`)."""
+    """Popen in a process group of its own (stop it with :func:`stop_all`)."""
     return subprocess.Popen(cmd, start_new_session=True, **kwargs)
 
 
@@ -57,7 +65,4 @@ def wait_all(lead: subprocess.Popen, others: list[subprocess.Popen], timeout: fl
             p.wait(timeout=max(0.0, deadline - time.monotonic()))
         return out
     finally:
-        for p in (lead, *others):
-            if p.poll() is None:
-                kill_group(p)
-                p.wait()
+        stop_all(lead, *others)

@@ -36,7 +36,7 @@ from fmu_bridge.bridge_fmu import build_bridge_fmu  # noqa: E402
 from fmu_bridge.config import load_project, parse_project  # noqa: E402
 from fmu_bridge.model_fmu import build_model_fmu  # noqa: E402
 
-from _procs import free_port, kill_group, run, start  # noqa: E402
+from _procs import free_port, run, start, stop_all  # noqa: E402
 
 KEYS = ["python_node_step_us", "fmu_node_step_us", "python_node_cosim_steps_per_s", "fmu_node_cosim_steps_per_s",
         "bridge_fmu_cosim_steps_per_s", "zenoh_floor_steps_per_s"]
@@ -122,9 +122,7 @@ def bridge(tmp: Path, built: Bridge, steps: int, timeout: float, run_dir: Path) 
     except subprocess.TimeoutExpired:
         raise RuntimeError(f"timed out after {timeout:g} s (--timeout): the bridge FMU's server") from None
     finally:
-        if server.poll() is None:
-            kill_group(server)
-            server.communicate()
+        stop_all(server)
     if imp.returncode or server.returncode:
         raise RuntimeError(imp.stderr + server_err)
     return float(json.loads((run_dir / "meta.json").read_text())["steps_per_s"])

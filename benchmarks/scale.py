@@ -22,7 +22,7 @@ sys.path.insert(0, str(REPO))
 from tests.helpers import env  # noqa: E402
 from tests.netns import hosts, netns_available  # noqa: E402
 
-from _procs import kill_group, start, wait_all  # noqa: E402
+from _procs import start, stop_all, wait_all  # noqa: E402
 
 
 def ring(n: int, steps: int, path: Path) -> Path:
@@ -56,10 +56,7 @@ def run(n: int, steps: int, n_hosts: int, timeout: float) -> float:
         except subprocess.TimeoutExpired:
             raise RuntimeError(f"N={n}: timed out after {timeout:g} s (--timeout)") from None
         finally:
-            for p in (server, *nodes):  # a failure while starting the nodes
-                if p.poll() is None:
-                    kill_group(p)
-                    p.wait()
+            stop_all(server, *nodes)  # after a failure while starting the nodes
         if server.returncode:
             raise RuntimeError(f"N={n}: the server failed:\n{err[-2000:]}")
         return float(json.loads((run_dir / "meta.json").read_text())["steps_per_s"])
