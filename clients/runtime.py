@@ -136,25 +136,34 @@ class NodeRuntime:
                                f"largest: {largest}") from None
 
     def _wait(self, timeout: float, what: str) -> frames.Frame:
-        """The next frame from the server (skipping ones not for us); STOP ends the wait too.
+        """The next frame from the server (skipping ones not for us); STOP ends the wait too."""
+        frame = self._next_frame(timeout)
+        if frame is None:
+            raise NodeRunError(f"node {self.name!r}: no {what} from the server at {self.endpoint} "
+                               f"within {timeout:g} s (after step {self.steps})")
+        return frame
 
-        If the server's token goes (a link cut), wait up to linkGrace for it to come back.
+    def _next_frame(self, timeout: float) -> frames.Frame | None:
+        """The next frame from the server within ``timeout`` seconds, or None.
+
+        Liveliness is handled here: if the server's token goes (a link cut), wait up to
+        linkGrace for it to come back, then stop. Malformed frames are dropped.
         """
         deadline = time.monotonic() + timeout
         grace = self.cosim.linkGrace
         while True:
-            wait = deadline - time.monotonic()
+            now = time.monotonic()
+            wait = deadline - now
             if self._server_lost is not None:
-                if time.monotonic() - self._server_lost > grace:
+                if now - self._server_lost > grace:
                     raise NodeRunError(f"node {self.name!r}: the server went away after step {self.steps} and did not "
                                        f"come back within the link grace of {grace:g} s")
-                wait = min(wait, self._server_lost + grace - time.monotonic() + 0.01)
+                wait = min(wait, self._server_lost + grace - now + 0.01)
             msg = self.inbox.recv(max(wait, 0.0))
             if msg is None:
-                if self._server_lost is not None and time.monotonic() < deadline:
-                    continue
-                raise NodeRunError(f"node {self.name!r}: no {what} from the server at {self.endpoint} "
-                                   f"within {timeout:g} s (after step {self.steps})")
+                if time.monotonic() < deadline:
+                    continue  # woken for the grace check above
+                return None
             try:
                 frame = frames.decode(msg[1])
             except frames.FrameError as exc:
@@ -243,21 +252,18 @@ class NodeRuntime:
                 self._send(frames.encode(frames.SAMPLE, self.spec.UID, seq, ts, self._pack_outputs(values)))
                 seq += 1
             if rt:
-                # Real time: sample by the wall clock, and look for STOP in between.
-                msg = self.inbox.recv(period)
-                frame = frames.decode(msg[1]) if msg is not None else None
+                # Real time: sample by the wall clock, and look for STOP in between. While the
+                # server is away (within linkGrace) samples go nowhere; sampling goes on.
+                frame = self._next_frame(period)
                 sim_now = t0 + (time.time() - wall0) / rt
             else:
                 # As fast as possible: the server's releases are the clock.
                 frame = self._wait(self.cosim.stepTimeout + 30.0, "release")
+                if frame.kind == frames.REPLAY:
+                    frame = frame.fields[1]
                 if frame.kind == frames.STEP:
                     _, t, h, *_ = frame.fields
                     sim_now = t + h
                     self.steps = frame.fields[0] + 1
-            if frame is not None and frame.kind == frames.LIVE:
-                if not frame.fields[1]:
-                    raise NodeRunError(f"node {self.name!r}: the server went away after step {self.steps}")
-                self._log.info("server seen", step=self.steps)  # its token, fetched after START
-                self._server_seen = True
             if frame is not None and frame.kind == frames.STOP:
                 return

@@ -98,6 +98,35 @@ def test_malformed_frames_are_dropped_counted_and_the_run_goes_on(tmp_path):
         reap(server, *nodes)
 
 
+def test_garbage_on_the_servers_release_key_is_dropped_by_every_node(tmp_path):
+    """Nodes read frames anyone on the network may write (without security): a stepping node
+    and a real-time asynchronous source both drop garbage, log it, and run to the end."""
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "sensor", "UID": 1, "model": "ramp_source", "async": True, "rate": 20.0, "output": ["y"]},
+        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+    ], [{"from": "sensor.y", "to": "g.u"}], cosim={"stepSize": 0.01, "stopTime": 2.0, "realTime": True,
+                                                   "attachTimeout": 20.0}, name="faults")
+    run_dir = tmp_path / "run"
+    logs = {n: tmp_path / f"{n}.log.jsonl" for n in ("sensor", "g")}
+    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
+    nodes = {n: spawn("node", n, str(cfg), "--log-file", str(logs[n])) for n in logs}
+    try:
+        wait_for(lambda: _steps_on_disk(run_dir) > 10, 30, "10 steps")
+        with zenoh.open(client_config(_endpoint(cfg))) as session:
+            for payload in (os.urandom(40), msgpack.packb({"not": "a frame"}), msgpack.packb([99, frames.STEP])):
+                session.put(ProjectKeys("faults").down, payload, congestion_control=zenoh.CongestionControl.BLOCK)
+            time.sleep(0.3)
+        _, err = server.communicate(timeout=30)
+        assert server.returncode == 0, err
+        for name, proc in nodes.items():
+            _, node_err = proc.communicate(timeout=20)
+            assert proc.returncode == 0, node_err
+            assert logs[name].read_text().count('"frame dropped"') == 3, name
+        assert meta(run_dir)["status"] == "completed" and len(read_rows(run_dir)) == 201
+    finally:
+        reap(server, *nodes.values())
+
+
 def test_node_that_never_attaches_times_out_naming_it(tmp_path):
     cfg = _pair(tmp_path, attachTimeout=2.0)
     run_dir = tmp_path / "run"
