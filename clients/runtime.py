@@ -103,13 +103,21 @@ class NodeRuntime:
             watch = session.liveliness().declare_subscriber(self.keys.alive(SERVER_TOKEN), self._on_server_liveliness,
                                                             history=True)
             # Declared after the subscriber: the server starts once it sees this token.
+            self._refuse_a_second_instance(session)
             token = session.liveliness().declare_token(self.keys.alive(self.name))
             try:
                 # The server times out the attach; outwait it so that its STOP, naming who is
                 # missing, reaches this node rather than a timeout of our own.
                 start = self._wait(self.cosim.attachTimeout + self.cosim.stepTimeout, "START")
+                if start.kind == frames.REPLAY:  # START again, after a link cut during the attach
+                    start = start.fields[1]
                 if start.kind == frames.STOP:
                     return
+                if start.kind != frames.START:
+                    at = f" (step {start.fields[0]})" if start.kind == frames.STEP else ""
+                    raise NodeRunError(f"node {self.name!r}: the run on {self.endpoint} was already under way{at} "
+                                       "when it attached; a node joins before the run starts, and a node "
+                                       "restarted mid-run has lost the state the run needs: start the run again")
                 if isinstance(self.impl, AsyncSource):
                     self._run_async(start)
                 else:
@@ -123,6 +131,19 @@ class NodeRuntime:
                 self.impl.teardown()
             finally:
                 session.close()
+
+    def _refuse_a_second_instance(self, session: zenoh.Session) -> None:
+        """Stop if another process already holds this node's liveliness token.
+
+        Two processes answering for one node would both send its outputs, and the server
+        would take whichever came first.
+        """
+        key = self.keys.alive(self.name)
+        timeout = min(5.0, self.cosim.attachTimeout)
+        for reply in session.liveliness().get(key, timeout=timeout):
+            if reply.ok is not None:
+                raise NodeRunError(f"node {self.name!r} is already attached to the server at {self.endpoint}: "
+                                   "another process holds its liveliness token (one process per node)")
 
     def _send(self, payload: bytes) -> None:
         """Publish one frame; one too large for the link stops the node, naming its largest outputs."""
@@ -166,6 +187,15 @@ class NodeRuntime:
                 return None
             try:
                 frame = frames.decode(msg[1])
+                if frame.kind == frames.REPLAY:
+                    if frame.fields[0] != self.name:
+                        continue
+                    inner = frames.decode(frame.fields[1])
+                    if inner.kind not in (frames.START, frames.STEP):
+                        raise frames.FrameError(f"a replay of a frame of kind {inner.kind}")
+                    frame = frames.Frame(frames.REPLAY, (self.name, frames.check_release(inner, self.name)))
+                elif frame.kind in (frames.START, frames.STEP):
+                    frames.check_release(frame, self.name)
             except frames.FrameError as exc:
                 self._log.warning("frame dropped", reason=str(exc), step=self.steps)
                 continue
@@ -179,10 +209,6 @@ class NodeRuntime:
                 else:
                     raise NodeRunError(f"node {self.name!r}: the server went away after step {self.steps}")
                 continue
-            if frame.kind == frames.REPLAY:
-                if frame.fields[0] != self.name:
-                    continue
-                return frames.Frame(frames.REPLAY, (frame.fields[0], frames.decode(frame.fields[1])))
             return frame
 
     def _run_stepping(self, checkpoint: bool) -> None:

@@ -76,6 +76,35 @@ def decode(payload: bytes) -> Frame:
     return Frame(kind, fields)
 
 
+_NUMBER = (int, float)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, _NUMBER) and not isinstance(value, bool)
+
+
+def check_release(frame: Frame, node: str | None = None) -> Frame:
+    """Return a START or STEP frame whose fields have the types a node reads; raise FrameError otherwise.
+
+    :func:`decode` checks only the shape; a node (or the gateway) reading a release that
+    anyone on an unsecured network may have written checks the types before it acts.
+    With ``node``, a STEP's inputs for that node, if any, must be a list.
+    """
+    f = frame.fields
+    if frame.kind == START:
+        ok = (isinstance(f[0], str) and _is_number(f[1]) and _is_number(f[2]) and _is_number(f[3])
+              and (f[4] is None or _is_number(f[4])) and isinstance(f[5], dict))
+    elif frame.kind == STEP:
+        ok = (type(f[0]) is int and _is_number(f[1]) and _is_number(f[2]) and isinstance(f[3], str)
+              and isinstance(f[4], dict) and isinstance(f[5], list)
+              and (node is None or isinstance(f[4].get(node, []), list)))
+    else:
+        raise FrameError(f"frame kind {frame.kind} is not a release")
+    if not ok:
+        raise FrameError(f"{'START' if frame.kind == START else 'STEP'} frame with fields of the wrong types")
+    return frame
+
+
 def largest_values(named: Iterable[tuple[str, Any]], count: int = 3) -> str:
     """``name (N bytes), ...`` for the ``count`` values that take most room in a frame."""
     sizes = sorted(((len(msgpack.packb(v, use_bin_type=True)), name) for name, v in named), reverse=True)

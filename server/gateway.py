@@ -109,6 +109,10 @@ class Gateway:
             self._refuse(sock, f"node {name!r} has {len(node.output)} outputs and {len(node.input)} inputs, "
                                f"the FMU declares {n_out} and {n_in}: rebuild it from this project", "unknown ports")
             return None
+        if self._token_held(name):
+            self._refuse(sock, f"node {name!r} is already attached: a process on Zenoh holds its liveliness token",
+                         "not owner")
+            return None
         with self._lock:
             if name in self._conns:
                 self._refuse(sock, f"node {name!r} is already attached", "not owner")
@@ -121,6 +125,11 @@ class Gateway:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         sock.sendall(gp.frame(gp.WELCOME))
         return node
+
+    def _token_held(self, name: str) -> bool:
+        """Whether a node runtime on Zenoh already answers for ``name``."""
+        replies = self._session.liveliness().get(self._keys.alive(name), timeout=self._hello_timeout)
+        return any(reply.ok is not None for reply in replies)
 
     def _serve(self, sock: socket.socket, peer: object) -> None:
         node = self._hello(sock)
@@ -173,18 +182,20 @@ class Gateway:
             return
         try:
             frame = frames.decode(sample.payload.to_bytes())
-        except frames.FrameError:
-            return
-        if frame.kind == frames.START:
-            _, t0, h, _, _, _ = frame.fields
-            data = {c: gp.start(t0, h) for c in conns}
-        elif frame.kind == frames.STEP:
-            k, t, h, _, inputs, driven = frame.fields
-            data = {c: gp.step(k, t, h, c.node.nodeName in driven, [float(v) for v in inputs[c.node.nodeName]])
-                    for c in conns}
-        elif frame.kind == frames.STOP:
-            data = {c: gp.text(gp.STOP, str(frame.fields[1])) for c in conns}
-        else:
+            if frame.kind == frames.START:
+                _, t0, h, _, _, _ = frames.check_release(frame).fields
+                data = {c: gp.start(t0, h) for c in conns}
+            elif frame.kind == frames.STEP:
+                k, t, h, _, inputs, driven = frames.check_release(frame).fields
+                data = {c: gp.step(k, t, h, c.node.nodeName in driven, [float(v) for v in inputs[c.node.nodeName]])
+                        for c in conns}
+            elif frame.kind == frames.STOP:
+                data = {c: gp.text(gp.STOP, str(frame.fields[1])) for c in conns}
+            else:
+                return
+        except (frames.FrameError, KeyError, TypeError, ValueError) as exc:
+            # The down key is open to anyone on an unsecured network; only the server's releases pass.
+            self._drop("malformed release", f"on the release key: {type(exc).__name__}: {exc}", -1)
             return
         for conn, payload in data.items():
             try:

@@ -222,3 +222,56 @@ def test_gateway_node_disconnecting_mid_step_stops_the_run_naming_it(tmp_path):
     assert clock.returncode == 0
     rows = read_rows(tmp_path / "run")
     assert column(rows, "tool.y") == [0.0, 1.0, 2.0]
+
+
+def test_gateway_drops_forged_releases_and_passes_only_the_servers(tmp_path):
+    """The release key is open to anyone on an unsecured network: a STEP whose fields have the
+    wrong types, or that has no inputs for the bridged node, never reaches the FMU (nor the
+    Python node beside it); it is counted, and the FMU sees exactly the server's steps."""
+    import zenoh
+
+    from fmu_bridge import frames
+    from fmu_bridge.keys import ProjectKeys
+    from fmu_bridge.session import client_config
+
+    cfg = _project(tmp_path, stop=0.5)
+    server, clock = _start(cfg, tmp_path / "run")
+    sock, kind, _ = _raw_attach(cfg, uid=7)
+    assert kind == gp.WELCOME and gp.read_frame(sock)[0] == gp.START
+    sock.sendall(gp.outputs(0, 0.0, [0.0]))
+    assert gp.read_frame(sock)[0] == gp.STEP
+    forged = [frames.encode(frames.STEP, 1, "0.1", 0.1, "free", {"tool": [1.0]}, []),
+              frames.encode(frames.STEP, 1, 0.1, 0.1, "free", {"clock": 5}, [])]
+    with zenoh.open(client_config(json.loads(cfg.read_text())["serverIP"])) as session:
+        for payload in forged:
+            session.put(ProjectKeys("bridge").down, payload, congestion_control=zenoh.CongestionControl.BLOCK)
+        time.sleep(0.3)
+    steps = [0]
+    for k in range(1, 6):
+        sock.sendall(gp.outputs(k, 0.1 * k, [float(k)]))
+        kind, payload = gp.read_frame(sock)
+        if kind != gp.STEP:
+            break
+        steps.append(gp.parse_step(payload)[0])
+    assert kind == gp.STOP and steps == [0, 1, 2, 3, 4]
+    sock.close()
+    (_, serr), _ = _finish([server, clock])
+    assert server.returncode == 0 and "Traceback" not in serr
+    assert meta(tmp_path / "run")["dropped_frames"] == {"malformed release": 2}
+
+
+def test_gateway_refuses_an_fmu_for_a_node_already_attached_over_zenoh(tmp_path):
+    cfg = _project(tmp_path, attachTimeout=8.0)
+    endpoint = json.loads(cfg.read_text())["serverIP"]
+    server, clock = _start(cfg, tmp_path / "run")
+    deadline = time.monotonic() + 30
+    while "attached 1/2" not in hycosim("status", endpoint, "--project", "bridge").stdout:
+        assert time.monotonic() < deadline, "clock never attached"
+        time.sleep(0.2)
+    sock, kind, payload = _raw_attach(cfg, uid=1, name="clock", n_out=2, n_in=0)
+    sock.close()
+    assert kind == gp.REFUSE and payload.decode() == (
+        "node 'clock' is already attached: a process on Zenoh holds its liveliness token")
+    (_, serr), _ = _finish([server, clock])
+    assert server.returncode == 3 and "waiting for node(s) tool to attach" in serr
+    assert meta(tmp_path / "run")["dropped_frames"] == {"not owner": 1}

@@ -195,6 +195,9 @@ def test_wrong_or_missing_credentials_cannot_attach_and_a_forged_frame_is_droppe
         assert bad.returncode == 3 and "cannot open Zenoh session" in bad.stderr and "user 'clock'" in bad.stderr
         with pytest.raises(Exception):
             zenoh.open(client_config(endpoint, timeout_s=2.0))  # no credentials at all
+        # The right credentials for a node that is already attached: refused, the run unharmed.
+        second = hycosim("node", "g", str(cfg), timeout=90)
+        assert second.returncode == 3 and "node 'g' is already attached" in second.stderr, second.stderr
         keys = ProjectKeys("secure")
         # Authenticated as clock, try to write g's outputs: the router's access control drops it.
         with zenoh.open(client_config(endpoint, user="clock", password="clock-pw")) as forger:
