@@ -169,3 +169,33 @@ def test_recv_on_a_closed_session_raises_instead_of_hanging():
         assert time.monotonic() - t0 < 2.0
     finally:
         inbox.close()
+
+
+def _context_switches(thread: threading.Thread) -> int:
+    status = open(f"/proc/self/task/{thread.native_id}/status").read()
+    return int(status.split("voluntary_ctxt_switches:")[1].split()[0])
+
+
+def test_the_watchdog_sleeps_between_deadlines_and_keeps_short_ones():
+    """The watchdog wakes for a deadline or the quarter-second Ctrl-C tick, not on a poll
+    (with 17 processes on 2 cores a 10 ms poll in each cost a fifth of the barrier rate);
+    a short timeout set while it sleeps toward a later wake still ends on time."""
+    router, client = _pair()
+    inbox = Inbox(router, "t/up/**", "t/up/local")
+    try:
+        time.sleep(0.3)
+        before = _context_switches(inbox._watchdog)
+        time.sleep(1.0)  # idle
+        assert inbox.recv(timeout=1.0) is None  # a long wait
+        woken = _context_switches(inbox._watchdog) - before
+        assert woken <= 16, f"the watchdog woke {woken} times in 2 s"
+        for _ in range(5):
+            inbox.inject(b"event")
+            assert inbox.recv(timeout=5.0) == ("t/up/local", b"event")  # the watchdog now aims at ~0.25 s
+            t0 = time.monotonic()
+            assert inbox.recv(timeout=0.03) is None
+            assert 0.03 <= time.monotonic() - t0 < 0.15
+    finally:
+        inbox.close()
+        client.close()
+        router.close()
