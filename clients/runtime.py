@@ -20,6 +20,7 @@ from fmu_bridge.config import LoadedProject, PortType
 from fmu_bridge.fmu_loader import FmuError
 from fmu_bridge.inbox import Inbox
 from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
+from fmu_bridge.security import client_tls
 from fmu_bridge.session import ConnectError, FramePublisher, FrameTooLarge, client_config, open_session
 
 from clients.node import AsyncSource, Node, NodeContext
@@ -84,7 +85,8 @@ class NodeRuntime:
                 raise NodeRunError(str(exc)) from None
             raise NodeRunError(f"node {self.name!r}: its model failed to set up: {type(exc).__name__}: {exc}") from exc
         conf = client_config(self.endpoint, timeout_s=self.cosim.attachTimeout, low_latency=self.cosim.lowLatency,
-                             user=self.name if self.password is not None else None, password=self.password)
+                             user=self.name if self.password is not None else None, password=self.password,
+                             tls=client_tls(self.loaded, self.endpoint))
         try:
             session = open_session(conf, self.endpoint)
         except ConnectError as exc:

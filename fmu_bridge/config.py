@@ -161,14 +161,25 @@ class Event(_Strict):
     description: str | None = None
 
 
+class Tls(_Strict):
+    """TLS on the server's ``tls/HOST:PORT`` endpoint; PEM files relative to the project JSON."""
+
+    # The CA that signed the server's certificate: what a node checks the server against.
+    rootCa: str
+    # The server's certificate (naming serverIP's host) and private key; only the server reads them.
+    certificate: str | None = None
+    privateKey: str | None = None
+
+
 class Security(_Strict):
-    """Remote attach with credentials: Zenoh user/password and per-node access control."""
+    """Remote attach: Zenoh user/password with per-node access control, TLS, or both."""
 
     # Zenoh's dictionary file, "user:password" per line: "server", each node by its name,
     # and any other user (a monitor for `hycosim status`). Relative to the project JSON.
-    credentials: str
-    # Access control at the router: each node may publish only on its own keys.
+    credentials: str | None = None
+    # Access control at the router (with credentials): each node may publish only on its own keys.
     acl: bool = True
+    tls: Tls | None = None
 
 
 class Project(_Strict):
@@ -375,6 +386,25 @@ def _resolve_routes(project: Project, issues: list[Issue]) -> list[Route]:
     return routes
 
 
+def _security_issues(project: Project) -> list[Issue]:
+    sec = project.security
+    tls_endpoint = project.serverIP.startswith("tls/")
+    issues = []
+    if sec is not None and sec.credentials is None and sec.tls is None:
+        issues.append(Issue("security", "security names neither 'credentials' nor 'tls'", "give one or both"))
+    if tls_endpoint and (sec is None or sec.tls is None):
+        issues.append(Issue("serverIP", f"{project.serverIP} is a TLS endpoint but the project has no security.tls",
+                            "add security.tls with rootCa, certificate and privateKey (PEM files)"))
+    if sec is not None and sec.tls is not None:
+        if not tls_endpoint:
+            issues.append(Issue("security.tls", f"TLS is configured but serverIP {project.serverIP} is not a "
+                                                "tls/ endpoint", "write serverIP as tls/HOST:PORT"))
+        if (sec.tls.certificate is None) != (sec.tls.privateKey is None):
+            issues.append(Issue("security.tls", "certificate and privateKey go together",
+                                "give both (the server's), or neither in a copy for nodes only"))
+    return issues
+
+
 def check_semantics(project: Project) -> tuple[list[Route], dict[str, tuple[Guard, Guard]], list[Issue]]:
     """Check everything that spans entries; return routes, compiled guards and issues."""
     issues: list[Issue] = []
@@ -406,6 +436,7 @@ def check_semantics(project: Project) -> tuple[list[Route], dict[str, tuple[Guar
         if n.asynchronous and n.input:
             issues.append(Issue(f"nodeLists[{i}].input", f"asynchronous node {n.nodeName!r} has inputs",
                                 "an asynchronous source only publishes samples"))
+    issues.extend(_security_issues(project))
     cosim = project.coSimulation
     if cosim.stopTime <= cosim.startTime:
         issues.append(Issue("coSimulation.stopTime", "stopTime must be after startTime"))

@@ -1,10 +1,13 @@
-"""Credentials and access control for remote attach.
+"""Credentials, access control and TLS for remote attach.
 
 The server is a Zenoh router with ``transport/auth/usrpwd``: a client without the right
 user and password never gets a session. With ``acl`` on, the router's access control lets
 each node (user = node name) publish only on its own ``up/<node>`` key and declare only
 its own liveliness token, so an authenticated node cannot inject values for another; the
-server's UID check stays as a second line.
+server's UID check stays as a second line. With ``tls`` the server listens on a
+``tls/HOST:PORT`` endpoint: the link is encrypted and a node attaches only to a server
+whose certificate the project's CA signed. TLS settings apply to ``tls/`` endpoints only,
+so an embedded run on TCP loopback needs none of the files.
 """
 
 from __future__ import annotations
@@ -41,20 +44,57 @@ def read_credentials(path: Path) -> dict[str, str]:
 
 
 def credentials_path(loaded: LoadedProject) -> Path | None:
+    """The project's credentials file, resolved; None when it has none."""
     sec = loaded.project.security
-    return loaded.resolve(sec.credentials) if sec else None
+    return loaded.resolve(sec.credentials) if sec and sec.credentials else None
 
 
-def router_security(loaded: LoadedProject) -> dict:
-    """The router's ``transport/auth/usrpwd`` and ``access_control`` settings, or {}."""
+def _pem(loaded: LoadedProject, relative: str, what: str) -> str:
+    path = loaded.resolve(relative)
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4096)
+    except OSError as exc:
+        raise SecurityError(f"{path}: cannot read the {what} ({exc.strerror or exc})") from None
+    if b"-----BEGIN " not in head:
+        raise SecurityError(f"{path}: the {what} is not a PEM file")
+    return str(path)
+
+
+def router_tls(loaded: LoadedProject, endpoint: str) -> dict:
+    """The router's ``transport/link/tls`` settings for a ``tls/`` endpoint, or {}."""
+    sec = loaded.project.security
+    if not endpoint.startswith("tls/") or sec is None or sec.tls is None:
+        return {}
+    tls = sec.tls
+    if tls.certificate is None or tls.privateKey is None:
+        raise SecurityError(f"{loaded.path}: the server needs security.tls.certificate and privateKey "
+                            f"to listen on {endpoint}")
+    return {"transport/link/tls/listen_certificate": _pem(loaded, tls.certificate, "server certificate"),
+            "transport/link/tls/listen_private_key": _pem(loaded, tls.privateKey, "server private key")}
+
+
+def client_tls(loaded: LoadedProject, endpoint: str) -> dict:
+    """A node's ``transport/link/tls`` settings (the CA it checks the server against), or {}."""
+    sec = loaded.project.security
+    if not endpoint.startswith("tls/"):
+        return {}
+    if sec is None or sec.tls is None:
+        raise SecurityError(f"{endpoint} is a TLS endpoint but {loaded.path} has no security.tls.rootCa "
+                            "to check the server's certificate against")
+    return {"transport/link/tls/root_ca_certificate": _pem(loaded, sec.tls.rootCa, "root CA certificate")}
+
+
+def router_security(loaded: LoadedProject, endpoint: str = "") -> dict:
+    """The router's ``transport/auth/usrpwd``, ``access_control`` and TLS settings, or {}."""
     path = credentials_path(loaded)
     if path is None:
-        return {}
+        return router_tls(loaded, endpoint)
     users = read_credentials(path)
     if SERVER_USER not in users:
         raise SecurityError(f"{path}: no '{SERVER_USER}' user (the relay server's own credentials)")
     settings: dict = {"transport/auth/usrpwd": {"user": SERVER_USER, "password": users[SERVER_USER],
-                                                "dictionary_file": str(path)}}
+                                                "dictionary_file": str(path)}, **router_tls(loaded, endpoint)}
     if not loaded.project.security.acl:
         return settings
     keys = ProjectKeys(loaded.name)
@@ -85,7 +125,7 @@ def router_security(loaded: LoadedProject) -> dict:
 def node_password(loaded: LoadedProject, node: str, password_file: Path | None) -> str | None:
     """A node's password: --password-file, else $HYCOSIM_PASSWORD, else the project's
     credentials file when it is at hand (local runs); None when the project needs none."""
-    if loaded.project.security is None:
+    if credentials_path(loaded) is None:
         return None
     if password_file is not None:
         try:

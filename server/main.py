@@ -57,7 +57,7 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         def on_progress(p: Any) -> None:
             print(json.dumps({"progress": asdict(p), "run_dir": str(run_dir)}), flush=True)
     try:
-        session = open_session(router_config(endpoint, security=router_security(loaded),
+        session = open_session(router_config(endpoint, security=router_security(loaded, endpoint),
                                              low_latency=loaded.project.coSimulation.lowLatency), endpoint)
     except Exception as exc:  # SecurityError or ConnectError, both with their own message
         recorder.close("failed", reason=str(exc))

@@ -223,3 +223,84 @@ def _pw(tmp_path: Path, password: str) -> Path:
     path = tmp_path / f"pw-{password}"
     path.write_text(password)
     return path
+
+
+def _openssl(*args: str, cwd: Path) -> None:
+    subprocess.run(["openssl", *args], cwd=cwd, check=True, capture_output=True, timeout=60)
+
+
+def _make_ca(folder: Path, name: str) -> None:
+    """A CA and a server certificate for 127.0.0.1 signed by it, made as the README shows."""
+    folder.mkdir()
+    _openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "ca.key", "-out", "ca.pem", "-days", "30",
+             "-subj", f"/CN={name}", cwd=folder)
+    _openssl("req", "-newkey", "rsa:2048", "-nodes", "-keyout", "server.key", "-out", "server.csr",
+             "-subj", "/CN=localhost", cwd=folder)
+    (folder / "san.cnf").write_text("subjectAltName=DNS:localhost,IP:127.0.0.1\n")
+    _openssl("x509", "-req", "-in", "server.csr", "-CA", "ca.pem", "-CAkey", "ca.key", "-CAcreateserial",
+             "-out", "server.pem", "-days", "30", "-extfile", "san.cnf", cwd=folder)
+
+
+def test_nodes_attach_over_tls_only_to_a_server_their_ca_signed(tmp_path):
+    _make_ca(tmp_path / "site", "hycosim site CA")
+    _make_ca(tmp_path / "other", "some other CA")
+    endpoint = free_endpoint().replace("tcp/", "tls/")
+    tls = {"rootCa": "site/ca.pem", "certificate": "site/server.pem", "privateKey": "site/server.key"}
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+    ], [{"from": "clock.y", "to": "g.u"}], cosim={"stepSize": 0.01, "stopTime": 4.0, "realTime": True,
+                                                 "attachTimeout": 20.0},
+        name="tls", security={"tls": tls})
+    doc = json.loads(cfg.read_text())
+    doc["serverIP"] = endpoint
+    cfg.write_text(json.dumps(doc))
+    # What a node's machine holds: the project with the CA only; here, a CA that did not sign.
+    doc["security"]["tls"] = {"rootCa": "other/ca.pem"}
+    (tmp_path / "impostor.json").write_text(json.dumps(doc))
+    doc["coSimulation"]["attachTimeout"] = 2.0
+    (tmp_path / "quick.json").write_text(json.dumps(doc))
+    run_dir = tmp_path / "run"
+    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
+    nodes = [spawn("node", n, str(cfg)) for n in ("clock", "g")]
+    try:
+        wait_for(lambda: (run_dir / "values.csv").exists() and len(read_rows(run_dir)) > 10, 30, "10 steps")
+        status = hycosim("status", endpoint, "--project", "tls", "--tls-ca", str(tmp_path / "site" / "ca.pem"))
+        assert status.returncode == 0 and "attached 2/2" in status.stdout, status.stderr
+        no_ca = hycosim("status", endpoint, "--project", "tls")
+        assert no_ca.returncode == 2 and "give --tls-ca" in no_ca.stderr
+        wrong = hycosim("node", "g", str(tmp_path / "quick.json"), timeout=90)
+        assert wrong.returncode == 3 and "cannot open Zenoh session on " + endpoint in wrong.stderr, wrong.stderr
+        _, err = server.communicate(timeout=60)
+        assert server.returncode == 0, err
+        assert all(p.wait(timeout=30) == 0 for p in nodes)
+    finally:
+        reap(server, *nodes)
+    rows = read_rows(run_dir)
+    assert len(rows) == 401 and all(rows[k]["g.y"] == rows[k - 1]["clock.y"] for k in range(1, len(rows)))
+    assert meta(run_dir)["endpoint"] == endpoint
+
+
+def test_tls_settings_that_cannot_work_are_refused_naming_the_key_or_file(tmp_path):
+    nodes = [{"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]}]
+    cfg = write_project(tmp_path / "a.json", nodes, name="tls")
+    doc = json.loads(cfg.read_text())
+    doc["serverIP"] = doc["serverIP"].replace("tcp/", "tls/")
+    cfg.write_text(json.dumps(doc))
+    res = hycosim("validate", str(cfg))
+    assert res.returncode == 2 and "serverIP" in res.stdout + res.stderr and "no security.tls" in res.stdout + res.stderr
+    doc["serverIP"] = doc["serverIP"].replace("tls/", "tcp/")
+    doc["security"] = {"tls": {"rootCa": "ca.pem", "certificate": "server.pem"}}
+    cfg.write_text(json.dumps(doc))
+    res = hycosim("validate", str(cfg))
+    text = res.stdout + res.stderr
+    assert res.returncode == 2 and "security.tls: TLS is configured but serverIP" in text
+    assert "certificate and privateKey go together" in text
+    # Valid, but the server's key file is missing: the server says which file.
+    doc["serverIP"] = doc["serverIP"].replace("tcp/", "tls/")
+    doc["security"]["tls"]["privateKey"] = "missing.key"
+    (tmp_path / "server.pem").write_text("not a certificate")
+    cfg.write_text(json.dumps(doc))
+    res = hycosim("server", str(cfg), "--run-dir", str(tmp_path / "run"), timeout=60)
+    assert res.returncode == 3 and "server.pem: the server certificate is not a PEM file" in res.stderr, res.stderr
+    assert "Traceback" not in res.stderr
