@@ -73,7 +73,10 @@ class NodeRuntime:
         return packed
 
     def _on_server_liveliness(self, sample: zenoh.Sample) -> None:
-        self.inbox.inject(frames.encode(frames.LIVE, SERVER_TOKEN, sample.kind == zenoh.SampleKind.PUT))
+        try:
+            self.inbox.inject(frames.encode(frames.LIVE, SERVER_TOKEN, sample.kind == zenoh.SampleKind.PUT))
+        except zenoh.ZError:  # the session is closing: nobody is left to tell
+            pass
 
     def run(self) -> None:
         try:
@@ -95,6 +98,8 @@ class NodeRuntime:
                                    "wrong credentials are refused this way too)") from None
             raise
         try:
+            # Before any declaration: a refused node leaves nothing behind to fire as it closes.
+            self._refuse_a_second_instance(session)
             self.inbox = Inbox(session, self.keys.down, self.keys.down,
                                poll=self.loaded.project.polls_before_blocking(os.cpu_count()))
             self._publisher = FramePublisher(session, self.keys.up(self.name), low_latency=self.cosim.lowLatency)
@@ -105,7 +110,6 @@ class NodeRuntime:
             watch = session.liveliness().declare_subscriber(self.keys.alive(SERVER_TOKEN), self._on_server_liveliness,
                                                             history=True)
             # Declared after the subscriber: the server starts once it sees this token.
-            self._refuse_a_second_instance(session)
             token = session.liveliness().declare_token(self.keys.alive(self.name))
             try:
                 # The server times out the attach; outwait it so that its STOP, naming who is

@@ -91,7 +91,10 @@ class Relay:
     def _on_liveliness(self, sample: zenoh.Sample) -> None:
         node = ProjectKeys.last_chunk(str(sample.key_expr))
         alive = sample.kind == zenoh.SampleKind.PUT
-        self.inbox.inject(frames.encode(frames.LIVE, node, alive))
+        try:
+            self.inbox.inject(frames.encode(frames.LIVE, node, alive))
+        except zenoh.ZError:  # the session is closing at the end of the run
+            pass
 
     def _on_status(self, query: zenoh.Query) -> None:
         query.reply(self.keys.status, json.dumps({

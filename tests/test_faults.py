@@ -98,9 +98,9 @@ def test_malformed_frames_are_dropped_counted_and_the_run_goes_on(tmp_path):
         reap(server, *nodes)
 
 
-def test_garbage_on_the_servers_release_key_is_dropped_by_every_node(tmp_path):
-    """Nodes read frames anyone on the network may write (without security): a stepping node
-    and a real-time asynchronous source both drop garbage, log it, and run to the end."""
+def _forge_on_the_release_key(tmp_path, payloads: list[bytes], dropped: int) -> None:
+    """Run a real-time asynchronous source and a stepping node; write ``payloads`` on the
+    server's release key mid-run; check each node logged ``dropped`` drops and ran on."""
     cfg = write_project(tmp_path / "p.json", [
         {"nodeName": "sensor", "UID": 1, "model": "ramp_source", "async": True, "rate": 20.0, "output": ["y"]},
         {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
@@ -113,7 +113,7 @@ def test_garbage_on_the_servers_release_key_is_dropped_by_every_node(tmp_path):
     try:
         wait_for(lambda: _steps_on_disk(run_dir) > 10, 30, "10 steps")
         with zenoh.open(client_config(_endpoint(cfg))) as session:
-            for payload in (os.urandom(40), msgpack.packb({"not": "a frame"}), msgpack.packb([99, frames.STEP])):
+            for payload in payloads:
                 session.put(ProjectKeys("faults").down, payload, congestion_control=zenoh.CongestionControl.BLOCK)
             time.sleep(0.3)
         _, err = server.communicate(timeout=30)
@@ -121,82 +121,74 @@ def test_garbage_on_the_servers_release_key_is_dropped_by_every_node(tmp_path):
         for name, proc in nodes.items():
             _, node_err = proc.communicate(timeout=20)
             assert proc.returncode == 0, node_err
-            assert logs[name].read_text().count('"frame dropped"') == 3, name
+            assert logs[name].read_text().count('"frame dropped"') == dropped, name
         assert meta(run_dir)["status"] == "completed" and len(read_rows(run_dir)) == 201
     finally:
         reap(server, *nodes.values())
+
+
+def test_garbage_on_the_servers_release_key_is_dropped_by_every_node(tmp_path):
+    """Nodes read frames anyone on the network may write (without security): a stepping node
+    and a real-time asynchronous source both drop garbage, log it, and run to the end."""
+    _forge_on_the_release_key(tmp_path, [os.urandom(40), msgpack.packb({"not": "a frame"}),
+                                         msgpack.packb([99, frames.STEP])], dropped=3)
 
 
 def test_forged_releases_with_wrong_contents_are_dropped_by_every_node(tmp_path):
     """Well-formed frames whose contents are not a release a node can act on: a replay carrying
-    garbage, an integer, a STOP or a mistyped STEP, and a STEP whose fields have the wrong types.
-    Each node drops all five, logs them, and runs to the end."""
-    cfg = write_project(tmp_path / "p.json", [
-        {"nodeName": "sensor", "UID": 1, "model": "ramp_source", "async": True, "rate": 20.0, "output": ["y"]},
-        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
-    ], [{"from": "sensor.y", "to": "g.u"}], cosim={"stepSize": 0.01, "stopTime": 2.0, "realTime": True,
-                                                   "attachTimeout": 20.0}, name="faults")
-    run_dir = tmp_path / "run"
-    logs = {n: tmp_path / f"{n}.log.jsonl" for n in ("sensor", "g")}
-    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
-    nodes = {n: spawn("node", n, str(cfg), "--log-file", str(logs[n])) for n in logs}
+    garbage, an integer, a STOP or a mistyped STEP (one of each per node), and a STEP whose
+    fields have the wrong types."""
     mistyped_step = frames.encode(frames.STEP, "7", 0.1, 0.01, "free", {"g": 3.0}, 5)
+    replays = [frames.encode(frames.REPLAY, name, inner) for name in ("sensor", "g")
+               for inner in (os.urandom(24), 7, frames.encode(frames.STOP, 3, "forged"), mistyped_step)]
+    # A node ignores replays addressed to the other, so each drops its own four and the STEP.
+    _forge_on_the_release_key(tmp_path, [*replays, mistyped_step], dropped=5)
+
+
+def _second_g(cfg, run_dir, kill_first: bool):
+    """Run clock and g; after 20 steps start another g (after SIGKILLing the first, if asked).
+    Return the server, the first two nodes, and the second g's exit code and stderr."""
+    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
+    nodes = [spawn("node", n, str(cfg)) for n in ("clock", "g")]
     try:
-        wait_for(lambda: _steps_on_disk(run_dir) > 10, 30, "10 steps")
-        with zenoh.open(client_config(_endpoint(cfg))) as session:
-            forged = [frames.encode(frames.REPLAY, name, inner) for name in logs
-                      for inner in (os.urandom(24), 7, frames.encode(frames.STOP, 3, "forged"), mistyped_step)]
-            for payload in [*forged, mistyped_step]:
-                session.put(ProjectKeys("faults").down, payload, congestion_control=zenoh.CongestionControl.BLOCK)
-            time.sleep(0.3)
-        _, err = server.communicate(timeout=30)
-        assert server.returncode == 0, err
-        for name, proc in nodes.items():
-            _, node_err = proc.communicate(timeout=20)
-            assert proc.returncode == 0, node_err
-            assert logs[name].read_text().count('"frame dropped"') == 5, name
-        assert meta(run_dir)["status"] == "completed" and len(read_rows(run_dir)) == 201
-    finally:
-        reap(server, *nodes.values())
+        wait_for(lambda: _steps_on_disk(run_dir) > 20, 30, "20 steps")
+        if kill_first:
+            nodes[1].send_signal(signal.SIGKILL)
+            time.sleep(0.5)
+        second = spawn("node", "g", str(cfg))
+        try:
+            _, err = second.communicate(timeout=30)
+        finally:
+            reap(second)
+    except BaseException:
+        reap(server, *nodes)
+        raise
+    return server, nodes, second.returncode, err
 
 
 def test_a_second_process_for_an_attached_node_is_refused(tmp_path):
     """Launching a node that already runs elsewhere stops the newcomer with a clear message;
     the run it would have corrupted (two processes sending one node's outputs) goes on."""
-    cfg = _pair(tmp_path, stopTime=3.0)
     run_dir = tmp_path / "run"
-    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
-    nodes = [spawn("node", n, str(cfg)) for n in ("clock", "g")]
-    second = None
+    server, nodes, code, err = _second_g(_pair(tmp_path, stopTime=3.0), run_dir, kill_first=False)
     try:
-        wait_for(lambda: _steps_on_disk(run_dir) > 20, 30, "20 steps")
-        second = spawn("node", "g", str(cfg))
-        _, err = second.communicate(timeout=30)
-        assert second.returncode == 3
+        assert code == 3
         assert "node 'g' is already attached to the server" in err and "Traceback" not in err
         assert server.wait(timeout=30) == 0
         m = meta(run_dir)
         assert m["status"] == "completed" and m["dropped_frames"] == {} and len(read_rows(run_dir)) == 301
         assert all(p.wait(timeout=20) == 0 for p in nodes)
     finally:
-        reap(server, *nodes, *([second] if second else []))
+        reap(server, *nodes)
 
 
 def test_a_node_restarted_mid_run_is_told_the_run_is_under_way(tmp_path):
     """A node killed and started again within linkGrace has lost its state: the new process
     refuses the replayed step, and the server fails naming the node once the grace is over."""
-    cfg = _pair(tmp_path, stopTime=20.0, linkGrace=3.0)
     run_dir = tmp_path / "run"
-    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
-    nodes = [spawn("node", n, str(cfg)) for n in ("clock", "g")]
-    restarted = None
+    server, nodes, code, err = _second_g(_pair(tmp_path, stopTime=20.0, linkGrace=3.0), run_dir, kill_first=True)
     try:
-        wait_for(lambda: _steps_on_disk(run_dir) > 20, 30, "20 steps")
-        nodes[1].send_signal(signal.SIGKILL)
-        time.sleep(0.5)
-        restarted = spawn("node", "g", str(cfg))
-        _, err = restarted.communicate(timeout=30)
-        assert restarted.returncode == 3
+        assert code == 3
         assert "node 'g': the run on" in err and "was already under way (step" in err and "Traceback" not in err
         _, server_err = server.communicate(timeout=30)
         assert server.returncode == 3
@@ -206,7 +198,7 @@ def test_a_node_restarted_mid_run_is_told_the_run_is_under_way(tmp_path):
         assert len(read_rows(run_dir)) == m["steps"] >= 20
         assert nodes[0].wait(timeout=20) == 0
     finally:
-        reap(server, *nodes, *([restarted] if restarted else []))
+        reap(server, *nodes)
 
 
 def test_node_that_never_attaches_times_out_naming_it(tmp_path):
