@@ -21,7 +21,7 @@ from fmu_bridge.fmu_loader import FmuError
 from fmu_bridge.inbox import Inbox
 from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
 from fmu_bridge.security import client_tls
-from fmu_bridge.session import ConnectError, FramePublisher, FrameTooLarge, client_config, open_session
+from fmu_bridge.session import ConnectError, FramePublisher, FrameTooLarge, client_config, open_session, token_held
 
 from clients.node import AsyncSource, Node, NodeContext
 
@@ -73,10 +73,7 @@ class NodeRuntime:
         return packed
 
     def _on_server_liveliness(self, sample: zenoh.Sample) -> None:
-        try:
-            self.inbox.inject(frames.encode(frames.LIVE, SERVER_TOKEN, sample.kind == zenoh.SampleKind.PUT))
-        except zenoh.ZError:  # the session is closing: nobody is left to tell
-            pass
+        self.inbox.inject(frames.encode(frames.LIVE, SERVER_TOKEN, sample.kind == zenoh.SampleKind.PUT))
 
     def run(self) -> None:
         try:
@@ -144,12 +141,9 @@ class NodeRuntime:
         Two processes answering for one node would both send its outputs, and the server
         would take whichever came first.
         """
-        key = self.keys.alive(self.name)
-        timeout = min(5.0, self.cosim.attachTimeout)
-        for reply in session.liveliness().get(key, timeout=timeout):
-            if reply.ok is not None:
-                raise NodeRunError(f"node {self.name!r} is already attached to the server at {self.endpoint}: "
-                                   "another process holds its liveliness token (one process per node)")
+        if token_held(session, self.keys.alive(self.name), timeout=min(5.0, self.cosim.attachTimeout)):
+            raise NodeRunError(f"node {self.name!r} is already attached to the server at {self.endpoint}: "
+                               "another process holds its liveliness token (one process per node)")
 
     def _send(self, payload: bytes) -> None:
         """Publish one frame; one too large for the link stops the node, naming its largest outputs."""

@@ -94,9 +94,16 @@ class Inbox:
         return self._polls
 
     def inject(self, payload: bytes) -> None:
-        """Hand a payload to the reading thread, behind everything already queued."""
-        self._session.put(self._local_key, payload, allowed_destination=zenoh.Locality.SESSION_LOCAL,
-                          congestion_control=zenoh.CongestionControl.BLOCK)
+        """Hand a payload to the reading thread, behind everything already queued.
+
+        Once the session is closing there is no reader left: the payload is dropped rather
+        than raising in whichever callback or thread injected it.
+        """
+        try:
+            self._session.put(self._local_key, payload, allowed_destination=zenoh.Locality.SESSION_LOCAL,
+                              congestion_control=zenoh.CongestionControl.BLOCK)
+        except zenoh.ZError:
+            pass
 
     def recv(self, timeout: float) -> tuple[str, bytes] | None:
         """The next sample as (key, payload), or None once ``timeout`` seconds pass."""

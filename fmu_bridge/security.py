@@ -49,8 +49,7 @@ def credentials_path(loaded: LoadedProject) -> Path | None:
     return loaded.resolve(sec.credentials) if sec and sec.credentials else None
 
 
-def _pem(loaded: LoadedProject, relative: str, what: str) -> str:
-    path = loaded.resolve(relative)
+def _pem(path: Path, what: str) -> str:
     try:
         with open(path, "rb") as f:
             head = f.read(4096)
@@ -70,8 +69,8 @@ def router_tls(loaded: LoadedProject, endpoint: str) -> dict:
     if tls.certificate is None or tls.privateKey is None:
         raise SecurityError(f"{loaded.path}: the server needs security.tls.certificate and privateKey "
                             f"to listen on {endpoint}")
-    return {"transport/link/tls/listen_certificate": _pem(loaded, tls.certificate, "server certificate"),
-            "transport/link/tls/listen_private_key": _pem(loaded, tls.privateKey, "server private key")}
+    return {"transport/link/tls/listen_certificate": _pem(loaded.resolve(tls.certificate), "server certificate"),
+            "transport/link/tls/listen_private_key": _pem(loaded.resolve(tls.privateKey), "server private key")}
 
 
 def client_tls(loaded: LoadedProject, endpoint: str) -> dict:
@@ -82,7 +81,12 @@ def client_tls(loaded: LoadedProject, endpoint: str) -> dict:
     if sec is None or sec.tls is None:
         raise SecurityError(f"{endpoint} is a TLS endpoint but {loaded.path} has no security.tls.rootCa "
                             "to check the server's certificate against")
-    return {"transport/link/tls/root_ca_certificate": _pem(loaded, sec.tls.rootCa, "root CA certificate")}
+    return ca_settings(loaded.resolve(sec.tls.rootCa))
+
+
+def ca_settings(ca: Path) -> dict:
+    """``transport/link/tls`` settings for a client that checks the server against ``ca`` (PEM)."""
+    return {"transport/link/tls/root_ca_certificate": _pem(ca.resolve(), "root CA certificate")}
 
 
 def router_security(loaded: LoadedProject, endpoint: str = "") -> dict:

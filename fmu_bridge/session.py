@@ -119,6 +119,11 @@ def client_config(connect: str, *, timeout_s: float = 10.0, lease_ms: int = 1000
     return _config(settings)
 
 
+def token_held(session: zenoh.Session, key: str, timeout: float) -> bool:
+    """Whether any session on the network holds the liveliness token ``key`` (asked, not watched)."""
+    return any(reply.ok is not None for reply in session.liveliness().get(key, timeout=timeout))
+
+
 def open_session(conf: zenoh.Config, endpoint: str) -> zenoh.Session:
     """Open a session; raise ConnectError naming the endpoint if that fails."""
     try:

@@ -191,20 +191,24 @@ def status(
 ) -> None:
     """Ask a running server who is attached."""
     from fmu_bridge.keys import ProjectKeys
+    from fmu_bridge.security import SecurityError, ca_settings
     from fmu_bridge.session import ConnectError, client_config, open_session
 
     if endpoint.startswith("tls/") and tls_ca is None:
         err.print(f"[red]error:[/red] {endpoint} is a TLS endpoint: give --tls-ca with the CA that signed "
                   "the server's certificate", highlight=False)
         raise typer.Exit(2)
-    tls = {"transport/link/tls/root_ca_certificate": str(tls_ca.resolve())} if tls_ca else None
     try:
+        tls = ca_settings(tls_ca) if tls_ca else None
         password = password_file.read_text().strip() if password_file else None
         session = open_session(client_config(endpoint, timeout_s=timeout, user=user, password=password, tls=tls),
                                endpoint)
     except OSError as exc:
         err.print(f"[red]error:[/red] {password_file}: cannot read the password ({exc.strerror or exc})",
                   highlight=False)
+        raise typer.Exit(2) from None
+    except SecurityError as exc:
+        err.print(f"[red]error:[/red] {exc}", highlight=False)
         raise typer.Exit(2) from None
     except ConnectError as exc:
         err.print(f"[red]error:[/red] {exc}", highlight=False)

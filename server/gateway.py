@@ -22,6 +22,7 @@ from fmu_bridge import frames
 from fmu_bridge import gateway_protocol as gp
 from fmu_bridge.config import Node, PortType
 from fmu_bridge.keys import ProjectKeys
+from fmu_bridge.session import token_held
 
 _FROM_WIRE: dict[PortType, Callable[[float], object]] = {
     PortType.REAL: float,
@@ -109,7 +110,7 @@ class Gateway:
             self._refuse(sock, f"node {name!r} has {len(node.output)} outputs and {len(node.input)} inputs, "
                                f"the FMU declares {n_out} and {n_in}: rebuild it from this project", "unknown ports")
             return None
-        if self._token_held(name):
+        if token_held(self._session, self._keys.alive(name), timeout=self._hello_timeout):
             self._refuse(sock, f"node {name!r} is already attached: a process on Zenoh holds its liveliness token",
                          "not owner")
             return None
@@ -125,11 +126,6 @@ class Gateway:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         sock.sendall(gp.frame(gp.WELCOME))
         return node
-
-    def _token_held(self, name: str) -> bool:
-        """Whether a node runtime on Zenoh already answers for ``name``."""
-        replies = self._session.liveliness().get(self._keys.alive(name), timeout=self._hello_timeout)
-        return any(reply.ok is not None for reply in replies)
 
     def _serve(self, sock: socket.socket, peer: object) -> None:
         node = self._hello(sock)

@@ -91,10 +91,7 @@ class Relay:
     def _on_liveliness(self, sample: zenoh.Sample) -> None:
         node = ProjectKeys.last_chunk(str(sample.key_expr))
         alive = sample.kind == zenoh.SampleKind.PUT
-        try:
-            self.inbox.inject(frames.encode(frames.LIVE, node, alive))
-        except zenoh.ZError:  # the session is closing at the end of the run
-            pass
+        self.inbox.inject(frames.encode(frames.LIVE, node, alive))
 
     def _on_status(self, query: zenoh.Query) -> None:
         query.reply(self.keys.status, json.dumps({
