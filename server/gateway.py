@@ -2,11 +2,13 @@
 
 The paper's server "can also transmit FMU data": a tool that can only import FMUs loads
 a generated bridge FMU, which connects here (framing in ``fmu_bridge.gateway_protocol``).
-The gateway turns that connection into an ordinary node for the relay: HELLO becomes a
-liveliness PUT, each OUTPUTS frame becomes the msgpack frame a Zenoh node would have
+The gateway turns that connection into an ordinary node for the relay: an accepted HELLO
+declares the node's liveliness token in the relay's session (so the relay sees it attach
+exactly as a Zenoh node, and a second process for the node, over Zenoh or the gateway,
+finds the token held and is refused), each OUTPUTS frame becomes the msgpack frame a Zenoh node would have
 published on ``up/<node>`` (put session-locally, so it takes the same path through
 intake and barrier), and the server's START/STEP/STOP on ``down`` are written back to
-each connection with that node's inputs. A closed connection is a lost node.
+each connection with that node's inputs. A closed connection undeclares the token: a lost node.
 """
 
 from __future__ import annotations
@@ -36,9 +38,10 @@ class GatewayError(RuntimeError):
 
 
 class _Connection:
-    def __init__(self, sock: socket.socket, node: Node):
+    def __init__(self, sock: socket.socket, node: Node, token: zenoh.LivelinessToken):
         self.sock = sock
         self.node = node
+        self.token = token
         self.lock = threading.Lock()
 
     def send(self, data: bytes) -> None:
@@ -48,12 +51,11 @@ class _Connection:
 
 class Gateway:
     def __init__(self, nodes: list[Node], session: zenoh.Session, keys: ProjectKeys, host: str, port: int,
-                 announce: Callable[[str, bool], None], drop: Callable[[str, str, int], None],
+                 drop: Callable[[str, str, int], None],
                  hello_timeout: float = 10.0):
         self._nodes = {n.nodeName: n for n in nodes}
         self._session = session
         self._keys = keys
-        self._announce = announce
         self._drop = drop
         self._hello_timeout = hello_timeout
         self._conns: dict[str, _Connection] = {}
@@ -119,12 +121,19 @@ class Gateway:
                 self._refuse(sock, f"node {name!r} is already attached", "not owner")
                 return None
             sock.settimeout(None)
-            self._conns[name] = _Connection(sock, node)
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            try:
+                # First on the connection: a release can follow as soon as the token below is seen.
+                sock.sendall(gp.frame(gp.WELCOME))
+            except OSError:
+                sock.close()
+                return None
             if self._down is None:
                 # Before the node is announced, so the release that follows reaches it.
                 self._down = self._session.declare_subscriber(self._keys.down, self._on_down)
-        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        sock.sendall(gp.frame(gp.WELCOME))
+            # Last: the relay counts the node attached once it sees the token.
+            token = self._session.liveliness().declare_token(self._keys.alive(name))
+            self._conns[name] = _Connection(sock, node, token)
         return node
 
     def _serve(self, sock: socket.socket, peer: object) -> None:
@@ -134,7 +143,6 @@ class Gateway:
         name = node.nodeName
         log = self._log.bind(node=name, peer=str(peer))
         log.info("bridge FMU attached")
-        self._announce(name, True)
         convert = [_FROM_WIRE[p.type] for p in node.output]
         key = self._keys.up(name)
         try:
@@ -163,11 +171,15 @@ class Gateway:
             pass
         finally:
             with self._lock:
-                self._conns.pop(name, None)
+                conn = self._conns.pop(name, None)
             sock.close()
+            if conn is not None:
+                try:
+                    conn.token.undeclare()
+                except zenoh.ZError:  # the session closed first: the token went with it
+                    pass
             if not self._closing.is_set():
                 log.info("bridge FMU detached")
-                self._announce(name, False)
 
     # --- releases -------------------------------------------------------------------
 

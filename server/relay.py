@@ -163,7 +163,6 @@ class Relay:
         try:
             self.gateway = Gateway(
                 self.project.stepping_nodes(), self.session, self.keys, host, port,
-                announce=lambda node, alive: self.inbox.inject(frames.encode(frames.LIVE, node, alive)),
                 drop=self.intake.drop)
         except GatewayError as exc:
             if self._gateway_required:

@@ -275,3 +275,31 @@ def test_gateway_refuses_an_fmu_for_a_node_already_attached_over_zenoh(tmp_path)
     (_, serr), _ = _finish([server, clock])
     assert server.returncode == 3 and "waiting for node(s) tool to attach" in serr
     assert meta(tmp_path / "run")["dropped_frames"] == {"not owner": 1}
+
+
+def test_a_python_node_is_refused_for_a_node_attached_through_the_gateway(tmp_path):
+    """The gateway holds the liveliness token of each bridge FMU it serves, so a process that
+    starts for the same node over Zenoh is refused at attach, and the run goes on with the FMU."""
+    cfg = _project(tmp_path, stop=0.3)
+    doc = json.loads(cfg.read_text())
+    doc["nodeLists"][0]["model"] = "gain"  # so that a Python process could run the node too
+    cfg.write_text(json.dumps(doc))
+    server, clock = _start(cfg, tmp_path / "run")
+    sock, kind, _ = _raw_attach(cfg, uid=7)
+    assert kind == gp.WELCOME and gp.read_frame(sock)[0] == gp.START
+    second = hycosim("node", "tool", str(cfg), timeout=60)
+    assert second.returncode == 3, second.stderr
+    assert "node 'tool' is already attached" in second.stderr and "Traceback" not in second.stderr
+    steps = []
+    for k in range(10):
+        sock.sendall(gp.outputs(k, 0.1 * k, [float(k)]))
+        kind, payload = gp.read_frame(sock)
+        if kind != gp.STEP:
+            break
+        steps.append(gp.parse_step(payload)[0])
+    assert kind == gp.STOP and steps == [0, 1, 2]
+    sock.close()
+    (_, serr), _ = _finish([server, clock])
+    assert server.returncode == 0, serr
+    assert column(read_rows(tmp_path / "run"), "tool.y") == [0.0, 1.0, 2.0, 3.0]
+    assert meta(tmp_path / "run")["dropped_frames"] == {}
