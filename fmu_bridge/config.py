@@ -16,7 +16,7 @@ import json
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
@@ -158,6 +158,10 @@ class Event(_Strict):
     when: str
     drives: str
     until: str
+    # After a release the event fires again only once this guard has held at a macro-step
+    # point. Default: once `when` has been seen not to hold, so a `when` that still holds
+    # at the release does not switch straight back (guards fire on a rising edge).
+    rearm: str | None = None
     description: str | None = None
 
 
@@ -267,6 +271,14 @@ class ConfigError(Exception):
         super().__init__(f"{source}: {len(issues)} error(s) in project file\n{lines}")
 
 
+class EventGuards(NamedTuple):
+    """An event's compiled guards; ``rearm`` is None for the default (``when`` stopped holding)."""
+
+    when: Guard
+    until: Guard
+    rearm: Guard | None = None
+
+
 @dataclass
 class LoadedProject:
     """A validated project with its resolved routes and compiled guards."""
@@ -274,7 +286,7 @@ class LoadedProject:
     project: Project
     path: Path | None
     routes: list[Route]
-    guards: dict[str, tuple[Guard, Guard]] = field(default_factory=dict)
+    guards: dict[str, EventGuards] = field(default_factory=dict)
     digest: str = ""
 
     @property
@@ -405,7 +417,7 @@ def _security_issues(project: Project) -> list[Issue]:
     return issues
 
 
-def check_semantics(project: Project) -> tuple[list[Route], dict[str, tuple[Guard, Guard]], list[Issue]]:
+def check_semantics(project: Project) -> tuple[list[Route], dict[str, EventGuards], list[Issue]]:
     """Check everything that spans entries; return routes, compiled guards and issues."""
     issues: list[Issue] = []
     if project.nodeNum != len(project.nodeLists):
@@ -441,7 +453,7 @@ def check_semantics(project: Project) -> tuple[list[Route], dict[str, tuple[Guar
     if cosim.stopTime <= cosim.startTime:
         issues.append(Issue("coSimulation.stopTime", "stopTime must be after startTime"))
     event_names: set[str] = set()
-    guards: dict[str, tuple[Guard, Guard]] = {}
+    guards: dict[str, EventGuards] = {}
     outputs = {(n.nodeName, p.name) for n in project.nodeLists for p in n.output}
     for i, e in enumerate(project.events):
         if e.name == FREE_MODE or e.name in event_names:
@@ -449,8 +461,10 @@ def check_semantics(project: Project) -> tuple[list[Route], dict[str, tuple[Guar
         event_names.add(e.name)
         if e.drives not in names:
             issues.append(Issue(f"events[{i}].drives", f"unknown node {e.drives!r}", f"nodes are {sorted(names)}"))
-        compiled = []
-        for key in ("when", "until"):
+        compiled: dict[str, Guard] = {}
+        for key in ("when", "until", "rearm"):
+            if getattr(e, key) is None:
+                continue
             try:
                 g = Guard(getattr(e, key))
             except GuardError as exc:
@@ -460,9 +474,9 @@ def check_semantics(project: Project) -> tuple[list[Route], dict[str, tuple[Guar
                 if ref not in outputs:
                     issues.append(Issue(f"events[{i}].{key}", f"guard names {ref[0]}.{ref[1]}, which is not a node output",
                                         "guards read node outputs as node.port"))
-            compiled.append(g)
-        if len(compiled) == 2:
-            guards[e.name] = (compiled[0], compiled[1])
+            compiled[key] = g
+        if "when" in compiled and "until" in compiled and (e.rearm is None or "rearm" in compiled):
+            guards[e.name] = EventGuards(**compiled)
     routes = _resolve_routes(project, issues)
     return routes, guards, issues
 

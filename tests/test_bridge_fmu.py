@@ -160,14 +160,18 @@ def test_bridge_fmu_in_a_c_only_importer(tmp_path):
     _check_exchange(tmp_path / "run", [tuple(map(float, line.split(","))) for line in out.split()])
 
 
-def _raw_attach(cfg: Path, uid: int, name: str = "tool", n_out: int = 1, n_in: int = 1) -> tuple[socket.socket, int, bytes]:
+def _raw_attach(cfg: Path, server: subprocess.Popen, uid: int, name: str = "tool", n_out: int = 1,
+                n_in: int = 1) -> tuple[socket.socket, int, bytes]:
     host, port = _gateway(cfg)
-    deadline = time.monotonic() + 20
+    deadline = time.monotonic() + 30
     while True:
         try:
             sock = socket.create_connection((host, port), timeout=10)
             break
         except OSError:
+            if server.poll() is not None:
+                pytest.fail(f"the server exited ({server.returncode}) before its gateway listened:\n"
+                            f"{server.communicate()[1][-3000:]}")
             if time.monotonic() > deadline:
                 raise
             time.sleep(0.1)
@@ -179,10 +183,10 @@ def _raw_attach(cfg: Path, uid: int, name: str = "tool", n_out: int = 1, n_in: i
 def test_gateway_refuses_a_wrong_uid_and_counts_it(tmp_path):
     cfg = _project(tmp_path, attachTimeout=8.0)
     server, clock = _start(cfg, tmp_path / "run")
-    sock, kind, payload = _raw_attach(cfg, uid=99)
+    sock, kind, payload = _raw_attach(cfg, server, uid=99)
     assert kind == gp.REFUSE and payload.decode() == "UID 99 does not own node 'tool'"
     sock.close()
-    sock, kind, payload = _raw_attach(cfg, uid=7, n_out=3)
+    sock, kind, payload = _raw_attach(cfg, server, uid=7, n_out=3)
     assert kind == gp.REFUSE and "rebuild it from this project" in payload.decode()
     sock.close()
     (_, serr), _ = _finish([server, clock])
@@ -193,7 +197,7 @@ def test_gateway_refuses_a_wrong_uid_and_counts_it(tmp_path):
 def test_gateway_truncated_frame_is_counted_and_the_node_is_lost(tmp_path):
     cfg = _project(tmp_path)
     server, clock = _start(cfg, tmp_path / "run")
-    sock, kind, _ = _raw_attach(cfg, uid=7)
+    sock, kind, _ = _raw_attach(cfg, server, uid=7)
     assert kind == gp.WELCOME
     assert gp.read_frame(sock)[0] == gp.START
     sock.sendall(gp.outputs(0, 0.0, [1.0]))
@@ -210,7 +214,7 @@ def test_gateway_truncated_frame_is_counted_and_the_node_is_lost(tmp_path):
 def test_gateway_node_disconnecting_mid_step_stops_the_run_naming_it(tmp_path):
     cfg = _project(tmp_path, stop=5.0)
     server, clock = _start(cfg, tmp_path / "run")
-    sock, kind, _ = _raw_attach(cfg, uid=7)
+    sock, kind, _ = _raw_attach(cfg, server, uid=7)
     assert kind == gp.WELCOME and gp.read_frame(sock)[0] == gp.START
     for k in range(3):
         sock.sendall(gp.outputs(k, 0.1 * k, [float(k)]))
@@ -236,7 +240,7 @@ def test_gateway_drops_forged_releases_and_passes_only_the_servers(tmp_path):
 
     cfg = _project(tmp_path, stop=0.5)
     server, clock = _start(cfg, tmp_path / "run")
-    sock, kind, _ = _raw_attach(cfg, uid=7)
+    sock, kind, _ = _raw_attach(cfg, server, uid=7)
     assert kind == gp.WELCOME and gp.read_frame(sock)[0] == gp.START
     sock.sendall(gp.outputs(0, 0.0, [0.0]))
     assert gp.read_frame(sock)[0] == gp.STEP
@@ -268,7 +272,7 @@ def test_gateway_refuses_an_fmu_for_a_node_already_attached_over_zenoh(tmp_path)
     while "attached 1/2" not in hycosim("status", endpoint, "--project", "bridge").stdout:
         assert time.monotonic() < deadline, "clock never attached"
         time.sleep(0.2)
-    sock, kind, payload = _raw_attach(cfg, uid=1, name="clock", n_out=2, n_in=0)
+    sock, kind, payload = _raw_attach(cfg, server, uid=1, name="clock", n_out=2, n_in=0)
     sock.close()
     assert kind == gp.REFUSE and payload.decode() == (
         "node 'clock' is already attached: a process on Zenoh holds its liveliness token")
@@ -285,7 +289,7 @@ def test_a_python_node_is_refused_for_a_node_attached_through_the_gateway(tmp_pa
     doc["nodeLists"][0]["model"] = "gain"  # so that a Python process could run the node too
     cfg.write_text(json.dumps(doc))
     server, clock = _start(cfg, tmp_path / "run")
-    sock, kind, _ = _raw_attach(cfg, uid=7)
+    sock, kind, _ = _raw_attach(cfg, server, uid=7)
     assert kind == gp.WELCOME and gp.read_frame(sock)[0] == gp.START
     second = hycosim("node", "tool", str(cfg), timeout=60)
     assert second.returncode == 3, second.stderr

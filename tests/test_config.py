@@ -51,8 +51,8 @@ def test_good_file_loads_with_routes_and_guards(tmp_path):
         ("a", "y", "b", "u"), ("b", "y", "c", "u"), ("a", "v", "c", "u")]
     assert loaded.routes[1].active("free") and not loaded.routes[1].active("hold")
     assert loaded.routes[0].active("hold")
-    when, until = loaded.guards["hold"]
-    assert when.references == [("c", "flag")]
+    guards = loaded.guards["hold"]
+    assert guards.when.references == [("c", "flag")] and guards.rearm is None
     assert len(loaded.digest) == 64
 
 
@@ -79,6 +79,8 @@ CASES = {
     "guard does not parse": (lambda d: d["events"][0].update(when="c.flag >"), "events[0].when", "does not parse"),
     "guard names unknown port": (lambda d: d["events"][0].update(until="c.nothing > 1"), "events[0].until",
                                  "c.nothing, which is not a node output"),
+    "rearm guard names unknown port": (lambda d: d["events"][0].update(rearm="c.flagg"), "events[0].rearm",
+                                       "c.flagg, which is not a node output"),
     "guard calls code": (lambda d: d["events"][0].update(when="__import__('os').system('true')"), "events[0].when",
                          "not allowed"),
     "unknown mode": (lambda d: d["linkLists"][1].update(activeIn=["grab"]), "linkLists[1].activeIn", "unknown mode 'grab'"),

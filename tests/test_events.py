@@ -54,3 +54,71 @@ def test_catch_and_release_of_a_falling_ball(tmp_path):
     assert events[0]["values"] == {"ball.h": h[k_catch], "hand.y": hand[k_catch]}
     assert events[1]["values"] == {"hand.y": hand[k_release]}
     assert math.isclose(events[0]["t"], t[k_catch])
+
+
+def _coordinator(*events: dict):
+    from fmu_bridge.config import Event, EventGuards
+    from fmu_bridge.guards import Guard
+    from server.coordinator import Coordinator
+
+    parsed = [Event(**e) for e in events]
+    return Coordinator(parsed, {e.name: EventGuards(Guard(e.when), Guard(e.until), Guard(e.rearm) if e.rearm else None)
+                                for e in parsed})
+
+
+def _modes(coordinator, points: list[dict[str, float]]) -> list[str]:
+    modes = []
+    for k, point in enumerate(points):
+        coordinator.update(k, 0.1 * k, {tuple(name.split(".")): v for name, v in point.items()})
+        modes.append(coordinator.mode)
+    return modes
+
+
+def test_a_when_still_holding_at_its_release_waits_for_its_edge():
+    c = _coordinator({"name": "grip", "when": "r.near > 0.5", "drives": "r", "until": "r.open > 0.5"})
+    points = [{"r.near": 0, "r.open": 0}, {"r.near": 1, "r.open": 0}, {"r.near": 1, "r.open": 1},
+              {"r.near": 1, "r.open": 1}, {"r.near": 1, "r.open": 0}, {"r.near": 0, "r.open": 0},
+              {"r.near": 1, "r.open": 0}]
+    # Level-triggered, points 3 and 4 would switch straight back to grip.
+    assert _modes(c, points) == ["free", "grip", "free", "free", "free", "free", "grip"]
+
+
+def test_a_rearm_guard_gives_hysteresis():
+    c = _coordinator({"name": "low", "when": "x.v < 1.0", "drives": "x", "until": "x.v >= 1.0", "rearm": "x.v > 1.2"})
+    values = [1.1, 0.9, 1.05, 0.95, 1.1, 0.99, 1.3, 0.9]
+    assert _modes(c, [{"x.v": v} for v in values]) == ["free", "low", "free", "free", "free", "free", "free", "low"]
+
+
+def test_an_edge_passing_while_another_event_is_active_rearms():
+    c = _coordinator({"name": "a", "when": "n.a > 0.5", "drives": "n", "until": "n.a_off > 0.5"},
+                     {"name": "b", "when": "n.b > 0.5", "drives": "n", "until": "n.b_off > 0.5"})
+    p = lambda a, a_off, b, b_off: {"n.a": a, "n.a_off": a_off, "n.b": b, "n.b_off": b_off}
+    points = [p(1, 0, 0, 0), p(1, 1, 1, 0), p(1, 0, 1, 0), p(0, 0, 1, 0), p(1, 0, 0, 1), p(1, 0, 0, 0)]
+    # a released at 1; b fires at 2 (a disarmed: its when still holds); a's when drops at 3,
+    # inside b's mode, and that re-arms it; so a fires at 5, right after b's release at 4.
+    assert _modes(c, points) == ["a", "free", "b", "b", "free", "a"]
+
+
+def test_a_caught_ball_released_where_the_catch_guard_still_holds_flies_free(tmp_path):
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "ball", "UID": 1, "model": "bouncing_ball", "parameters": {"h0": 2.0, "v0": 0.0, "g": G, "e": 0.8},
+         "input": ["h_in", "v_in"], "output": ["h", "v", {"name": "impacts", "type": "Integer"}]},
+        {"nodeName": "hand", "UID": 2, "model": "ramp", "parameters": {"a": 0.2, "b": 0.5}, "output": ["y", "v"]},
+    ], [{"from": "hand", "to": "ball", "pairs": [["y", "h_in"], ["v", "v_in"]], "activeIn": ["catch"]}],
+        events=[{"name": "catch", "when": "ball.h <= 1.5", "drives": "ball", "until": "hand.y >= 0.9"}],
+        cosim={"stepSize": H, "stopTime": 2.4})
+    run = run_project(cfg, tmp_path / "runs")
+    rows = read_rows(run)
+    t, h, v, hand = column(rows, "t"), column(rows, "ball.h"), column(rows, "ball.v"), column(rows, "hand.y")
+    modes = [r["mode"] for r in rows]
+    k_catch = next(k for k in range(len(rows)) if h[k] <= 1.5)
+    k_release = next(k for k in range(k_catch + 1, len(rows)) if hand[k] >= 0.9)
+    events = [json.loads(line) for line in (run / "events.jsonl").read_text().splitlines()]
+    assert [(e["step"], e["to"]) for e in events] == [(k_catch, "catch"), (k_release, "free")]
+    assert h[k_release] <= 1.5 and modes[k_release:] == ["free"] * (len(rows) - k_release)
+    for k in range(k_release + 1, len(rows)):  # its own dynamics again, not the hand's
+        tau = t[k] - t[k_release]
+        expected = h[k_release] + v[k_release] * tau - G * tau ** 2 / 2
+        if expected <= 0:
+            break
+        assert math.isclose(h[k], expected, abs_tol=1e-9)
