@@ -139,8 +139,13 @@ def model_description(node: Node, guid: str, server: str, timeout_s: float, proj
         (f'    <ScalarVariable name="hycosim_timeout" valueReference="{vr + 3}" causality="parameter" variability="fixed" '
          f'initial="exact" description="seconds a doStep may wait for the server">\n'
          f'      <Real start="{float(timeout_s)!r}" unit="s"/>\n    </ScalarVariable>'),
+        (f'    <ScalarVariable name="hycosim_driven" valueReference="{vr + 4}" causality="output" '
+         f'variability="discrete" initial="exact" description="true while an event drives this node: over the '
+         f'next step it follows its inputs (s_A = g_B(s_B)) instead of its own dynamics">\n'
+         f'      <Boolean start="false"/>\n    </ScalarVariable>'),
     ]
     lines.extend(params)
+    outputs_index.append(index + len(params))  # hycosim_driven, the last variable
     # "s" is always there: hycosim_timeout uses it.
     unit_defs = "  <UnitDefinitions>\n" + "".join(
         f"    <Unit name={quoteattr(u)}/>\n" for u in sorted(set(units) | {"s"})) + "  </UnitDefinitions>\n"

@@ -52,7 +52,7 @@ def test_every_generated_fmu_validates_and_declares_exactly_the_ports(tmp_path):
     ], [{"from": "b-2.z", "to": "a.u"}])
     res = hycosim("fmu", "build", str(cfg), "-o", str(tmp_path / "fmus"))
     assert res.returncode == 0, res.stderr
-    for name, ins, outs in (("a", ["y", "ok"], ["u", "n"]), ("b-2", ["z"], [])):
+    for name, ins, outs in (("a", ["y", "ok"], ["u", "n", "hycosim_driven"]), ("b-2", ["z"], ["hycosim_driven"])):
         path = tmp_path / "fmus" / f"{name}.fmu"
         assert validate_fmu(str(path)) == []
         md = read_model_description(str(path), validate_model_structure=True, validate_variable_names=True)
@@ -137,6 +137,34 @@ for row in r[1:]:
     assert server.returncode == 0, serr
     u_seen = [tuple(map(float, line.split(","))) for line in out.split()]
     _check_exchange(tmp_path / "run", u_seen)
+
+
+def test_bridge_fmu_tells_the_importer_when_an_event_drives_its_node(tmp_path):
+    """hycosim_driven after doStep(T_k) is the mode of the release at T_k: true exactly for the
+    steps the server recorded in the event's mode, so the tool's model can follow its inputs."""
+    cfg = _project(tmp_path)
+    doc = json.loads(cfg.read_text())
+    doc["events"] = [{"name": "follow", "when": "clock.y >= 0.3", "drives": "tool", "until": "clock.y >= 0.6"}]
+    doc["linkLists"][0]["activeIn"] = ["free", "follow"]
+    cfg.write_text(json.dumps(doc))
+    fmu = build_bridge_fmu(load_project(cfg), "tool", tmp_path / "fmus").path
+    server, clock = _start(cfg, tmp_path / "run")
+    script = f"""
+from fmpy import simulate_fmu
+r = simulate_fmu({str(fmu)!r}, start_time=0, stop_time=1.0, step_size=0.1, output_interval=0.1,
+                 output=["hycosim_driven"])
+print(" ".join(str(int(row["hycosim_driven"])) for row in r))
+"""
+    importer = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, env=env())
+    (out, err), (_, serr), _ = _finish([importer, server, clock])
+    assert importer.returncode == 0, err
+    assert server.returncode == 0, serr
+    driven = [bool(int(x)) for x in out.split()]
+    modes = [row["mode"] for row in read_rows(tmp_path / "run")]
+    assert "follow" in modes and "free" in modes[modes.index("follow"):]  # entered and released
+    assert driven[0] is False  # before the first doStep
+    assert driven[1:] == [m == "follow" for m in modes[:10]]
 
 
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")

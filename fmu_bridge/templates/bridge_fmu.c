@@ -45,6 +45,7 @@ typedef int hy_socket;
 #define HY_VR_NODE (HY_N_VALUES + 1)
 #define HY_VR_UID (HY_N_VALUES + 2)
 #define HY_VR_TIMEOUT (HY_N_VALUES + 3)
+#define HY_VR_DRIVEN (HY_N_VALUES + 4) /* Boolean output: the mode of the last release */
 #define HY_MAGIC "HYCO"
 #define HY_PROTOCOL 1
 enum { F_HELLO = 1, F_WELCOME, F_REFUSE, F_START, F_OUTPUTS, F_STEP, F_STOP };
@@ -298,6 +299,7 @@ FMI2_Export fmi2Status fmi2Reset(fmi2Component c) {
     for (int i = 0; i < HY_N_VALUES; i++) b->values[i] = HY_START[i];
     b->started = b->stopped = 0;
     b->step = 0;
+    b->driven = 0;
     return fmi2OK;
 }
 
@@ -332,6 +334,7 @@ FMI2_Export fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference 
 FMI2_Export fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean v[]) {
     Bridge *b = (Bridge *)c;
     for (size_t i = 0; i < n; i++) {
+        if (vr[i] == HY_VR_DRIVEN) { v[i] = b->driven ? fmi2True : fmi2False; continue; }
         if (check_vr(b, vr[i], 'B', "fmi2GetBoolean")) return fmi2Error;
         v[i] = b->values[vr[i]] != 0.0 ? fmi2True : fmi2False;
     }
