@@ -14,8 +14,8 @@ class FmuNode(Node):
     """Ports map to FMU variables by name (a port's ``variable`` renames); node parameters
     and input start values are set before initialisation; one doStep per macro step.
 
-    The driven flag has no FMI counterpart; an FMU that can be driven exposes an input
-    for it, wired by a link active in the event's mode.
+    The driven flag has no FMI call: an FMU that can be driven names an input for it in
+    the node's ``drivenVariable``, which set_mode sets before the next doStep.
     """
 
     def __init__(self, spec: NodeSpec, path):
@@ -38,6 +38,9 @@ class FmuNode(Node):
     def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
         self.fmu.set_inputs(inputs)
         self.fmu.do_step(t, h)
+
+    def set_mode(self, mode: str, driven: bool) -> None:
+        self.fmu.set_driven(driven)
 
     def get_state(self) -> Any:
         state = self.fmu.get_state()

@@ -83,6 +83,9 @@ class Node(_Strict):
     # An FMU file (path relative to the project JSON) run through fmpy.
     fmu: str | None = None
     parameters: dict[str, Any] = Field(default_factory=dict)
+    # FMU nodes: an FMU input (Boolean, Integer or Real) set to true / 1 while an event drives
+    # the node and false / 0 otherwise: FMI has no call for it. Python nodes get set_mode.
+    drivenVariable: str | None = None
     # Asynchronous sources publish timestamped samples instead of stepping.
     asynchronous: bool = Field(default=False, alias="async")
     rate: float | None = Field(default=None, gt=0)
@@ -445,6 +448,10 @@ def check_semantics(project: Project) -> tuple[list[Route], dict[str, EventGuard
                 seen_ports.add(p.name)
         if n.model and n.fmu:
             issues.append(Issue(f"nodeLists[{i}]", f"node {n.nodeName!r} names both 'model' and 'fmu'", "keep one"))
+        if n.drivenVariable is not None and not n.fmu:
+            issues.append(Issue(f"nodeLists[{i}].drivenVariable", f"node {n.nodeName!r} is not an FMU node",
+                                "a Python node is told it is driven through set_mode; a bridge FMU through "
+                                "its hycosim_driven output"))
         if n.asynchronous and n.input:
             issues.append(Issue(f"nodeLists[{i}].input", f"asynchronous node {n.nodeName!r} has inputs",
                                 "an asynchronous source only publishes samples"))

@@ -29,6 +29,7 @@ _COMPATIBLE = {
     PortType.STRING: {"String"},
     PortType.BINARY: {"Binary"},
 }
+_DRIVEN_TYPES = _COMPATIBLE[PortType.REAL] | _COMPATIBLE[PortType.INTEGER] | _COMPATIBLE[PortType.BOOLEAN]
 
 
 class FmuError(RuntimeError):
@@ -64,6 +65,10 @@ def check_platform(path: Path, md: ModelDescription, node: str) -> None:
                        f"not for this one ({want})")
 
 
+def _a(word: str) -> str:
+    return ("an " if word[:1] in "aeiou" else "a ") + word
+
+
 def map_ports(md: ModelDescription, node: Node, path: Path) -> tuple[list[MappedPort], list[MappedPort]]:
     """Map the node's inputs and outputs onto FMU variables by name (``variable`` renames)."""
     variables = {v.name: v for v in md.modelVariables}
@@ -75,7 +80,7 @@ def map_ports(md: ModelDescription, node: Node, path: Path) -> tuple[list[Mapped
             raise FmuError(f"node {node.nodeName!r}: {kind} {port.name!r} maps to variable {name!r}, "
                            f"which {path.name} does not have")
         if var.causality not in causalities:
-            raise FmuError(f"node {node.nodeName!r}: variable {name!r} of {path.name} is a {var.causality}, "
+            raise FmuError(f"node {node.nodeName!r}: variable {name!r} of {path.name} is {_a(var.causality)}, "
                            f"not an {kind}")
         if var.type not in _COMPATIBLE[port.type]:
             raise FmuError(f"node {node.nodeName!r}: {kind} {port.name!r} is {port.type.value} but variable "
@@ -87,6 +92,26 @@ def map_ports(md: ModelDescription, node: Node, path: Path) -> tuple[list[Mapped
     return inputs, outputs
 
 
+def map_driven(md: ModelDescription, node: Node, path: Path) -> ScalarVariable | None:
+    """The FMU variable named by the node's ``drivenVariable``: an input not mapped to a port."""
+    name = node.drivenVariable
+    if name is None:
+        return None
+    var = next((v for v in md.modelVariables if v.name == name), None)
+    if var is None:
+        raise FmuError(f"node {node.nodeName!r}: drivenVariable {name!r} is not a variable of {path.name}")
+    if var.causality != "input":
+        raise FmuError(f"node {node.nodeName!r}: drivenVariable {name!r} of {path.name} is {_a(var.causality)}, "
+                       "not an input")
+    if var.type not in _DRIVEN_TYPES:
+        raise FmuError(f"node {node.nodeName!r}: drivenVariable {name!r} of {path.name} is {var.type}; "
+                       "it must be Boolean, Integer or Real")
+    if name in {p.variable or p.name for p in node.input}:
+        raise FmuError(f"node {node.nodeName!r}: drivenVariable {name!r} is also an input port of the node; "
+                       "the coordinator sets it, a link cannot")
+    return var
+
+
 class FmuInstance:
     """One instantiated co-simulation FMU playing one node."""
 
@@ -96,6 +121,7 @@ class FmuInstance:
         self.md = describe(path)
         check_platform(path, self.md, self.node)
         self.inputs, self.outputs = map_ports(self.md, node, path)
+        self.driven_variable = map_driven(self.md, node, path)
         self.fmi3 = self.md.fmiVersion.startswith("3")
         cs = self.md.coSimulation
         self.can_rollback = bool(getattr(cs, "canGetAndSetFMUstate", False))
@@ -156,6 +182,11 @@ class FmuInstance:
         if var is None:
             raise FmuError(f"node {self.node!r}: parameter {name!r} is not a variable of {self.path.name}")
         self._set(var, value)
+
+    def set_driven(self, driven: bool) -> None:
+        """Tell the FMU, through its ``drivenVariable`` (if any), whether an event drives it."""
+        if self.driven_variable is not None:
+            self._set(self.driven_variable, driven)
 
     def set_inputs(self, values: dict[str, Any]) -> None:
         for m in self.inputs:

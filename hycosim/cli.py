@@ -271,7 +271,7 @@ def fmu_inspect(
     """List an FMU's co-simulation capabilities and variables; with --config, the port mapping."""
     import fmpy
 
-    from fmu_bridge.fmu_loader import FmuError, check_platform, describe, map_ports
+    from fmu_bridge.fmu_loader import FmuError, check_platform, describe, map_driven, map_ports
 
     try:
         md = describe(fmu)
@@ -316,6 +316,7 @@ def fmu_inspect(
     try:
         check_platform(fmu, md, spec.nodeName)
         inputs, outputs = map_ports(md, spec, fmu)
+        driven = map_driven(md, spec, fmu)
     except FmuError as exc:
         err.print(f"[red]error:[/red] {exc}", highlight=False)
         raise typer.Exit(2) from None
@@ -325,6 +326,8 @@ def fmu_inspect(
     for direction, ports in (("input", inputs), ("output", outputs)):
         for m in ports:
             mapping.add_row(m.port, direction, m.variable, str(m.vr), m.type)
+    if driven is not None:
+        mapping.add_row("(driven flag)", "input", driven.name, str(driven.valueReference), driven.type)
     out.print(mapping)
 
 

@@ -81,6 +81,8 @@ CASES = {
                                  "c.nothing, which is not a node output"),
     "rearm guard names unknown port": (lambda d: d["events"][0].update(rearm="c.flagg"), "events[0].rearm",
                                        "c.flagg, which is not a node output"),
+    "drivenVariable on a Python node": (lambda d: d["nodeLists"][0].update(drivenVariable="follow"),
+                                        "nodeLists[0].drivenVariable", "is not an FMU node"),
     "guard calls code": (lambda d: d["events"][0].update(when="__import__('os').system('true')"), "events[0].when",
                          "not allowed"),
     "unknown mode": (lambda d: d["linkLists"][1].update(activeIn=["grab"]), "linkLists[1].activeIn", "unknown mode 'grab'"),

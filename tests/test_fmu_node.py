@@ -77,8 +77,34 @@ def test_type_mismatch_names_node_and_variable(tmp_path, fmus):
 
 
 def test_wrong_causality_names_the_variable(tmp_path, fmus):
-    with pytest.raises(FmuError, match="variable 'y' of GainModel.fmu is a output, not an input"):
+    with pytest.raises(FmuError, match="variable 'y' of GainModel.fmu is an output, not an input"):
         _instance(tmp_path, fmus["gain"], _gain_node(fmus["gain"], input=[{"name": "u", "variable": "y"}]))
+
+
+@pytest.mark.parametrize("name, message", [
+    ("hold", "drivenVariable 'hold' is not a variable of GainModel.fmu"),
+    ("y", "drivenVariable 'y' of GainModel.fmu is an output, not an input"),
+    ("u", "drivenVariable 'u' is also an input port of the node"),
+])
+def test_a_bad_driven_variable_names_node_and_variable(tmp_path, fmus, name, message):
+    with pytest.raises(FmuError, match=f"node 'g': {message}"):
+        _instance(tmp_path, fmus["gain"], _gain_node(fmus["gain"], drivenVariable=name))
+
+
+def test_an_event_drives_an_fmu_through_its_driven_variable(tmp_path, fmus):
+    """The FMU follows its input (y = u) exactly in the steps the coordinator drives it, and
+    its own law (y = 2u + 0.5) before and after."""
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        _gain_node(fmus["gain"], drivenVariable="follow"),
+    ], [{"from": "clock.y", "to": "g.u"}], cosim={"stepSize": 0.1, "stopTime": 1.0},
+        events=[{"name": "hold", "when": "clock.y >= 0.3", "drives": "g", "until": "clock.y >= 0.6"}])
+    rows = read_rows(run_project(cfg, tmp_path / "runs"))
+    clock, y, modes = column(rows, "clock.y"), column(rows, "g.y"), [r["mode"] for r in rows]
+    assert modes.count("hold") == 3 and modes[-1] == "free"
+    for k in range(1, len(rows)):
+        expected = clock[k - 1] if modes[k - 1] == "hold" else 2.0 * clock[k - 1] + 0.5
+        assert math.isclose(y[k], expected, abs_tol=1e-12), (k, modes[k - 1])
 
 
 def _rewrite(src: Path, dst: Path, edit) -> Path:
@@ -149,6 +175,12 @@ def test_inspect_lists_capabilities_variables_and_mapping(tmp_path, fmus):
     bad = write_project(tmp_path / "bad.json", [_gain_node(fmus["gain"], output=["speed"])])
     res = hycosim("fmu", "inspect", str(fmus["gain"]), "--config", str(bad))
     assert res.returncode == 2 and "'speed'" in res.stderr
+    driven = write_project(tmp_path / "driven.json", [_gain_node(fmus["gain"], drivenVariable="follow")])
+    res = hycosim("fmu", "inspect", str(fmus["gain"]), "--config", str(driven))
+    assert res.returncode == 0 and "(driven flag)" in res.stdout and "follow" in res.stdout
+    bad = write_project(tmp_path / "bad2.json", [_gain_node(fmus["gain"], drivenVariable="k")])
+    res = hycosim("fmu", "inspect", str(fmus["gain"]), "--config", str(bad))
+    assert res.returncode == 2 and "drivenVariable 'k' of GainModel.fmu is a parameter, not an input" in res.stderr
 
 
 def _ball_project(tmp_path: Path, fmu: Path, extra_nodes: list | None = None, **cosim) -> Path:

@@ -1,6 +1,7 @@
-"""A pythonfmu model for the FMU-node tests: y = k·u + b; do_step fails from t >= fail_at."""
+"""A pythonfmu model for the FMU-node tests: y = k·u + b, or y = u while the input ``follow``
+is true (a node an event can drive); do_step fails from t >= fail_at."""
 
-from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Integer, Real
+from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Integer, Real
 
 
 class GainModel(Fmi2Slave):
@@ -14,7 +15,9 @@ class GainModel(Fmi2Slave):
         self.b = 1.0
         self.fail_at = 1e9
         self.count = 0
+        self.follow = False
         self.register_variable(Real("u", causality=Fmi2Causality.input))
+        self.register_variable(Boolean("follow", causality=Fmi2Causality.input, variability=Fmi2Variability.discrete))
         self.register_variable(Real("y", causality=Fmi2Causality.output, initial=Fmi2Initial.exact))
         self.register_variable(Integer("count", causality=Fmi2Causality.output, variability=Fmi2Variability.discrete, initial=Fmi2Initial.exact))
         self.register_variable(Real("k", causality=Fmi2Causality.parameter, variability=Fmi2Variability.tunable))
@@ -24,6 +27,6 @@ class GainModel(Fmi2Slave):
     def do_step(self, current_time, step_size):
         if current_time >= self.fail_at:
             return False
-        self.y = self.k * self.u + self.b
+        self.y = self.u if self.follow else self.k * self.u + self.b
         self.count += 1
         return True
