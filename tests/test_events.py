@@ -11,14 +11,19 @@ G = 9.81
 H = 0.01
 
 
-def test_catch_and_release_of_a_falling_ball(tmp_path):
-    cfg = write_project(tmp_path / "p.json", [
+def _ball_and_hand(tmp_path, when: str, until: str):
+    """A ball falling from 2 m and a hand rising as 0.5 + 0.2 t; in mode catch the ball follows the hand."""
+    return write_project(tmp_path / "p.json", [
         {"nodeName": "ball", "UID": 1, "model": "bouncing_ball", "parameters": {"h0": 2.0, "v0": 0.0, "g": G, "e": 0.8},
          "input": ["h_in", "v_in"], "output": ["h", "v", {"name": "impacts", "type": "Integer"}]},
         {"nodeName": "hand", "UID": 2, "model": "ramp", "parameters": {"a": 0.2, "b": 0.5}, "output": ["y", "v"]},
     ], [{"from": "hand", "to": "ball", "pairs": [["y", "h_in"], ["v", "v_in"]], "activeIn": ["catch"]}],
-        events=[{"name": "catch", "when": "ball.h <= hand.y and hand.y < 1.0", "drives": "ball", "until": "hand.y >= 1.2"}],
+        events=[{"name": "catch", "when": when, "drives": "ball", "until": until}],
         cosim={"stepSize": H, "stopTime": 2.4})
+
+
+def test_catch_and_release_of_a_falling_ball(tmp_path):
+    cfg = _ball_and_hand(tmp_path, "ball.h <= hand.y and hand.y < 1.0", "hand.y >= 1.2")
     run = run_project(cfg, tmp_path / "runs")
     rows = read_rows(run)
     t = column(rows, "t")
@@ -100,13 +105,7 @@ def test_an_edge_passing_while_another_event_is_active_rearms():
 
 
 def test_a_caught_ball_released_where_the_catch_guard_still_holds_flies_free(tmp_path):
-    cfg = write_project(tmp_path / "p.json", [
-        {"nodeName": "ball", "UID": 1, "model": "bouncing_ball", "parameters": {"h0": 2.0, "v0": 0.0, "g": G, "e": 0.8},
-         "input": ["h_in", "v_in"], "output": ["h", "v", {"name": "impacts", "type": "Integer"}]},
-        {"nodeName": "hand", "UID": 2, "model": "ramp", "parameters": {"a": 0.2, "b": 0.5}, "output": ["y", "v"]},
-    ], [{"from": "hand", "to": "ball", "pairs": [["y", "h_in"], ["v", "v_in"]], "activeIn": ["catch"]}],
-        events=[{"name": "catch", "when": "ball.h <= 1.5", "drives": "ball", "until": "hand.y >= 0.9"}],
-        cosim={"stepSize": H, "stopTime": 2.4})
+    cfg = _ball_and_hand(tmp_path, "ball.h <= 1.5", "hand.y >= 0.9")
     run = run_project(cfg, tmp_path / "runs")
     rows = read_rows(run)
     t, h, v, hand = column(rows, "t"), column(rows, "ball.h"), column(rows, "ball.v"), column(rows, "hand.y")
