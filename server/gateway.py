@@ -2,13 +2,14 @@
 
 The paper's server "can also transmit FMU data": a tool that can only import FMUs loads
 a generated bridge FMU, which connects here (framing in ``fmu_bridge.gateway_protocol``).
-The gateway turns that connection into an ordinary node for the relay: an accepted HELLO
-declares the node's liveliness token in the relay's session (so the relay sees it attach
-exactly as a Zenoh node, and a second process for the node, over Zenoh or the gateway,
-finds the token held and is refused), each OUTPUTS frame becomes the msgpack frame a Zenoh node would have
-published on ``up/<node>`` (put session-locally, so it takes the same path through
-intake and barrier), and the server's START/STEP/STOP on ``down`` are written back to
-each connection with that node's inputs. A closed connection undeclares the token: a lost node.
+The gateway turns that connection into an ordinary node for the relay. An accepted HELLO
+declares the node's liveliness token in the relay's session, so the relay sees it attach
+exactly as a Zenoh node, and a second process for the node (over Zenoh or the gateway)
+finds the token held and is refused. Each OUTPUTS frame becomes the msgpack frame a Zenoh
+node would have published on ``up/<node>`` (put session-locally, so it takes the same
+path through intake and barrier), and the server's START/STEP/STOP on ``down`` are
+written back to each connection with that node's inputs. A closed connection undeclares
+the token: a lost node.
 """
 
 from __future__ import annotations
