@@ -62,6 +62,7 @@ class Gateway:
         self._conns: dict[str, _Connection] = {}
         self._lock = threading.Lock()
         self._closing = threading.Event()
+        self._started = threading.Event()  # START sent: a bridge FMU attaching now is too late
         self._log = structlog.get_logger("server.gateway")
         try:
             self._listener = socket.create_server((host, port), reuse_port=False)
@@ -112,6 +113,11 @@ class Gateway:
         if (n_out, n_in) != (len(node.output), len(node.input)):
             self._refuse(sock, f"node {name!r} has {len(node.output)} outputs and {len(node.input)} inputs, "
                                f"the FMU declares {n_out} and {n_in}: rebuild it from this project", "unknown ports")
+            return None
+        if self._started.is_set():
+            # Its START is gone, and a node restarted mid-run has lost the state the run needs.
+            self._refuse(sock, f"node {name!r}: the run was already under way when it attached; a node joins "
+                               "before the run starts: start the run again", "late attach")
             return None
         if token_held(self._session, self._keys.alive(name), timeout=self._hello_timeout):
             self._refuse(sock, f"node {name!r} is already attached: a process on Zenoh holds its liveliness token",
@@ -181,6 +187,10 @@ class Gateway:
                     pass
             if not self._closing.is_set():
                 log.info("bridge FMU detached")
+
+    def run_started(self) -> None:
+        """The relay sent START: from now on a bridge FMU that attaches is refused."""
+        self._started.set()
 
     # --- releases -------------------------------------------------------------------
 

@@ -345,6 +345,8 @@ class Relay:
                                            H, wall0, rt, {"checkpoint": checkpoint})
         self.release.put(self._last_release)
         released_at = time.perf_counter()
+        if self.gateway is not None:
+            self.gateway.run_started()
         arrivals = self._collect(0, released_at)
         wait = time.perf_counter() - released_at
         localise = self._localisation_plan()

@@ -335,3 +335,26 @@ def test_a_python_node_is_refused_for_a_node_attached_through_the_gateway(tmp_pa
     assert server.returncode == 0, serr
     assert column(read_rows(tmp_path / "run"), "tool.y") == [0.0, 1.0, 2.0, 3.0]
     assert meta(tmp_path / "run")["dropped_frames"] == {}
+
+
+def test_a_bridge_fmu_attaching_mid_run_is_told_the_run_is_under_way(tmp_path):
+    """Within linkGrace the relay waits for a lost node; a new bridge FMU instance for it has
+    lost the node's state (and its START is gone), so it is refused at HELLO rather than left
+    waiting for a START that never comes, and the run stops naming the node after the grace."""
+    cfg = _project(tmp_path, stop=5.0, linkGrace=2.0)
+    server, clock = _start(cfg, tmp_path / "run")
+    sock, kind, _ = _raw_attach(cfg, server, uid=7)
+    assert kind == gp.WELCOME and gp.read_frame(sock)[0] == gp.START
+    for k in range(2):
+        sock.sendall(gp.outputs(k, 0.1 * k, [float(k)]))
+        assert gp.read_frame(sock)[0] == gp.STEP
+    sock.close()
+    again, kind, payload = _raw_attach(cfg, server, uid=7)
+    again.close()
+    assert kind == gp.REFUSE and payload.decode() == (
+        "node 'tool': the run was already under way when it attached; a node joins before the run starts: "
+        "start the run again")
+    (_, serr), _ = _finish([server, clock])
+    assert server.returncode == 3 and "did not come back within the link grace of 2 s" in serr
+    assert meta(tmp_path / "run")["dropped_frames"] == {"late attach": 1}
+    assert column(read_rows(tmp_path / "run"), "tool.y") == [0.0, 1.0]
