@@ -126,7 +126,7 @@ def model_description(node: Node, guid: str, server: str, timeout_s: float, proj
         vr += 1
         index += 1
         outputs_index.append(index)
-    params = [
+    bridge_vars = [
         (f'    <ScalarVariable name="hycosim_server" valueReference="{vr}" causality="parameter" variability="fixed" '
          f'initial="exact" description="hycosim gateway address (HOST:PORT)">\n'
          f'      <String start={quoteattr(server)}/>\n    </ScalarVariable>'),
@@ -144,8 +144,8 @@ def model_description(node: Node, guid: str, server: str, timeout_s: float, proj
          f'next step it follows its inputs (s_A = g_B(s_B)) instead of its own dynamics">\n'
          f'      <Boolean start="false"/>\n    </ScalarVariable>'),
     ]
-    lines.extend(params)
-    outputs_index.append(index + len(params))  # hycosim_driven, the last variable
+    lines.extend(bridge_vars)
+    outputs_index.append(index + len(bridge_vars))  # hycosim_driven, the last variable
     # "s" is always there: hycosim_timeout uses it.
     unit_defs = "  <UnitDefinitions>\n" + "".join(
         f"    <Unit name={quoteattr(u)}/>\n" for u in sorted(set(units) | {"s"})) + "  </UnitDefinitions>\n"

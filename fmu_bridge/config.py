@@ -468,12 +468,11 @@ def check_semantics(project: Project) -> tuple[list[Route], dict[str, EventGuard
         event_names.add(e.name)
         if e.drives not in names:
             issues.append(Issue(f"events[{i}].drives", f"unknown node {e.drives!r}", f"nodes are {sorted(names)}"))
+        given = {key: getattr(e, key) for key in ("when", "until", "rearm") if getattr(e, key) is not None}
         compiled: dict[str, Guard] = {}
-        for key in ("when", "until", "rearm"):
-            if getattr(e, key) is None:
-                continue
+        for key, text in given.items():
             try:
-                g = Guard(getattr(e, key))
+                g = Guard(text)
             except GuardError as exc:
                 issues.append(Issue(f"events[{i}].{key}", str(exc), "e.g. 'robot.grasped > 0.5'"))
                 continue
@@ -482,7 +481,7 @@ def check_semantics(project: Project) -> tuple[list[Route], dict[str, EventGuard
                     issues.append(Issue(f"events[{i}].{key}", f"guard names {ref[0]}.{ref[1]}, which is not a node output",
                                         "guards read node outputs as node.port"))
             compiled[key] = g
-        if "when" in compiled and "until" in compiled and (e.rearm is None or "rearm" in compiled):
+        if len(compiled) == len(given):
             guards[e.name] = EventGuards(**compiled)
     routes = _resolve_routes(project, issues)
     return routes, guards, issues

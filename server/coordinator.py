@@ -80,9 +80,8 @@ class Coordinator:
 
     def update(self, step: int, t: float, values: Mapping[tuple[str, str], Any]) -> ModeSwitch | None:
         """Evaluate the guards at a macro-step point; switch mode and report it if one holds."""
-        for name in sorted(self.disarmed):
-            if self._rearmed(name, values):
-                self.disarmed.discard(name)
+        if self.disarmed:
+            self.disarmed = {name for name in self.disarmed if not self._rearmed(name, values)}
         if self.mode == FREE_MODE:
             for event in self._events:
                 if event.name in self.disarmed:
