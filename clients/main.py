@@ -6,6 +6,7 @@ from pathlib import Path
 
 from fmu_bridge import logs
 from fmu_bridge.config import LoadedProject, server_endpoint
+from fmu_bridge.endpoints import EndpointError, parse_endpoint
 from fmu_bridge.fmu_loader import FmuError
 from fmu_bridge.security import SecurityError, node_password
 from fmu_bridge.session import ConnectError
@@ -23,7 +24,10 @@ def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
     except KeyError:
         names = ", ".join(n.nodeName for n in loaded.project.nodeLists)
         return 2, f"{loaded.path}: no node named {name!r} (nodes: {names})"
-    endpoint = connect or server_endpoint(loaded.project.serverIP)
+    try:
+        endpoint = str(parse_endpoint(connect)) if connect else server_endpoint(loaded.project.serverIP)
+    except EndpointError as exc:
+        return 2, f"{'--connect' if connect else 'serverIP'}: {exc}"
     try:
         password = node_password(loaded, name, password_file)
         impl = load_node(spec, loaded.path.parent if loaded.path else Path.cwd())

@@ -20,6 +20,7 @@ from typing import Any, Literal, NamedTuple
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from fmu_bridge.endpoints import GATEWAY_PORT, SERVER_PORT, Address, EndpointError, gateway_beside, parse_address, parse_endpoint
 from fmu_bridge.guards import Guard, GuardError
 
 FREE_MODE = "free"
@@ -401,6 +402,22 @@ def _resolve_routes(project: Project, issues: list[Issue]) -> list[Route]:
     return routes
 
 
+def _address_issues(project: Project) -> list[Issue]:
+    hint = "e.g. 127.0.0.1:7447, tcp/10.0.0.5:7447, or tls/HOST:PORT with security.tls"
+    try:
+        server = parse_endpoint(project.serverIP, SERVER_PORT)
+    except EndpointError as exc:
+        return [Issue("serverIP", str(exc), hint)]
+    try:
+        if project.gatewayIP is not None:
+            parse_address(project.gatewayIP, GATEWAY_PORT)
+        else:
+            gateway_beside(server)
+    except EndpointError as exc:
+        return [Issue("gatewayIP", str(exc), "HOST:PORT of the TCP gateway for bridge FMUs")]
+    return []
+
+
 def _security_issues(project: Project) -> list[Issue]:
     sec = project.security
     tls_endpoint = project.serverIP.startswith("tls/")
@@ -455,6 +472,7 @@ def check_semantics(project: Project) -> tuple[list[Route], dict[str, EventGuard
         if n.asynchronous and n.input:
             issues.append(Issue(f"nodeLists[{i}].input", f"asynchronous node {n.nodeName!r} has inputs",
                                 "an asynchronous source only publishes samples"))
+    issues.extend(_address_issues(project))
     issues.extend(_security_issues(project))
     cosim = project.coSimulation
     if cosim.stopTime <= cosim.startTime:
@@ -517,35 +535,22 @@ def load_project(path: str | Path) -> LoadedProject:
     return parse_project(data, source, path.resolve(), raw)
 
 
-def _host_port(address: str, default_port: int) -> tuple[str, int]:
-    if "/" in address:
-        address = address.split("/", 1)[1]
-    if address.startswith("["):  # [v6]:port
-        host, _, port = address[1:].partition("]:")
-        return host, int(port or default_port)
-    if address.count(":") == 1:
-        host, port = address.split(":")
-        return host, int(port)
-    return address, default_port
-
-
 def server_endpoint(server_ip: str) -> str:
-    """Turn the paper's ``serverIP`` (bare IP, IP:port) or a Zenoh endpoint into an endpoint."""
-    if "/" in server_ip:
-        return server_ip
-    host, port = _host_port(server_ip, 7447)
-    return f"tcp/{host}:{port}"
+    """The Zenoh endpoint of the paper's ``serverIP`` (bare IP, IP:port or an endpoint); raise EndpointError."""
+    return str(parse_endpoint(server_ip, SERVER_PORT))
+
+
+def gateway_address(project: Project, server_ip: str | None = None) -> Address:
+    """Where the TCP gateway for bridge FMUs is: ``gatewayIP``, or the server's port + 1.
+
+    ``server_ip`` overrides ``serverIP`` (a server told to listen elsewhere). Raises
+    EndpointError for an address that cannot be used.
+    """
+    if project.gatewayIP:
+        return parse_address(project.gatewayIP, GATEWAY_PORT)
+    return gateway_beside(parse_endpoint(server_ip or project.serverIP, SERVER_PORT))
 
 
 def gateway_endpoint(project: Project, server_ip: str | None = None) -> str:
-    """``HOST:PORT`` of the TCP gateway for bridge FMUs: ``gatewayIP``, or serverIP's port + 1."""
-    if project.gatewayIP:
-        host, port = _host_port(project.gatewayIP, 7448)
-        return f"{host}:{port}"
-    host, port = _host_port(server_ip or project.serverIP, 7447)
-    return f"{host}:{port + 1}"
-
-
-def split_host_port(address: str, default_port: int = 7448) -> tuple[str, int]:
-    """(host, port) of ``HOST:PORT``, ``tcp/HOST:PORT`` or ``[v6]:PORT``."""
-    return _host_port(address, default_port)
+    """``HOST:PORT`` of the TCP gateway for bridge FMUs (see :func:`gateway_address`)."""
+    return str(gateway_address(project, server_ip))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 
 import zenoh
 
@@ -59,10 +60,24 @@ class FramePublisher:
         self._pub.put(payload)
 
 
+# Zenoh's errors end with where in its Rust sources they were raised ("... at
+# /root/.cargo/git/.../orchestrator.rs:388."): noise to a user, so it is cut.
+_RUST_LOCATION = re.compile(r"\s*\bat\s+\S+\.rs:\d+\.?")
+
+
+def zenoh_message(exc: BaseException) -> str:
+    """The first line of a Zenoh error without its Rust source locations."""
+    text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    return _RUST_LOCATION.sub("", text).strip()
+
+
 def _config(settings: dict[str, object]) -> zenoh.Config:
     conf = zenoh.Config()
     for key, value in settings.items():
-        conf.insert_json5(key, json.dumps(value))
+        try:
+            conf.insert_json5(key, json.dumps(value))
+        except zenoh.ZError as exc:
+            raise ConnectError(f"Zenoh refused the setting {key} = {json.dumps(value)}: {zenoh_message(exc)}") from None
     return conf
 
 
@@ -129,5 +144,4 @@ def open_session(conf: zenoh.Config, endpoint: str) -> zenoh.Session:
     try:
         return zenoh.open(conf)
     except Exception as exc:  # zenoh raises ZError with the Rust message
-        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise ConnectError(f"cannot open Zenoh session on {endpoint}: {first}") from None
+        raise ConnectError(f"cannot open Zenoh session on {endpoint}: {zenoh_message(exc)}") from None

@@ -17,6 +17,7 @@ from rich.console import Console
 from rich.table import Table
 
 from fmu_bridge.config import ConfigError, LoadedProject, load_project
+from fmu_bridge.endpoints import GATEWAY_PORT, EndpointError, parse_address, parse_endpoint
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="hycosim: hybrid time/event co-simulation on FMI, relayed over Zenoh.")
@@ -31,6 +32,15 @@ def _load(path: Path) -> LoadedProject:
         err.print(f"[red]error:[/red] {exc.source}: {len(exc.issues)} error(s)", highlight=False)
         for issue in exc.issues:
             err.print(f"  {exc.source}: {issue.render()}", highlight=False, markup=False)
+        raise typer.Exit(2) from None
+
+
+def _endpoint(option: str, value: str) -> str:
+    """A Zenoh endpoint given on the command line, normalised; exit 2 naming the option if unusable."""
+    try:
+        return str(parse_endpoint(value))
+    except EndpointError as exc:
+        err.print(f"[red]error:[/red] {option}: {exc}", highlight=False)
         raise typer.Exit(2) from None
 
 
@@ -60,7 +70,7 @@ def server(
     code, rdir, message = serve(loaded, listen=listen, runs_dir=runs_dir, run_dir=run_dir,
                                 progress_jsonl=progress_jsonl, gateway=gateway)
     if code:
-        err.print(f"[red]error:[/red] {message}\n  results so far: {rdir}", highlight=False)
+        err.print(f"[red]error:[/red] {message}" + (f"\n  results so far: {rdir}" if rdir else ""), highlight=False)
     elif not progress_jsonl:
         out.print(f"{message}; results in {rdir}", highlight=False)
     raise typer.Exit(code)
@@ -96,6 +106,7 @@ def run(
     from server.report import summarise
 
     loaded = _load(file)
+    listen = _endpoint("--listen", listen) if listen else None
     result = run_embedded(loaded, file, listen=listen, runs_dir=runs_dir, console=err, show_progress=progress)
     if result.code:
         err.print(f"[red]error:[/red] {result.message}\n  results so far: {result.run_dir}", highlight=False)
@@ -194,6 +205,7 @@ def status(
     from fmu_bridge.security import SecurityError, ca_settings
     from fmu_bridge.session import ConnectError, client_config, open_session
 
+    endpoint = _endpoint("endpoint", endpoint)
     if endpoint.startswith("tls/") and tls_ca is None:
         err.print(f"[red]error:[/red] {endpoint} is a TLS endpoint: give --tls-ca with the CA that signed "
                   "the server's certificate", highlight=False)
@@ -245,6 +257,12 @@ def fmu_build(
     from fmu_bridge.bridge_fmu import BridgeBuildError, build_bridge_fmus
 
     loaded = _load(file)
+    if server is not None:
+        try:
+            server = str(parse_address(server, GATEWAY_PORT))
+        except EndpointError as exc:
+            err.print(f"[red]error:[/red] --server: {exc}", highlight=False)
+            raise typer.Exit(2) from None
     unknown = [n for n in node or [] if n not in {x.nodeName for x in loaded.project.nodeLists}]
     if unknown:
         err.print(f"[red]error:[/red] {file}: no node named {', '.join(unknown)}", highlight=False)

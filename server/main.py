@@ -14,7 +14,8 @@ from typing import Any
 import structlog
 
 from fmu_bridge import logs
-from fmu_bridge.config import LoadedProject, gateway_endpoint, server_endpoint, split_host_port
+from fmu_bridge.config import LoadedProject, gateway_address, server_endpoint
+from fmu_bridge.endpoints import GATEWAY_PORT, EndpointError, parse_address, parse_endpoint
 from fmu_bridge.security import router_security
 from fmu_bridge.session import open_session, router_config
 
@@ -34,11 +35,21 @@ def _versions() -> dict[str, str]:
 
 def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = Path("runs"),
           run_dir: Path | None = None, progress_jsonl: bool = False,
-          gateway: str | None = None) -> tuple[int, Path, str]:
-    """Run one co-simulation as its server; return (exit code, run directory, message)."""
-    endpoint = listen or server_endpoint(loaded.project.serverIP)
+          gateway: str | None = None) -> tuple[int, Path | None, str]:
+    """Run one co-simulation as its server; return (exit code, run directory, message).
+
+    Addresses are checked before anything is written: one that cannot be used gives
+    exit code 2 and no run directory.
+    """
+    try:
+        endpoint = str(parse_endpoint(listen)) if listen else server_endpoint(loaded.project.serverIP)
+    except EndpointError as exc:
+        return 2, None, f"{'--listen' if listen else 'serverIP'}: {exc}"
+    try:
+        gw = parse_address(gateway, GATEWAY_PORT) if gateway else gateway_address(loaded.project, endpoint)
+    except EndpointError as exc:
+        return 2, None, f"{'--gateway' if gateway else 'gatewayIP'}: {exc}"
     gateway_required = bool(gateway or loaded.project.gatewayIP)
-    gateway_address = split_host_port(gateway or gateway_endpoint(loaded.project, endpoint))
     run_dir = run_dir or run_dir_for(runs_dir, loaded.name)
     run_dir.mkdir(parents=True, exist_ok=True)
     logs.configure(run_dir / "server.log.jsonl")
@@ -63,7 +74,7 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         recorder.close("failed", reason=str(exc))
         return 3, run_dir, str(exc)
     relay = Relay(loaded, session, recorder, progress_every_s=0.1, on_progress=on_progress,
-                  gateway_address=gateway_address, gateway_required=gateway_required)
+                  gateway_address=(gw.host, gw.port), gateway_required=gateway_required)
     try:
         relay.run()
         code, message = 0, f"completed {recorder.meta['steps']} macro steps"

@@ -8,7 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from fmu_bridge.config import ConfigError, load_project, polls_before_blocking, server_endpoint
+from fmu_bridge.config import (ConfigError, gateway_address, load_project, parse_project, polls_before_blocking,
+                               server_endpoint)
+from fmu_bridge.endpoints import Address, EndpointError, parse_address, parse_endpoint
+from fmu_bridge.session import zenoh_message
 from tests.helpers import REPO, hycosim
 
 GOOD = {
@@ -89,6 +92,11 @@ CASES = {
     "event drives unknown node": (lambda d: d["events"][0].update(drives="ghost"), "events[0].drives", "unknown node"),
     "unknown wait strategy": (lambda d: d.update(coSimulation={"waitStrategy": "spin"}),
                               "coSimulation.waitStrategy", "Input should be 'auto', 'block' or 'yield'"),
+    "server port not a number": (lambda d: d.update(serverIP="127.0.0.1:74a7"), "serverIP", "port '74a7' is not a number"),
+    "server port out of range": (lambda d: d.update(serverIP="10.0.0.5:70000"), "serverIP", "outside 1-65535"),
+    "server protocol": (lambda d: d.update(serverIP="udp/10.0.0.5:7447"), "serverIP", "not udp/"),
+    "gateway port out of range": (lambda d: d.update(gatewayIP="127.0.0.1:0"), "gatewayIP", "port 0 is outside"),
+    "gateway beside the last port": (lambda d: d.update(serverIP="127.0.0.1:65535"), "gatewayIP", "is the last port"),
     "bad port type": (lambda d: d["nodeLists"][1].update(input=[{"name": "u", "type": "Float"}]),
                       "nodeLists[1].input[0].type", "Input should be"),
 }
@@ -138,6 +146,60 @@ def test_server_ip_forms():
     assert server_endpoint("10.0.0.5") == "tcp/10.0.0.5:7447"
     assert server_endpoint("10.0.0.5:9000") == "tcp/10.0.0.5:9000"
     assert server_endpoint("tcp/127.0.0.1:7448") == "tcp/127.0.0.1:7448"
+    assert server_endpoint("server") == "tcp/server:7447"  # a compose service name
+    assert server_endpoint("[::1]:9000") == "tcp/[::1]:9000"
+    assert server_endpoint("::1") == "tcp/[::1]:7447"
+    assert server_endpoint("tls/robot-cell.lan:7447") == "tls/robot-cell.lan:7447"
+    assert server_endpoint("tcp/10.0.0.5:7447#iface=eth0") == "tcp/10.0.0.5:7447#iface=eth0"
+
+
+@pytest.mark.parametrize("text, reason", [
+    ("/work/configs/grasp.json", "(a path?)"),
+    ("udp/10.0.0.5:7447", "not udp/"),
+    ("10.0.0.5:", "port '' is not a number"),
+    ("10.0.0.5:0", "port 0 is outside 1-65535"),
+    ("tcp/", "names no host"),
+    ("my host", "'my host' is not a host name"),
+    ("[::1:7447", "written [ADDRESS]:PORT"),
+])
+def test_unusable_endpoints_are_named_with_the_reason(text, reason):
+    with pytest.raises(EndpointError) as exc:
+        parse_endpoint(text)
+    assert repr(text) in str(exc.value) and reason in str(exc.value)
+
+
+def test_gateway_address_defaults_beside_the_server():
+    doc = copy.deepcopy(GOOD)
+    project = parse_project(doc).project
+    assert gateway_address(project) == Address("127.0.0.1", 7448)
+    assert gateway_address(project, "tcp/0.0.0.0:9000") == Address("0.0.0.0", 9001)
+    doc["gatewayIP"] = "tcp/[::1]:9100"
+    assert str(gateway_address(parse_project(doc).project)) == "[::1]:9100"
+    with pytest.raises(EndpointError, match="'tls/h:1' is not a HOST:PORT address"):
+        parse_address("tls/h:1", 7448)
+
+
+@pytest.mark.parametrize("args, option", [
+    (["node", "a", "{cfg}", "--connect", "udp/127.0.0.1:7447"], "--connect"),
+    (["server", "{cfg}", "--runs-dir", "{tmp}/runs", "--listen", "127.0.0.1:port"], "--listen"),
+    (["server", "{cfg}", "--runs-dir", "{tmp}/runs", "--gateway", "127.0.0.1:123456"], "--gateway"),
+    (["run", "{cfg}", "--runs-dir", "{tmp}/runs", "--listen", "unixsock-stream//tmp/hy.sock"], "--listen"),
+    (["status", "{cfg}"], "endpoint"),  # the config file given where the endpoint goes
+    (["fmu", "build", "{cfg}", "--server", "tls/127.0.0.1:7448", "-o", "{tmp}/fmus"], "--server"),
+])
+def test_cli_names_an_unusable_address_and_writes_nothing(tmp_path, args, option):
+    cfg = _write(tmp_path, GOOD)
+    res = hycosim(*(a.format(cfg=cfg, tmp=tmp_path) for a in args))
+    assert res.returncode == 2, res.stderr
+    assert f"error: {option}: " in res.stderr
+    assert "Traceback" not in res.stderr and ".rs:" not in res.stderr
+    assert not (tmp_path / "runs").exists() and not (tmp_path / "fmus").exists()
+
+
+def test_zenoh_errors_lose_their_rust_source_locations():
+    exc = RuntimeError("Unable to connect to any of [Single(tcp/127.0.0.1:1)]. Timeout! at "
+                       "/root/.cargo/git/checkouts/zenoh-9c599d5ef3e0480e/cc83980/zenoh/src/net/runtime/orchestrator.rs:388.")
+    assert zenoh_message(exc) == "Unable to connect to any of [Single(tcp/127.0.0.1:1)]. Timeout!"
 
 
 def test_wait_strategy_polls_only_where_the_processes_fit_the_cores(tmp_path):
