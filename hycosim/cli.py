@@ -591,8 +591,8 @@ def krl_controller(
 
 @app.command()
 def trials(
-    angles: Annotated[str, typer.Option(help="initial angles in degrees: --angles 30 40 50 60")] = "30,40,50,60",
-    n: Annotated[int, typer.Option("--trials", help="trials per angle")] = 20,
+    angles: Annotated[str, typer.Option(help="initial angles in degrees, each in (0, 90): --angles 30 40 50 60")] = "30,40,50,60",
+    n: Annotated[int, typer.Option("--trials", min=1, help="trials per angle")] = 20,
     correction: Annotated[bool, typer.Option("--correction/--no-correction", help="camera correction of the twin")] = True,
     driver: Annotated[str, typer.Option(help="'policy' (pretrained DDPG) or 'reference' (scripted)")] = "policy",
     output: Annotated[Path, typer.Option("-o", "--output")] = Path("runs/trials"),
@@ -608,6 +608,13 @@ def trials(
     except ValueError:
         err.print(f"[red]error:[/red] --angles {angles!r}: give numbers in degrees", highlight=False)
         raise typer.Exit(2) from None
+    outside = [a for a in angle_list if not 0.0 < a < 90.0]
+    if not angle_list or outside:
+        # The rod is released from rest on one side, below the horizontal (the paper: 30° to 60°).
+        err.print(f"[red]error:[/red] --angles {angles!r}: "
+                  + (f"{', '.join(f'{a:g}°' for a in outside)} outside (0°, 90°)" if outside else "no angle given"),
+                  highlight=False)
+        raise typer.Exit(2)
     def progress(r) -> None:
         if r.error:
             err.print(f"{r.angle:g}° #{r.trial}: [red]not run[/red]: {r.error}", highlight=False)
@@ -634,6 +641,11 @@ def trials(
         raise typer.Exit(3)
 
 
+def _is_option(arg: str) -> bool:
+    # "-o" is an option; "-5" is a (negative) angle, left for trials to refuse.
+    return arg.startswith("-") and not arg[1:2].isdigit()
+
+
 def _join_multi_value_options(argv: list[str]) -> list[str]:
     # `--angles 30 40 50 60` as the paper's trials are written; click options take one value.
     out, i = [], 0
@@ -641,7 +653,7 @@ def _join_multi_value_options(argv: list[str]) -> list[str]:
         out.append(argv[i])
         if argv[i] == "--angles":
             values = []
-            while i + 1 < len(argv) and not argv[i + 1].startswith("--"):
+            while i + 1 < len(argv) and not _is_option(argv[i + 1]):
                 i += 1
                 values.append(argv[i])
             out.append(",".join(values))

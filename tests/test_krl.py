@@ -128,6 +128,18 @@ def test_export_and_controller_cli_errors(tmp_path):
     assert res.returncode == 2 and "expected <ETHERNETKRL>" in res.stderr
 
 
+@pytest.mark.parametrize("args, message", [
+    (["--angles", "95", "--trials", "1"], "95° outside (0°, 90°)"),
+    (["--angles", "-5", "40"], "-5° outside (0°, 90°)"),  # and "-o" after it is still an option
+    (["--angles", "30", "--trials", "0"], "'--trials'"),
+    (["--angles", "thirty"], "give numbers in degrees"),
+])
+def test_trials_refuse_bad_angles_and_counts_before_running(tmp_path, args, message):
+    res = hycosim("trials", *args, "-o", str(tmp_path / "out"))
+    assert res.returncode == 2 and message in res.stderr, res.stderr
+    assert "Traceback" not in res.stderr and not (tmp_path / "out").exists()
+
+
 def test_short_trials_run_produces_the_table_and_files(tmp_path):
     out = tmp_path / "trials"
     res = hycosim("trials", "--angles", "30", "40", "50", "60", "--trials", "2", "-o", str(out), timeout=900)
