@@ -393,7 +393,12 @@ def scene_fmus(output: Annotated[Path, typer.Option("-o", "--output")] = Path("b
 
     from clients.scene_fmus import build_scene_fmus
 
-    for name, path in build_scene_fmus(output).items():
+    try:
+        built = build_scene_fmus(output)
+    except OSError as exc:
+        err.print(f"[red]error:[/red] {output}: cannot write the FMUs there ({exc.strerror or exc})", highlight=False)
+        raise typer.Exit(2) from None
+    for name, path in built.items():
         problems = validate_fmu(str(path))
         out.print(f"{name}: {path} ({'valid' if not problems else 'INVALID: ' + '; '.join(problems)})", highlight=False)
         if problems:
@@ -404,11 +409,11 @@ def scene_fmus(output: Annotated[Path, typer.Option("-o", "--output")] = Path("b
 def camera(
     source: Annotated[str, typer.Option(help="'emulated', a video file, or a camera device index")] = "emulated",
     annotate: Annotated[Optional[Path], typer.Option(help="write the frames with the detected rod drawn, .mp4 or .avi")] = None,
-    seconds: Annotated[float, typer.Option(help="how much to process (emulated: simulated seconds)")] = 3.0,
+    seconds: Annotated[float, typer.Option(min=0.0, help="how much to process (emulated: simulated seconds)")] = 3.0,
     calibration: Annotated[Optional[Path], typer.Option(help="calibration JSON (real sources)")] = None,
     initial_angle: Annotated[float, typer.Option(help="emulated rod's release angle, degrees")] = 45.0,
-    noise: Annotated[float, typer.Option(help="emulated image noise σ (grey levels)")] = 25.0,
-    fps: Annotated[float, typer.Option(help="emulated frame rate")] = 60.0,
+    noise: Annotated[float, typer.Option(min=0.0, help="emulated image noise σ (grey levels)")] = 25.0,
+    fps: Annotated[float, typer.Option(min=1.0, help="emulated frame rate")] = 60.0,
 ) -> None:
     """Run the camera node alone: detect the rod in each frame and summarise (and annotate)."""
     import math
@@ -461,6 +466,10 @@ def camera(
                 h, w = frame.image.shape[:2]
                 fourcc = cv2.VideoWriter_fourcc(*("mp4v" if annotate.suffix == ".mp4" else "MJPG"))
                 writer = cv2.VideoWriter(str(annotate), fourcc, fps if source == "emulated" else 30.0, (w, h))
+                if not writer.isOpened():  # OpenCV does not raise: it writes nothing
+                    err.print(f"[red]error:[/red] {annotate}: cannot write a video there (a missing folder, "
+                              "or a suffix other than .mp4 or .avi?)", highlight=False)
+                    raise typer.Exit(2)
             writer.write(draw(frame.image, found, cal, f"t={frame.t:.3f}s"))
     if writer is not None:
         writer.release()
@@ -477,10 +486,10 @@ def camera(
 @app.command()
 def train(
     output: Annotated[Path, typer.Option("-o", "--output", help="folder for checkpoints and the learning curve")] = Path("runs/train"),
-    episodes: Annotated[int, typer.Option(help="DDPG episodes after the demonstrations")] = 200,
-    demos: Annotated[int, typer.Option(help="reference-controller episodes to learn from")] = 100,
-    eval_every: Annotated[int, typer.Option(help="evaluate every N episodes")] = 20,
-    eval_trials: Annotated[int, typer.Option(help="evaluation episodes per release angle")] = 10,
+    episodes: Annotated[int, typer.Option(min=0, help="DDPG episodes after the demonstrations")] = 200,
+    demos: Annotated[int, typer.Option(min=0, help="reference-controller episodes to learn from")] = 100,
+    eval_every: Annotated[int, typer.Option(min=1, help="evaluate every N episodes")] = 20,
+    eval_trials: Annotated[int, typer.Option(min=1, help="evaluation episodes per release angle")] = 10,
     seed: Annotated[int, typer.Option()] = 0,
     ship: Annotated[Optional[Path], typer.Option(help="also write a small copy of the best checkpoint here")] = None,
 ) -> None:
@@ -551,11 +560,11 @@ def krl_export(run_dir: Path, output: Annotated[Path, typer.Option("-o", "--outp
 @krl_app.command("controller")
 def krl_controller(
     eki: Annotated[Path, typer.Option(help="the EKI configuration (port, RECEIVE elements)")],
-    port: Annotated[Optional[int], typer.Option(help="override the EKI file's port")] = None,
+    port: Annotated[Optional[int], typer.Option(min=1, max=65535, help="override the EKI file's port")] = None,
     host: Annotated[str, typer.Option(help="address to listen on")] = "127.0.0.1",
-    length: Annotated[float, typer.Option(help="physical rod length (m)")] = 0.6,
+    length: Annotated[float, typer.Option(min=0.05, help="physical rod length (m)")] = 0.6,
     angle: Annotated[float, typer.Option(help="physical rod release angle (deg)")] = 40.0,
-    programs: Annotated[int, typer.Option(help="stop after this many programs (0: run until Ctrl-C)")] = 0,
+    programs: Annotated[int, typer.Option(min=0, help="stop after this many programs (0: run until Ctrl-C)")] = 0,
 ) -> None:
     """Listen as the robot's EKI endpoint and execute programs against the emulated physical rod."""
     import math
@@ -566,11 +575,19 @@ def krl_controller(
 
     try:
         config = EkiConfig.parse(eki.read_text(), str(eki))
-    except (OSError, EkiError) as exc:
+    except OSError as exc:
+        err.print(f"[red]error:[/red] {eki}: cannot read ({exc.strerror or exc})", highlight=False)
+        raise typer.Exit(2) from None
+    except EkiError as exc:
         err.print(f"[red]error:[/red] {exc}", highlight=False)
         raise typer.Exit(2) from None
-    controller = EmulatedController(config, RodParams(length=length, initial_angle=math.radians(angle)),
-                                    host=host, port=port)
+    try:
+        controller = EmulatedController(config, RodParams(length=length, initial_angle=math.radians(angle)),
+                                        host=host, port=port)
+    except OSError as exc:
+        err.print(f"[red]error:[/red] cannot listen on {host}:{port or config.port} ({exc.strerror or exc})",
+                  highlight=False)
+        raise typer.Exit(3) from None
     out.print(f"emulated KUKA controller listening on {host}:{controller.address[1]} ({eki.name})", highlight=False)
     try:
         while programs == 0 or len(controller.results) < programs:
@@ -668,7 +685,15 @@ def main() -> None:
     from fmu_bridge.session import prefer_shared_runtime
 
     prefer_shared_runtime()  # before any session opens; the server and nodes it starts inherit it
-    app(args=_join_multi_value_options(sys.argv[1:]), prog_name="hycosim")
+    try:
+        app(args=_join_multi_value_options(sys.argv[1:]), prog_name="hycosim")
+    except OSError as exc:
+        # The last resort for a file a command could not read or write (an output folder
+        # that cannot be made, a PNG path in a missing folder): name it instead of a traceback.
+        if exc.filename is None:
+            raise
+        err.print(f"[red]error:[/red] {exc.filename}: {exc.strerror or exc}", highlight=False)
+        sys.exit(2)
 
 
 if __name__ == "__main__":
