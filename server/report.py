@@ -7,12 +7,13 @@ of each step onto its holder tells the user which simulator holds the others bac
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from fmu_bridge.run_files import RunFileError, read_csv_rows, read_jsonl
 
 
 class RunDirError(RuntimeError):
@@ -41,10 +42,9 @@ class RunSummary:
 
 def _read_csv(path: Path) -> list[dict[str, str]]:
     try:
-        with open(path, newline="") as f:
-            return list(csv.DictReader(f))
-    except OSError as exc:
-        raise RunDirError(f"{path}: cannot read ({exc.strerror or exc})") from None
+        return read_csv_rows(path)
+    except RunFileError as exc:
+        raise RunDirError(str(exc)) from None
 
 
 def read_meta(run_dir: Path) -> dict[str, Any]:
@@ -58,10 +58,10 @@ def read_meta(run_dir: Path) -> dict[str, Any]:
 
 
 def read_events(run_dir: Path) -> list[dict[str, Any]]:
-    path = run_dir / "events.jsonl"
-    if not path.exists():
-        return []
-    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    try:
+        return read_jsonl(run_dir / "events.jsonl")
+    except RunFileError as exc:
+        raise RunDirError(str(exc)) from None
 
 
 def summarise(run_dir: Path, slowest: int = 5) -> RunSummary:

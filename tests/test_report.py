@@ -65,3 +65,37 @@ def test_real_time_pacing_follows_the_wall_clock(tmp_path):
     assert len(lateness) == 51 and all(x >= 0 for x in lateness)
     s = json.loads(hycosim("report", str(run), "--json").stdout)
     assert s["lateness"]["steps"] == 50  # the start-up point is not a macro step
+
+
+def test_a_run_cut_off_mid_write_still_reports_and_plots_what_it_finished(tmp_path):
+    from fmu_bridge.run_files import read_csv_rows
+
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+    ], [{"from": "clock.y", "to": "g.u"}],
+        events=[{"name": "hold", "when": "clock.y >= 0.3", "drives": "g", "until": "clock.y >= 0.6"}],
+        cosim={"stepSize": 0.01, "stopTime": 1.0})
+    run = run_project(cfg, tmp_path / "runs")
+    whole = read_rows(run, "values.csv")
+    switches = json.loads(hycosim("report", str(run), "--json").stdout)["mode_switches"]
+    assert [s["to"] for s in switches] == ["hold", "free"]
+    # What a SIGKILL during a write leaves: every finished line, then part of one.
+    for name in ("values.csv", "timing.csv"):
+        text = (run / name).read_text()
+        (run / name).write_text(text[:text.index("\n", len(text) // 2) + 6])
+    (run / "events.jsonl").write_text((run / "events.jsonl").read_text() + '{"step": 71, "t": 0.7')
+    kept = read_csv_rows(run / "values.csv")
+    assert 40 < len(kept) < len(whole) and kept == whole[:len(kept)]
+    res = hycosim("report", str(run), "--json")
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["mode_switches"] == switches
+    png = tmp_path / "cut.png"
+    res = hycosim("plot", str(run), "clock.y", "-o", str(png))
+    assert res.returncode == 0 and png.stat().st_size > 10_000, res.stderr
+    # A malformed line that is not the last is no torn write: named, not skipped.
+    lines = (run / "values.csv").read_text().splitlines(keepends=True)
+    lines[3] = "3,0.03\n"
+    (run / "values.csv").write_text("".join(lines))
+    res = hycosim("plot", str(run), "clock.y", "-o", str(png))
+    assert res.returncode == 2 and f"{run / 'values.csv'}: line 4 does not have one cell" in res.stderr

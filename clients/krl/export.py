@@ -9,10 +9,11 @@ routed to the robot at that step.
 
 from __future__ import annotations
 
-import csv
 import math
 from dataclasses import dataclass
 from pathlib import Path
+
+from fmu_bridge.run_files import RunFileError, read_csv_rows
 
 from clients.krl.eki import EkiConfig, frame, krl_program
 from clients.robot import kr6
@@ -33,10 +34,9 @@ class JointPath:
 def read_path(run_dir: Path, robot: str = "robot") -> JointPath:
     path = run_dir / "values.csv"
     try:
-        with open(path, newline="") as f:
-            rows = list(csv.DictReader(f))
-    except OSError as exc:
-        raise ExportError(f"{path}: cannot read ({exc.strerror or exc})") from None
+        rows = read_csv_rows(path)
+    except RunFileError as exc:
+        raise ExportError(str(exc)) from None
     cols = [f"{robot}.q{i}" for i in range(1, 7)]
     if not rows or any(c not in rows[0] for c in cols):
         raise ExportError(f"{path}: no joint path ({', '.join(cols)}) recorded for node {robot!r}")
