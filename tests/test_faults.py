@@ -59,6 +59,32 @@ def test_node_killed_mid_run_stops_with_its_name_and_step(tmp_path):
         reap(server, *nodes.values())
 
 
+def test_server_killed_mid_run_leaves_a_readable_run_and_the_nodes_stop(tmp_path):
+    cfg = _pair(tmp_path, linkGrace=1.0)
+    run_dir = tmp_path / "run"
+    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
+    nodes = {n: spawn("node", n, str(cfg)) for n in ("clock", "g")}
+    try:
+        wait_for(lambda: _steps_on_disk(run_dir) > 30, 30, "30 steps")
+        server.send_signal(signal.SIGKILL)
+        server.wait(timeout=10)
+        for name, proc in nodes.items():
+            _, err = proc.communicate(timeout=20)  # the link grace, then they give up
+            assert proc.returncode == 3, err
+            assert f"node {name!r}: the server went away" in err and "Traceback" not in err
+        rows = read_rows(run_dir)
+        assert len(rows) >= 30 and [r["step"] for r in rows] == [str(i) for i in range(len(rows))]
+        res = hycosim("report", str(run_dir), "--json")
+        assert res.returncode == 0, res.stderr
+        summary = json.loads(res.stdout)
+        assert summary["status"] == "running"  # the server never closed the run
+        assert summary["steps"] == len(read_rows(run_dir, "timing.csv")) >= 30
+        res = hycosim("plot", str(run_dir), "g.y", "-o", str(tmp_path / "g.png"))
+        assert res.returncode == 0, res.stderr
+    finally:
+        reap(server, *nodes.values())
+
+
 def test_malformed_frames_are_dropped_counted_and_the_run_goes_on(tmp_path):
     cfg = _pair(tmp_path, stopTime=2.0)
     run_dir = tmp_path / "run"

@@ -87,9 +87,13 @@ def test_a_run_cut_off_mid_write_still_reports_and_plots_what_it_finished(tmp_pa
     (run / "events.jsonl").write_text((run / "events.jsonl").read_text() + '{"step": 71, "t": 0.7')
     kept = read_csv_rows(run / "values.csv")
     assert 40 < len(kept) < len(whole) and kept == whole[:len(kept)]
+    m = json.loads((run / "meta.json").read_text())
+    (run / "meta.json").write_text(json.dumps({**m, "status": "running", "steps": 0}))  # as the server left it
     res = hycosim("report", str(run), "--json")
     assert res.returncode == 0, res.stderr
-    assert json.loads(res.stdout)["mode_switches"] == switches
+    s = json.loads(res.stdout)
+    assert s["mode_switches"] == switches and s["status"] == "running"
+    assert s["steps"] == len(read_csv_rows(run / "timing.csv")) > 40
     png = tmp_path / "cut.png"
     res = hycosim("plot", str(run), "clock.y", "-o", str(png))
     assert res.returncode == 0 and png.stat().st_size > 10_000, res.stderr
