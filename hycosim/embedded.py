@@ -42,9 +42,10 @@ class EmbeddedResult:
 
 def _tail(path: Path, lines: int = 5) -> str:
     try:
-        return "\n".join(path.read_text(errors="replace").strip().splitlines()[-lines:])
+        text = "\n".join(path.read_text(errors="replace").strip().splitlines()[-lines:])
     except OSError:
         return ""
+    return text.removeprefix("error: ")  # the CLI's prefix: the launcher adds its own
 
 
 def _pump(stream, sink: queue.Queue) -> None:
@@ -116,14 +117,26 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
         server.kill()
     if code is None:
         code, message = (server.returncode or 3), _tail(run_dir / "server.stderr.txt") or "the server exited"
+    # After a completed run the nodes have their STOP and leave by themselves. After a failed
+    # one, a node may still wait for a START or a step that will not come, until its own
+    # timeout: it is interrupted after a short grace, and its complaint is not a failure.
+    grace = 15.0 if code == 0 else 2.0
+    deadline = time.monotonic() + grace
+    interrupted = set()
     for name, proc in nodes.items():
         try:
-            proc.wait(timeout=15)
+            proc.wait(timeout=max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            proc.send_signal(signal.SIGINT if code else signal.SIGKILL)
+            interrupted.add(name)
+    for name, proc in nodes.items():
+        try:
+            proc.wait(timeout=10)
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
-        if proc.returncode not in (0, None) and name not in failures:
-            failures[name] = _tail(run_dir / f"node-{name}.stderr.txt")
+        if proc.returncode != 0 and name not in failures and not (code and name in interrupted):
+            failures[name] = _tail(run_dir / f"node-{name}.stderr.txt") or f"exit status {proc.returncode}"
     if failures and code in (0, 130):
         code = 3
         message = "; ".join(f"{n}: {m}" for n, m in failures.items())

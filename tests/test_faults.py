@@ -282,5 +282,7 @@ def test_embedded_run_reports_a_broken_node_model(tmp_path):
     assert res.returncode == 3
     assert "node 'broken': cannot load model 'no_such_module:Thing'" in res.stderr
     assert time.monotonic() - started < 25  # the launcher does not wait out the attach timeout
+    assert "clock" not in res.stderr  # stopped by the launcher, not blamed for the failure
+    assert "error: broken: node 'broken'" in res.stderr  # one "error:", the launcher's
     run_dir = next((tmp_path / "runs").iterdir())
     assert (run_dir / "meta.json").exists()
