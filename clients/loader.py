@@ -55,4 +55,8 @@ def load_node(spec: NodeSpec, project_dir: Path) -> Node | AsyncSource:
         raise NodeLoadError(f"node {spec.nodeName!r} is asynchronous but {target} is not an AsyncSource")
     if not spec.asynchronous and not isinstance(impl, Node):
         raise NodeLoadError(f"node {spec.nodeName!r}: {target} is not a Node")
+    unknown = sorted(set(spec.parameters) - impl.PARAMETERS) if impl.PARAMETERS is not None else []
+    if unknown:
+        raise NodeLoadError(f"node {spec.nodeName!r}: model {spec.model!r} has no parameter "
+                            f"{', '.join(map(repr, unknown))} (its parameters: {', '.join(sorted(impl.PARAMETERS))})")
     return impl

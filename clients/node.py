@@ -21,7 +21,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 from fmu_bridge.config import Port
 
@@ -45,6 +45,11 @@ class NodeContext:
 
 class Node(ABC):
     """A simulator advanced in macro steps by the runtime."""
+
+    # The parameter names the model reads, if it declares them: a node entry giving any
+    # other is refused at load, since a misspelt parameter would leave its default in
+    # place without a word. None: not declared (the model reads what it likes).
+    PARAMETERS: ClassVar[frozenset[str] | None] = None
 
     def setup(self, ctx: NodeContext) -> None:
         """Prepare the model; called once before the node attaches."""
@@ -80,6 +85,8 @@ class Node(ABC):
 
 class AsyncSource(ABC):
     """A source that publishes timestamped samples at its own rate instead of stepping."""
+
+    PARAMETERS: ClassVar[frozenset[str] | None] = None  # as for Node
 
     def setup(self, ctx: NodeContext) -> None:
         """Prepare the source; called once before the node attaches."""

@@ -272,6 +272,15 @@ def test_node_without_server_fails_clearly(tmp_path):
     assert res.returncode == 2 and "no node named 'nobody'" in res.stderr
 
 
+def test_a_misspelt_parameter_of_a_reference_model_is_refused(tmp_path):
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "g", "UID": 1, "model": "gain", "parameters": {"k": 2.0, "offset": 1.0}, "input": ["u"],
+         "output": ["y"]}])
+    res = hycosim("node", "g", str(cfg), timeout=60)
+    assert res.returncode == 3, res.stderr
+    assert "node 'g': model 'gain' has no parameter 'offset' (its parameters: b, k, work_s)" in res.stderr
+
+
 def test_embedded_run_reports_a_broken_node_model(tmp_path):
     cfg = write_project(tmp_path / "p.json", [
         {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},

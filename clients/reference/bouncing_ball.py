@@ -39,6 +39,8 @@ def fall(h0: float, v0: float, g: float, e: float, duration: float) -> tuple[flo
 class BouncingBall(Node):
     """Parameters: ``h0`` (1.0 m), ``v0`` (0.0 m/s), ``g`` (9.81), ``e`` restitution (0.8)."""
 
+    PARAMETERS = frozenset({"h0", "v0", "g", "e"})
+
     def setup(self, ctx: NodeContext) -> None:
         self.h = float(ctx.parameter("h0", 1.0))
         self.v = float(ctx.parameter("v0", 0.0))

@@ -17,6 +17,8 @@ class Gain(Node):
     the Jacobi scheme's one-step delay per hop exactly.
     """
 
+    PARAMETERS = frozenset({"k", "b", "work_s"})
+
     def setup(self, ctx: NodeContext) -> None:
         self.k = float(ctx.parameter("k", 1.0))
         self.b = float(ctx.parameter("b", 0.0))

@@ -16,6 +16,8 @@ class Pendulum(Node):
     """Parameters: ``length`` (1.0 m), ``g`` (9.81), ``damping`` c (0.0 1/s),
     ``theta0`` (rad), ``omega0`` (rad/s), ``micro_steps`` per macro step (10)."""
 
+    PARAMETERS = frozenset({"length", "g", "damping", "theta0", "omega0", "micro_steps"})
+
     def setup(self, ctx: NodeContext) -> None:
         self.length = float(ctx.parameter("length", 1.0))
         self.g = float(ctx.parameter("g", 9.81))

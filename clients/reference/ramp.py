@@ -10,6 +10,8 @@ from clients.node import Node, NodeContext
 class Ramp(Node):
     """Parameters ``a`` (0.0) and ``b`` (1.0); outputs ``y`` and its rate ``v`` = b."""
 
+    PARAMETERS = frozenset({"a", "b"})
+
     def setup(self, ctx: NodeContext) -> None:
         self.a = float(ctx.parameter("a", 0.0))
         self.b = float(ctx.parameter("b", 1.0))

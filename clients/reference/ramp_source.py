@@ -11,6 +11,8 @@ from clients.node import AsyncSource, NodeContext
 class RampSource(AsyncSource):
     """Parameters ``a`` (0.0), ``b`` (1.0); samples at the node's ``rate`` (30 Hz) from t0."""
 
+    PARAMETERS = frozenset({"a", "b", "rate"})
+
     def setup(self, ctx: NodeContext) -> None:
         self.a = float(ctx.parameter("a", 0.0))
         self.b = float(ctx.parameter("b", 1.0))
