@@ -19,6 +19,7 @@ from fmu_bridge.endpoints import GATEWAY_PORT, EndpointError, parse_address, par
 from fmu_bridge.security import router_security
 from fmu_bridge.session import open_session, router_config
 
+from server.coordinator import GuardEvaluationError
 from server.recorder import Recorder
 from server.relay import Relay, RunError, run_dir_for
 
@@ -78,7 +79,7 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     try:
         relay.run()
         code, message = 0, f"completed {recorder.meta['steps']} macro steps"
-    except RunError as exc:
+    except (RunError, GuardEvaluationError) as exc:
         log.error("run failed", error=str(exc))
         code, message = 3, str(exc)
     except KeyboardInterrupt:

@@ -30,7 +30,7 @@ from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
 from fmu_bridge.session import FramePublisher, FrameTooLarge
 
 from server.async_sources import SampleHistory
-from server.coordinator import Coordinator
+from server.coordinator import Coordinator, GuardEvaluationError
 from server.gateway import Gateway, GatewayError
 from server.intake import Dropped, Intake
 from server.recorder import Recorder
@@ -364,7 +364,10 @@ class Relay:
                 if held is not None:
                     self.outputs[node] = held[1]
             view = OutputView(self.router.output_index, self.outputs)
-            switch = self.coordinator.update(k, t, view)
+            try:
+                switch = self.coordinator.update(k, t, view)
+            except GuardEvaluationError as exc:
+                raise RunError(f"{exc} (at step {k}, t={t:g} s)") from None
             if switch is not None:
                 entry = switch.as_record()
                 if localised:

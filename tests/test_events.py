@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import math
 
-from tests.helpers import column, read_rows, run_project, write_project
+from tests.helpers import column, hycosim, meta, read_rows, run_project, write_project
 
 G = 9.81
 H = 0.01
@@ -121,3 +121,20 @@ def test_a_caught_ball_released_where_the_catch_guard_still_holds_flies_free(tmp
         if expected <= 0:
             break
         assert math.isclose(h[k], expected, abs_tol=1e-9)
+
+
+def test_a_guard_that_fails_at_run_time_stops_the_run_naming_event_and_step(tmp_path):
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+    ], [{"from": "clock.y", "to": "g.u"}],
+        # parses and names real ports; divides by zero once clock.y passes 0.25
+        events=[{"name": "odd", "when": "clock.y > 0.25 and 1 / (clock.y - clock.y) > 0", "drives": "g",
+                 "until": "clock.y > 0.5"}],
+        cosim={"stepSize": 0.1, "stopTime": 1.0})
+    res = hycosim("run", str(cfg), "--runs-dir", str(tmp_path / "runs"), "--no-progress")
+    assert res.returncode == 3, res.stderr
+    assert "event 'odd': guard 'clock.y > 0.25 and 1 / (clock.y - clock.y) > 0' failed on" in res.stderr
+    assert "division by zero (at step 3, t=0.3 s)" in res.stderr and "internal error" not in res.stderr
+    run = next((tmp_path / "runs").iterdir())
+    assert meta(run)["status"] == "failed" and len(read_rows(run)) == 3  # T_0..T_2 recorded
