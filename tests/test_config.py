@@ -89,8 +89,6 @@ CASES = {
     "guard calls code": (lambda d: d["events"][0].update(when="__import__('os').system('true')"), "events[0].when",
                          "not allowed"),
     "unknown mode": (lambda d: d["linkLists"][1].update(activeIn=["grab"]), "linkLists[1].activeIn", "unknown mode 'grab'"),
-    "driven node has no link in the mode": (lambda d: d["events"][0].update(drives="a"), "events[0].drives",
-                                            "node 'a' is driven in mode 'hold', but no link into it is active"),
     "event drives unknown node": (lambda d: d["events"][0].update(drives="ghost"), "events[0].drives", "unknown node"),
     "unknown wait strategy": (lambda d: d.update(coSimulation={"waitStrategy": "spin"}),
                               "coSimulation.waitStrategy", "Input should be 'auto', 'block' or 'yield'"),
