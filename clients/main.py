@@ -12,7 +12,7 @@ from fmu_bridge.security import SecurityError, node_password
 from fmu_bridge.session import ConnectError
 
 from clients.loader import NodeLoadError, load_node
-from clients.runtime import NodeRunError, NodeRuntime
+from clients.runtime import NodeRunError, NodeRuntime, RunFailedElsewhere
 
 
 def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
@@ -33,6 +33,8 @@ def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
         impl = load_node(spec, loaded.path.parent if loaded.path else Path.cwd())
         runtime = NodeRuntime(loaded, name, impl, endpoint, password=password)
         runtime.run()
+    except RunFailedElsewhere as exc:
+        return 5, str(exc)
     except (NodeLoadError, NodeRunError, ConnectError, FmuError, SecurityError) as exc:
         return 3, str(exc)
     except KeyboardInterrupt:

@@ -38,6 +38,10 @@ class NodeRunError(RuntimeError):
     """The node cannot go on; the message names the node and the step."""
 
 
+class RunFailedElsewhere(NodeRunError):
+    """The server stopped a run that failed (another node lost, a timeout): this node's end too."""
+
+
 class NodeRuntime:
     def __init__(self, loaded: LoadedProject, node_name: str, impl: Node | AsyncSource, endpoint: str,
                  password: str | None = None):
@@ -115,6 +119,7 @@ class NodeRuntime:
                 if start.kind == frames.REPLAY:  # START again, after a link cut during the attach
                     start = start.fields[1]
                 if start.kind == frames.STOP:
+                    self._on_stop(start)
                     return
                 if start.kind != frames.START:
                     at = f" (step {start.fields[0]})" if start.kind == frames.STEP else ""
@@ -216,7 +221,7 @@ class NodeRuntime:
         assert isinstance(impl, Node)
         checkpoint = checkpoint and impl.can_rollback
         saved_step, saved = -1, None
-        self._send(frames.encode(frames.HELLO, self.spec.UID, {"rollback": impl.can_rollback}))
+        self._send(self._hello(impl.can_rollback))
         last_out = frames.encode(frames.OUTPUTS, self.spec.UID, 0, self.cosim.startTime,
                                  self._pack_outputs(impl.outputs()))
         self._send(last_out)
@@ -228,7 +233,7 @@ class NodeRuntime:
         while True:
             frame = self._wait(silence, "release")
             if frame.kind == frames.STOP:
-                self._log.info("stop", step=self.steps, reason=frame.fields[1], waits=self.inbox.waits)
+                self._on_stop(frame)
                 return
             if frame.kind == frames.REPLAY:
                 # Back after a link cut: the release we may have missed, or already answered.
@@ -267,9 +272,20 @@ class NodeRuntime:
             last_out = frames.encode(frames.OUTPUTS, self.spec.UID, k + 1, t + h, self._pack_outputs(impl.outputs()))
             self._send(last_out)
 
+    def _hello(self, rollback: bool) -> bytes:
+        return frames.encode(frames.HELLO, self.spec.UID, {"rollback": rollback, "ports": self.spec.wire_ports()})
+
+    def _on_stop(self, frame: frames.Frame) -> None:
+        """The server's STOP: the end of the run, or of a failed one, which is this node's failure too."""
+        step, reason = frame.fields
+        self._log.info("stop", step=self.steps, reason=reason, waits=self.inbox.waits)
+        if reason not in frames.CLEAN_STOPS:
+            raise RunFailedElsewhere(f"node {self.name!r}: the server stopped the run at step {step}: {reason}")
+
     def _run_async(self, start: frames.Frame) -> None:
         impl = self.impl
         assert isinstance(impl, AsyncSource)
+        self._send(self._hello(False))
         _, t0, _, wall0, rt, _ = start.fields
         sim_now, seq = t0, 0
         period = 1.0 / float(self.spec.rate or 30.0)
@@ -292,4 +308,5 @@ class NodeRuntime:
                     sim_now = t + h
                     self.steps = frame.fields[0] + 1
             if frame is not None and frame.kind == frames.STOP:
+                self._on_stop(frame)
                 return

@@ -108,6 +108,12 @@ class Node(_Strict):
     def input_names(self) -> list[str]:
         return [p.name for p in self.input]
 
+    def wire_ports(self) -> dict[str, list[str]]:
+        """The node's ports as frames carry them, ``name:Type`` in order: what the server and a
+        node must agree on, however else their copies of the project file differ."""
+        return {"input": [f"{p.name}:{p.type.value}" for p in self.input],
+                "output": [f"{p.name}:{p.type.value}" for p in self.output]}
+
 
 class Link(_Strict):
     """Routes outputs of one node to inputs of another.

@@ -11,9 +11,11 @@ Kinds and layouts (after version and kind):
 * ``START``    server → nodes: ``run_id, t0, H, wall_t0, real_time_factor, options``
   (options: ``{"checkpoint": bool}``: save state before each step, for rollback)
 * ``STEP``     server → nodes: ``step, t, H, mode, inputs {node: [values]}, driven [nodes]``
-* ``STOP``     server → nodes: ``step, reason``
+* ``STOP``     server → nodes: ``step, reason`` (``completed`` or ``stopped`` for a run that ended
+  as asked, else why it failed: a node reports that failure as its own end)
 * ``LIVE``     local only, server: ``node, alive`` (liveliness changes fed into the inbox)
-* ``HELLO``    node → server, before its first outputs: ``uid, capabilities`` (``{"rollback": bool}``)
+* ``HELLO``    node → server, before its first outputs: ``uid, capabilities`` (``{"rollback": bool,
+  "ports": {"input": [...], "output": [...]}}``, the ports as its project file has them)
 * ``ROLLBACK`` server → nodes: ``step, t``: restore the state saved before that step
 * ``REPLAY``   server → one node: ``node, release``: the last START/STEP again, for a node that
   came back after a link cut (it may have missed the release, or the server its outputs)
@@ -37,6 +39,11 @@ LIVE = 6
 HELLO = 7
 ROLLBACK = 8
 REPLAY = 9
+
+# STOP reasons of a run that ended as asked; any other reason is a failure.
+STOP_COMPLETED = "completed"
+STOP_STOPPED = "stopped"
+CLEAN_STOPS = (STOP_COMPLETED, STOP_STOPPED)
 
 _ARITY = {OUTPUTS: 4, SAMPLE: 4, START: 6, STEP: 6, STOP: 2, LIVE: 2, HELLO: 2, ROLLBACK: 2, REPLAY: 2}
 

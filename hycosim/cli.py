@@ -1,7 +1,9 @@
 """The ``hycosim`` command line. User-facing output goes through here, not through logs.
 
 Exit codes: 0 success, 2 bad input (config, arguments, run directory), 3 a run that
-failed (timeout, lost node, server gone), 130 Ctrl-C.
+failed (timeout, lost node, server gone), 4 an internal error or an invalid FMU built,
+5 a node whose run the server stopped because it failed elsewhere (the server says why),
+130 Ctrl-C.
 """
 
 from __future__ import annotations

@@ -25,6 +25,9 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from fmu_bridge.config import LoadedProject
 from server.relay import run_dir_for
 
+# A node's exit status when the server stopped a run that failed elsewhere (hycosim node).
+FAILED_ELSEWHERE = 5
+
 
 def free_loopback_endpoint() -> str:
     with socket.socket() as s:
@@ -104,7 +107,7 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
                     elif "done" in msg:
                         code, message = msg["done"], msg["message"]
                 for name, proc in nodes.items():
-                    if name not in failures and proc.poll() not in (None, 0):
+                    if name not in failures and proc.poll() not in (None, 0, FAILED_ELSEWHERE):
                         failures[name] = _tail(run_dir / f"node-{name}.stderr.txt")
                         if server.poll() is None:
                             server.send_signal(signal.SIGINT)
@@ -135,7 +138,7 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
-        if proc.returncode != 0 and name not in failures and not (code and name in interrupted):
+        if proc.returncode not in (0, FAILED_ELSEWHERE) and name not in failures and not (code and name in interrupted):
             failures[name] = _tail(run_dir / f"node-{name}.stderr.txt") or f"exit status {proc.returncode}"
     if failures and code in (0, 130):
         code = 3

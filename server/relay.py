@@ -118,7 +118,7 @@ class Relay:
             self._start_gateway()
             self._wait_for_nodes()
             self._loop()
-            status_text = "completed" if not self._stop_requested.is_set() else "stopped"
+            status_text = frames.STOP_COMPLETED if not self._stop_requested.is_set() else frames.STOP_STOPPED
         except KeyboardInterrupt:
             status_text, reason = "interrupted", "interrupted by Ctrl-C"
             raise
@@ -230,8 +230,22 @@ class Relay:
             return None
         if frame.kind == frames.HELLO:
             self.capabilities[node] = dict(frame.fields[1]) if isinstance(frame.fields[1], dict) else {}
+            self._check_ports(node, self.capabilities[node].get("ports"))
             return None
         return node, frame
+
+    def _check_ports(self, node: str, theirs: Any) -> None:
+        """Stop the run if a node's copy of the project file gives it other ports than ours:
+        its frames would all be dropped and the run would only time out."""
+        ours = self.project.node(node).wire_ports()
+        if theirs is None or theirs == ours:
+            return
+        if not isinstance(theirs, dict):
+            theirs = {}
+        differ = [f"its {kind}s are {', '.join(map(str, theirs.get(kind) or [])) or 'none'}, the server's "
+                  f"{', '.join(ours[kind]) or 'none'}" for kind in ("input", "output") if theirs.get(kind) != ours[kind]]
+        raise RunError(f"node {node!r} attached with another version of its entry in the project file: "
+                       f"{'; '.join(differ)}. Give every process the same project file")
 
     def _time(self, step: int) -> float:
         return self.cosim.startTime + max(step, 0) * self.cosim.stepSize

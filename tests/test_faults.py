@@ -54,7 +54,7 @@ def test_node_killed_mid_run_stops_with_its_name_and_step(tmp_path):
         assert len(rows) >= 30 and all(r["step"] == str(i) for i, r in enumerate(rows))
         step = int(m["reason"].split("at step ")[1].split()[0])
         assert len(rows) == step  # every step before the loss is on disk, none after
-        assert nodes["clock"].wait(timeout=20) == 0  # told to stop
+        assert nodes["clock"].wait(timeout=20) == 5  # told the run failed
     finally:
         reap(server, *nodes.values())
 
@@ -83,6 +83,27 @@ def test_server_killed_mid_run_leaves_a_readable_run_and_the_nodes_stop(tmp_path
         assert res.returncode == 0, res.stderr
     finally:
         reap(server, *nodes.values())
+
+
+def test_a_node_with_another_version_of_the_project_file_stops_the_run_naming_its_ports(tmp_path):
+    cfg = _pair(tmp_path, stepTimeout=30.0)
+    stale = json.loads(cfg.read_text())
+    stale["nodeLists"][1]["input"] = ["u", {"name": "gate", "type": "Boolean"}]  # g, as a newer file has it
+    stale_cfg = tmp_path / "stale.json"
+    stale_cfg.write_text(json.dumps(stale))
+    run_dir = tmp_path / "run"
+    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
+    nodes = [spawn("node", "clock", str(cfg)), spawn("node", "g", str(stale_cfg))]
+    try:
+        _, err = server.communicate(timeout=20)  # well before the step timeout of 30 s
+        assert server.returncode == 3
+        assert ("node 'g' attached with another version of its entry in the project file: its inputs are "
+                "u:Real, gate:Boolean, the server's u:Real. Give every process the same project file") in err
+        for p in nodes:
+            _, node_err = p.communicate(timeout=20)
+            assert p.returncode == 5 and "another version of its entry" in node_err, node_err
+    finally:
+        reap(server, *nodes)
 
 
 def test_malformed_frames_are_dropped_counted_and_the_run_goes_on(tmp_path):
@@ -222,7 +243,7 @@ def test_a_node_restarted_mid_run_is_told_the_run_is_under_way(tmp_path):
         m = meta(run_dir)
         assert m["status"] == "failed" and m["reattached"] == {"g": 1}
         assert len(read_rows(run_dir)) == m["steps"] >= 20
-        assert nodes[0].wait(timeout=20) == 0
+        assert nodes[0].wait(timeout=20) == 5  # the clock, told the run failed
     finally:
         reap(server, *nodes)
 
@@ -238,7 +259,10 @@ def test_node_that_never_attaches_times_out_naming_it(tmp_path):
         assert "timed out after 2 s waiting for node(s) g to attach" in err
         assert "clock" not in err.split("waiting for node(s)")[1].split("to attach")[0]
         assert meta(run_dir)["status"] == "failed"
-        assert node.wait(timeout=20) == 0  # the server's STOP reaches the node that did attach
+        _, node_err = node.communicate(timeout=20)  # the server's STOP reaches the node that did attach
+        assert node.returncode == 5
+        assert "node 'clock': the server stopped the run at step" in node_err
+        assert "waiting for node(s) g to attach" in node_err
     finally:
         reap(server, node)
 
@@ -258,7 +282,8 @@ def test_ctrl_c_shuts_down_cleanly_with_results_flushed(tmp_path):
         assert m["status"] == "interrupted"
         assert len(read_rows(run_dir)) == m["steps"] >= 20
         for p in nodes:
-            assert p.wait(timeout=20) == 0
+            _, node_err = p.communicate(timeout=20)
+            assert p.returncode == 5 and "interrupted by Ctrl-C" in node_err
     finally:
         reap(server, *nodes)
 
