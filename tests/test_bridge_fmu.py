@@ -251,7 +251,7 @@ def test_gateway_node_disconnecting_mid_step_stops_the_run_naming_it(tmp_path):
     sock.close()  # mid-step: released for step 2, never reports step 3
     (_, serr), (_, cerr) = _finish([server, clock])
     assert server.returncode == 3 and "node 'tool' was lost at step 3" in serr
-    assert clock.returncode == 0
+    assert clock.returncode == 5 and "node 'clock': the server stopped the run: node 'tool' was lost" in cerr
     rows = read_rows(tmp_path / "run")
     assert column(rows, "tool.y") == [0.0, 1.0, 2.0]
 

@@ -133,7 +133,8 @@ def test_link_cut_beyond_the_grace_stops_with_a_clear_message_and_results(tmp_pa
     code, err, nodes, run_dir = _remote_run(tmp_path, grace=1.0, stop=6.0, cut_after=1.0, cut_for=4.0)
     assert code == 3
     assert "node 'clock' was lost at step" in err and "did not come back within the link grace of 1 s" in err
-    assert nodes["g"][0] == 0, nodes["g"][1][-1500:]  # told to stop
+    assert nodes["g"][0] == 5, nodes["g"][1][-1500:]  # told the run failed, and why
+    assert "node 'g': the server stopped the run: node 'clock' was lost" in nodes["g"][1]
     assert nodes["clock"][0] == 3 and "did not come back within the link grace" in nodes["clock"][1]
     m = meta(run_dir)
     rows = read_rows(run_dir)

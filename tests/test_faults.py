@@ -261,7 +261,7 @@ def test_node_that_never_attaches_times_out_naming_it(tmp_path):
         assert meta(run_dir)["status"] == "failed"
         _, node_err = node.communicate(timeout=20)  # the server's STOP reaches the node that did attach
         assert node.returncode == 5
-        assert "node 'clock': the server stopped the run at step" in node_err
+        assert "node 'clock': the server stopped the run: timed out" in node_err
         assert "waiting for node(s) g to attach" in node_err
     finally:
         reap(server, node)
