@@ -8,6 +8,7 @@ server going away. Every wait has a timeout.
 
 from __future__ import annotations
 
+import json
 import os
 import time
 from typing import Any
@@ -115,7 +116,10 @@ class NodeRuntime:
             try:
                 # The server times out the attach; outwait it so that its STOP, naming who is
                 # missing, reaches this node rather than a timeout of our own.
-                start = self._wait(self.cosim.attachTimeout + self.cosim.stepTimeout, "START")
+                try:
+                    start = self._wait(self.cosim.attachTimeout + self.cosim.stepTimeout, "START")
+                except NodeRunError as exc:
+                    raise NodeRunError(f"{exc}{self._other_projects(session)}") from None
                 if start.kind == frames.REPLAY:  # START again, after a link cut during the attach
                     start = start.fields[1]
                 if start.kind == frames.STOP:
@@ -271,6 +275,20 @@ class NodeRuntime:
             self.steps, done = k + 1, k
             last_out = frames.encode(frames.OUTPUTS, self.spec.UID, k + 1, t + h, self._pack_outputs(impl.outputs()))
             self._send(last_out)
+
+    def _other_projects(self, session: zenoh.Session) -> str:
+        """A hint for a node that heard nothing from its server: the endpoint may serve another project."""
+        found = []
+        try:
+            for reply in session.get(ProjectKeys("*").status, timeout=2.0):
+                if reply.ok is not None:
+                    found.append(str(json.loads(reply.ok.payload.to_bytes()).get("project")))
+        except Exception:  # a hint only: a refused query (access control) or a bad answer gives none
+            return ""
+        if not found or self.loaded.project.projectName in found:
+            return ""
+        return (f"; the server there runs project {', '.join(map(repr, sorted(found)))}, not "
+                f"{self.loaded.project.projectName!r}: is this the project file the server was started with?")
 
     def _hello(self, rollback: bool) -> bytes:
         return frames.encode(frames.HELLO, self.spec.UID, {"rollback": rollback, "ports": self.spec.wire_ports()})

@@ -267,6 +267,24 @@ def test_node_that_never_attaches_times_out_naming_it(tmp_path):
         reap(server, node)
 
 
+def test_a_node_of_another_project_is_told_which_project_the_server_runs(tmp_path):
+    cfg = _pair(tmp_path, attachTimeout=30.0)
+    other = json.loads(cfg.read_text())
+    other["projectName"] = "other"
+    other["coSimulation"].update(attachTimeout=1.0, stepTimeout=1.0)  # the node gives up first
+    other_cfg = tmp_path / "other.json"
+    other_cfg.write_text(json.dumps(other))
+    server = spawn("server", str(cfg), "--run-dir", str(tmp_path / "run"))
+    try:
+        wait_for(lambda: (tmp_path / "run" / "meta.json").exists(), 20, "the server")
+        res = hycosim("node", "clock", str(other_cfg), timeout=60)
+        assert res.returncode == 3
+        assert "node 'clock': no START from the server" in res.stderr
+        assert "the server there runs project 'faults', not 'other'" in res.stderr
+    finally:
+        reap(server)
+
+
 def test_ctrl_c_shuts_down_cleanly_with_results_flushed(tmp_path):
     cfg = _pair(tmp_path, stopTime=30.0)
     run_dir = tmp_path / "run"
