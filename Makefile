@@ -42,6 +42,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/barrier.py
 	$(PY) benchmarks/fmu_overhead.py
 	$(PY) benchmarks/scene_fmus.py
+	$(PY) benchmarks/memory.py
 
 # The rod and robot-scene FMUs that configs/grasp-fmu.json uses.
 fmus: $(STAMP)

@@ -7,11 +7,11 @@ from pathlib import Path
 from fmu_bridge import logs
 from fmu_bridge.config import LoadedProject, server_endpoint
 from fmu_bridge.endpoints import EndpointError, parse_endpoint
-from fmu_bridge.fmu_loader import FmuError
 from fmu_bridge.security import SecurityError, node_password
 from fmu_bridge.session import ConnectError
 
 from clients.loader import NodeLoadError, load_node
+from clients.node import NodeModelError
 from clients.runtime import NodeRunError, NodeRuntime, RunFailedElsewhere
 
 
@@ -35,7 +35,7 @@ def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
         runtime.run()
     except RunFailedElsewhere as exc:
         return 5, str(exc)
-    except (NodeLoadError, NodeRunError, ConnectError, FmuError, SecurityError) as exc:
+    except (NodeLoadError, NodeRunError, NodeModelError, ConnectError, SecurityError) as exc:
         return 3, str(exc)
     except KeyboardInterrupt:
         return 130, f"node {name!r} interrupted by Ctrl-C"

@@ -43,6 +43,11 @@ class NodeContext:
         return self.parameters.get(key, default)
 
 
+class NodeModelError(RuntimeError):
+    """A model that cannot go on, with a message for the user that names the node: the
+    runtime reports it as it is (any other exception is reported with its type)."""
+
+
 class Node(ABC):
     """A simulator advanced in macro steps by the runtime."""
 

@@ -18,13 +18,12 @@ import zenoh
 
 from fmu_bridge import frames
 from fmu_bridge.config import LoadedProject, PortType
-from fmu_bridge.fmu_loader import FmuError
 from fmu_bridge.inbox import Inbox
 from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
 from fmu_bridge.security import client_tls
 from fmu_bridge.session import ConnectError, FramePublisher, FrameTooLarge, client_config, open_session, token_held
 
-from clients.node import AsyncSource, Node, NodeContext
+from clients.node import AsyncSource, Node, NodeContext, NodeModelError
 
 _COERCE = {
     PortType.REAL: float,
@@ -84,8 +83,10 @@ class NodeRuntime:
         try:
             self.impl.setup(self.context())
         except Exception as exc:
-            if isinstance(exc, (NodeRunError, FmuError)):
+            if isinstance(exc, NodeRunError):
                 raise
+            if isinstance(exc, NodeModelError):
+                raise NodeRunError(str(exc)) from None
             if type(exc).__name__ == "CameraError":  # a clear message of its own
                 raise NodeRunError(str(exc)) from None
             raise NodeRunError(f"node {self.name!r}: its model failed to set up: {type(exc).__name__}: {exc}") from exc
@@ -269,6 +270,8 @@ class NodeRuntime:
             mine = inputs.get(self.name, [])
             try:
                 impl.step(t, h, dict(zip(self._in_names, mine)))
+            except NodeModelError as exc:
+                raise NodeRunError(f"{exc} (step {k})") from None
             except Exception as exc:
                 raise NodeRunError(f"node {self.name!r}: its model failed at step {k} (t={t:g} s): "
                                    f"{type(exc).__name__}: {exc}") from exc

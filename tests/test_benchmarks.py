@@ -80,3 +80,30 @@ def test_scale_benchmark_over_namespaces_reports_and_kills_a_run_past_its_timeou
     time.sleep(0.5)  # the server and nodes went with it, though their namespaces did
     left = subprocess.run(["pgrep", "-f", "hycosim (server|node) .*ring.json"], capture_output=True, text=True)
     assert left.stdout.split() == []
+
+
+def test_memory_benchmark_reports_peaks_growth_and_ratios():
+    res = subprocess.run([sys.executable, "benchmarks/memory.py", "--n", "2", "--steps", "300", "--json"],
+                         capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
+    assert res.returncode == 0, res.stderr
+    lines = [json.loads(line) for line in res.stdout.splitlines()]
+    peaks, summary = lines[:-1], lines[-1]
+    assert sorted((r["system"], r["process"], r["steps"]) for r in peaks) == sorted(
+        (system, kind, steps) for system in ("hycosim", "zenoh-floor") for kind in ("server", "node")
+        for steps in (300, 3000))
+    assert all(20 < r["peak_rss_mib"] < 2000 for r in peaks)  # a Python process with zenoh, not a stray one
+    rss = {(r["system"], r["process"], r["steps"]): r["peak_rss_mib"] for r in peaks}
+    assert summary["vs_floor"]["server"] == pytest.approx(
+        rss[("hycosim", "server", 3000)] / rss[("zenoh-floor", "server", 3000)], abs=0.01)
+    assert set(summary["growth"]) == {"hycosim server", "hycosim node", "zenoh-floor server", "zenoh-floor node"}
+    assert all(0.8 < g < 1.5 for g in summary["growth"].values())
+
+
+def test_a_python_node_process_loads_neither_fmpy_nor_numpy():
+    # What a node playing a Python model imports (clients.main and what it loads for a gain).
+    code = ("import sys, clients.main, clients.loader, clients.reference.gain; "
+            "print(sorted(m for m in ('fmpy', 'numpy', 'torch', 'mujoco', 'cv2') if m in sys.modules))")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=REPO, env=env())
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "[]"
+
