@@ -85,9 +85,7 @@ class NodeRuntime:
         except Exception as exc:
             if isinstance(exc, NodeRunError):
                 raise
-            if isinstance(exc, NodeModelError):
-                raise NodeRunError(str(exc)) from None
-            if type(exc).__name__ == "CameraError":  # a clear message of its own
+            if isinstance(exc, NodeModelError):  # a clear message of its own
                 raise NodeRunError(str(exc)) from None
             raise NodeRunError(f"node {self.name!r}: its model failed to set up: {type(exc).__name__}: {exc}") from exc
         conf = client_config(self.endpoint, timeout_s=self.cosim.attachTimeout, low_latency=self.cosim.lowLatency,

@@ -14,9 +14,10 @@ from typing import Iterator
 import cv2
 
 from clients.camera.emulated import Frame
+from clients.node import NodeModelError
 
 
-class CameraError(RuntimeError):
+class CameraError(NodeModelError):
     """A frame source that cannot be opened or read; names the file or device."""
 
 
