@@ -242,8 +242,12 @@ class Relay:
             return
         if not isinstance(theirs, dict):
             theirs = {}
-        differ = [f"its {kind}s are {', '.join(map(str, theirs.get(kind) or [])) or 'none'}, the server's "
-                  f"{', '.join(ours[kind]) or 'none'}" for kind in ("input", "output") if theirs.get(kind) != ours[kind]]
+        differ = []
+        for kind in ("input", "output"):
+            given = theirs.get(kind)
+            if given != ours[kind]:
+                shown = ", ".join(map(str, given)) if isinstance(given, list) else ""
+                differ.append(f"its {kind}s are {shown or 'none'}, the server's {', '.join(ours[kind]) or 'none'}")
         raise RunError(f"node {node!r} attached with another version of its entry in the project file: "
                        f"{'; '.join(differ)}. Give every process the same project file")
 
