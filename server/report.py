@@ -135,6 +135,8 @@ def plot_run(run_dir: Path, ports: list[str], out: Path) -> Path:
     import matplotlib.pyplot as plt
 
     columns, data = read_values(run_dir)
+    if not columns:
+        raise RunDirError(f"{run_dir / 'values.csv'}: no macro step recorded (yet): nothing to plot")
     numeric = [c for c in columns[3:] if all(isinstance(v, float) for v in data[c])]
     chosen = ports or numeric[:8]
     unknown = [p for p in chosen if p not in columns]

@@ -97,6 +97,14 @@ def test_a_run_cut_off_mid_write_still_reports_and_plots_what_it_finished(tmp_pa
     png = tmp_path / "cut.png"
     res = hycosim("plot", str(run), "clock.y", "-o", str(png))
     assert res.returncode == 0 and png.stat().st_size > 10_000, res.stderr
+    # Killed before its first flush: nothing to draw, and it says so.
+    empty = tmp_path / "empty-run"
+    empty.mkdir()
+    (empty / "meta.json").write_text((run / "meta.json").read_text())
+    (empty / "values.csv").write_text("")
+    res = hycosim("plot", str(empty), "-o", str(tmp_path / "empty.png"))
+    assert res.returncode == 2 and "values.csv: no macro step recorded (yet)" in res.stderr, res.stderr
+    assert not (tmp_path / "empty.png").exists()
     # A malformed line that is not the last is no torn write: named, not skipped.
     lines = (run / "values.csv").read_text().splitlines(keepends=True)
     lines[3] = "3,0.03\n"
