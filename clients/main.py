@@ -15,6 +15,11 @@ from clients.node import NodeModelError
 from clients.runtime import NodeRunError, NodeRuntime, RunFailedElsewhere
 
 
+# The exit status of a node whose run the server stopped because it failed elsewhere (the
+# server's reason is the node's message); launchers tell it from the node's own failure.
+FAILED_ELSEWHERE = 5
+
+
 def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
              log_file: Path | None = None, password_file: Path | None = None) -> tuple[int, str]:
     """Run one node to the end of the co-simulation; return (exit code, message)."""
@@ -34,7 +39,7 @@ def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
         runtime = NodeRuntime(loaded, name, impl, endpoint, password=password)
         runtime.run()
     except RunFailedElsewhere as exc:
-        return 5, str(exc)
+        return FAILED_ELSEWHERE, str(exc)
     except (NodeLoadError, NodeRunError, NodeModelError, ConnectError, SecurityError) as exc:
         return 3, str(exc)
     except KeyboardInterrupt:

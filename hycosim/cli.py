@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import time
 from dataclasses import asdict
+from functools import partial
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -37,10 +38,10 @@ def _load(path: Path) -> LoadedProject:
         raise typer.Exit(2) from None
 
 
-def _endpoint(option: str, value: str) -> str:
-    """A Zenoh endpoint given on the command line, normalised; exit 2 naming the option if unusable."""
+def _endpoint(option: str, value: str, parse=parse_endpoint) -> str:
+    """An address given on the command line, normalised; exit 2 naming the option if unusable."""
     try:
-        return str(parse_endpoint(value))
+        return str(parse(value))
     except EndpointError as exc:
         err.print(f"[red]error:[/red] {option}: {exc}", highlight=False)
         raise typer.Exit(2) from None
@@ -260,11 +261,7 @@ def fmu_build(
 
     loaded = _load(file)
     if server is not None:
-        try:
-            server = str(parse_address(server, GATEWAY_PORT))
-        except EndpointError as exc:
-            err.print(f"[red]error:[/red] --server: {exc}", highlight=False)
-            raise typer.Exit(2) from None
+        server = _endpoint("--server", server, partial(parse_address, default_port=GATEWAY_PORT))
     unknown = [n for n in node or [] if n not in {x.nodeName for x in loaded.project.nodeLists}]
     if unknown:
         err.print(f"[red]error:[/red] {file}: no node named {', '.join(unknown)}", highlight=False)

@@ -23,10 +23,8 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from fmu_bridge.config import LoadedProject
+from clients.main import FAILED_ELSEWHERE
 from server.relay import run_dir_for
-
-# A node's exit status when the server stopped a run that failed elsewhere (hycosim node).
-FAILED_ELSEWHERE = 5
 
 
 def free_loopback_endpoint() -> str:

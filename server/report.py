@@ -92,11 +92,12 @@ def summarise(run_dir: Path, slowest: int = 5) -> RunSummary:
     if late:
         lateness = {"mean_ms": 1000 * sum(late) / len(late), "max_ms": 1000 * max(late),
                     "late_steps": sum(1 for x in late if x > 0.001), "steps": len(late)}
+    # meta.json is rewritten when the run ends; one still "running" is live, or its server
+    # was killed: the recorded points are the count then.
+    steps = len(rows) if meta.get("status") == "running" else int(meta.get("steps", len(rows)))
     return RunSummary(
         run_dir=str(run_dir), status=meta.get("status", "?"), reason=meta.get("reason", ""),
-        # meta.json is rewritten when the run ends; one still "running" is live, or its
-        # server was killed: the recorded points are the count then.
-        steps=len(rows) if meta.get("status") == "running" else int(meta.get("steps", len(rows))), wall_time_s=meta.get("wall_time_s"),
+        steps=steps, wall_time_s=meta.get("wall_time_s"),
         steps_per_s=meta.get("steps_per_s"),
         holder_share={n: (w / total_wait if total_wait > 0 else math.nan) for n, w in sorted(waits.items())},
         holder_steps=dict(sorted(counts.items())),
