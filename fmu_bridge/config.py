@@ -536,6 +536,13 @@ def load_project(path: str | Path) -> LoadedProject:
         data = json.loads(raw, object_pairs_hook=_reject_duplicate_keys)
     except json.JSONDecodeError as exc:
         raise ConfigError(source, [Issue(f"line {exc.lineno} column {exc.colno}", f"invalid JSON: {exc.msg}")]) from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(source, [Issue("(file)", f"not text: byte {exc.start} cannot be read as {exc.encoding}",
+                                         "save the project file as UTF-8 JSON")]) from None
+    except RecursionError:
+        # Python's decoder recurses per level of nesting; no project file comes near that.
+        raise ConfigError(source, [Issue("(top level)", "invalid JSON: nested too deeply to read",
+                                         "a project file nests a few levels (nodeLists, ports, events)")]) from None
     except ValueError as exc:
         raise ConfigError(source, [Issue("(top level)", str(exc), "each key may appear once per object")]) from None
     return parse_project(data, source, path.resolve(), raw)

@@ -12,12 +12,21 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, Iterable
 
 
 class RunFileError(RuntimeError):
     """A run file that cannot be read; the message names the file (and line)."""
+
+
+class MissingColumns(RunFileError):
+    """A CSV file whose header lacks columns the reader requires (``columns``)."""
+
+    def __init__(self, path: Path, columns: list[str]):
+        super().__init__(f"{path}: no column {', '.join(columns)} in its header")
+        self.columns = columns
 
 
 def _finished_text(path: Path) -> str:
@@ -31,19 +40,45 @@ def _finished_text(path: Path) -> str:
     return text[:end]
 
 
-def read_csv_rows(path: Path) -> list[dict[str, str]]:
-    """The finished rows of a CSV file with a header, as dicts; a torn last row is left out."""
+def read_csv_rows(path: Path, numeric: Callable[[str], bool] | None = None,
+                  required: Iterable[str] = ()) -> list[dict[str, Any]]:
+    """The finished rows of a CSV file with a header, as dicts; a torn last row is left out.
+
+    Cells of the columns ``numeric`` accepts become floats (an empty cell None); those of the
+    ``required`` ones among them must be finite numbers. A cell that breaks this is an error
+    naming the file, the line and the column.
+    """
     reader = csv.DictReader(io.StringIO(_finished_text(path), newline=""))
-    rows = []
+    rows: list[dict[str, Any]] = []
     try:
+        header = reader.fieldnames or []
+        missing = [c for c in required if c not in header]
+        if missing and header:
+            raise MissingColumns(path, missing)
+        columns = [c for c in header if numeric is not None and numeric(c)]
         for row in reader:
             if None in row or None in row.values():  # more or fewer cells than the header
                 raise RunFileError(f"{path}: line {reader.line_num} does not have one cell for each of "
                                    f"its {len(reader.fieldnames or [])} columns")
+            for column in columns:
+                row[column] = _number(row[column], path, reader.line_num, column, column in required)
             rows.append(row)
     except csv.Error as exc:
         raise RunFileError(f"{path}: line {reader.line_num}: {exc}") from None
     return rows
+
+
+def _number(text: str, path: Path, line: int, column: str, required: bool) -> float | None:
+    if text == "" and not required:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = None
+    if value is None or (required and not math.isfinite(value)):
+        raise RunFileError(f"{path}: line {line}, column {column}: {text[:40]!r} is not "
+                           f"{'a finite number' if required else 'a number'}")
+    return value
 
 
 def read_jsonl(path: Path) -> list[dict[str, Any]]:

@@ -495,6 +495,7 @@ def train(
     """Train the DDPG grasp policy (demonstrations, behaviour cloning, DDPG); resumes from OUTPUT/last.pt."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
+    from clients.policy.ddpg import CheckpointError
     from clients.policy.train import TrainConfig, train as run_training
 
     config = TrainConfig(demo_episodes=demos, episodes=episodes, eval_every=eval_every, eval_trials=eval_trials,
@@ -526,7 +527,7 @@ def train(
 
         try:
             result = run_training(output, config, report)
-        except ValueError as exc:
+        except (ValueError, CheckpointError) as exc:
             err.print(f"[red]error:[/red] {exc}", highlight=False)
             raise typer.Exit(2) from None
     if ship is not None:

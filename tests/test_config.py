@@ -129,6 +129,19 @@ def test_duplicate_json_key_and_bad_json(tmp_path):
         load_project(tmp_path / "missing.json")
 
 
+def test_file_that_is_not_json_text_is_named_not_a_traceback(tmp_path):
+    p = tmp_path / "deep.json"
+    p.write_text("[" * 100_000 + "]" * 100_000)  # the decoder recurses once per level
+    with pytest.raises(ConfigError, match="nested too deeply"):
+        load_project(p)
+    p.write_bytes(b'{"projectName": "\xff"}')
+    with pytest.raises(ConfigError, match="byte 17 cannot be read as utf-8") as caught:
+        load_project(p)
+    assert "once per object" not in str(caught.value)  # not the duplicate-key hint
+    res = hycosim("validate", str(p))
+    assert res.returncode == 2 and "Traceback" not in res.stderr and "save the project file as UTF-8" in res.stderr
+
+
 def test_cli_lists_every_error_and_exits_2(tmp_path):
     doc = copy.deepcopy(GOOD)
     doc["nodeNum"] = 7

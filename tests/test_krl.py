@@ -14,7 +14,7 @@ import pytest
 
 from clients.krl.controller import EmulatedController, parse_ack, stream_program
 from clients.krl.eki import AXES, EkiConfig, EkiError, frame, parse_frame
-from clients.krl.export import ExportError, export
+from clients.krl.export import ExportError, export, read_path
 from clients.rod.model import RodParams
 from tests.helpers import REPO, hycosim, run_project
 
@@ -123,6 +123,17 @@ def test_export_and_controller_cli_errors(tmp_path):
         export(tmp_path, tmp_path / "out")
     res = hycosim("krl", "export", str(tmp_path))
     assert res.returncode == 2 and "values.csv" in res.stderr
+    q = [f"robot.q{i}" for i in range(1, 7)]
+    header = ",".join(["step", "t", "mode", *q, "robot.grasped"])
+    (tmp_path / "values.csv").write_text(f"step,t,mode,rod.angle\n0,0.0,free,0.1\n")
+    with pytest.raises(ExportError, match="no joint path .* recorded for node 'robot'"):
+        export(tmp_path, tmp_path / "out")
+    (tmp_path / "values.csv").write_text(f"{header}\n0,0.0,free,0,0,0,0,0,0,0\n1,0.01,free,0,0,up,0,0,0,1\n")
+    with pytest.raises(ExportError, match="line 3, column robot.q3: 'up' is not a finite number"):
+        export(tmp_path, tmp_path / "out")
+    (tmp_path / "values.csv").write_text(f"{header}\n0,0.0,free,0,0,0,0,0,0,0\n1,0.01,free,0,0,0.5,0,0,0,1\n")
+    path = read_path(tmp_path)
+    assert path.grasp_index == 1 and path.t == [0.0, 0.01] and path.q_deg[1][2] == pytest.approx(28.6479, abs=1e-3)
     (tmp_path / "bad.xml").write_text("<NOT/>")
     res = hycosim("krl", "controller", "--eki", str(tmp_path / "bad.xml"))
     assert res.returncode == 2 and "expected <ETHERNETKRL>" in res.stderr

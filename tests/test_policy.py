@@ -181,6 +181,16 @@ def test_missing_or_incompatible_checkpoint_gives_a_clear_error(tmp_path):
     cfg.write_text(json.dumps(doc))
     res = hycosim("node", "policy", str(cfg), timeout=60)
     assert res.returncode == 3 and "none.pt does not exist" in res.stderr and "Traceback" not in res.stderr
+    # A damaged last.pt in a training folder: named, with what to do, before any episode runs.
+    run = tmp_path / "train"
+    run.mkdir()
+    (run / "last.pt").write_bytes(b"\x80\x04truncated")
+    with pytest.raises(CheckpointError, match="last.pt is not a readable checkpoint .*remove it to start afresh"):
+        train(run, TrainConfig(episodes=1, demo_episodes=1))
+    torch.save([1, 2], run / "last.pt")
+    res = hycosim("train", "-o", str(run), "--episodes", "1", "--demos", "1", timeout=120)
+    assert res.returncode == 2 and "last.pt is not a training checkpoint of hycosim" in res.stderr
+    assert "Traceback" not in res.stderr and not (run / "best.pt").exists()
 
 
 def test_pretrained_policy_node_grasps_inside_a_cosimulation(tmp_path):

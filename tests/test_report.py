@@ -111,3 +111,54 @@ def test_a_run_cut_off_mid_write_still_reports_and_plots_what_it_finished(tmp_pa
     (run / "values.csv").write_text("".join(lines))
     res = hycosim("plot", str(run), "clock.y", "-o", str(png))
     assert res.returncode == 2 and f"{run / 'values.csv'}: line 4 does not have one cell" in res.stderr
+
+
+def test_a_hand_edited_run_directory_is_named_cell_by_cell_not_a_traceback(tmp_path):
+    import shutil
+
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+    ], [{"from": "clock.y", "to": "g.u"}],
+        events=[{"name": "hold", "when": "clock.y >= 0.3", "drives": "g", "until": "clock.y >= 0.6"}],
+        cosim={"stepSize": 0.01, "stopTime": 0.5})
+    run = run_project(cfg, tmp_path / "runs")
+
+    def edited(name: str, edit) -> str:
+        copy = tmp_path / f"edit-{name}-{len(list(tmp_path.glob('edit-*')))}"
+        shutil.copytree(run, copy)
+        (copy / name).write_text(edit((copy / name).read_text()))
+        return str(copy)
+
+    def refused(*args: str) -> str:
+        res = hycosim(*args)
+        assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
+        return res.stderr
+
+    def cell(text: str, line: int, column: str, value: str) -> str:
+        lines = text.splitlines()
+        header = lines[0].split(",")
+        cells = lines[line - 1].split(",")
+        cells[header.index(column)] = value
+        lines[line - 1] = ",".join(cells)
+        return "\n".join(lines) + "\n"
+
+    bad_wait = edited("timing.csv", lambda t: cell(t, 5, "wait_s", "soon"))
+    assert f"{bad_wait}/timing.csv: line 5, column wait_s: 'soon' is not a finite number" in refused("report", bad_wait)
+    endless = edited("timing.csv", lambda t: cell(t, 7, "step", "inf"))
+    assert "line 7, column step: 'inf' is not a finite number" in refused("report", endless, "--json")
+    no_t = edited("values.csv", lambda t: t.replace("step,t,", "step,time,", 1))
+    assert f"{no_t}/values.csv: no column t in its header" in refused("plot", no_t)
+    listed = edited("meta.json", lambda t: "[1, 2]")
+    assert "not a run's metadata (a JSON object is expected, it holds a list)" in refused("report", listed)
+    typed = edited("meta.json", lambda t: json.dumps({**json.loads(t), "steps": "many"}))
+    assert "not a run's metadata (steps: Input should be a valid integer" in refused("report", typed)
+    undated = edited("events.jsonl", lambda t: t.replace('"t": ', '"time": ', 1))
+    assert "events.jsonl: record 1 is not a mode switch (t: Field required)" in refused("plot", undated)
+    assert "record 1 is not a mode switch" in refused("report", undated)
+    worded = edited("values.csv", lambda t: cell(t, 12, "clock.y", "high"))
+    assert "values.csv: clock.y is not a number at step 10 ('high')" in refused("plot", worded, "clock.y")
+    # the other columns still plot, and the untouched run reports as before
+    res = hycosim("plot", worded, "g.y", "-o", str(tmp_path / "g.png"))
+    assert res.returncode == 0 and (tmp_path / "g.png").stat().st_size > 10_000, res.stderr
+    assert json.loads(hycosim("report", str(run), "--json").stdout)["steps"] == 51

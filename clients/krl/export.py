@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from fmu_bridge.run_files import RunFileError, read_csv_rows
+from fmu_bridge.run_files import MissingColumns, RunFileError, read_csv_rows
 
 from clients.krl.eki import EkiConfig, frame, krl_program
 from clients.robot import kr6
@@ -33,20 +33,24 @@ class JointPath:
 
 def read_path(run_dir: Path, robot: str = "robot") -> JointPath:
     path = run_dir / "values.csv"
+    cols = [f"{robot}.q{i}" for i in range(1, 7)]
+    flags = (f"{robot}.grasped", f"{robot}.grip_cmd")
+    no_path = f"{path}: no joint path ({', '.join(cols)}) recorded for node {robot!r}"
     try:
-        rows = read_csv_rows(path)
+        rows = read_csv_rows(path, lambda c: c == "t" or c in cols or c in flags, required=("t", *cols))
+    except MissingColumns as exc:
+        raise ExportError(no_path if set(exc.columns) & set(cols) else str(exc)) from None
     except RunFileError as exc:
         raise ExportError(str(exc)) from None
-    cols = [f"{robot}.q{i}" for i in range(1, 7)]
-    if not rows or any(c not in rows[0] for c in cols):
-        raise ExportError(f"{path}: no joint path ({', '.join(cols)}) recorded for node {robot!r}")
-    t0 = float(rows[0]["t"])
+    if not rows:
+        raise ExportError(no_path)
+    t0 = rows[0]["t"]
     t, q, close, grasp = [], [], [], None
     for i, r in enumerate(rows):
-        held = float(r.get(f"{robot}.grasped", 0) or 0) > 0.5
-        t.append(float(r["t"]) - t0)
-        q.append([math.degrees(float(r[c])) for c in cols])
-        close.append(float(r.get(f"{robot}.grip_cmd", 0) or 0) > 0.5)
+        held = (r.get(flags[0]) or 0.0) > 0.5
+        t.append(r["t"] - t0)
+        q.append([math.degrees(r[c]) for c in cols])
+        close.append((r.get(flags[1]) or 0.0) > 0.5)
         if held and grasp is None:
             grasp = i
             break

@@ -18,7 +18,7 @@ from typing import Callable
 import numpy as np
 import torch
 
-from clients.policy.ddpg import DDPG, DDPGConfig, ReplayBuffer
+from clients.policy.ddpg import DDPG, CheckpointError, DDPGConfig, ReplayBuffer
 from clients.policy.env import GraspEnv
 
 EVAL_ANGLES = (30.0, 40.0, 50.0, 60.0)
@@ -101,11 +101,20 @@ def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | Non
     episodes_done, started = 0, time.monotonic()
     last = out / "last.pt"
     if last.exists():
-        state = torch.load(last, map_location="cpu", weights_only=False)
+        afresh = "remove it to start afresh, or use another output folder"
+        try:
+            state = torch.load(last, map_location="cpu", weights_only=False)
+        except Exception as exc:  # torch raises pickle, zip and runtime errors alike for a damaged file
+            raise CheckpointError(f"{last} is not a readable checkpoint ({exc}): {afresh}") from None
+        if not isinstance(state, dict) or "history" not in state or "episodes" not in state:
+            raise CheckpointError(f"{last} is not a training checkpoint of hycosim: {afresh}")
         if state.get("config_hash") != config.digest():
             raise ValueError(f"{last} was trained with another config (hash {state.get('config_hash')}); "
                              "use another output folder")
-        agent.load_state(state)
+        try:
+            agent.load_state(state)
+        except (RuntimeError, KeyError, ValueError) as exc:
+            raise CheckpointError(f"{last} does not fit the networks ({exc}): {afresh}") from None
         history = state["history"]
         episodes_done = state["episodes"]
     report = progress or (lambda _: None)
