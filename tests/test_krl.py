@@ -12,7 +12,7 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from clients.krl.controller import EmulatedController, parse_ack, stream_program
+from clients.krl.controller import MAX_FRAME_BYTES, EmulatedController, parse_ack, stream_program
 from clients.krl.eki import AXES, EkiConfig, EkiError, frame, parse_frame
 from clients.krl.export import ExportError, export, read_path
 from clients.rod.model import RodParams
@@ -100,11 +100,18 @@ def test_malformed_inputs_are_rejected_and_the_controller_keeps_running(grasp_ru
         frame([200.0, -90, 90, 0, 0, 0], 0.0),                                    # A1 beyond ±170°
         good[0].replace('A3="', 'A3="x'),                                         # not a REAL
         "<Other/></Robot>",                                                       # not a Robot frame
+        frame([0.0, -90, 90, 0, 0, 0], 1e300),                                    # a wait without end
+        frame([0.0, -90, 90, 0, 0, 0], math.nan),                                 # no time at all
     ]
-    answer = stream_program(host, port, "\n".join([*bad, *good]) + "\n")
+    answer = stream_program(host, port, "\n".join([*bad, *good]) + "\n", timeout=30)
     assert "outside its limits" in answer and "malformed XML" in answer and "is not REAL" in answer
+    assert "T=1e+300 s is outside a program's time [0, 120] s" in answer and "T=nan s is outside" in answer
     ack = parse_ack(answer)
-    assert ack["rejected"] == 4 and ack["grasped"]
+    assert ack["rejected"] == 6 and ack["grasped"]
+    # A peer that never ends a frame is cut off at a bound, not buffered for ever.
+    with socket.create_connection((host, port), timeout=30) as s:
+        s.sendall(b"<Robot>" + b" " * MAX_FRAME_BYTES)  # all of it read before the cut: no reset
+        assert b"no frame end (</Robot>)" in s.recv(4096)
     # A connection that drops mid-program is rejected too; the next program still runs.
     with socket.create_connection((host, port)) as s:
         s.sendall("\n".join(good[:5]).encode())

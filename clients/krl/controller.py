@@ -8,7 +8,8 @@ A1 ends the program. Meanwhile the physical rod (a RodModel whose parameters dif
 the twin's) swings. The controller reports whether the gripper closed on the rod, when,
 and how far the TCP was from the rod's grasp point, then waits for the next program.
 
-Malformed XML, out-of-limit axes and a dropped connection are rejected with a message
+Malformed XML, out-of-limit axes, a T outside the program's time (MAX_PROGRAM_S), a frame with
+no end and a dropped connection are rejected with a message
 (sent back where the connection still stands, and logged) and leave it running.
 """
 
@@ -28,6 +29,12 @@ from clients.robot.scene import RobotScene, SceneParams
 from clients.rod.model import RodModel, RodParams
 
 TICK = 0.001  # s: the controller's interpolation cycle, emulated
+# A frame's T is a $TIMER value the program waits for. The emulation runs the wait tick by
+# tick, so a T far ahead (a typo, 1e300) would hold the controller for good: frames past
+# this bound are rejected. The paper's programs last 15-17 s; ours under one.
+MAX_PROGRAM_S = 120.0
+# A peer that never closes a frame must not grow the buffer without bound.
+MAX_FRAME_BYTES = 1 << 20
 
 
 @dataclass
@@ -95,6 +102,12 @@ def check_limits(q_deg: list[float]) -> str | None:
     return None
 
 
+def check_time(t: float) -> str | None:
+    if not math.isfinite(t) or not 0.0 <= t <= MAX_PROGRAM_S:
+        return f"T={t:g} s is outside a program's time [0, {MAX_PROGRAM_S:g}] s"
+    return None
+
+
 class EmulatedController:
     def __init__(self, config: EkiConfig, rod: RodParams, scene: SceneParams | None = None,
                  host: str = "127.0.0.1", port: int | None = None):
@@ -151,6 +164,10 @@ class EmulatedController:
                                    f"({program.result.frames} frames executed)", program)
                 return None
             buffer += chunk
+            if b"</Robot>" not in buffer and len(buffer) > MAX_FRAME_BYTES:
+                self._reject(conn, f"no frame end (</Robot>) in {len(buffer)} bytes from {peer or 'the PC'}: "
+                                   "connection closed", program)
+                return None
             while b"</Robot>" in buffer:
                 raw, _, buffer = buffer.partition(b"</Robot>")
                 text = raw.decode(errors="replace").strip() + "</Robot>"
@@ -172,7 +189,7 @@ class EmulatedController:
                     except OSError:
                         pass
                     return result
-                bad = check_limits(fr.q_deg)
+                bad = check_limits(fr.q_deg) or check_time(fr.t)
                 if bad:
                     self._reject(conn, f"frame {program.result.frames + 1}: {bad}", program)
                     continue
