@@ -7,6 +7,7 @@ logged; the run goes on.
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 
 import structlog
@@ -65,6 +66,9 @@ class Intake:
             raise Dropped("wrong kind", f"{node} is {'' if spec.asynchronous else 'not '}asynchronous")
         if type(t) not in (float, int):
             raise Dropped("wrong type", f"from {node}: time {t!r} is not a number")
+        if not math.isfinite(t):
+            # An infinite sample time would outrank every later sample (held for ever); NaN breaks the order.
+            raise Dropped("wrong type", f"from {node}: time {t!r} is not finite")
         ports = self._types[node]
         if type(values) is not list or len(values) != len(ports):
             raise Dropped("unknown ports", f"from {node}: {len(values) if isinstance(values, list) else values!r} "

@@ -29,6 +29,28 @@ def test_sample_history_hold_and_linear():
     assert early.value_at(0, 0.3, "hold") == (5.0, 0.3 - 0.5)  # only newer samples: the oldest
 
 
+def test_a_sample_stamped_at_no_finite_time_is_dropped_before_it_can_freeze_its_source():
+    import pytest
+
+    from fmu_bridge import frames
+    from fmu_bridge.config import Node
+    from server.intake import Dropped, Intake
+
+    camera = Node.model_validate({"nodeName": "camera", "UID": 3, "async": True, "model": "ramp_source",
+                                  "output": ["angle"]})
+    intake = Intake([camera])
+    hist = SampleHistory([0.0])
+    for t in (math.inf, math.nan):
+        with pytest.raises(Dropped, match="is not finite") as caught:
+            intake.accept("camera", frames.encode(frames.SAMPLE, 3, 7, t, [1.0]))
+        assert caught.value.reason == "wrong type"
+    # What an infinite stamp would have done had it got through: every later sample ignored.
+    hist.add(math.inf, [9.0])
+    assert not hist.add(0.1, [1.0]) and hist.value_at(0, 0.1, "hold")[0] == 9.0
+    accepted = intake.accept("camera", frames.encode(frames.SAMPLE, 3, 8, 0.1, [1.0]))
+    assert accepted.fields[2:] == (0.1, [1.0])
+
+
 def test_extrapolated_and_held_samples_over_zenoh(tmp_path):
     rate, slope = 23.0, 2.0  # a rate that never lines up with the macro step
     cfg = write_project(tmp_path / "p.json", [
