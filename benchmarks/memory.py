@@ -88,7 +88,8 @@ def peak_rss_by_process(cmd: list[str], timeout: float) -> dict[int, tuple[float
 
 
 def _kind(argv: list[str]) -> str | None:
-    """'server' or 'node' for ``python -m hycosim server|node …`` and ``_zenoh_floor.py server|node …``."""
+    """'server' or 'node' for ``python [-P] -m hycosim server|node …`` and ``_zenoh_floor.py server|node …``."""
+    argv = [a for a in argv if a != "-P"]
     if argv[1:3] == ["-m", "hycosim"] and len(argv) > 3:
         word = argv[3]
     elif len(argv) > 2 and argv[1].endswith("_zenoh_floor.py"):

@@ -615,7 +615,7 @@ def trials(
     output: Annotated[Path, typer.Option("-o", "--output")] = Path("runs/trials"),
 ) -> None:
     """Rerun the paper's trials: co-simulation, EthernetKRL export, emulated controller, Table 2."""
-    from hycosim.trials import PAPER, run_trials, summarise, write_outputs
+    from hycosim.trials import PAPER, TrialsInterrupted, run_trials, summarise, write_outputs
 
     if driver not in ("policy", "reference"):
         err.print("[red]error:[/red] --driver is 'policy' or 'reference'", highlight=False)
@@ -639,7 +639,14 @@ def trials(
         err.print(f"{r.angle:g}° #{r.trial}: {'grasped' if r.success else 'missed'}"
                   + (f", {r.grasp_error_mm:.1f} mm, {r.execution_time_s:.2f} s" if r.success else ""), highlight=False)
 
-    results = run_trials(angle_list, n, output, correction, driver, progress)
+    interrupted = None
+    try:
+        results = run_trials(angle_list, n, output, correction, driver, progress)
+    except TrialsInterrupted as exc:
+        interrupted, results = exc, exc.results
+        if not results:
+            err.print(f"[red]error:[/red] {exc}; nothing to tabulate", highlight=False)
+            raise typer.Exit(130) from None
     csv_path, png = write_outputs(results, output)
     table = Table(title=f"grasping trials ({'with' if correction else 'without'} camera correction, {driver}): "
                         "grasp distance error, execution time, success")
@@ -651,6 +658,9 @@ def trials(
                       f"{row['success_pct']:.0f} % of {row['trials']}", f"{p[0]}", f"{p[1]}", f"{p[2]}")
     out.print(table)
     out.print(f"wrote {csv_path} and {png}", highlight=False)
+    if interrupted is not None:
+        err.print(f"[red]error:[/red] {interrupted} of {len(angle_list) * n}: the table holds those", highlight=False)
+        raise typer.Exit(130)
     failed = [r for r in results if r.error]
     if failed:
         err.print(f"[red]error:[/red] {len(failed)} of {len(results)} trials could not be run (counted as missed): "

@@ -62,7 +62,9 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
     endpoint = listen or free_loopback_endpoint()
     run_dir = run_dir_for(runs_dir, loaded.name)
     run_dir.mkdir(parents=True)
-    cmd = [sys.executable, "-m", "hycosim"]
+    # -P: "python -m" would put the working directory first on the children's import path,
+    # so a user's grp.py or zenoh.py there would replace the library in every node.
+    cmd = [sys.executable, "-P", "-m", "hycosim"]
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     server = subprocess.Popen([*cmd, "server", str(config_path), "--listen", endpoint, "--run-dir", str(run_dir),
                                "--progress-jsonl"], stdout=subprocess.PIPE, stderr=open(run_dir / "server.stderr.txt", "w"),
@@ -138,6 +140,10 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
             proc.wait()
         if proc.returncode not in (0, FAILED_ELSEWHERE) and name not in failures and not (code and name in interrupted):
             failures[name] = _tail(run_dir / f"node-{name}.stderr.txt") or f"exit status {proc.returncode}"
+    if code == 130:
+        # Ctrl-C in a terminal reaches every process of the group: a node that stopped for it
+        # (status 130) did not fail, whether it stopped before the launcher noticed or after.
+        failures = {n: m for n, m in failures.items() if nodes[n].returncode != 130}
     if failures and code in (0, 130):
         code = 3
         message = "; ".join(f"{n}: {m}" for n, m in failures.items())

@@ -104,6 +104,8 @@ def run_trial(angle: float, trial: int, out: Path, correction: bool = True, driv
     cfg.write_text(json.dumps(doc, indent=1))
     loaded = parse_project(doc, str(cfg), cfg.resolve())
     result = run_embedded(loaded, cfg, runs_dir=folder / "runs", show_progress=False)
+    if result.code == 130:
+        raise KeyboardInterrupt  # the launcher stopped its processes; the trials stop too
     if result.code:
         raise RuntimeError(f"trial {angle:g}° #{trial}: co-simulation failed: {result.message}")
     files = export(result.run_dir, folder / "krl")
@@ -202,10 +204,19 @@ def plot(results: list[TrialResult], path: Path) -> Path:
     return path
 
 
+class TrialsInterrupted(Exception):
+    """Ctrl-C during the trials: ``results`` holds the trials finished before it (in ``trials.csv``)."""
+
+    def __init__(self, results: list[TrialResult]):
+        super().__init__(f"interrupted by Ctrl-C after {len(results)} trials")
+        self.results = results
+
+
 def run_trials(angles: list[float], trials: int, out: Path, correction: bool = True, driver: str = "policy",
                progress: Callable[[TrialResult], None] | None = None) -> list[TrialResult]:
     """Every trial, in order; one that fails to run is recorded as not grasped, with its error,
-    and the others go on. ``trials.csv`` is rewritten after each trial."""
+    and the others go on. ``trials.csv`` is rewritten after each trial. Ctrl-C stops them:
+    TrialsInterrupted carries the finished ones (the interrupted trial is not counted)."""
     from fmu_bridge import logs
 
     out.mkdir(parents=True, exist_ok=True)
@@ -215,6 +226,8 @@ def run_trials(angles: list[float], trials: int, out: Path, correction: bool = T
         for i in range(trials):
             try:
                 r = run_trial(angle, i, out, correction, driver)
+            except KeyboardInterrupt:
+                raise TrialsInterrupted(results) from None
             except (RuntimeError, OSError, ValueError) as exc:
                 physical = physical_rod(angle, trial_seed(angle, i))
                 r = TrialResult(angle, i, correction, False, None, None, False, str(out / f"{angle:g}deg-{i:02d}"),

@@ -14,8 +14,10 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -50,6 +52,21 @@ class Progress:
     mode: str = FREE_MODE
     steps_per_s: float = 0.0
     attached: list[str] = field(default_factory=list)
+
+
+@contextmanager
+def _ctrl_c_deferred():
+    """Ignore Ctrl-C while the run shuts down (a few seconds at most): a terminal's Ctrl-C
+    reaches every process of the group and a launcher may pass on another, and a second
+    KeyboardInterrupt here would leave the run's metadata unwritten."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 class Relay:
@@ -126,19 +143,20 @@ class Relay:
             reason = str(exc)
             raise
         finally:
-            self._broadcast_stop(status_text if not reason else reason)
-            self._await_departures()
-            if self.gateway is not None:
-                self.gateway.close(reason or status_text)
-            self.recorder.close(status_text, reason=reason, dropped_frames=dict(self.intake.dropped),
-                                reattached=dict(self.reattached), server_waits=self.inbox.waits,
-                                samples_received={n: h.received for n, h in self.histories.items()})
-            for decl in (status, watcher, token):
-                try:
-                    decl.undeclare()
-                except Exception:
-                    pass
-            self.inbox.close()
+            with _ctrl_c_deferred():
+                self._broadcast_stop(status_text if not reason else reason)
+                self._await_departures()
+                if self.gateway is not None:
+                    self.gateway.close(reason or status_text)
+                self.recorder.close(status_text, reason=reason, dropped_frames=dict(self.intake.dropped),
+                                    reattached=dict(self.reattached), server_waits=self.inbox.waits,
+                                    samples_received={n: h.received for n, h in self.histories.items()})
+                for decl in (status, watcher, token):
+                    try:
+                        decl.undeclare()
+                    except Exception:
+                        pass
+                self.inbox.close()
 
     def _await_departures(self, timeout: float = 3.0) -> None:
         """After STOP, give the nodes a moment to leave before this session closes: closing at

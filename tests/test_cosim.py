@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 from tests.helpers import column, meta, read_rows, run_project, write_project
 
@@ -58,3 +59,27 @@ def test_gain_ring_matches_closed_form(tmp_path):
         for i in range(n):
             # y_0 = 0.5·0 + 1, y_k = 0.5·y_{k-1} + 1  ⇒  y_k = 2 − 0.5^k
             assert math.isclose(float(row[f"n{i}.y"]), 2 - 0.5 ** k, rel_tol=0, abs_tol=1e-12)
+
+
+def test_modules_in_the_working_folder_do_not_replace_the_libraries_of_the_nodes(tmp_path):
+    """``hycosim run`` in a folder holding a zenoh.py or grp.py (a stdlib module that torch and
+    shutil import): the nodes it starts import the installed libraries, not the user's files."""
+    import subprocess
+    import sys
+
+    from tests.helpers import env
+
+    for name in ("zenoh", "grp", "msgpack"):
+        (tmp_path / f"{name}.py").write_text(f"raise SystemExit('the working folder\\'s {name}.py was imported')\n")
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+    ], [{"from": "clock.y", "to": "g.u"}], cosim={"stepSize": 0.1, "stopTime": 1.0})
+    console_script = Path(sys.executable).parent / "hycosim"
+    res = subprocess.run([str(console_script), "run", cfg.name, "--runs-dir", "runs", "--no-progress"],
+                         capture_output=True, text=True, timeout=120, env=env(), cwd=tmp_path)
+    assert res.returncode == 0, res.stdout + res.stderr
+    run = next((tmp_path / "runs").iterdir())
+    assert not any("was imported" in p.read_text() for p in run.glob("*.stderr.txt"))
+    rows = read_rows(run)
+    assert len(rows) == 11 and column(rows, "g.u") == column(rows, "clock.y")

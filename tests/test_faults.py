@@ -306,6 +306,24 @@ def test_ctrl_c_shuts_down_cleanly_with_results_flushed(tmp_path):
         reap(server, *nodes)
 
 
+def test_ctrl_c_in_a_terminal_stops_an_embedded_run_without_blaming_its_nodes(tmp_path):
+    """A terminal's Ctrl-C reaches the launcher, the server and every node at once."""
+    cfg = _pair(tmp_path, stopTime=60.0)
+    runs = tmp_path / "runs"
+    run = spawn("run", str(cfg), "--runs-dir", str(runs), "--no-progress", start_new_session=True)
+    try:
+        wait_for(lambda: runs.exists() and any(_steps_on_disk(d) > 20 for d in runs.iterdir()), 30, "20 steps")
+        os.killpg(run.pid, signal.SIGINT)
+        _, err = run.communicate(timeout=30)
+        assert run.returncode == 130, err
+        assert "interrupted by Ctrl-C" in err and "exit status" not in err and "Traceback" not in err
+        run_dir = next(runs.iterdir())
+        m = meta(run_dir)
+        assert m["status"] == "interrupted" and len(read_rows(run_dir)) == m["steps"] >= 20
+    finally:
+        reap(run)
+
+
 def test_node_without_server_fails_clearly(tmp_path):
     cfg = _pair(tmp_path, attachTimeout=1.0)
     res = hycosim("node", "clock", str(cfg), timeout=60)

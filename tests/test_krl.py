@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import time
 import socket
 import threading
 import xml.etree.ElementTree as ET
@@ -195,3 +196,29 @@ def test_the_papers_eighty_trials(tmp_path):
     assert all(row["success_pct"] >= 95 for row in table.values())
     assert all(row["error_mm"] <= 3.0 for row in table.values())
     assert all(row["time_s"] <= 5.0 for row in table.values())
+
+
+def test_ctrl_c_stops_the_trials_and_tabulates_the_finished_ones(tmp_path):
+    """A terminal's Ctrl-C (the whole process group) during the second trial: no further trial
+    starts, the first is in the table and CSV, and the exit status says interrupted."""
+    import os
+    import signal
+
+    from tests.helpers import reap, spawn, wait_for
+
+    out = tmp_path / "trials"
+    csv_rows = lambda: len((out / "trials.csv").read_text().splitlines()) - 1 if (out / "trials.csv").exists() else 0  # noqa: E731
+    proc = spawn("trials", "--angles", "40", "--trials", "3", "--driver", "reference", "-o", str(out),
+                 start_new_session=True)
+    try:
+        wait_for(lambda: csv_rows() >= 1, 90, "the first trial")
+        wait_for(lambda: (out / "40deg-01" / "runs").exists(), 30, "the second trial to start")
+        time.sleep(1.0)
+        os.killpg(proc.pid, signal.SIGINT)
+        stdout, err = proc.communicate(timeout=60)
+        assert proc.returncode == 130, err
+        assert "interrupted by Ctrl-C after 1 trials of 3: the table holds those" in err and "Traceback" not in err
+        assert "of 1" in stdout and csv_rows() == 1 and not (out / "40deg-02").exists()
+        assert (out / "trials.png").stat().st_size > 10_000
+    finally:
+        reap(proc)
