@@ -527,6 +527,13 @@ def train(
 
         try:
             result = run_training(output, config, report)
+        except KeyboardInterrupt:
+            progress.stop()
+            saved = output / "last.pt"
+            err.print("interrupted by Ctrl-C; " + (
+                f"the same command resumes from {saved}" if saved.exists() else
+                "no checkpoint yet (the first is written after the cloning phase)"), highlight=False)
+            raise typer.Exit(130) from None
         except (ValueError, CheckpointError) as exc:
             err.print(f"[red]error:[/red] {exc}", highlight=False)
             raise typer.Exit(2) from None

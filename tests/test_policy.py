@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 import warnings
 
 import numpy as np
@@ -17,7 +18,7 @@ from clients.policy.features import ACT_DIM, OBS_DIM, choice_action
 from clients.policy.node import PRETRAINED
 from clients.policy.train import TrainConfig, evaluate, train
 from clients.robot import kr6
-from tests.helpers import REPO, column, hycosim, read_rows, run_project
+from tests.helpers import REPO, column, hycosim, read_rows, reap, run_project
 
 
 def test_gymnasium_env_checker_passes_and_episodes_are_reproducible():
@@ -159,6 +160,26 @@ def test_checkpoint_round_trip_and_resume(short_training, tmp_path):
         train(out, TrainConfig(episodes=5, demo_episodes=1))
 
 
+def test_training_interrupted_after_cloning_resumes_without_cloning_again(tmp_path):
+    config = TrainConfig(demo_episodes=3, bc_steps=50, dagger_rounds=1, dagger_episodes=1, critic_warmup_steps=20,
+                         episodes=2, eval_every=2, eval_trials=1)
+    phases: list[str] = []
+
+    def ctrl_c_in_the_first_ddpg_episode(d: dict) -> None:
+        phases.append(d["phase"])
+        if d["phase"] == "ddpg":
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        train(tmp_path, config, ctrl_c_in_the_first_ddpg_episode)
+    saved = torch.load(tmp_path / "last.pt", map_location="cpu", weights_only=False)
+    assert saved["episodes"] == 0 and "pretrained" in phases and not list(tmp_path.glob("*.tmp"))
+    phases.clear()
+    result = train(tmp_path, config, lambda d: phases.append(d["phase"]))
+    assert "dagger" not in phases and "pretrained" not in phases  # no second cloning
+    assert phases.count("ddpg") == 2 and [e["episode"] for e in result["evals"]] == [0, 2]
+
+
 def test_missing_or_incompatible_checkpoint_gives_a_clear_error(tmp_path):
     with pytest.raises(CheckpointError, match="does not exist"):
         load_policy(tmp_path / "none.pt")
@@ -191,6 +212,22 @@ def test_missing_or_incompatible_checkpoint_gives_a_clear_error(tmp_path):
     res = hycosim("train", "-o", str(run), "--episodes", "1", "--demos", "1", timeout=120)
     assert res.returncode == 2 and "last.pt is not a training checkpoint of hycosim" in res.stderr
     assert "Traceback" not in res.stderr and not (run / "best.pt").exists()
+    # Ctrl-C (a terminal's reaches the whole group) before the first checkpoint: said, status 130.
+    import os
+    import signal
+
+    from tests.helpers import spawn
+
+    fresh = tmp_path / "fresh"
+    proc = spawn("train", "-o", str(fresh), "--demos", "1", start_new_session=True)
+    try:
+        time.sleep(6.0)  # imports, then demonstrations and cloning: minutes before any checkpoint
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        reap(proc)
+    assert proc.returncode == 130 and "Traceback" not in err
+    assert "interrupted by Ctrl-C; no checkpoint yet (the first is written after the cloning phase)" in err
 
 
 def test_pretrained_policy_node_grasps_inside_a_cosimulation(tmp_path):

@@ -117,6 +117,7 @@ def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | Non
             raise CheckpointError(f"{last} does not fit the networks ({exc}): {afresh}") from None
         history = state["history"]
         episodes_done = state["episodes"]
+    resumed = last.exists()
     report = progress or (lambda _: None)
     # Demonstrations (also on resume: the buffer is not checkpointed).
     demo_obs, demo_act = [], []
@@ -127,7 +128,7 @@ def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | Non
             demo_act.append(a)
         report({"phase": "demonstrations", "done": i + 1, "total": config.demo_episodes})
     demo_obs_arr, demo_act_arr = np.array(demo_obs), np.array(demo_act)
-    if episodes_done == 0:
+    if not resumed:
         agent.norm.update(demo_obs_arr)
         bc = agent.pretrain_actor(demo_obs_arr, demo_act_arr, config.bc_steps)
         for r in range(config.dagger_rounds):
@@ -146,8 +147,10 @@ def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | Non
         ev = evaluate(agent, env, config.eval_trials)
         mean = float(np.mean([v["success"] for v in ev.values()]))
         history["evals"].append({"episode": 0, "per_angle": ev, "mean_success": mean})
-        torch.save(agent.state(config_hash=config.digest(), episodes=0, history=history, metrics=ev,
-                               trained_s=time.monotonic() - started, train_config=asdict(config)), out / "best.pt")
+        pretrained = agent.state(config_hash=config.digest(), episodes=0, history=history, metrics=ev,
+                                 trained_s=time.monotonic() - started, train_config=asdict(config))
+        _save(pretrained, out / "best.pt")
+        _save(pretrained, last)  # a resume goes on from here, without cloning again
         report({"phase": "pretrained", "bc_mse": bc, "per_angle": ev, "mean_success": mean})
     best = max((_score(e) for e in history["evals"]), default=(-1.0, -1.0, -float("inf")))
     rng_seed = config.seed * 1_000_000 + 50_000
@@ -168,10 +171,18 @@ def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | Non
             score = _score(history["evals"][-1])
             if score >= best:
                 best = score
-                torch.save(agent.state(**extra), out / "best.pt")
-            torch.save(agent.state(**extra), last)
+                _save(agent.state(**extra), out / "best.pt")
+            _save(agent.state(**extra), last)
     plot_learning_curve(history, out / "learning_curve.png")
     return {"best_mean_success": best[1], "best_mean_precise": best[0], "evals": history["evals"], "trained_s": time.monotonic() - started}
+
+
+def _save(state: dict, path: Path) -> None:
+    # Written beside and renamed over: a Ctrl-C or a full disk mid-write leaves the last
+    # complete checkpoint, never a torn one.
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(state, tmp)
+    tmp.replace(path)
 
 
 def _score(evaluation: dict) -> tuple[float, float, float]:
