@@ -42,14 +42,21 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     Addresses are checked before anything is written: one that cannot be used gives
     exit code 2 and no run directory.
     """
+    def done(code: int, run_dir: Path | None, message: str) -> tuple[int, Path | None, str]:
+        # A launcher reading --progress-jsonl learns the outcome from this line, on every path.
+        if progress_jsonl:
+            print(json.dumps({"done": code, "message": message, "run_dir": str(run_dir) if run_dir else None}),
+                  flush=True)
+        return code, run_dir, message
+
     try:
         endpoint = str(parse_endpoint(listen)) if listen else server_endpoint(loaded.project.serverIP)
     except EndpointError as exc:
-        return 2, None, f"{'--listen' if listen else 'serverIP'}: {exc}"
+        return done(2, None, f"{'--listen' if listen else 'serverIP'}: {exc}")
     try:
         gw = parse_address(gateway, GATEWAY_PORT) if gateway else gateway_address(loaded.project, endpoint)
     except EndpointError as exc:
-        return 2, None, f"{'--gateway' if gateway else 'gatewayIP'}: {exc}"
+        return done(2, None, f"{'--gateway' if gateway else 'gatewayIP'}: {exc}")
     gateway_required = bool(gateway or loaded.project.gatewayIP)
     run_dir = run_dir or run_dir_for(runs_dir, loaded.name)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -73,7 +80,7 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
                                              low_latency=loaded.project.coSimulation.lowLatency), endpoint)
     except Exception as exc:  # SecurityError or ConnectError, both with their own message
         recorder.close("failed", reason=str(exc))
-        return 3, run_dir, str(exc)
+        return done(3, run_dir, str(exc))
     relay = Relay(loaded, session, recorder, progress_every_s=0.1, on_progress=on_progress,
                   gateway_address=(gw.host, gw.port), gateway_required=gateway_required)
     try:
@@ -89,9 +96,7 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         code, message = 4, f"internal error {type(exc).__name__}: {exc} (traceback in {run_dir / 'server.log.jsonl'})"
     finally:
         session.close()
-    if progress_jsonl:
-        print(json.dumps({"done": code, "message": message, "run_dir": str(run_dir)}), flush=True)
-    return code, run_dir, message
+    return done(code, run_dir, message)
 
 
 if __name__ == "__main__":  # pragma: no cover - the CLI is the entry point

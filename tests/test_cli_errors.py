@@ -27,3 +27,26 @@ def test_bad_arguments_are_named(tmp_path, args, message):
     assert message.format(**where) in res.stderr
     assert "Traceback" not in res.stderr
     assert not (tmp_path / "train").exists() and not (tmp_path / "a.gif").exists()
+
+
+def test_a_listen_port_already_taken_fails_once_and_quickly(tmp_path):
+    """The server cannot listen: one message (not one per layer), the run directory named once,
+    and the nodes, stuck connecting to whatever holds the port, are not waited for one by one."""
+    import socket
+    import time
+
+    from tests.helpers import write_project
+
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": f"n{i}", "UID": i + 1, "model": "gain", "input": ["u"], "output": ["y"]} for i in range(4)],
+        cosim={"stepSize": 0.1, "stopTime": 1.0, "attachTimeout": 60.0})
+    with socket.socket() as holder:
+        holder.bind(("127.0.0.1", 0))
+        holder.listen()
+        started = time.monotonic()
+        res = hycosim("run", str(cfg), "--listen", f"tcp/127.0.0.1:{holder.getsockname()[1]}",
+                      "--runs-dir", str(tmp_path / "runs"), "--no-progress")
+        took = time.monotonic() - started
+    assert res.returncode == 3 and "Address already in use" in res.stderr and "Traceback" not in res.stderr
+    assert res.stderr.count("results so far:") == 1 and res.stderr.count("error:") == 1, res.stderr
+    assert took < 40, f"{took:.0f} s"  # 2 s grace, then one 10 s bound for all four nodes
