@@ -131,6 +131,8 @@ class Link(_Strict):
 
 
 class CoSimulation(_Strict):
+    # Infinity or NaN in a time would make a run endless or its comparisons meaningless.
+    model_config = ConfigDict(allow_inf_nan=False)
     stepSize: float = Field(default=0.01, gt=0)
     startTime: float = 0.0
     stopTime: float = Field(default=1.0)
@@ -483,6 +485,18 @@ def check_semantics(project: Project) -> tuple[list[Route], dict[str, EventGuard
     cosim = project.coSimulation
     if cosim.stopTime <= cosim.startTime:
         issues.append(Issue("coSimulation.stopTime", "stopTime must be after startTime"))
+    else:
+        # Macro-step points are startTime + j·stepSize: below the float resolution of the
+        # times involved, a step would not advance the clock and the run would never end.
+        stuck = [name for name, at in (("startTime", cosim.startTime), ("stopTime", cosim.stopTime))
+                 if at + cosim.stepSize == at]
+        if stuck:
+            issues.append(Issue("coSimulation.stepSize", f"stepSize {cosim.stepSize:g} does not advance a time "
+                                f"of {getattr(cosim, stuck[0]):g} s ({stuck[0]}): the run would never end",
+                                "a step above the float resolution of startTime and stopTime (about 1e-16 of them)"))
+    if not isinstance(cosim.realTime, bool) and cosim.realTime < 0:
+        issues.append(Issue("coSimulation.realTime", f"realTime {cosim.realTime:g} is negative",
+                            "false (as fast as possible), true, or a factor > 0 (wall time = simulated time × factor)"))
     event_names: set[str] = set()
     guards: dict[str, EventGuards] = {}
     outputs = {(n.nodeName, p.name) for n in project.nodeLists for p in n.output}

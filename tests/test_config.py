@@ -97,6 +97,13 @@ CASES = {
     "server protocol": (lambda d: d.update(serverIP="udp/10.0.0.5:7447"), "serverIP", "not udp/"),
     "gateway port out of range": (lambda d: d.update(gatewayIP="127.0.0.1:0"), "gatewayIP", "port 0 is outside"),
     "gateway beside the last port": (lambda d: d.update(serverIP="127.0.0.1:65535"), "gatewayIP", "is the last port"),
+    "step below the clock's resolution": (lambda d: d.update(coSimulation={"stepSize": 1e-20, "startTime": 1.0,
+                                                                           "stopTime": 2.0}),
+                                          "coSimulation.stepSize", "does not advance a time of 1 s (startTime)"),
+    "endless stop time": (lambda d: d.update(coSimulation={"stopTime": float("inf")}), "coSimulation.stopTime",
+                          "Input should be a finite number"),
+    "negative real-time factor": (lambda d: d.update(coSimulation={"realTime": -2}), "coSimulation.realTime",
+                                  "realTime -2 is negative"),
     "bad port type": (lambda d: d["nodeLists"][1].update(input=[{"name": "u", "type": "Float"}]),
                       "nodeLists[1].input[0].type", "Input should be"),
 }
