@@ -50,3 +50,32 @@ def test_a_listen_port_already_taken_fails_once_and_quickly(tmp_path):
     assert res.returncode == 3 and "Address already in use" in res.stderr and "Traceback" not in res.stderr
     assert res.stderr.count("results so far:") == 1 and res.stderr.count("error:") == 1, res.stderr
     assert took < 40, f"{took:.0f} s"  # 2 s grace, then one 10 s bound for all four nodes
+
+
+def test_logs_are_json_for_collectors_and_text_on_a_terminal(tmp_path):
+    import json
+    import os
+    import pty
+    import subprocess
+    import sys
+
+    from tests.helpers import env
+
+    script = ("import structlog; from fmu_bridge import logs; logs.configure(); "
+              "structlog.get_logger('x').info('server seen', node='rod', step=3)")
+    piped = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env(), timeout=60)
+    record = json.loads(piped.stderr)
+    assert record["event"] == "server seen" and record["node"] == "rod" and record["step"] == 3
+    main, terminal = pty.openpty()
+    try:
+        proc = subprocess.run([sys.executable, "-c", script], stderr=terminal, env=env(), timeout=60)
+        text = os.read(main, 4096).decode()
+    finally:
+        os.close(main)
+        os.close(terminal)
+    assert proc.returncode == 0 and "server seen" in text and "node" in text and "rod" in text
+    assert not text.lstrip().startswith("{")
+    (tmp_path / "x.log").write_text("")
+    to_file = script.replace("logs.configure()", f"logs.configure({str(tmp_path / 'x.log')!r})")
+    subprocess.run([sys.executable, "-c", to_file], env=env(), timeout=60, check=True)
+    assert json.loads((tmp_path / "x.log").read_text())["step"] == 3  # a file is always JSON lines
