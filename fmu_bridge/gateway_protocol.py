@@ -57,12 +57,18 @@ def hello(uid: int, name: str, n_outputs: int, n_inputs: int) -> bytes:
 
 
 def parse_hello(payload: bytes) -> tuple[int, str, int, int]:
+    """uid, node name, number of outputs and inputs of a HELLO payload; ProtocolError if malformed."""
+    if len(payload) < 6:
+        raise ProtocolError(f"bad HELLO payload: {len(payload)} bytes, shorter than its 6-byte start")
+    uid, n = struct.unpack_from("<IH", payload)
+    if len(payload) != 6 + n + 4:
+        raise ProtocolError(f"bad HELLO payload: a {n}-byte name and two counts need {6 + n + 4} bytes, "
+                            f"it has {len(payload)}")
     try:
-        uid, n = struct.unpack_from("<IH", payload)
         name = payload[6:6 + n].decode()
-        n_out, n_in = struct.unpack_from("<HH", payload, 6 + n)
-    except (struct.error, UnicodeDecodeError) as exc:
-        raise ProtocolError(f"bad HELLO payload: {exc}") from None
+    except UnicodeDecodeError:
+        raise ProtocolError("bad HELLO payload: the node name is not UTF-8") from None
+    n_out, n_in = struct.unpack_from("<HH", payload, 6 + n)
     return uid, name, n_out, n_in
 
 

@@ -81,6 +81,7 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
     cosim = loaded.project.coSimulation
     total = cosim.stopTime - cosim.startTime
     code, message, failures = None, "", {}
+    user_stopped = False
     progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(),
                         TextColumn("t={task.fields[t]:.3f}/{task.total:.3f} s"),
                         TextColumn("{task.fields[rate]:.0f} steps/s"), TextColumn("mode={task.fields[mode]}"),
@@ -114,6 +115,7 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
     except KeyboardInterrupt:
         server.send_signal(signal.SIGINT)
         code, message = 130, "interrupted by Ctrl-C"
+        user_stopped = True
     try:
         server.wait(timeout=30)
     except subprocess.TimeoutExpired:
@@ -141,9 +143,12 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
             proc.wait()
         if proc.returncode not in (0, FAILED_ELSEWHERE) and name not in failures and not (code and name in interrupted):
             failures[name] = _tail(run_dir / f"node-{name}.stderr.txt") or f"exit status {proc.returncode}"
-    if code == 130:
-        # Ctrl-C in a terminal reaches every process of the group: a node that stopped for it
-        # (status 130) did not fail, whether it stopped before the launcher noticed or after.
+    if user_stopped:
+        # Ctrl-C in a terminal reaches every process of the group at once: whatever a node said
+        # as it stopped (status 130, or an import cut short: "initialization failed") is not a
+        # failure of the run the user stopped.
+        failures = {}
+    elif code == 130:
         failures = {n: m for n, m in failures.items() if nodes[n].returncode != 130}
     if failures and code in (0, 130):
         code = 3

@@ -358,3 +358,19 @@ def test_a_bridge_fmu_attaching_mid_run_is_told_the_run_is_under_way(tmp_path):
     assert server.returncode == 3 and "did not come back within the link grace of 2 s" in serr
     assert meta(tmp_path / "run")["dropped_frames"] == {"late attach": 1}
     assert column(read_rows(tmp_path / "run"), "tool.y") == [0.0, 1.0]
+
+
+def test_a_malformed_hello_is_named_by_what_is_wrong_with_it():
+    from fmu_bridge import gateway_protocol as gp
+
+    good = gp.hello(7, "rod", 4, 2)[gp.HEADER.size:]
+    assert gp.parse_hello(good) == (7, "rod", 4, 2)
+    cases = {
+        good[:4]: "4 bytes, shorter than its 6-byte start",
+        b"\x01\x00\x00\x00\xff\xff": "a 65535-byte name and two counts need 65545 bytes, it has 6",
+        good + b"\x00": "a 3-byte name and two counts need 13 bytes, it has 14",
+        good[:6] + b"\xff\xfe\xfd" + good[9:]: "the node name is not UTF-8",
+    }
+    for payload, message in cases.items():
+        with pytest.raises(gp.ProtocolError, match=message):
+            gp.parse_hello(payload)
