@@ -9,7 +9,8 @@ checking, routing, coordinator or recording), and two ratios:
 * hycosim / floor per kind, on the long run: what hycosim's code and imports cost over the
   transport they share;
 * long / short run per kind: growth with run length. Recording streams to disk and every
-  buffer is bounded, so the goal is 1.0 (at most 1.05: allocator noise).
+  buffer is bounded, so the goal is 1.0 (at most 1.05: allocator noise). The same for
+  reading the run back (``hycosim report`` and ``plot`` on the run directory): both stream.
 
     python benchmarks/memory.py [--n 4] [--steps 2000] [--json] [--timeout 120]
 
@@ -113,7 +114,15 @@ def measure(system: str, n: int, steps: int, timeout: float) -> dict[str, float]
             kind = _kind(argv)
             if kind is not None:
                 peaks[kind] = max(peaks.get(kind, 0.0), rss)
-    if set(peaks) != {"server", "node"}:
+        if system == "hycosim":
+            # Reading the run back: report and plot stream the run's files, so their peak
+            # should not grow with its length either (plot keeps 8 bytes per drawn value).
+            run_dir = next(Path(tmp).glob("ring*-*"))
+            for kind, args in (("report", ["report", str(run_dir)]),
+                               ("plot", ["plot", str(run_dir), "-o", str(Path(tmp) / "plot.png")])):
+                found = peak_rss_by_process([sys.executable, "-m", "hycosim", *args], timeout).values()
+                peaks[kind] = max(rss for rss, _ in found)
+    if {"server", "node"} - set(peaks):
         raise RuntimeError(f"{system}: found no {' or '.join({'server', 'node'} - set(peaks))} process to measure")
     return peaks
 
@@ -129,7 +138,7 @@ def main() -> None:
     peaks = {(system, steps): measure(system, args.n, steps, args.timeout)
              for steps in lengths for system in ("hycosim", "zenoh-floor")}
     growth = {f"{system} {kind}": peaks[(system, lengths[1])][kind] / peaks[(system, lengths[0])][kind]
-              for system in ("hycosim", "zenoh-floor") for kind in ("server", "node")}
+              for system in ("hycosim", "zenoh-floor") for kind in peaks[(system, lengths[0])]}
     vs_floor = {kind: peaks[("hycosim", lengths[1])][kind] / peaks[("zenoh-floor", lengths[1])][kind]
                 for kind in ("server", "node")}
     if args.json:
@@ -142,7 +151,7 @@ def main() -> None:
     print(f"peak resident set, MiB (ring of {args.n}; the largest node)")
     print(f"{'':<22}{'steps=' + str(lengths[0]):>14}{'steps=' + str(lengths[1]):>14}{'growth':>10}")
     for system in ("hycosim", "zenoh-floor"):
-        for kind in ("server", "node"):
+        for kind in peaks[(system, lengths[0])]:
             short, long = peaks[(system, lengths[0])][kind], peaks[(system, lengths[1])][kind]
             print(f"{system + ' ' + kind:<22}{short:>14.1f}{long:>14.1f}{long / short:>10.3f}")
     print("hycosim / floor: " + ", ".join(f"{kind} {ratio:.2f}×" for kind, ratio in vs_floor.items()))

@@ -10,11 +10,10 @@ file and the line, since nothing the server writes looks like that.
 from __future__ import annotations
 
 import csv
-import io
 import json
 import math
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Iterator
 
 
 class RunFileError(RuntimeError):
@@ -29,27 +28,32 @@ class MissingColumns(RunFileError):
         self.columns = columns
 
 
-def _finished_text(path: Path) -> str:
+def _finished_lines(path: Path) -> Iterator[str]:
+    """The file's lines, newline kept, one at a time; a last line without one (torn) is left out."""
     try:
-        text = path.read_text()
+        f = open(path, newline="")  # noqa: SIM115 - closed below, also when the reader stops early
     except OSError as exc:
         raise RunFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    except UnicodeDecodeError as exc:
-        raise RunFileError(f"{path}: not text ({exc.reason} at byte {exc.start})") from None
-    end = text.rfind("\n") + 1
-    return text[:end]
+    with f:
+        try:
+            for line in f:
+                if line.endswith("\n"):
+                    yield line
+        except UnicodeDecodeError as exc:
+            raise RunFileError(f"{path}: not text ({exc.reason})") from None
 
 
-def read_csv_rows(path: Path, numeric: Callable[[str], bool] | None = None,
-                  required: Iterable[str] = ()) -> list[dict[str, Any]]:
-    """The finished rows of a CSV file with a header, as dicts; a torn last row is left out.
+def iter_csv_rows(path: Path, numeric: Callable[[str], bool] | None = None,
+                  required: Iterable[str] = ()) -> Iterator[dict[str, Any]]:
+    """The finished rows of a CSV file with a header, as dicts, read as they are used: a run of
+    millions of steps is summarised without holding it. A torn last row is left out.
 
     Cells of the columns ``numeric`` accepts become floats (an empty cell None); those of the
     ``required`` ones among them must be finite numbers. A cell that breaks this is an error
     naming the file, the line and the column.
     """
-    reader = csv.DictReader(io.StringIO(_finished_text(path), newline=""))
-    rows: list[dict[str, Any]] = []
+    required = tuple(required)
+    reader = csv.DictReader(_finished_lines(path))
     try:
         header = reader.fieldnames or []
         missing = [c for c in required if c not in header]
@@ -59,13 +63,18 @@ def read_csv_rows(path: Path, numeric: Callable[[str], bool] | None = None,
         for row in reader:
             if None in row or None in row.values():  # more or fewer cells than the header
                 raise RunFileError(f"{path}: line {reader.line_num} does not have one cell for each of "
-                                   f"its {len(reader.fieldnames or [])} columns")
+                                   f"its {len(header)} columns")
             for column in columns:
                 row[column] = _number(row[column], path, reader.line_num, column, column in required)
-            rows.append(row)
+            yield row
     except csv.Error as exc:
         raise RunFileError(f"{path}: line {reader.line_num}: {exc}") from None
-    return rows
+
+
+def read_csv_rows(path: Path, numeric: Callable[[str], bool] | None = None,
+                  required: Iterable[str] = ()) -> list[dict[str, Any]]:
+    """All of :func:`iter_csv_rows` at once, for files known to be small."""
+    return list(iter_csv_rows(path, numeric, required))
 
 
 def _number(text: str, path: Path, line: int, column: str, required: bool) -> float | None:
@@ -86,7 +95,7 @@ def read_jsonl(path: Path) -> list[dict[str, Any]]:
     if not path.exists():
         return []
     records = []
-    for number, line in enumerate(_finished_text(path).splitlines(), start=1):
+    for number, line in enumerate(_finished_lines(path), start=1):
         if not line.strip():
             continue
         try:

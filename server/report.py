@@ -7,15 +7,18 @@ of each step onto its holder tells the user which simulator holds the others bac
 
 from __future__ import annotations
 
+import heapq
+import itertools
 import json
 import math
+from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from fmu_bridge.run_files import RunFileError, read_csv_rows, read_jsonl
+from fmu_bridge.run_files import RunFileError, iter_csv_rows, read_jsonl
 
 
 class RunDirError(RuntimeError):
@@ -79,9 +82,9 @@ def _timing_number(column: str) -> bool:
     return column in ("step", "t", "wait_s", "lateness_s") or column.startswith(("arrival_s:", "age_s:"))
 
 
-def _read_csv(path: Path, numeric=None, required: tuple[str, ...] = ()) -> list[dict[str, Any]]:
+def _rows(path: Path, numeric=None, required: tuple[str, ...] = ()) -> Iterator[dict[str, Any]]:
     try:
-        return read_csv_rows(path, numeric, required)
+        yield from iter_csv_rows(path, numeric, required)
     except RunFileError as exc:
         raise RunDirError(str(exc)) from None
 
@@ -122,16 +125,20 @@ def read_events(run_dir: Path) -> list[dict[str, Any]]:
 
 
 def summarise(run_dir: Path, slowest: int = 5) -> RunSummary:
+    """The report of a run, read in one pass over its timing file (a long run is not held in memory)."""
     meta = read_meta(run_dir)
-    rows = _read_csv(run_dir / "timing.csv", _timing_number, required=("step", "t", "wait_s"))
     waits: dict[str, float] = {}
     counts: dict[str, int] = {}
     arrival_sum: dict[str, float] = {}
     arrival_n: dict[str, int] = {}
     late: list[float] = []
     ages: dict[str, list[float]] = {}
-    stepped = rows[1:]  # step 0's wait is the start-up, not a macro step
-    for row in stepped:
+    ranked: list[tuple[float, int, dict[str, Any]]] = []  # a heap of the slowest steps so far
+    points = 0
+    for index, row in enumerate(_rows(run_dir / "timing.csv", _timing_number, required=("step", "t", "wait_s"))):
+        points += 1
+        if index == 0:
+            continue  # step 0's wait is the start-up, not a macro step
         holder, wait = row["holder"], row["wait_s"]
         waits[holder] = waits.get(holder, 0.0) + wait
         counts[holder] = counts.get(holder, 0) + 1
@@ -144,23 +151,27 @@ def summarise(run_dir: Path, slowest: int = 5) -> RunSummary:
                 ages.setdefault(key.split(":", 1)[1], []).append(value)
         if row["lateness_s"] is not None:
             late.append(row["lateness_s"])
+        # Ties go to the earlier step: the heap's least is the shortest wait, then the latest step.
+        entry = (wait, -index, {"step": int(row["step"]), "t": row["t"], "wait_ms": 1000 * wait, "holder": holder})
+        if len(ranked) < slowest:
+            heapq.heappush(ranked, entry)
+        elif slowest and entry[:2] > ranked[0][:2]:
+            heapq.heapreplace(ranked, entry)
     total_wait = sum(waits.values())
-    ranked = sorted(stepped, key=lambda r: r["wait_s"], reverse=True)[:slowest]
     lateness = None
     if late:
         lateness = {"mean_ms": 1000 * sum(late) / len(late), "max_ms": 1000 * max(late),
                     "late_steps": sum(1 for x in late if x > 0.001), "steps": len(late)}
     # meta.json is rewritten when the run ends; one still "running" is live, or its server
     # was killed: the recorded points are the count then.
-    steps = len(rows) if meta.status == "running" or meta.steps is None else meta.steps
+    steps = points if meta.status == "running" or meta.steps is None else meta.steps
     return RunSummary(
         run_dir=str(run_dir), status=meta.status, reason=meta.reason,
         steps=steps, wall_time_s=meta.wall_time_s, steps_per_s=meta.steps_per_s,
         holder_share={n: (w / total_wait if total_wait > 0 else math.nan) for n, w in sorted(waits.items())},
         holder_steps=dict(sorted(counts.items())),
         mean_arrival_ms={n: 1000 * arrival_sum[n] / arrival_n[n] for n in sorted(arrival_sum)},
-        slowest_steps=[{"step": int(r["step"]), "t": r["t"], "wait_ms": 1000 * r["wait_s"],
-                        "holder": r["holder"]} for r in ranked],
+        slowest_steps=[row for *_, row in sorted(ranked, key=lambda e: e[:2], reverse=True)],
         lateness=lateness, mode_switches=read_events(run_dir),
         dropped_frames=meta.dropped_frames, async_age_ms={k: 1000 * sum(v) / len(v) for k, v in ages.items()},
         wait_strategy=meta.waitStrategy, server_waits=meta.server_waits,
@@ -168,20 +179,76 @@ def summarise(run_dir: Path, slowest: int = 5) -> RunSummary:
 
 
 def read_values(run_dir: Path) -> tuple[list[str], dict[str, list[Any]]]:
-    """The columns of ``values.csv`` and their values: numbers where a cell reads as one, else text."""
-    rows = _read_csv(run_dir / "values.csv", lambda c: c in ("step", "t"), required=("step", "t"))
-    if not rows:
-        return [], {}
-    columns = list(rows[0].keys())
-    data: dict[str, list[Any]] = {c: [] for c in columns}
-    for row in rows:
+    """The columns of ``values.csv`` and their values: numbers where a cell reads as one, else
+    text. Holds the whole file: for the figures of short runs (trials); plots stream."""
+    columns: list[str] = []
+    data: dict[str, list[Any]] = {}
+    for row in _rows(run_dir / "values.csv", lambda c: c in ("step", "t"), required=("step", "t")):
+        if not columns:
+            columns = list(row)
+            data = {c: [] for c in columns}
         for c in columns:
-            v = row[c]
-            try:
-                data[c].append(float(v))
-            except (TypeError, ValueError):
-                data[c].append(v)
+            data[c].append(_number_or_text(row[c]))
     return columns, data
+
+
+def _number_or_text(value: Any) -> Any:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return value
+
+
+PLOT_BUCKETS = 2000  # per line: about two points per pixel of the figure's width
+
+
+def _plotted_columns(run_dir: Path, ports: list[str]) -> dict[str, array]:
+    """``t`` and the ports to draw, as float arrays, in one pass over ``values.csv``: the named
+    ones (a cell that is not a number is an error), or up to 8 that hold numbers only."""
+    path = run_dir / "values.csv"
+    rows = _rows(path, lambda c: c in ("step", "t"), required=("step", "t"))
+    first = next(rows, None)
+    if first is None:
+        raise RunDirError(f"{path}: no macro step recorded (yet): nothing to plot")
+    columns = list(first)
+    unknown = [p for p in ports if p not in columns]
+    if unknown:
+        raise RunDirError(f"{run_dir}: no recorded port {', '.join(unknown)} "
+                          f"(recorded: {', '.join(columns[3:])})")
+    # By default, the first 8 ports that read as numbers; one that turns out to hold text is left out.
+    candidates = ports or [c for c in columns[3:] if isinstance(_number_or_text(first[c]), float)][:8]
+    data = {c: array("d") for c in ("t", *candidates)}
+    for row in itertools.chain([first], rows):
+        data["t"].append(row["t"])
+        for port in [c for c in data if c != "t"]:
+            value = _number_or_text(row[port])
+            if isinstance(value, float):
+                data[port].append(value)
+            elif ports:
+                raise RunDirError(f"{path}: {port} is not a number at step {row['step']:g} "
+                                  f"({str(value)[:40]!r}): only numeric ports can be plotted")
+            else:
+                del data[port]
+    return data
+
+
+def _envelope(t: array, y: array, buckets: int = PLOT_BUCKETS) -> tuple[Any, Any]:
+    """t and y thinned to each bucket's lowest and highest point, in time order: a figure a
+    thousand pixels wide shows the same as with a million points, and draws in a moment."""
+    import numpy as np
+
+    tv, yv = np.frombuffer(t), np.frombuffer(y)
+    if len(tv) <= 4 * buckets:
+        return tv, yv
+    edges = np.linspace(0, len(tv), buckets + 1).astype(int)
+    keep: list[int] = []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        part = yv[lo:hi]
+        if np.isnan(part).all():
+            keep.append(lo)  # one NaN keeps the gap a gap in the line
+            continue
+        keep.extend(sorted({lo + int(np.nanargmin(part)), lo + int(np.nanargmax(part))}))
+    return tv[keep], yv[keep]
 
 
 def plot_run(run_dir: Path, ports: list[str], out: Path) -> Path:
@@ -191,24 +258,12 @@ def plot_run(run_dir: Path, ports: list[str], out: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    columns, data = read_values(run_dir)
-    if not columns:
-        raise RunDirError(f"{run_dir / 'values.csv'}: no macro step recorded (yet): nothing to plot")
-    numeric = [c for c in columns[3:] if all(isinstance(v, float) for v in data[c])]
-    chosen = ports or numeric[:8]
-    unknown = [p for p in chosen if p not in columns]
-    if unknown:
-        raise RunDirError(f"{run_dir}: no recorded port {', '.join(unknown)} "
-                          f"(recorded: {', '.join(columns[3:])})")
-    for port in chosen:
-        text = next((i for i, v in enumerate(data[port]) if not isinstance(v, float)), None)
-        if text is not None:
-            raise RunDirError(f"{run_dir / 'values.csv'}: {port} is not a number at step {data['step'][text]:g} "
-                              f"({str(data[port][text])[:40]!r}): only numeric ports can be plotted")
+    data = _plotted_columns(run_dir, ports)
+    events = read_events(run_dir)
     fig, ax = plt.subplots(figsize=(10, 5))
-    for port in chosen:
-        ax.plot(data["t"], data[port], label=port)
-    for i, ev in enumerate(read_events(run_dir)):
+    for port in (c for c in data if c != "t"):
+        ax.plot(*_envelope(data["t"], data[port]), label=port)
+    for i, ev in enumerate(events):
         ax.axvline(ev["t"], color="red" if ev["to"] != "free" else "green", linestyle="--", linewidth=1,
                    label=f"{ev['from']}→{ev['to']}" if i < 6 else None)
     ax.set_xlabel("t (s)")

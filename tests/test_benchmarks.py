@@ -88,14 +88,14 @@ def test_memory_benchmark_reports_peaks_growth_and_ratios():
     assert res.returncode == 0, res.stderr
     lines = [json.loads(line) for line in res.stdout.splitlines()]
     peaks, summary = lines[:-1], lines[-1]
+    kinds = {"hycosim": ("server", "node", "report", "plot"), "zenoh-floor": ("server", "node")}
     assert sorted((r["system"], r["process"], r["steps"]) for r in peaks) == sorted(
-        (system, kind, steps) for system in ("hycosim", "zenoh-floor") for kind in ("server", "node")
-        for steps in (300, 3000))
+        (system, kind, steps) for system in kinds for kind in kinds[system] for steps in (300, 3000))
     assert all(20 < r["peak_rss_mib"] < 2000 for r in peaks)  # a Python process with zenoh, not a stray one
     rss = {(r["system"], r["process"], r["steps"]): r["peak_rss_mib"] for r in peaks}
     assert summary["vs_floor"]["server"] == pytest.approx(
         rss[("hycosim", "server", 3000)] / rss[("zenoh-floor", "server", 3000)], abs=0.01)
-    assert set(summary["growth"]) == {"hycosim server", "hycosim node", "zenoh-floor server", "zenoh-floor node"}
+    assert set(summary["growth"]) == {f"{system} {kind}" for system in kinds for kind in kinds[system]}
     assert all(0.8 < g < 1.5 for g in summary["growth"].values())
 
 

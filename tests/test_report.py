@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+import math
+
+import pytest
 
 from tests.helpers import hycosim, meta, read_rows, run_project, write_project
 
@@ -162,3 +165,43 @@ def test_a_hand_edited_run_directory_is_named_cell_by_cell_not_a_traceback(tmp_p
     res = hycosim("plot", worded, "g.y", "-o", str(tmp_path / "g.png"))
     assert res.returncode == 0 and (tmp_path / "g.png").stat().st_size > 10_000, res.stderr
     assert json.loads(hycosim("report", str(run), "--json").stdout)["steps"] == 51
+
+
+def test_a_long_run_is_read_back_in_one_pass(tmp_path):
+    """A run of 200,000 recorded steps (the files as the recorder writes them, made here):
+    the report's figures are those of the whole file, and the plot thins each line to its
+    extremes per pixel bucket without losing a peak."""
+    from array import array
+
+    from server.report import PLOT_BUCKETS, _envelope, plot_run, summarise
+
+    run = tmp_path / "long"
+    run.mkdir()
+    n = 200_000
+    (run / "meta.json").write_text(json.dumps({"status": "completed", "steps": n}))
+    waits = [((k * 7919) % 1000) * 1e-6 for k in range(n)]
+    waits[123_456] = 0.5  # the slowest step, held by b
+    with open(run / "timing.csv", "w") as f:
+        f.write("step,t,wait_s,holder,lateness_s,arrival_s:a,arrival_s:b\n")
+        for k, w in enumerate(waits):
+            f.write(f"{k},{k * 0.001!r},{w:.9f},{'b' if k == 123_456 else 'a'},,{w:.9f},{w / 2:.9f}\n")
+    with open(run / "values.csv", "w") as f:
+        f.write("step,t,mode,a.y,b.y\n")
+        for k in range(n):
+            f.write(f"{k},{k * 0.001!r},free,{math.sin(k / 5000)!r},{3.0 if k == 77_777 else 0.0}\n")
+    s = summarise(run)
+    assert s.steps == n and s.holder_steps == {"a": n - 2, "b": 1}
+    assert s.slowest_steps[0] == {"step": 123_456, "t": 123.456, "wait_ms": 500.0, "holder": "b"}
+    assert [r["wait_ms"] for r in s.slowest_steps[1:]] == pytest.approx([0.999] * 4)  # ties: the earliest first
+    assert [r["step"] for r in s.slowest_steps[1:]] == [k for k in range(1, n) if (k * 7919) % 1000 == 999][:4]
+    assert s.mean_arrival_ms["a"] == pytest.approx(1000 * sum(waits[1:]) / (n - 1))
+    t = array("d", (k * 0.001 for k in range(n)))
+    spike = array("d", (3.0 if k == 77_777 else 0.0 for k in range(n)))
+    tt, yy = _envelope(t, spike)
+    assert len(tt) <= 2 * PLOT_BUCKETS and 3.0 in yy and list(tt) == sorted(tt)
+    gap = array("d", (math.nan if 1000 <= k < 5000 else 1.0 for k in range(n)))
+    assert any(math.isnan(v) for v in _envelope(t, gap)[1])  # a gap stays a gap
+    short = array("d", [1.0, 2.0])
+    assert list(_envelope(array("d", [0.0, 1.0]), short)[1]) == [1.0, 2.0]
+    png = plot_run(run, ["a.y", "b.y"], tmp_path / "long.png")
+    assert png.stat().st_size > 10_000

@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from fmu_bridge.run_files import MissingColumns, RunFileError, read_csv_rows
+from fmu_bridge.run_files import MissingColumns, RunFileError, iter_csv_rows
 
 from clients.krl.eki import EkiConfig, frame, krl_program
 from clients.robot import kr6
@@ -36,24 +36,25 @@ def read_path(run_dir: Path, robot: str = "robot") -> JointPath:
     cols = [f"{robot}.q{i}" for i in range(1, 7)]
     flags = (f"{robot}.grasped", f"{robot}.grip_cmd")
     no_path = f"{path}: no joint path ({', '.join(cols)}) recorded for node {robot!r}"
+    t, q, close, grasp = [], [], [], None
+    t0 = None
     try:
-        rows = read_csv_rows(path, lambda c: c == "t" or c in cols or c in flags, required=("t", *cols))
+        # Read up to the grasp only: the path ends there, however long the run went on.
+        for i, r in enumerate(iter_csv_rows(path, lambda c: c == "t" or c in cols or c in flags,
+                                            required=("t", *cols))):
+            t0 = r["t"] if t0 is None else t0
+            t.append(r["t"] - t0)
+            q.append([math.degrees(r[c]) for c in cols])
+            close.append((r.get(flags[1]) or 0.0) > 0.5)
+            if (r.get(flags[0]) or 0.0) > 0.5:
+                grasp = i
+                break
     except MissingColumns as exc:
         raise ExportError(no_path if set(exc.columns) & set(cols) else str(exc)) from None
     except RunFileError as exc:
         raise ExportError(str(exc)) from None
-    if not rows:
+    if not t:
         raise ExportError(no_path)
-    t0 = rows[0]["t"]
-    t, q, close, grasp = [], [], [], None
-    for i, r in enumerate(rows):
-        held = (r.get(flags[0]) or 0.0) > 0.5
-        t.append(r["t"] - t0)
-        q.append([math.degrees(r[c]) for c in cols])
-        close.append((r.get(flags[1]) or 0.0) > 0.5)
-        if held and grasp is None:
-            grasp = i
-            break
     return JointPath(t, q, close, grasp)
 
 
