@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import signal
+import threading
 from pathlib import Path
+from typing import Any
 
 from fmu_bridge import logs
 from fmu_bridge.config import LoadedProject, server_endpoint
@@ -33,6 +36,13 @@ def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
         endpoint = str(parse_endpoint(connect)) if connect else server_endpoint(loaded.project.serverIP)
     except EndpointError as exc:
         return 2, f"{'--connect' if connect else 'serverIP'}: {exc}"
+    interrupted = threading.Event()
+
+    def on_sigint(signum: int, frame: Any) -> None:
+        interrupted.set()
+        signal.default_int_handler(signum, frame)
+
+    previous = signal.signal(signal.SIGINT, on_sigint)
     try:
         password = node_password(loaded, name, password_file)
         impl = load_node(spec, loaded.path.parent if loaded.path else Path.cwd())
@@ -41,7 +51,12 @@ def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
     except RunFailedElsewhere as exc:
         return FAILED_ELSEWHERE, str(exc)
     except (NodeLoadError, NodeRunError, NodeModelError, ConnectError, SecurityError) as exc:
+        if interrupted.is_set():
+            # Ctrl-C while a model's extension module initialised surfaces as an ImportError.
+            return 130, f"node {name!r} interrupted by Ctrl-C"
         return 3, str(exc)
     except KeyboardInterrupt:
         return 130, f"node {name!r} interrupted by Ctrl-C"
+    finally:
+        signal.signal(signal.SIGINT, previous)
     return 0, f"node {name!r} finished after {runtime.steps} steps"

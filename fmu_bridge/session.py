@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import threading
 
 import zenoh
 
@@ -140,8 +141,40 @@ def token_held(session: zenoh.Session, key: str, timeout: float) -> bool:
 
 
 def open_session(conf: zenoh.Config, endpoint: str) -> zenoh.Session:
-    """Open a session; raise ConnectError naming the endpoint if that fails."""
+    """Open a session; raise ConnectError naming the endpoint if that fails.
+
+    ``zenoh.open`` does not return to Python until it connects or its connect timeout passes,
+    so Ctrl-C would wait that long (30 s for a node whose server is not up). It runs in a
+    helper thread while this one waits in short slices, where a KeyboardInterrupt is raised
+    at once; a session that opens after that is closed by the helper.
+    """
+    outcome: list[zenoh.Session | BaseException] = []
+    abandoned = threading.Event()
+    handover = threading.Lock()  # the session is either handed over or closed, never neither
+
+    def attempt() -> None:
+        try:
+            session = zenoh.open(conf)
+        except Exception as exc:  # zenoh raises ZError with the Rust message
+            outcome.append(exc)
+            return
+        with handover:
+            if abandoned.is_set():
+                session.close()
+            else:
+                outcome.append(session)
+
+    helper = threading.Thread(target=attempt, name="zenoh-open", daemon=True)
+    helper.start()
     try:
-        return zenoh.open(conf)
-    except Exception as exc:  # zenoh raises ZError with the Rust message
-        raise ConnectError(f"cannot open Zenoh session on {endpoint}: {zenoh_message(exc)}") from None
+        while helper.is_alive():
+            helper.join(0.1)
+    except KeyboardInterrupt:
+        with handover:
+            abandoned.set()
+            if outcome and isinstance(outcome[0], zenoh.Session):
+                outcome[0].close()
+        raise
+    if isinstance(outcome[0], zenoh.Session):
+        return outcome[0]
+    raise ConnectError(f"cannot open Zenoh session on {endpoint}: {zenoh_message(outcome[0])}") from None

@@ -333,6 +333,23 @@ def test_node_without_server_fails_clearly(tmp_path):
     assert res.returncode == 2 and "no node named 'nobody'" in res.stderr
 
 
+def test_ctrl_c_stops_a_node_still_connecting_to_a_server_that_is_not_up(tmp_path):
+    """zenoh.open keeps trying for its whole connect timeout (30 s here) without returning to
+    Python: Ctrl-C must not wait for it."""
+    cfg = _pair(tmp_path, attachTimeout=30.0)
+    node = spawn("node", "clock", str(cfg))
+    try:
+        time.sleep(3.0)
+        assert node.poll() is None  # still connecting
+        sent = time.monotonic()
+        node.send_signal(signal.SIGINT)
+        _, err = node.communicate(timeout=20)
+        assert node.returncode == 130 and "node 'clock' interrupted by Ctrl-C" in err, err
+        assert time.monotonic() - sent < 10, "Ctrl-C waited for the connect timeout"
+    finally:
+        reap(node)
+
+
 def test_a_misspelt_parameter_of_a_reference_model_is_refused(tmp_path):
     cfg = write_project(tmp_path / "p.json", [
         {"nodeName": "g", "UID": 1, "model": "gain", "parameters": {"k": 2.0, "offset": 1.0}, "input": ["u"],
@@ -340,6 +357,14 @@ def test_a_misspelt_parameter_of_a_reference_model_is_refused(tmp_path):
     res = hycosim("node", "g", str(cfg), timeout=60)
     assert res.returncode == 3, res.stderr
     assert "node 'g': model 'gain' has no parameter 'offset' (its parameters: b, k, work_s)" in res.stderr
+
+
+def test_ctrl_c_while_a_node_loads_its_model_is_an_interruption_not_a_broken_model(tmp_path):
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "slow", "UID": 1, "model": "tests.models.interrupted_import:Never", "output": ["y"]}])
+    res = hycosim("node", "slow", str(cfg), timeout=60)
+    assert res.returncode == 130, res.stderr
+    assert "node 'slow' interrupted by Ctrl-C" in res.stderr and "initialization failed" not in res.stderr
 
 
 def test_embedded_run_reports_a_broken_node_model(tmp_path):
