@@ -55,7 +55,12 @@ def describe(path: Path) -> ModelDescription:
 
 
 def check_platform(path: Path, md: ModelDescription, node: str) -> None:
-    """Raise FmuError unless the FMU has co-simulation and a binary for this platform."""
+    """Raise FmuError unless the FMU is FMI 2.0 or 3.0 with co-simulation and a binary for this platform."""
+    if not md.fmiVersion.startswith(("2", "3")):
+        # FMI 1.0 names every C function differently (fmiDoStep, no fmi2 prefix): refused here
+        # rather than failing on a missing symbol when the binary loads.
+        raise FmuError(f"node {node!r}: {path.name} is an FMI {md.fmiVersion} FMU; hycosim runs FMI 2.0 and 3.0 "
+                       "co-simulation FMUs (export it again as FMI 2.0 or 3.0)")
     if md.coSimulation is None:
         raise FmuError(f"node {node!r}: {path.name} has no co-simulation interface (model exchange only)")
     platforms = fmpy.supported_platforms(str(path))

@@ -137,6 +137,22 @@ def test_fmu_for_another_platform(tmp_path, fmus):
         _instance(tmp_path, win, _gain_node(win))
 
 
+def test_an_fmi_1_fmu_is_refused_before_its_binary_loads(tmp_path, fmus):
+    # A valid FMI 1.0 co-simulation description; its binary (never loaded) has fmiDoStep, not fmi2DoStep.
+    old = tmp_path / "old.fmu"
+    with zipfile.ZipFile(old, "w") as z:
+        z.writestr("modelDescription.xml", (
+            '<?xml version="1.0"?><fmiModelDescription fmiVersion="1.0" modelName="m" modelIdentifier="m" '
+            'guid="{0}" numberOfContinuousStates="0" numberOfEventIndicators="0"><ModelVariables>'
+            '<ScalarVariable name="y" valueReference="0" causality="output"><Real/></ScalarVariable>'
+            '<ScalarVariable name="u" valueReference="1" causality="input"><Real start="0"/></ScalarVariable>'
+            '</ModelVariables><Implementation><CoSimulation_StandAlone><Capabilities/>'
+            '</CoSimulation_StandAlone></Implementation></fmiModelDescription>'))
+        z.writestr("binaries/linux64/m.so", b"\x7fELF")
+    with pytest.raises(FmuError, match="node 'g': old.fmu is an FMI 1.0 FMU; hycosim runs FMI 2.0 and 3.0"):
+        _instance(tmp_path, old, _gain_node(old))
+
+
 def test_do_step_failure_stops_the_run_naming_node_and_time(tmp_path, fmus):
     cfg = write_project(tmp_path / "p.json", [
         {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
