@@ -175,6 +175,7 @@ def open_session(conf: zenoh.Config, endpoint: str) -> zenoh.Session:
             if outcome and isinstance(outcome[0], zenoh.Session):
                 outcome[0].close()
         raise
-    if isinstance(outcome[0], zenoh.Session):
+    if outcome and isinstance(outcome[0], zenoh.Session):
         return outcome[0]
-    raise ConnectError(f"cannot open Zenoh session on {endpoint}: {zenoh_message(outcome[0])}") from None
+    reason = zenoh_message(outcome[0]) if outcome else "the attempt ended without an answer"
+    raise ConnectError(f"cannot open Zenoh session on {endpoint}: {reason}") from None

@@ -134,7 +134,7 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
         except subprocess.TimeoutExpired:
             proc.send_signal(signal.SIGINT if code else signal.SIGKILL)
             interrupted.add(name)
-    deadline = time.monotonic() + 10.0  # one bound for all: a node stuck in a connect ignores SIGINT
+    deadline = time.monotonic() + 10.0  # one bound for all: a node stuck in a blocking call may not see SIGINT
     for name, proc in nodes.items():
         try:
             proc.wait(timeout=max(0.0, deadline - time.monotonic()))

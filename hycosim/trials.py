@@ -208,7 +208,7 @@ class TrialsInterrupted(Exception):
     """Ctrl-C during the trials: ``results`` holds the trials finished before it (in ``trials.csv``)."""
 
     def __init__(self, results: list[TrialResult]):
-        super().__init__(f"interrupted by Ctrl-C after {len(results)} trials")
+        super().__init__(f"interrupted by Ctrl-C after {len(results)} trial{'' if len(results) == 1 else 's'}")
         self.results = results
 
 

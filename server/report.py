@@ -131,8 +131,9 @@ def summarise(run_dir: Path, slowest: int = 5) -> RunSummary:
     counts: dict[str, int] = {}
     arrival_sum: dict[str, float] = {}
     arrival_n: dict[str, int] = {}
-    late: list[float] = []
-    ages: dict[str, list[float]] = {}
+    late = {"n": 0, "sum": 0.0, "max": 0.0, "over_1ms": 0}  # running figures: nothing kept per step
+    age_sum: dict[str, float] = {}
+    age_n: dict[str, int] = {}
     ranked: list[tuple[float, int, dict[str, Any]]] = []  # a heap of the slowest steps so far
     points = 0
     for index, row in enumerate(_rows(run_dir / "timing.csv", _timing_number, required=("step", "t", "wait_s"))):
@@ -148,9 +149,13 @@ def summarise(run_dir: Path, slowest: int = 5) -> RunSummary:
                 arrival_sum[node] = arrival_sum.get(node, 0.0) + value
                 arrival_n[node] = arrival_n.get(node, 0) + 1
             elif key.startswith("age_s:") and value is not None:
-                ages.setdefault(key.split(":", 1)[1], []).append(value)
+                label = key.split(":", 1)[1]
+                age_sum[label] = age_sum.get(label, 0.0) + value
+                age_n[label] = age_n.get(label, 0) + 1
         if row["lateness_s"] is not None:
-            late.append(row["lateness_s"])
+            x = row["lateness_s"]
+            late.update(n=late["n"] + 1, sum=late["sum"] + x, max=max(late["max"], x),
+                        over_1ms=late["over_1ms"] + (x > 0.001))
         # Ties go to the earlier step: the heap's least is the shortest wait, then the latest step.
         entry = (wait, -index, {"step": int(row["step"]), "t": row["t"], "wait_ms": 1000 * wait, "holder": holder})
         if len(ranked) < slowest:
@@ -159,9 +164,9 @@ def summarise(run_dir: Path, slowest: int = 5) -> RunSummary:
             heapq.heapreplace(ranked, entry)
     total_wait = sum(waits.values())
     lateness = None
-    if late:
-        lateness = {"mean_ms": 1000 * sum(late) / len(late), "max_ms": 1000 * max(late),
-                    "late_steps": sum(1 for x in late if x > 0.001), "steps": len(late)}
+    if late["n"]:
+        lateness = {"mean_ms": 1000 * late["sum"] / late["n"], "max_ms": 1000 * late["max"],
+                    "late_steps": late["over_1ms"], "steps": late["n"]}
     # meta.json is rewritten when the run ends; one still "running" is live, or its server
     # was killed: the recorded points are the count then.
     steps = points if meta.status == "running" or meta.steps is None else meta.steps
@@ -173,7 +178,7 @@ def summarise(run_dir: Path, slowest: int = 5) -> RunSummary:
         mean_arrival_ms={n: 1000 * arrival_sum[n] / arrival_n[n] for n in sorted(arrival_sum)},
         slowest_steps=[row for *_, row in sorted(ranked, key=lambda e: e[:2], reverse=True)],
         lateness=lateness, mode_switches=read_events(run_dir),
-        dropped_frames=meta.dropped_frames, async_age_ms={k: 1000 * sum(v) / len(v) for k, v in ages.items()},
+        dropped_frames=meta.dropped_frames, async_age_ms={k: 1000 * age_sum[k] / age_n[k] for k in age_sum},
         wait_strategy=meta.waitStrategy, server_waits=meta.server_waits,
     )
 

@@ -217,7 +217,7 @@ def test_ctrl_c_stops_the_trials_and_tabulates_the_finished_ones(tmp_path):
         os.killpg(proc.pid, signal.SIGINT)
         stdout, err = proc.communicate(timeout=60)
         assert proc.returncode == 130, err
-        assert "interrupted by Ctrl-C after 1 trials of 3: the table holds those" in err and "Traceback" not in err
+        assert "interrupted by Ctrl-C after 1 trial of 3: the table holds those" in err and "Traceback" not in err
         assert "of 1" in stdout and csv_rows() == 1 and not (out / "40deg-02").exists()
         assert (out / "trials.png").stat().st_size > 10_000
     finally:
