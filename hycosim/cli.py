@@ -9,6 +9,7 @@ failed (timeout, lost node, server gone), 4 an internal error or an invalid FMU 
 from __future__ import annotations
 
 import json
+import signal
 import time
 from dataclasses import asdict
 from functools import partial
@@ -111,6 +112,8 @@ def run(
     loaded = _load(file)
     listen = _endpoint("--listen", listen) if listen else None
     result = run_embedded(loaded, file, listen=listen, runs_dir=runs_dir, console=err, show_progress=progress)
+    if result.code == 130:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C pressed twice: the run is over, say so
     if result.code:
         err.print(f"[red]error:[/red] {result.message}\n  results so far: {result.run_dir}", highlight=False)
         raise typer.Exit(result.code)
@@ -650,6 +653,8 @@ def trials(
     try:
         results = run_trials(angle_list, n, output, correction, driver, progress)
     except TrialsInterrupted as exc:
+        # Ctrl-C again must not cut short the table and files of the finished trials (a second or two).
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
         interrupted, results = exc, exc.results
         if not results:
             err.print(f"[red]error:[/red] {exc}; nothing to tabulate", highlight=False)

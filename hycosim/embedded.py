@@ -117,6 +117,26 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
         code, message = 130, "interrupted by Ctrl-C"
         user_stopped = True
     try:
+        return _shut_down(server, nodes, run_dir, code, message, failures, user_stopped)
+    except KeyboardInterrupt:
+        # Ctrl-C again while waiting for the processes to end: stop waiting for the nodes. The
+        # server still writes its records (it ignores Ctrl-C for the seconds that takes).
+        for proc in nodes.values():
+            if proc.poll() is None:
+                proc.kill()
+        try:
+            server.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            server.kill()
+        for proc in (server, *nodes.values()):
+            proc.wait()
+        return EmbeddedResult(130, run_dir, "interrupted by Ctrl-C", {})
+
+
+def _shut_down(server: subprocess.Popen, nodes: dict[str, subprocess.Popen], run_dir: Path, code: int | None,
+               message: str, failures: dict[str, str], user_stopped: bool) -> EmbeddedResult:
+    """Wait for the server and the nodes to end, stop the ones that do not, and say how the run went."""
+    try:
         server.wait(timeout=30)
     except subprocess.TimeoutExpired:
         server.kill()

@@ -69,6 +69,20 @@ def _ctrl_c_deferred():
         signal.signal(signal.SIGINT, previous)
 
 
+def _ctrl_c_once() -> None:
+    """From here on Ctrl-C raises KeyboardInterrupt once and is ignored after that. The handler
+    ignores further ones itself, before the interrupted code unwinds: the launcher passes on
+    the Ctrl-C that a terminal already sent to this process, microseconds apart."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+
+    def interrupt(signum: int, frame: Any) -> None:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, interrupt)
+
+
 class Relay:
     def __init__(self, loaded: LoadedProject, session: zenoh.Session, recorder: Recorder,
                  progress_every_s: float = 0.0, on_progress: Any = None,
@@ -131,6 +145,7 @@ class Relay:
         watcher = self.session.liveliness().declare_subscriber(self.keys.alive_all, self._on_liveliness, history=True)
         status = self.session.declare_queryable(self.keys.status, self._on_status)
         status_text, reason = "failed", ""
+        _ctrl_c_once()
         try:
             self._start_gateway()
             self._wait_for_nodes()
