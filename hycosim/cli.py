@@ -235,7 +235,12 @@ def status(
     try:
         for reply in session.get(ProjectKeys(project).status, timeout=timeout):
             if reply.ok is not None:
-                answers.append(json.loads(reply.ok.payload.to_bytes()))
+                try:
+                    answer = json.loads(reply.ok.payload.to_bytes())
+                except ValueError:
+                    continue  # not a hycosim server's answer (anyone may answer on the key)
+                if isinstance(answer, dict) and {"project", "step", "t", "mode", "attached", "expected"} <= answer.keys():
+                    answers.append(answer)
     finally:
         session.close()
     if not answers:

@@ -79,3 +79,24 @@ def test_logs_are_json_for_collectors_and_text_on_a_terminal(tmp_path):
     to_file = script.replace("logs.configure()", f"logs.configure({str(tmp_path / 'x.log')!r})")
     subprocess.run([sys.executable, "-c", to_file], env=env(), timeout=60, check=True)
     assert json.loads((tmp_path / "x.log").read_text())["step"] == 3  # a file is always JSON lines
+
+
+def test_status_ignores_answers_that_are_not_a_hycosim_servers(tmp_path):
+    """Anyone on the network may answer on the status key; a stranger's answer is no server."""
+    import zenoh
+
+    from fmu_bridge.keys import ProjectKeys
+    from fmu_bridge.session import router_config
+    from tests.helpers import free_endpoint
+
+    endpoint = free_endpoint()
+    strangers = [b"not json", b"[1, 2]", b'{"project": "x"}']
+    with zenoh.open(router_config(endpoint)) as session:
+        queryables = [session.declare_queryable(ProjectKeys(f"p{i}").status,
+                                                lambda q, answer=answer: q.reply(q.key_expr, answer))
+                      for i, answer in enumerate(strangers)]
+        res = hycosim("status", endpoint, "--timeout", "1", timeout=60)
+        for q in queryables:
+            q.undeclare()
+    assert res.returncode == 3 and "Traceback" not in res.stderr
+    assert f"no hycosim server answered on {endpoint}" in res.stderr
