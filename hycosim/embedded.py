@@ -81,7 +81,7 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
     cosim = loaded.project.coSimulation
     total = cosim.stopTime - cosim.startTime
     code, message, failures = None, "", {}
-    user_stopped = False
+    user_stopped = server_stopped = False
     progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(),
                         TextColumn("t={task.fields[t]:.3f}/{task.total:.3f} s"),
                         TextColumn("{task.fields[rate]:.0f} steps/s"), TextColumn("mode={task.fields[mode]}"),
@@ -110,8 +110,11 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
                 for name, proc in nodes.items():
                     if name not in failures and proc.poll() not in (None, 0, FAILED_ELSEWHERE):
                         failures[name] = _tail(run_dir / f"node-{name}.stderr.txt")
-                        if server.poll() is None:
-                            server.send_signal(signal.SIGINT)
+                # A node failed: stop the server, once it has started its records (a server
+                # stopped while it still imports would leave no meta.json to say what happened).
+                if failures and not server_stopped and server.poll() is None and (run_dir / "meta.json").exists():
+                    server.send_signal(signal.SIGINT)
+                    server_stopped = True
     except KeyboardInterrupt:
         server.send_signal(signal.SIGINT)
         code, message = 130, "interrupted by Ctrl-C"

@@ -78,6 +78,9 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     try:
         session = open_session(router_config(endpoint, security=router_security(loaded, endpoint),
                                              low_latency=loaded.project.coSimulation.lowLatency), endpoint)
+    except KeyboardInterrupt:
+        recorder.close("interrupted", reason="interrupted by Ctrl-C before the run started")
+        return done(130, run_dir, "interrupted by Ctrl-C before the run started")
     except Exception as exc:  # SecurityError or ConnectError, both with their own message
         recorder.close("failed", reason=str(exc))
         return done(3, run_dir, str(exc))
@@ -91,6 +94,8 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         code, message = 3, str(exc)
     except KeyboardInterrupt:
         code, message = 130, "interrupted by Ctrl-C; results so far are flushed"
+        if not recorder.closed:  # interrupted while the relay declared itself, before its own shutdown
+            recorder.close("interrupted", reason="interrupted by Ctrl-C")
     except Exception as exc:  # a bug, not bad input: keep the traceback in the log
         log.exception("internal error")
         code, message = 4, f"internal error {type(exc).__name__}: {exc} (traceback in {run_dir / 'server.log.jsonl'})"

@@ -92,6 +92,10 @@ class Recorder:
         tmp.write_text(json.dumps(self.meta, indent=2, default=str))
         tmp.replace(self.run_dir / "meta.json")
 
+    @property
+    def closed(self) -> bool:
+        return self._values_file.closed
+
     def close(self, status: str, **extra: Any) -> None:
         self.meta.update(status=status, finished_at=time.time(), **extra)
         self.meta["wall_time_s"] = self.meta["finished_at"] - self.meta["started_at"]
