@@ -158,7 +158,7 @@ def plot(results: list[TrialResult], path: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from server.report import read_values
+    from server.report import read_columns
 
     table = summarise(results)
     angles = list(table)
@@ -179,7 +179,7 @@ def plot(results: list[TrialResult], path: Path) -> Path:
         fig.savefig(path, dpi=100)
         plt.close(fig)
         return path
-    columns, data = read_values(Path(example.run_dir))
+    data = read_columns(Path(example.run_dir), ["rod.angle", "robot.dist"])
     t = np.array(data["t"])
     ax.plot(t, np.degrees(data["rod.angle"]), label="rod twin angle (°)")
     from clients.rod.model import RodModel

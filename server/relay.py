@@ -17,7 +17,6 @@ import os
 import signal
 import threading
 import time
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -54,30 +53,22 @@ class Progress:
     attached: list[str] = field(default_factory=list)
 
 
-@contextmanager
-def _ctrl_c_deferred():
-    """Ignore Ctrl-C while the run shuts down (a few seconds at most): a terminal's Ctrl-C
-    reaches every process of the group and a launcher may pass on another, and a second
-    KeyboardInterrupt here would leave the run's metadata unwritten."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
+def _ignore_ctrl_c() -> None:
+    """Ignore Ctrl-C from here on (the server's process is on its way out): a terminal's Ctrl-C
+    reaches every process of the group and the launcher passes on another, microseconds
+    apart, and a KeyboardInterrupt during the shutdown would leave the run's records unwritten."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _ctrl_c_once() -> None:
-    """From here on Ctrl-C raises KeyboardInterrupt once and is ignored after that. The handler
-    ignores further ones itself, before the interrupted code unwinds: the launcher passes on
-    the Ctrl-C that a terminal already sent to this process, microseconds apart."""
+    """From here on Ctrl-C raises KeyboardInterrupt once; the handler ignores further ones
+    itself, before the interrupted code unwinds."""
     if threading.current_thread() is not threading.main_thread():
         return
 
     def interrupt(signum: int, frame: Any) -> None:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        _ignore_ctrl_c()
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGINT, interrupt)
@@ -158,20 +149,20 @@ class Relay:
             reason = str(exc)
             raise
         finally:
-            with _ctrl_c_deferred():
-                self._broadcast_stop(status_text if not reason else reason)
-                self._await_departures()
-                if self.gateway is not None:
-                    self.gateway.close(reason or status_text)
-                self.recorder.close(status_text, reason=reason, dropped_frames=dict(self.intake.dropped),
-                                    reattached=dict(self.reattached), server_waits=self.inbox.waits,
-                                    samples_received={n: h.received for n, h in self.histories.items()})
-                for decl in (status, watcher, token):
-                    try:
-                        decl.undeclare()
-                    except Exception:
-                        pass
-                self.inbox.close()
+            _ignore_ctrl_c()
+            self._broadcast_stop(status_text if not reason else reason)
+            self._await_departures()
+            if self.gateway is not None:
+                self.gateway.close(reason or status_text)
+            self.recorder.close(status_text, reason=reason, dropped_frames=dict(self.intake.dropped),
+                                reattached=dict(self.reattached), server_waits=self.inbox.waits,
+                                samples_received={n: h.received for n, h in self.histories.items()})
+            for decl in (status, watcher, token):
+                try:
+                    decl.undeclare()
+                except Exception:
+                    pass
+            self.inbox.close()
 
     def _await_departures(self, timeout: float = 3.0) -> None:
         """After STOP, give the nodes a moment to leave before this session closes: closing at

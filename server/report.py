@@ -183,20 +183,6 @@ def summarise(run_dir: Path, slowest: int = 5) -> RunSummary:
     )
 
 
-def read_values(run_dir: Path) -> tuple[list[str], dict[str, list[Any]]]:
-    """The columns of ``values.csv`` and their values: numbers where a cell reads as one, else
-    text. Holds the whole file: for the figures of short runs (trials); plots stream."""
-    columns: list[str] = []
-    data: dict[str, list[Any]] = {}
-    for row in _rows(run_dir / "values.csv", lambda c: c in ("step", "t"), required=("step", "t")):
-        if not columns:
-            columns = list(row)
-            data = {c: [] for c in columns}
-        for c in columns:
-            data[c].append(_number_or_text(row[c]))
-    return columns, data
-
-
 def _number_or_text(value: Any) -> Any:
     try:
         return float(value)
@@ -207,9 +193,10 @@ def _number_or_text(value: Any) -> Any:
 PLOT_BUCKETS = 2000  # per line: about two points per pixel of the figure's width
 
 
-def _plotted_columns(run_dir: Path, ports: list[str]) -> dict[str, array]:
-    """``t`` and the ports to draw, as float arrays, in one pass over ``values.csv``: the named
-    ones (a cell that is not a number is an error), or up to 8 that hold numbers only."""
+def read_columns(run_dir: Path, ports: list[str]) -> dict[str, array]:
+    """``t`` and the chosen ports as float arrays, in one pass over ``values.csv`` (nothing else
+    of the run is held): the named ones (a cell that is not a number is an error), or with no
+    names up to 8 that hold numbers only."""
     path = run_dir / "values.csv"
     rows = _rows(path, lambda c: c in ("step", "t"), required=("step", "t"))
     first = next(rows, None)
@@ -263,7 +250,7 @@ def plot_run(run_dir: Path, ports: list[str], out: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    data = _plotted_columns(run_dir, ports)
+    data = read_columns(run_dir, ports)
     events = read_events(run_dir)
     fig, ax = plt.subplots(figsize=(10, 5))
     for port in (c for c in data if c != "t"):
