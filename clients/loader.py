@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 import importlib
 from pathlib import Path
 
@@ -27,17 +28,18 @@ class NodeLoadError(RuntimeError):
     """A node entry whose implementation cannot be found or made."""
 
 
-def load_node(spec: NodeSpec, project_dir: Path) -> Node | AsyncSource:
-    """Instantiate the implementation named by the node's ``model`` or ``fmu``."""
-    if spec.fmu:
-        from clients.fmu_node import FmuNode
+def _fmu_path(spec: NodeSpec, project_dir: Path) -> Path:
+    path = (project_dir / spec.fmu).resolve()
+    if not path.is_file():
+        raise NodeLoadError(f"node {spec.nodeName!r}: FMU file {path} does not exist")
+    if spec.asynchronous:
+        raise NodeLoadError(f"node {spec.nodeName!r}: an FMU node steps; it cannot be asynchronous")
+    return path
 
-        path = (project_dir / spec.fmu).resolve()
-        if not path.is_file():
-            raise NodeLoadError(f"node {spec.nodeName!r}: FMU file {path} does not exist")
-        if spec.asynchronous:
-            raise NodeLoadError(f"node {spec.nodeName!r}: an FMU node steps; it cannot be asynchronous")
-        return FmuNode(spec, path)
+
+def model_class(spec: NodeSpec) -> type[Node] | type[AsyncSource]:
+    """The class a Python node entry names, imported and checked against the entry: a Node
+    for a stepping node, an AsyncSource for an asynchronous one, taking the parameters given."""
     if not spec.model:
         raise NodeLoadError(f"node {spec.nodeName!r} names no 'model' to run; give a reference model "
                             f"({', '.join(sorted(REFERENCE_MODELS))}) or 'module:Class'")
@@ -48,15 +50,41 @@ def load_node(spec: NodeSpec, project_dir: Path) -> Node | AsyncSource:
                             f"({', '.join(sorted(REFERENCE_MODELS))}) nor 'module:Class'")
     try:
         cls = getattr(importlib.import_module(module_name), class_name)
-    except (ImportError, AttributeError) as exc:
-        raise NodeLoadError(f"node {spec.nodeName!r}: cannot load model {spec.model!r}: {exc}") from None
-    impl = cls()
-    if spec.asynchronous and not isinstance(impl, AsyncSource):
-        raise NodeLoadError(f"node {spec.nodeName!r} is asynchronous but {target} is not an AsyncSource")
-    if not spec.asynchronous and not isinstance(impl, Node):
-        raise NodeLoadError(f"node {spec.nodeName!r}: {target} is not a Node")
-    unknown = sorted(set(spec.parameters) - impl.PARAMETERS) if impl.PARAMETERS is not None else []
+    except Exception as exc:  # the user's module may fail to import in any way (SyntaxError, its own errors)
+        detail = str(exc) if isinstance(exc, (ImportError, AttributeError)) else f"{type(exc).__name__}: {exc}"
+        raise NodeLoadError(f"node {spec.nodeName!r}: cannot load model {spec.model!r}: {detail}") from None
+    kind = AsyncSource if spec.asynchronous else Node
+    if not (isinstance(cls, type) and issubclass(cls, kind)):
+        raise NodeLoadError(f"node {spec.nodeName!r} is asynchronous but {target} is not an AsyncSource"
+                            if spec.asynchronous else f"node {spec.nodeName!r}: {target} is not a Node")
+    declared = cls.PARAMETERS
+    unknown = sorted(set(spec.parameters) - declared) if declared is not None else []
     if unknown:
+        guesses = [m for name in unknown for m in difflib.get_close_matches(name, declared, n=1)]
         raise NodeLoadError(f"node {spec.nodeName!r}: model {spec.model!r} has no parameter "
-                            f"{', '.join(map(repr, unknown))} (its parameters: {', '.join(sorted(impl.PARAMETERS))})")
-    return impl
+                            f"{', '.join(map(repr, unknown))} (its parameters: {', '.join(sorted(declared))})"
+                            + (f"; did you mean {', '.join(map(repr, guesses))}?" if guesses else ""))
+    return cls
+
+
+def check_node(spec: NodeSpec, project_dir: Path) -> None:
+    """Raise NodeLoadError if the node's implementation could not be loaded as the entry says
+    (without making it: no model is set up, no FMU binary loaded)."""
+    if spec.fmu:
+        from fmu_bridge.fmu_loader import FmuError, check_fmu
+
+        try:
+            check_fmu(_fmu_path(spec, project_dir), spec)
+        except FmuError as exc:
+            raise NodeLoadError(str(exc)) from None
+    else:
+        model_class(spec)
+
+
+def load_node(spec: NodeSpec, project_dir: Path) -> Node | AsyncSource:
+    """Instantiate the implementation named by the node's ``model`` or ``fmu``."""
+    if spec.fmu:
+        from clients.fmu_node import FmuNode
+
+        return FmuNode(spec, _fmu_path(spec, project_dir))
+    return model_class(spec)()

@@ -494,6 +494,13 @@ def check_semantics(project: Project) -> tuple[list[Route], dict[str, EventGuard
             issues.append(Issue("coSimulation.stepSize", f"stepSize {cosim.stepSize:g} does not advance a time "
                                 f"of {getattr(cosim, stuck[0]):g} s ({stuck[0]}): the run would never end",
                                 "a step above the float resolution of startTime and stopTime (about 1e-16 of them)"))
+    if cosim.eventTolerance is not None and cosim.eventTolerance >= cosim.stepSize:
+        # Without rollback a crossing is already placed within one step; a tolerance that is
+        # no finer would make rollback bisect nothing and cost a state save every step.
+        issues.append(Issue("coSimulation.eventTolerance", f"eventTolerance {cosim.eventTolerance:g} s is not "
+                            f"smaller than stepSize {cosim.stepSize:g} s, so it would locate nothing",
+                            "a tolerance below stepSize, or leave eventTolerance out (crossings are then "
+                            "located to within one step)"))
     if not isinstance(cosim.realTime, bool) and cosim.realTime < 0:
         issues.append(Issue("coSimulation.realTime", f"realTime {cosim.realTime:g} is negative",
                             "false (as fast as possible), true, or a factor > 0 (wall time = simulated time × factor)"))

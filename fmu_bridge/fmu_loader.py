@@ -8,6 +8,7 @@ is one, the variable.
 
 from __future__ import annotations
 
+import difflib
 import shutil
 import tempfile
 from dataclasses import dataclass
@@ -117,6 +118,28 @@ def map_driven(md: ModelDescription, node: Node, path: Path) -> ScalarVariable |
     return var
 
 
+def check_parameters(md: ModelDescription, node: str, parameters: dict[str, Any], path: Path) -> None:
+    """Raise FmuError unless every key of ``parameters`` names a variable of the FMU."""
+    names = {v.name for v in md.modelVariables}
+    unknown = sorted(set(parameters) - names)
+    if unknown:
+        guesses = [m for name in unknown for m in difflib.get_close_matches(name, names, n=1)]
+        raise FmuError(f"node {node!r}: parameter {', '.join(map(repr, unknown))} "
+                       f"{'is not a variable' if len(unknown) == 1 else 'are not variables'} of {path.name}"
+                       + (f"; did you mean {', '.join(map(repr, guesses))}?" if guesses else ""))
+
+
+def check_fmu(path: Path, node: Node) -> None:
+    """Everything FmuInstance checks before it loads the binary: the FMU is readable, FMI 2.0
+    or 3.0 co-simulation with a binary for this platform, and the node's ports, drivenVariable
+    and parameters map onto its variables. Nothing is extracted or instantiated."""
+    md = describe(path)
+    check_platform(path, md, node.nodeName)
+    map_ports(md, node, path)
+    map_driven(md, node, path)
+    check_parameters(md, node.nodeName, node.parameters, path)
+
+
 class FmuInstance:
     """One instantiated co-simulation FMU playing one node."""
 
@@ -127,6 +150,7 @@ class FmuInstance:
         check_platform(path, self.md, self.node)
         self.inputs, self.outputs = map_ports(self.md, node, path)
         self.driven_variable = map_driven(self.md, node, path)
+        check_parameters(self.md, self.node, parameters, path)
         self.fmi3 = self.md.fmiVersion.startswith("3")
         cs = self.md.coSimulation
         self.can_rollback = bool(getattr(cs, "canGetAndSetFMUstate", False))

@@ -49,12 +49,31 @@ def _endpoint(option: str, value: str, parse=parse_endpoint) -> str:
 
 
 @app.command()
-def validate(file: Path) -> None:
+def validate(
+    file: Path,
+    models: Annotated[bool, typer.Option(help="also check that each node's model or FMU exists and takes "
+                                              "the node's ports and parameters (imports the models)")] = True,
+) -> None:
     """Check a project JSON: print OK, or every error with its JSON path and a hint."""
     loaded = _load(file)
     p = loaded.project
+    if models:
+        from clients.loader import NodeLoadError, check_node
+
+        problems = []
+        for i, node in enumerate(p.nodeLists):
+            try:
+                check_node(node, loaded.path.parent)
+            except NodeLoadError as exc:
+                problems.append(f"{file}: nodeLists[{i}]: {exc}")
+        if problems:
+            err.print(f"[red]error:[/red] {file}: {len(problems)} node(s) cannot be loaded", highlight=False)
+            for line in problems:
+                err.print(f"  {line}", highlight=False, markup=False)
+            raise typer.Exit(2)
     out.print(f"OK {file}: project {p.projectName!r}, {len(p.nodeLists)} nodes, {len(p.linkLists)} links, "
-              f"{len(loaded.routes)} routes, {len(p.events)} events", highlight=False)
+              f"{len(loaded.routes)} routes, {len(p.events)} events" + ("" if models else " (models not checked)"),
+              highlight=False)
 
 
 @app.command()

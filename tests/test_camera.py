@@ -170,3 +170,17 @@ def test_camera_correction_over_zenoh_brings_the_twin_onto_the_emulated_rod(tmp_
         assert 0 < max(latency) < 0.05
     assert errors[12.0] < math.radians(0.5)
     assert errors[0.0] > math.radians(2.0)
+
+
+@pytest.mark.parametrize("physical, expected", [
+    ({"lenght": 0.6}, "parameters.physical has no parameter 'lenght'"),
+    ([0.6], "parameters.physical must be an object of the rod's parameters"),
+])
+def test_the_emulated_rods_parameters_are_checked_by_name(tmp_path, physical, expected):
+    from clients.camera.node import CameraNode
+    from clients.node import NodeContext
+
+    ctx = NodeContext(name="cam", uid=9, inputs=[], outputs=[], parameters={"physical": physical},
+                      step_size=0.01, start_time=0.0, project_dir=tmp_path)
+    with pytest.raises(CameraError, match=f"camera node 'cam': {expected}"):
+        CameraNode().setup(ctx)

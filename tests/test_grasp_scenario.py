@@ -14,7 +14,7 @@ from fmpy.validation import validate_fmu
 
 from clients.rod.model import RodModel, RodParams
 from clients.scene_fmus import build_scene_fmus
-from tests.helpers import REPO, column, read_rows, run_project
+from tests.helpers import REPO, column, hycosim, read_rows, run_project
 
 
 def _check_grasp(run: Path, rows: list[dict]) -> None:
@@ -66,5 +66,15 @@ def test_scene_fmus_run_in_plain_fmpy_and_as_nodes(tmp_path):
     assert math.isclose(res["q1"][-1], 0.5) and math.isclose(res["q1"][1], math.radians(360) * 0.01)
     cfg = _shortened(REPO / "configs" / "grasp-fmu.json", tmp_path / "grasp-fmu.json", 1.5,
                      {"rod": fmus["rod"], "robot": fmus["robot"]})
+    res = hycosim("validate", str(cfg))
+    assert res.returncode == 0, res.stderr
+    doc = json.loads(cfg.read_text())
+    doc["nodeLists"][0]["parameters"]["lenght"] = 0.6
+    doc["nodeLists"][1]["output"][0] = {"name": "q1", "variable": "q_1"}
+    (tmp_path / "misspelt.json").write_text(json.dumps(doc))
+    res = hycosim("validate", str(tmp_path / "misspelt.json"))
+    assert res.returncode == 2
+    assert "nodeLists[0]: node 'rod': parameter 'lenght' is not a variable of Rod.fmu; did you mean 'length'?" in res.stderr
+    assert "nodeLists[1]: node 'robot': output 'q1' maps to variable 'q_1', which RobotScene6.fmu does not have" in res.stderr
     run = run_project(cfg, tmp_path / "runs")
     _check_grasp(run, read_rows(run))

@@ -30,7 +30,7 @@ from clients.camera.emulated import CameraSetup, EmulatedRodCamera, Frame
 from clients.camera.sources import CameraError, DeviceSource, VideoFileSource
 from clients.camera.tracker import Tracker
 from clients.node import AsyncSource, NodeContext
-from clients.rod.node import rod_params
+from clients.rod.node import ROD_PARAMETERS, rod_params
 
 
 def camera_setup(parameters: dict[str, Any]) -> CameraSetup:
@@ -44,13 +44,22 @@ def camera_setup(parameters: dict[str, Any]) -> CameraSetup:
 
 
 class CameraNode(AsyncSource):
+    PARAMETERS = frozenset({"source", "width", "height", "fps", "rate", "noise_sigma", "blur_sigma",
+                            "drop_probability", "seed", "physical", "calibration", "buffer_frames"})
+
     def setup(self, ctx: NodeContext) -> None:
         params = ctx.parameters
+        physical = params.get("physical", {})
+        unknown = sorted(set(physical) - ROD_PARAMETERS) if isinstance(physical, dict) else None
+        if unknown is None or unknown:
+            raise CameraError(f"camera node {ctx.name!r}: parameters.physical " + (
+                f"has no parameter {', '.join(map(repr, unknown))} (the rod's parameters: "
+                f"{', '.join(sorted(ROD_PARAMETERS))})" if unknown else "must be an object of the rod's parameters"))
         source = str(params.get("source", "emulated"))
         self.emulated: EmulatedRodCamera | None = None
         self.stream = None
         if source == "emulated":
-            self.emulated = EmulatedRodCamera(rod_params(params.get("physical", {})), camera_setup(params))
+            self.emulated = EmulatedRodCamera(rod_params(physical), camera_setup(params))
             calibration = self.emulated.calibration
         else:
             cal_file = params.get("calibration")

@@ -20,7 +20,7 @@ from clients.node import Node, NodeContext
 from clients.policy.ddpg import load_policy
 from clients.policy.features import Predictor, action_to_targets, grip_reflex, missed, observe
 from clients.robot import kr6
-from clients.robot.node import scene_params
+from clients.robot.node import SCENE_PARAMETERS, scene_params
 from clients.robot.scene import RobotScene, SceneParams
 from clients.rod.model import RodModel
 from clients.rod.node import rod_params
@@ -29,6 +29,8 @@ PRETRAINED = Path(__file__).with_name("pretrained") / "ddpg_grasp.pt"
 
 
 class PolicyNode(Node):
+    PARAMETERS = SCENE_PARAMETERS | {"checkpoint"}
+
     def setup(self, ctx: NodeContext) -> None:
         given = ctx.parameters.get("checkpoint")
         path = (ctx.project_dir / given) if given else PRETRAINED

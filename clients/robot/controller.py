@@ -21,7 +21,7 @@ import numpy as np
 
 from clients.node import Node, NodeContext
 from clients.robot import kr6
-from clients.robot.node import scene_params
+from clients.robot.node import SCENE_PARAMETERS, scene_params
 from clients.robot.scene import RobotScene, SceneParams
 from clients.rod.model import RodModel
 from clients.rod.node import rod_params
@@ -73,6 +73,8 @@ class ReferenceController(Node):
     """Parameters: the rod's (as for the rod node), ``close_lead`` s before the turning point
     to start closing (default: the jaws' closing time plus half a step, so that they meet the
     rod at the turning point), ``replan_every`` s (0.1)."""
+
+    PARAMETERS = SCENE_PARAMETERS | {"close_lead", "replan_every"}
 
     def setup(self, ctx: NodeContext) -> None:
         self.rod = RodModel(rod_params(ctx.parameters))

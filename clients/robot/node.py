@@ -16,7 +16,11 @@ import numpy as np
 from clients.node import Node, NodeContext
 from clients.robot import kr6
 from clients.robot.scene import RobotScene, SceneOutputs, SceneParams
-from clients.rod.node import rod_params
+from clients.rod.node import ROD_PARAMETERS, rod_params
+
+
+# What scene_params reads.
+SCENE_PARAMETERS = ROD_PARAMETERS | {"base", "check_reach"}
 
 
 def scene_params(parameters: dict[str, Any]) -> SceneParams:
@@ -43,6 +47,8 @@ def scene_output_dict(o: SceneOutputs) -> dict[str, Any]:
 
 
 class RobotNode(Node):
+    PARAMETERS = SCENE_PARAMETERS | {"q0_deg"}
+
     def setup(self, ctx: NodeContext) -> None:
         self.scene = RobotScene(scene_params(ctx.parameters))
         q0 = ctx.parameters.get("q0_deg")

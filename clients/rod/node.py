@@ -17,6 +17,12 @@ from clients.node import Node, NodeContext
 from clients.rod.model import RodModel, RodParams
 
 
+# What rod_params reads: the rod node's parameters, and part of every grasp node's (they
+# share the rod's description so that a project states it once per node alike).
+ROD_PARAMETERS = frozenset({"length", "mass", "radius", "damping", "pivot", "grasp_distance", "initial_angle_deg",
+                            "initial_omega", "observer_gain"})
+
+
 def rod_params(parameters: dict[str, Any]) -> RodParams:
     """RodParams from a node's ``parameters`` (angles in degrees, as people write them)."""
     d = RodParams()
@@ -34,6 +40,8 @@ def rod_params(parameters: dict[str, Any]) -> RodParams:
 
 
 class RodNode(Node):
+    PARAMETERS = ROD_PARAMETERS
+
     def setup(self, ctx: NodeContext) -> None:
         self.rod = RodModel(rod_params(ctx.parameters))
         self.mode_driven = False
