@@ -57,14 +57,19 @@ def model_class(spec: NodeSpec) -> type[Node] | type[AsyncSource]:
     if not (isinstance(cls, type) and issubclass(cls, kind)):
         raise NodeLoadError(f"node {spec.nodeName!r} is asynchronous but {target} is not an AsyncSource"
                             if spec.asynchronous else f"node {spec.nodeName!r}: {target} is not a Node")
-    declared = cls.PARAMETERS
-    unknown = sorted(set(spec.parameters) - declared) if declared is not None else []
+    _check_names(spec, "parameter", spec.parameters, cls.PARAMETERS)
+    _check_names(spec, "input", spec.input_names(), getattr(cls, "INPUTS", None))
+    _check_names(spec, "output", spec.output_names(), cls.OUTPUTS)
+    return cls
+
+
+def _check_names(spec: NodeSpec, kind: str, given, declared: frozenset[str] | None) -> None:
+    unknown = sorted(set(given) - declared) if declared is not None else []
     if unknown:
         guesses = [m for name in unknown for m in difflib.get_close_matches(name, declared, n=1)]
-        raise NodeLoadError(f"node {spec.nodeName!r}: model {spec.model!r} has no parameter "
-                            f"{', '.join(map(repr, unknown))} (its parameters: {', '.join(sorted(declared))})"
+        raise NodeLoadError(f"node {spec.nodeName!r}: model {spec.model!r} has no {kind} "
+                            f"{', '.join(map(repr, unknown))} (its {kind}s: {', '.join(sorted(declared)) or 'none'})"
                             + (f"; did you mean {', '.join(map(repr, guesses))}?" if guesses else ""))
-    return cls
 
 
 def check_node(spec: NodeSpec, project_dir: Path) -> None:

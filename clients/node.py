@@ -55,6 +55,11 @@ class Node(ABC):
     # other is refused at load, since a misspelt parameter would leave its default in
     # place without a word. None: not declared (the model reads what it likes).
     PARAMETERS: ClassVar[frozenset[str] | None] = None
+    # Likewise the input ports the model reads and the outputs it gives: an entry naming any
+    # other port is refused at load (an input read with a default, misspelt in the project
+    # file, would keep its default for the whole run). None: not declared.
+    INPUTS: ClassVar[frozenset[str] | None] = None
+    OUTPUTS: ClassVar[frozenset[str] | None] = None
 
     def setup(self, ctx: NodeContext) -> None:
         """Prepare the model; called once before the node attaches."""
@@ -92,6 +97,7 @@ class AsyncSource(ABC):
     """A source that publishes timestamped samples at its own rate instead of stepping."""
 
     PARAMETERS: ClassVar[frozenset[str] | None] = None  # as for Node
+    OUTPUTS: ClassVar[frozenset[str] | None] = None  # as for Node
 
     def setup(self, ctx: NodeContext) -> None:
         """Prepare the source; called once before the node attaches."""

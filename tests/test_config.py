@@ -77,18 +77,24 @@ def test_validate_checks_that_every_node_can_be_loaded_as_written(tmp_path):
         {"nodeName": "src", "UID": 4, "model": "gain", "async": True, "output": ["y"]},
         {"nodeName": "f", "UID": 5, "fmu": "missing.fmu", "output": ["y"]},
         {"nodeName": "fine", "UID": 6, "model": "ramp", "parameters": {"a": 1.0}, "output": ["y", "v"]},
+        # an input read with a default: misspelt, the camera's correction would never reach the twin
+        {"nodeName": "twin", "UID": 7, "model": "rod", "input": ["meas_angel"], "output": ["angle", "omega"]},
+        {"nodeName": "h", "UID": 8, "model": "gain", "input": ["u"], "output": ["y", "y2"]},
     ]
     p = write_project(tmp_path / "p.json", nodes, [{"from": "fine.y", "to": "g.u"}])
     res = hycosim("validate", str(p))
     assert res.returncode == 2 and "Traceback" not in res.stderr
-    assert f"{p}: 5 node(s) cannot be loaded" in res.stderr
+    assert f"{p}: 7 node(s) cannot be loaded" in res.stderr
     lines = [line.strip() for line in res.stderr.splitlines()[1:]]
-    assert len(lines) == 5 and all(line.startswith(f"{p}: nodeLists[") for line in lines)
+    assert len(lines) == 7 and all(line.startswith(f"{p}: nodeLists[") for line in lines)
     assert "nodeLists[0]: node 'g': model 'gain' has no parameter 'kk'" in lines[0] and "did you mean 'k'?" in lines[0]
     assert "nodeLists[1]: node 'rod'" in lines[1] and "did you mean 'initial_angle_deg'?" in lines[1]
     assert "nodeLists[2]: node 'x': cannot load model 'no_such_module:Thing'" in lines[2]
     assert "nodeLists[3]: node 'src' is asynchronous but clients.reference.gain:Gain is not an AsyncSource" in lines[3]
     assert "nodeLists[4]: node 'f': FMU file" in lines[4] and "missing.fmu does not exist" in lines[4]
+    assert "nodeLists[6]: node 'twin': model 'rod' has no input 'meas_angel'" in lines[5]
+    assert "did you mean 'meas_angle'?" in lines[5]
+    assert "nodeLists[7]: node 'h': model 'gain' has no output 'y2' (its outputs: y)" in lines[6]
     res = hycosim("validate", str(p), "--no-models")
     assert res.returncode == 0 and res.stdout.rstrip().endswith("(models not checked)")
 

@@ -83,3 +83,37 @@ def test_modules_in_the_working_folder_do_not_replace_the_libraries_of_the_nodes
     assert not any("was imported" in p.read_text() for p in run.glob("*.stderr.txt"))
     rows = read_rows(run)
     assert len(rows) == 11 and column(rows, "g.u") == column(rows, "clock.y")
+
+
+def _grasp_parameters() -> dict:
+    import json
+
+    from tests.helpers import REPO
+
+    return json.loads((REPO / "configs" / "grasp-policy.json").read_text())["nodeLists"][0]["parameters"]
+
+
+def test_every_shipped_model_gives_exactly_the_outputs_it_declares(tmp_path):
+    """The port names a model declares are what load and validate check entries against: they
+    must be the model's real outputs, not a list that drifted from its code."""
+    from clients.loader import REFERENCE_MODELS, model_class
+    from clients.node import AsyncSource, NodeContext
+    from fmu_bridge.config import Node as NodeSpec
+
+    grasp = _grasp_parameters()
+    for name in REFERENCE_MODELS:
+        asynchronous = name in ("camera", "ramp_source")
+        cls = model_class(NodeSpec.model_validate({"nodeName": "n", "UID": 1, "model": name, "async": asynchronous}))
+        assert cls.OUTPUTS, name
+        params = {k: v for k, v in grasp.items() if cls.PARAMETERS is not None and k in cls.PARAMETERS}
+        impl = cls()
+        impl.setup(NodeContext("n", 1, [], [], params, 0.01, 0.0, tmp_path))
+        try:
+            if isinstance(impl, AsyncSource):
+                samples = list(impl.samples_until(0.2))
+                assert samples and all(set(values) == cls.OUTPUTS for _, values in samples), name
+            else:
+                assert set(impl.outputs()) == cls.OUTPUTS, name
+                assert cls.INPUTS is not None, name
+        finally:
+            impl.teardown()

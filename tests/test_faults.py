@@ -90,7 +90,8 @@ def test_server_killed_mid_run_leaves_a_readable_run_and_the_nodes_stop(tmp_path
 def test_a_node_with_another_version_of_the_project_file_stops_the_run_naming_its_ports(tmp_path):
     cfg = _pair(tmp_path, stepTimeout=30.0)
     stale = json.loads(cfg.read_text())
-    stale["nodeLists"][1]["input"] = ["u", {"name": "gate", "type": "Boolean"}]  # g, as a newer file has it
+    stale["nodeLists"][1]["input"] = []  # g, as an older file had it, before it was fed by the clock
+    stale["linkLists"], stale["linkNum"] = [], 0
     stale_cfg = tmp_path / "stale.json"
     stale_cfg.write_text(json.dumps(stale))
     run_dir = tmp_path / "run"
@@ -100,7 +101,7 @@ def test_a_node_with_another_version_of_the_project_file_stops_the_run_naming_it
         _, err = server.communicate(timeout=20)  # well before the step timeout of 30 s
         assert server.returncode == 3
         assert ("node 'g' attached with another version of its entry in the project file: its inputs are "
-                "u:Real, gate:Boolean, the server's u:Real. Give every process the same project file") in err
+                "none, the server's u:Real. Give every process the same project file") in err
         for p in nodes:
             _, node_err = p.communicate(timeout=20)
             assert p.returncode == 5 and "another version of its entry" in node_err, node_err

@@ -46,6 +46,7 @@ def camera_setup(parameters: dict[str, Any]) -> CameraSetup:
 class CameraNode(AsyncSource):
     PARAMETERS = frozenset({"source", "width", "height", "fps", "rate", "noise_sigma", "blur_sigma",
                             "drop_probability", "seed", "physical", "calibration", "buffer_frames"})
+    OUTPUTS = frozenset({"meas_angle", "meas_omega", "meas_t", "meas_conf", "meas_valid", "latency", "true_angle"})
 
     def setup(self, ctx: NodeContext) -> None:
         params = ctx.parameters

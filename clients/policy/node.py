@@ -30,6 +30,9 @@ PRETRAINED = Path(__file__).with_name("pretrained") / "ddpg_grasp.pt"
 
 class PolicyNode(Node):
     PARAMETERS = SCENE_PARAMETERS | {"checkpoint"}
+    INPUTS = frozenset({f"q{i + 1}" for i in range(6)} | {
+        "rod_angle", "rod_omega", "grasp_x", "grasp_y", "grasp_z", "tcp_x", "tcp_y", "tcp_z", "gap", "dist", "grasped"})
+    OUTPUTS = frozenset({f"q_cmd{i + 1}" for i in range(6)} | {"grip_cmd", "infer_ms"})
 
     def setup(self, ctx: NodeContext) -> None:
         given = ctx.parameters.get("checkpoint")

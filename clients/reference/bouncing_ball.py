@@ -40,6 +40,8 @@ class BouncingBall(Node):
     """Parameters: ``h0`` (1.0 m), ``v0`` (0.0 m/s), ``g`` (9.81), ``e`` restitution (0.8)."""
 
     PARAMETERS = frozenset({"h0", "v0", "g", "e"})
+    INPUTS = frozenset({"h_in", "v_in"})
+    OUTPUTS = frozenset({"h", "v", "impacts"})
 
     def setup(self, ctx: NodeContext) -> None:
         self.h = float(ctx.parameter("h0", 1.0))

@@ -18,6 +18,8 @@ class Gain(Node):
     """
 
     PARAMETERS = frozenset({"k", "b", "work_s"})
+    INPUTS = frozenset({"u"})
+    OUTPUTS = frozenset({"y"})
 
     def setup(self, ctx: NodeContext) -> None:
         self.k = float(ctx.parameter("k", 1.0))

@@ -17,6 +17,8 @@ class Pendulum(Node):
     ``theta0`` (rad), ``omega0`` (rad/s), ``micro_steps`` per macro step (10)."""
 
     PARAMETERS = frozenset({"length", "g", "damping", "theta0", "omega0", "micro_steps"})
+    INPUTS = frozenset({"theta_in", "omega_in"})
+    OUTPUTS = frozenset({"theta", "omega"})
 
     def setup(self, ctx: NodeContext) -> None:
         self.length = float(ctx.parameter("length", 1.0))

@@ -11,6 +11,8 @@ class Ramp(Node):
     """Parameters ``a`` (0.0) and ``b`` (1.0); outputs ``y`` and its rate ``v`` = b."""
 
     PARAMETERS = frozenset({"a", "b"})
+    INPUTS = frozenset()
+    OUTPUTS = frozenset({"y", "v"})
 
     def setup(self, ctx: NodeContext) -> None:
         self.a = float(ctx.parameter("a", 0.0))

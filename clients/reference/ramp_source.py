@@ -12,6 +12,7 @@ class RampSource(AsyncSource):
     """Parameters ``a`` (0.0), ``b`` (1.0); samples at the node's ``rate`` (30 Hz) from t0."""
 
     PARAMETERS = frozenset({"a", "b", "rate"})
+    OUTPUTS = frozenset({"y"})
 
     def setup(self, ctx: NodeContext) -> None:
         self.a = float(ctx.parameter("a", 0.0))

@@ -75,6 +75,8 @@ class ReferenceController(Node):
     rod at the turning point), ``replan_every`` s (0.1)."""
 
     PARAMETERS = SCENE_PARAMETERS | {"close_lead", "replan_every"}
+    INPUTS = frozenset({f"q{i + 1}" for i in range(6)} | {"rod_angle", "rod_omega", "grasped"})
+    OUTPUTS = frozenset({f"q_cmd{i + 1}" for i in range(6)} | {"grip_cmd"})
 
     def setup(self, ctx: NodeContext) -> None:
         self.rod = RodModel(rod_params(ctx.parameters))

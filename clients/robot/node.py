@@ -48,6 +48,10 @@ def scene_output_dict(o: SceneOutputs) -> dict[str, Any]:
 
 class RobotNode(Node):
     PARAMETERS = SCENE_PARAMETERS | {"q0_deg"}
+    INPUTS = frozenset({f"q_cmd{i + 1}" for i in range(6)} | {"grip_cmd", "rod_angle"})
+    OUTPUTS = frozenset({f"q{i + 1}" for i in range(6)} | {
+        "tcp_x", "tcp_y", "tcp_z", "tcp_roll", "tcp_pitch", "tcp_yaw", "dist", "grasped", "collision", "reachable",
+        "near_miss", "gap", "grip_x", "grip_y", "grip_z"})
 
     def setup(self, ctx: NodeContext) -> None:
         self.scene = RobotScene(scene_params(ctx.parameters))

@@ -41,6 +41,8 @@ def rod_params(parameters: dict[str, Any]) -> RodParams:
 
 class RodNode(Node):
     PARAMETERS = ROD_PARAMETERS
+    INPUTS = frozenset({"driven", "grip_x", "grip_y", "grip_z", "meas_angle", "meas_t", "meas_valid"})
+    OUTPUTS = frozenset({"angle", "omega", "grasp_x", "grasp_y", "grasp_z", "tip_x", "tip_y", "tip_z"})
 
     def setup(self, ctx: NodeContext) -> None:
         self.rod = RodModel(rod_params(ctx.parameters))
