@@ -10,6 +10,37 @@ from typing import IO
 import structlog
 
 
+class _LossyStream:
+    """A log stream whose write errors (a full disk) are swallowed: losing log lines is better
+    than a node or the server failing on one. The first loss is said once on stderr."""
+
+    def __init__(self, stream: IO[str]):
+        self._stream = stream
+        self.lost = 0
+
+    def _lose(self, exc: OSError) -> None:
+        if not self.lost and self._stream is not sys.stderr:
+            try:
+                print(f"hycosim: log lines are being lost: {getattr(self._stream, 'name', 'log')}: "
+                      f"{exc.strerror or exc}", file=sys.stderr, flush=True)
+            except OSError:
+                pass
+        self.lost += 1
+
+    def write(self, text: str) -> int:
+        try:
+            return self._stream.write(text)
+        except OSError as exc:
+            self._lose(exc)
+            return 0
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except OSError as exc:
+            self._lose(exc)
+
+
 def configure(log_file: Path | None = None, level: str = "info", stream: IO[str] | None = None) -> None:
     """Send structlog events as JSON lines to ``log_file`` (appended) or to ``stream``.
 
@@ -27,6 +58,6 @@ def configure(log_file: Path | None = None, level: str = "info", stream: IO[str]
             structlog.dev.ConsoleRenderer() if terminal else structlog.processors.JSONRenderer(),
         ],
         wrapper_class=structlog.make_filtering_bound_logger(logging.getLevelName(level.upper())),
-        logger_factory=structlog.PrintLoggerFactory(out),
+        logger_factory=structlog.PrintLoggerFactory(_LossyStream(out)),
         cache_logger_on_first_use=False,
     )

@@ -39,6 +39,15 @@ def _load(path: Path) -> LoadedProject:
         raise typer.Exit(2) from None
 
 
+def _say_outcome(console: Console, text: str) -> None:
+    """Print a process's last word. Its stderr may be a file on a disk that just filled up
+    (a launched node's): the exit status still tells the outcome, so a failed print is let go."""
+    try:
+        console.print(text, highlight=False)
+    except OSError:
+        pass
+
+
 def _endpoint(option: str, value: str, parse=parse_endpoint) -> str:
     """An address given on the command line, normalised; exit 2 naming the option if unusable."""
     try:
@@ -93,9 +102,9 @@ def server(
     code, rdir, message = serve(loaded, listen=listen, runs_dir=runs_dir, run_dir=run_dir,
                                 progress_jsonl=progress_jsonl, gateway=gateway)
     if code:
-        err.print(f"[red]error:[/red] {message}" + (f"\n  results so far: {rdir}" if rdir else ""), highlight=False)
+        _say_outcome(err, f"[red]error:[/red] {message}" + (f"\n  results so far: {rdir}" if rdir else ""))
     elif not progress_jsonl:
-        out.print(f"{message}; results in {rdir}", highlight=False)
+        _say_outcome(out, f"{message}; results in {rdir}")
     raise typer.Exit(code)
 
 
@@ -113,7 +122,7 @@ def node(
 
     loaded = _load(file)
     code, message = run_node(loaded, name, connect, log_file, password_file)
-    (err if code else out).print(("[red]error:[/red] " if code else "") + message, highlight=False)
+    _say_outcome(err if code else out, ("[red]error:[/red] " if code else "") + message)
     raise typer.Exit(code)
 
 

@@ -20,7 +20,7 @@ from fmu_bridge.security import router_security
 from fmu_bridge.session import open_session, router_config
 
 from server.coordinator import GuardEvaluationError
-from server.recorder import Recorder
+from server.recorder import Recorder, RecordError
 from server.relay import Relay, RunError, run_dir_for
 
 
@@ -59,7 +59,10 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         return done(2, None, f"{'--gateway' if gateway else 'gatewayIP'}: {exc}")
     gateway_required = bool(gateway or loaded.project.gatewayIP)
     run_dir = run_dir or run_dir_for(runs_dir, loaded.name)
-    run_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        return done(2, None, f"{exc.filename or run_dir}: {exc.strerror or exc}")
     logs.configure(run_dir / "server.log.jsonl")
     log = structlog.get_logger("server")
     meta: dict[str, Any] = {
@@ -70,7 +73,10 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         "lowLatency": loaded.project.coSimulation.lowLatency,
         "waitStrategy": loaded.project.coSimulation.waitStrategy, "zenoh_runtime": os.environ.get("ZENOH_RUNTIME"),
     }
-    recorder = Recorder(run_dir, loaded, meta)
+    try:
+        recorder = Recorder(run_dir, loaded, meta)
+    except RecordError as exc:
+        return done(3, run_dir, str(exc))
     on_progress = None
     if progress_jsonl:
         def on_progress(p: Any) -> None:
@@ -89,7 +95,7 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     try:
         relay.run()
         code, message = 0, f"completed {recorder.meta['steps']} macro steps"
-    except (RunError, GuardEvaluationError) as exc:
+    except (RunError, RecordError, GuardEvaluationError) as exc:
         log.error("run failed", error=str(exc))
         code, message = 3, str(exc)
     except KeyboardInterrupt:

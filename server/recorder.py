@@ -4,12 +4,19 @@ Rows are written as each macro step completes and flushed at least every 0.1 s o
 time (a flush per step costs the barrier about a tenth of its rate), and always on close,
 which every failure path of the server reaches: whatever happened before a failure is on
 disk and readable. ``meta.json`` is rewritten with the outcome at the end.
+
+A disk that fills up stops the run (RecordError) rather than the records going on with
+gaps. So that the rows already taken and the outcome still reach the disk then, the run
+directory holds a reserve file (RESERVE_BYTES) from the start, removed when the records
+close: the space it frees is what the last buffered rows and ``meta.json`` are written into.
 """
 
 from __future__ import annotations
 
 import csv
+import io
 import json
+import os
 import time
 from pathlib import Path
 from typing import Any
@@ -18,6 +25,19 @@ from fmu_bridge.config import LoadedProject, PortType
 
 
 FLUSH_EVERY_S = 0.1
+# Several times what is buffered when writing fails (three files' buffers, meta.json, the
+# last log lines) and small beside any run's records.
+RESERVE_BYTES = 256 * 1024
+RESERVE_NAME = ".reserve"
+
+
+class RecordError(RuntimeError):
+    """The run directory cannot be written (a full disk, a folder removed): the run stops."""
+
+    @classmethod
+    def writing(cls, run_dir: Path, name: str, exc: OSError, step: int | None = None) -> RecordError:
+        at = f" at step {step}" if step is not None else ""
+        return cls(f"cannot write the run's records{at}: {run_dir / name}: {exc.strerror or exc}")
 
 
 def _cell(value: Any) -> Any:
@@ -28,12 +48,62 @@ def _cell(value: Any) -> Any:
     return value
 
 
+class _RecordFile:
+    """A file the recorder writes through its own buffer: rows collect in memory and go to the
+    file at each flush; whatever a failed write (a full disk) left unwritten stays in memory
+    for the next flush, in order. (A Python text file drops its pending text when the write
+    under it fails: rows would go missing from the middle of the file.)"""
+
+    def __init__(self, path: Path):
+        self.name = path.name
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self._pending = io.StringIO()
+        self._unwritten = b""
+
+    def write(self, text: str) -> int:
+        return self._pending.write(text)
+
+    def flush(self) -> None:
+        data = self._unwritten + self._pending.getvalue().encode()
+        self._pending.seek(0)
+        self._pending.truncate()
+        while data:
+            try:
+                written = os.write(self._fd, data)
+            except OSError:
+                self._unwritten = data
+                raise
+            data = data[written:]
+        self._unwritten = b""
+
+    @property
+    def closed(self) -> bool:
+        return self._fd < 0
+
+    def close(self) -> None:
+        if self._fd < 0:
+            return
+        try:
+            self.flush()
+        finally:
+            os.close(self._fd)
+            self._fd = -1
+
+
 class Recorder:
     """Writes ``values.csv``, ``timing.csv``, ``events.jsonl`` and ``meta.json`` in ``run_dir``."""
 
     def __init__(self, run_dir: Path, loaded: LoadedProject, meta: dict[str, Any]):
+        """Open the run's files; RecordError if they cannot be written (no space even for the reserve)."""
         self.run_dir = run_dir
-        run_dir.mkdir(parents=True, exist_ok=True)
+        try:
+            run_dir.mkdir(parents=True, exist_ok=True)
+            with open(run_dir / RESERVE_NAME, "wb") as reserve:
+                reserve.write(bytes(RESERVE_BYTES))
+        except OSError as exc:
+            (run_dir / RESERVE_NAME).unlink(missing_ok=True)
+            raise RecordError(f"cannot start the run's records in {run_dir}: {exc.strerror or exc} (a run "
+                              f"directory needs {RESERVE_BYTES // 1024} KiB free to start)") from None
         project = loaded.project
         self._nodes = [n.nodeName for n in project.nodeLists]
         # Numbers go to the CSV as they are; only nodes with boolean or byte ports need _cell.
@@ -43,21 +113,23 @@ class Recorder:
         self._stepping = [n.nodeName for n in project.stepping_nodes()]
         self._async_labels = [f"{r.dst_node}.{r.dst_port}" for r in loaded.routes
                               if project.node(r.src_node).asynchronous]
-        self._values_file = open(run_dir / "values.csv", "w", newline="")  # noqa: SIM115
+        self._values_file = _RecordFile(run_dir / "values.csv")
         self._values = csv.writer(self._values_file)
         out_cols = [f"{n.nodeName}.{p.name}" for n in project.nodeLists for p in n.output]
         in_cols = [f"{n.nodeName}.{p.name}" for n in project.nodeLists for p in n.input]
         self._values.writerow(["step", "t", "mode", *out_cols, *in_cols])
-        self._timing_file = open(run_dir / "timing.csv", "w", newline="")  # noqa: SIM115
+        self._timing_file = _RecordFile(run_dir / "timing.csv")
         self._timing = csv.writer(self._timing_file)
         self._timing.writerow(["step", "t", "wait_s", "holder", "lateness_s",
                                *(f"arrival_s:{n}" for n in self._stepping),
                                *(f"age_s:{label}" for label in self._async_labels)])
-        self._events_file = open(run_dir / "events.jsonl", "w")  # noqa: SIM115
+        self._events_file = _RecordFile(run_dir / "events.jsonl")
         self._flushed = time.monotonic()
         self.meta = dict(meta)
         self.meta.update(status="running", started_at=time.time(), steps=0)
         self.write_meta()
+        self._files = {"values.csv": self._values_file, "timing.csv": self._timing_file,
+                       "events.jsonl": self._events_file}
 
     def row(self, step: int, t: float, mode: str, outputs: dict[str, list[Any]], inputs: dict[str, list[Any]]) -> None:
         cells: list[Any] = [step, repr(t), mode]
@@ -76,29 +148,56 @@ class Recorder:
             *("" if ages.get(label) is None else f"{ages[label]:.6f}" for label in self._async_labels)])
         now = time.monotonic()
         if now - self._flushed >= FLUSH_EVERY_S:
-            self.flush()
+            self.flush(step)
             self._flushed = now
 
-    def flush(self) -> None:
-        for f in (self._values_file, self._timing_file, self._events_file):
-            f.flush()
+    def flush(self, step: int | None = None) -> None:
+        """Write what is buffered; RecordError naming the file if the disk refuses it."""
+        for name, f in self._files.items():
+            try:
+                f.flush()
+            except OSError as exc:
+                raise RecordError.writing(self.run_dir, name, exc, step) from None
 
     def event(self, record: dict[str, Any]) -> None:
-        self._events_file.write(json.dumps(record) + "\n")
-        self._events_file.flush()
+        try:
+            self._events_file.write(json.dumps(record) + "\n")
+            self._events_file.flush()
+        except OSError as exc:
+            raise RecordError.writing(self.run_dir, "events.jsonl", exc, record.get("step")) from None
 
     def write_meta(self) -> None:
         tmp = self.run_dir / "meta.json.tmp"
-        tmp.write_text(json.dumps(self.meta, indent=2, default=str))
-        tmp.replace(self.run_dir / "meta.json")
+        try:
+            tmp.write_text(json.dumps(self.meta, indent=2, default=str))
+            tmp.replace(self.run_dir / "meta.json")
+        except OSError as exc:
+            raise RecordError.writing(self.run_dir, "meta.json", exc) from None
 
     @property
     def closed(self) -> bool:
         return self._values_file.closed
 
+    def free_reserve(self) -> None:
+        """Give back the reserve's space (at the start of a shutdown, so that the nodes' last
+        words also find room); close does it too."""
+        (self.run_dir / RESERVE_NAME).unlink(missing_ok=True)
+
     def close(self, status: str, **extra: Any) -> None:
+        """Write the rest and the outcome. Never raises: it is the end of every failure path;
+        a file that still cannot be written is named in meta.json, if that can be."""
+        self.free_reserve()
         self.meta.update(status=status, finished_at=time.time(), **extra)
         self.meta["wall_time_s"] = self.meta["finished_at"] - self.meta["started_at"]
-        for f in (self._values_file, self._timing_file, self._events_file):
-            f.close()
-        self.write_meta()
+        unwritten = []
+        for name, f in self._files.items():
+            try:
+                f.close()
+            except OSError as exc:
+                unwritten.append(f"{name}: {exc.strerror or exc}")
+        if unwritten:
+            self.meta["unwritten"] = unwritten
+        try:
+            self.write_meta()
+        except RecordError:
+            pass

@@ -34,7 +34,7 @@ from server.async_sources import SampleHistory
 from server.coordinator import Coordinator, GuardEvaluationError
 from server.gateway import Gateway, GatewayError
 from server.intake import Dropped, Intake
-from server.recorder import Recorder
+from server.recorder import Recorder, RecordError
 from server.routing import OutputView, Router
 
 
@@ -145,11 +145,12 @@ class Relay:
         except KeyboardInterrupt:
             status_text, reason = "interrupted", "interrupted by Ctrl-C"
             raise
-        except RunError as exc:
+        except (RunError, RecordError) as exc:
             reason = str(exc)
             raise
         finally:
             _ignore_ctrl_c()
+            self.recorder.free_reserve()
             self._broadcast_stop(status_text if not reason else reason)
             self._await_departures()
             if self.gateway is not None:

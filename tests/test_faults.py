@@ -390,3 +390,53 @@ def test_embedded_run_reports_a_broken_node_model(tmp_path):
     assert "error: broken: node 'broken'" in res.stderr  # one "error:", the launcher's
     run_dir = next((tmp_path / "runs").iterdir())
     assert (run_dir / "meta.json").exists()
+
+
+def _mount_tmpfs(path, size: str) -> bool:
+    path.mkdir()
+    if os.geteuid() != 0:
+        return False
+    return subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)],
+                          capture_output=True).returncode == 0
+
+
+def test_a_full_disk_stops_the_run_naming_the_file_and_keeps_what_was_recorded(tmp_path):
+    disk = tmp_path / "disk"
+    if not _mount_tmpfs(disk, "400k"):
+        pytest.skip("needs root and mount (a small tmpfs stands in for a full disk)")
+    try:
+        cfg = write_project(tmp_path / "p.json", [
+            {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+            {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+        ], [{"from": "clock.y", "to": "g.u"}], cosim={"stepSize": 1.0, "stopTime": 50000.0}, name="full")
+        res = hycosim("run", str(cfg), "--runs-dir", str(disk), "--no-progress")
+        assert res.returncode == 3, res.stdout + res.stderr
+        assert "cannot write the run's records at step" in res.stderr and "No space left on device" in res.stderr
+        assert "Traceback" not in res.stderr and "internal error" not in res.stderr
+        run = next(disk.iterdir())
+        m = meta(run)
+        assert m["status"] == "failed" and "No space left on device" in m["reason"] and m["steps"] > 100
+        assert not (run / ".reserve").exists()
+        # every row taken before the disk filled is on disk, in order, with the right values
+        rows = read_rows(run)
+        assert m["steps"] - 1 <= len(rows) <= m["steps"]
+        assert [int(r["step"]) for r in rows] == list(range(len(rows)))
+        assert all(float(rows[k]["g.y"]) == float(rows[k - 1]["clock.y"]) for k in range(1, len(rows)))
+        for node in ("clock", "g"):
+            assert "the server stopped the run: cannot write the run's records" in (
+                run / f"node-{node}.stderr.txt").read_text()
+        assert hycosim("report", str(run)).returncode == 0
+        # a disk already full: refused before the run starts, naming the folder
+        fd = os.open(disk / "filler", os.O_WRONLY | os.O_CREAT)
+        try:
+            while os.write(fd, bytes(4096)):
+                pass
+        except OSError:
+            pass
+        finally:
+            os.close(fd)
+        res = hycosim("run", str(cfg), "--runs-dir", str(disk), "--no-progress")
+        assert res.returncode == 3 and "cannot start the run's records in" in res.stderr
+        assert "needs 256 KiB free to start" in res.stderr and "Traceback" not in res.stderr
+    finally:
+        subprocess.run(["umount", str(disk)], capture_output=True)
