@@ -22,6 +22,7 @@ from fmu_bridge.inbox import Inbox
 from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
 from fmu_bridge.security import client_tls
 from fmu_bridge.session import ConnectError, FramePublisher, FrameTooLarge, client_config, open_session, token_held
+from fmu_bridge.sim_clock import RealTimeClock
 
 from clients.node import AsyncSource, Node, NodeContext, NodeModelError
 
@@ -306,17 +307,18 @@ class NodeRuntime:
         assert isinstance(impl, AsyncSource)
         self._send(self._hello(False))
         _, t0, _, wall0, rt, _ = start.fields
+        clock = RealTimeClock(t0, wall0, rt) if rt else None
         sim_now, seq = t0, 0
         period = 1.0 / float(self.spec.rate or 30.0)
         while True:
             for ts, values in impl.samples_until(sim_now):
                 self._send(frames.encode(frames.SAMPLE, self.spec.UID, seq, ts, self._pack_outputs(values)))
                 seq += 1
-            if rt:
-                # Real time: sample by the wall clock, and look for STOP in between. While the
+            if clock is not None:
+                # Real time: sample by the clock, and look for STOP in between. While the
                 # server is away (within linkGrace) samples go nowhere; sampling goes on.
                 frame = self._next_frame(period)
-                sim_now = t0 + (time.time() - wall0) / rt
+                sim_now = clock.now()
             else:
                 # As fast as possible: the server's releases are the clock.
                 frame = self._wait(self.cosim.stepTimeout + 30.0, "release")

@@ -29,6 +29,7 @@ from fmu_bridge.config import FREE_MODE, LoadedProject
 from fmu_bridge.inbox import Inbox
 from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
 from fmu_bridge.session import FramePublisher, FrameTooLarge
+from fmu_bridge.sim_clock import RealTimeClock
 
 from server.async_sources import SampleHistory
 from server.coordinator import Coordinator, GuardEvaluationError
@@ -388,6 +389,7 @@ class Relay:
                                            H, wall0, rt, {"checkpoint": checkpoint})
         self.release.put(self._last_release)
         released_at = time.perf_counter()
+        clock = RealTimeClock(cosim.startTime, wall0, rt) if rt is not None else None
         if self.gateway is not None:
             self.gateway.run_started()
         arrivals = self._collect(0, released_at)
@@ -420,9 +422,8 @@ class Relay:
             mode = self.coordinator.mode
             ages = self.router.route(mode, t, self.outputs, self.histories)
             lateness = None
-            if rt is not None:
-                target = wall0 + (t - cosim.startTime) * rt
-                ahead = target - time.time()  # read once: a second reading may have passed target
+            if clock is not None:
+                ahead = clock.seconds_until(t)  # read once: a second reading may have passed t
                 lateness = max(0.0, -ahead)
                 if ahead > 0:
                     time.sleep(ahead)

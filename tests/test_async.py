@@ -81,3 +81,19 @@ def test_extrapolated_and_held_samples_over_zenoh(tmp_path):
             checked += 1
     assert checked > 50
     assert meta(run)["samples_received"]["sensor"] >= int(rate * 0.9)
+
+
+def test_real_time_pacing_keeps_its_pace_when_the_wall_clock_is_stepped(monkeypatch):
+    """NTP stepping the clock back an hour mid-run used to stall pacing for that hour (the
+    server slept until the wall clock caught up; its nodes gave up first)."""
+    import time
+
+    from fmu_bridge.sim_clock import RealTimeClock
+
+    clock = RealTimeClock(10.0, time.time() - 1.0, 2.0)  # started a second ago, at half speed
+    assert abs(clock.now() - 10.5) < 0.05 and abs(clock.seconds_until(11.0) - 1.0) < 0.05
+    wall = time.time
+    for step_s in (-3600.0, 3600.0):
+        monkeypatch.setattr(time, "time", lambda: wall() + step_s)
+        assert abs(clock.now() - 10.5) < 0.05
+        assert abs(clock.seconds_until(11.0) - 1.0) < 0.05
