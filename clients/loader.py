@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-import difflib
 import importlib
+from collections.abc import Iterable
 from pathlib import Path
 
 from fmu_bridge.config import Node as NodeSpec
+from fmu_bridge.hints import did_you_mean
 
 from clients.node import AsyncSource, Node
 
@@ -63,13 +64,12 @@ def model_class(spec: NodeSpec) -> type[Node] | type[AsyncSource]:
     return cls
 
 
-def _check_names(spec: NodeSpec, kind: str, given, declared: frozenset[str] | None) -> None:
+def _check_names(spec: NodeSpec, kind: str, given: Iterable[str], declared: frozenset[str] | None) -> None:
     unknown = sorted(set(given) - declared) if declared is not None else []
     if unknown:
-        guesses = [m for name in unknown for m in difflib.get_close_matches(name, declared, n=1)]
         raise NodeLoadError(f"node {spec.nodeName!r}: model {spec.model!r} has no {kind} "
                             f"{', '.join(map(repr, unknown))} (its {kind}s: {', '.join(sorted(declared)) or 'none'})"
-                            + (f"; did you mean {', '.join(map(repr, guesses))}?" if guesses else ""))
+                            + did_you_mean(unknown, declared))
 
 
 def check_node(spec: NodeSpec, project_dir: Path) -> None:

@@ -8,7 +8,6 @@ is one, the variable.
 
 from __future__ import annotations
 
-import difflib
 import shutil
 import tempfile
 from dataclasses import dataclass
@@ -21,6 +20,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.model_description import ModelDescription, ScalarVariable
 
 from fmu_bridge.config import Node, PortType
+from fmu_bridge.hints import did_you_mean
 
 # FMI 2 type names and their FMI 3 counterparts, per port type.
 _COMPATIBLE = {
@@ -123,10 +123,9 @@ def check_parameters(md: ModelDescription, node: str, parameters: dict[str, Any]
     names = {v.name for v in md.modelVariables}
     unknown = sorted(set(parameters) - names)
     if unknown:
-        guesses = [m for name in unknown for m in difflib.get_close_matches(name, names, n=1)]
         raise FmuError(f"node {node!r}: parameter {', '.join(map(repr, unknown))} "
                        f"{'is not a variable' if len(unknown) == 1 else 'are not variables'} of {path.name}"
-                       + (f"; did you mean {', '.join(map(repr, guesses))}?" if guesses else ""))
+                       + did_you_mean(unknown, names))
 
 
 def check_fmu(path: Path, node: Node) -> None:

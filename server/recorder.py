@@ -14,6 +14,7 @@ close: the space it frees is what the last buffered rows and ``meta.json`` are w
 from __future__ import annotations
 
 import csv
+import errno
 import io
 import json
 import os
@@ -32,7 +33,7 @@ RESERVE_NAME = ".reserve"
 
 
 class RecordError(RuntimeError):
-    """The run directory cannot be written (a full disk, a folder removed): the run stops."""
+    """The run directory cannot be written (a full disk, a quota): the run stops."""
 
     @classmethod
     def writing(cls, run_dir: Path, name: str, exc: OSError, step: int | None = None) -> RecordError:
@@ -102,8 +103,9 @@ class Recorder:
                 reserve.write(bytes(RESERVE_BYTES))
         except OSError as exc:
             (run_dir / RESERVE_NAME).unlink(missing_ok=True)
-            raise RecordError(f"cannot start the run's records in {run_dir}: {exc.strerror or exc} (a run "
-                              f"directory needs {RESERVE_BYTES // 1024} KiB free to start)") from None
+            full = exc.errno in (errno.ENOSPC, errno.EDQUOT)
+            raise RecordError(f"cannot start the run's records in {run_dir}: {exc.strerror or exc}" + (
+                f" (a run directory needs {RESERVE_BYTES // 1024} KiB free to start)" if full else "")) from None
         project = loaded.project
         self._nodes = [n.nodeName for n in project.nodeLists]
         # Numbers go to the CSV as they are; only nodes with boolean or byte ports need _cell.
