@@ -89,10 +89,9 @@ def peak_rss_by_process(cmd: list[str], timeout: float) -> dict[int, tuple[float
 
 
 def _kind(argv: list[str]) -> str | None:
-    """'server' or 'node' for ``python [-P] -m hycosim server|node …`` and ``_zenoh_floor.py server|node …``."""
-    argv = [a for a in argv if a != "-P"]
-    if argv[1:3] == ["-m", "hycosim"] and len(argv) > 3:
-        word = argv[3]
+    """'server' or 'node' for ``python [options] -m hycosim server|node …`` and ``_zenoh_floor.py server|node …``."""
+    if "-m" in argv and argv[argv.index("-m") + 1:argv.index("-m") + 2] == ["hycosim"]:
+        word = argv[argv.index("-m") + 2] if len(argv) > argv.index("-m") + 2 else ""
     elif len(argv) > 2 and argv[1].endswith("_zenoh_floor.py"):
         word = argv[2]
     else:

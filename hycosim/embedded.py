@@ -49,6 +49,20 @@ def _tail(path: Path, lines: int = 5) -> str:
     return text.removeprefix("error: ")  # the CLI's prefix: the launcher adds its own
 
 
+def _node_failure(run_dir: Path, name: str, status: int) -> str:
+    """What a node that ended with ``status`` said, or how its process died."""
+    log = run_dir / f"node-{name}.stderr.txt"
+    if status < 0:
+        # A crash in a model's native code (an FMU, an extension): the process said nothing of
+        # its own, but Python's fault handler wrote the stack it was at to its stderr file.
+        try:
+            cause = signal.Signals(-status).name
+        except ValueError:
+            cause = f"signal {-status}"
+        return f"its process died of {cause} (the Python stack at that moment: {log})"
+    return _tail(log) or f"exit status {status}"
+
+
 def _pump(stream, sink: queue.Queue) -> None:
     for line in stream:
         sink.put(line)
@@ -64,7 +78,8 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
     run_dir.mkdir(parents=True)
     # -P: "python -m" would put the working directory first on the children's import path,
     # so a user's grp.py or zenoh.py there would replace the library in every node.
-    cmd = [sys.executable, "-P", "-m", "hycosim"]
+    # -X faulthandler: a model that crashes in native code leaves the Python stack it was at.
+    cmd = [sys.executable, "-P", "-X", "faulthandler", "-m", "hycosim"]
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     server = subprocess.Popen([*cmd, "server", str(config_path), "--listen", endpoint, "--run-dir", str(run_dir),
                                "--progress-jsonl"], stdout=subprocess.PIPE, stderr=open(run_dir / "server.stderr.txt", "w"),
@@ -109,7 +124,7 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
                         code, message = msg["done"], msg["message"]
                 for name, proc in nodes.items():
                     if name not in failures and proc.poll() not in (None, 0, FAILED_ELSEWHERE):
-                        failures[name] = _tail(run_dir / f"node-{name}.stderr.txt")
+                        failures[name] = _node_failure(run_dir, name, proc.returncode)
                 # A node failed: stop the server, once it has started its records (a server
                 # stopped while it still imports would leave no meta.json to say what happened).
                 if failures and not server_stopped and server.poll() is None and (run_dir / "meta.json").exists():
@@ -165,7 +180,7 @@ def _shut_down(server: subprocess.Popen, nodes: dict[str, subprocess.Popen], run
             proc.kill()
             proc.wait()
         if proc.returncode not in (0, FAILED_ELSEWHERE) and name not in failures and not (code and name in interrupted):
-            failures[name] = _tail(run_dir / f"node-{name}.stderr.txt") or f"exit status {proc.returncode}"
+            failures[name] = _node_failure(run_dir, name, proc.returncode)
     if user_stopped:
         # Ctrl-C in a terminal reaches every process of the group at once: whatever a node said
         # as it stopped (status 130, or an import cut short: "initialization failed") is not a

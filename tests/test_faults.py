@@ -440,3 +440,19 @@ def test_a_full_disk_stops_the_run_naming_the_file_and_keeps_what_was_recorded(t
         assert "needs 256 KiB free to start" in res.stderr and "Traceback" not in res.stderr
     finally:
         subprocess.run(["umount", str(disk)], capture_output=True)
+
+
+def test_a_node_that_crashes_in_native_code_is_reported_with_its_signal_and_stack(tmp_path):
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "crash", "UID": 2, "model": "tests.models.crashing_model:Crashing", "output": ["y"]},
+    ], cosim={"stepSize": 0.01, "stopTime": 1.0})
+    res = hycosim("run", str(cfg), "--runs-dir", str(tmp_path / "runs"), "--no-progress", timeout=90)
+    assert res.returncode == 3
+    run_dir = next((tmp_path / "runs").iterdir())
+    assert "node 'crash' was lost at step" in res.stderr
+    assert f"node crash: its process died of SIGSEGV (the Python stack at that moment: {run_dir}" in res.stderr
+    stack = (run_dir / "node-crash.stderr.txt").read_text()
+    assert "Fatal Python error: Segmentation fault" in stack and 'crashing_model.py", line 14 in step' in stack
+    assert "clock" not in res.stderr.replace(str(run_dir), "")
+    assert len(read_rows(run_dir)) >= 5  # the steps before the crash are on disk
