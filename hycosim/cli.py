@@ -735,10 +735,14 @@ def _join_multi_value_options(argv: list[str]) -> list[str]:
 
 def main() -> None:
     """Console entry point."""
+    import faulthandler
     import sys
 
     from fmu_bridge.session import prefer_shared_runtime
 
+    # A model that crashes in native code (an FMU's binary, an extension) kills the process
+    # without a word from Python; the fault handler at least prints the stack it was at.
+    faulthandler.enable()
     prefer_shared_runtime()  # before any session opens; the server and nodes it starts inherit it
     try:
         app(args=_join_multi_value_options(sys.argv[1:]), prog_name="hycosim")

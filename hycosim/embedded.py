@@ -54,7 +54,7 @@ def _node_failure(run_dir: Path, name: str, status: int) -> str:
     log = run_dir / f"node-{name}.stderr.txt"
     if status < 0:
         # A crash in a model's native code (an FMU, an extension): the process said nothing of
-        # its own, but Python's fault handler wrote the stack it was at to its stderr file.
+        # its own, but the fault handler (hycosim.cli.main) wrote the stack it was at to its stderr.
         try:
             cause = signal.Signals(-status).name
         except ValueError:
@@ -78,8 +78,7 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
     run_dir.mkdir(parents=True)
     # -P: "python -m" would put the working directory first on the children's import path,
     # so a user's grp.py or zenoh.py there would replace the library in every node.
-    # -X faulthandler: a model that crashes in native code leaves the Python stack it was at.
-    cmd = [sys.executable, "-P", "-X", "faulthandler", "-m", "hycosim"]
+    cmd = [sys.executable, "-P", "-m", "hycosim"]
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     server = subprocess.Popen([*cmd, "server", str(config_path), "--listen", endpoint, "--run-dir", str(run_dir),
                                "--progress-jsonl"], stdout=subprocess.PIPE, stderr=open(run_dir / "server.stderr.txt", "w"),
