@@ -154,6 +154,10 @@ def _print_summary(s) -> None:
     wall = f"{s.wall_time_s:.2f} s" if s.wall_time_s else "-"
     out.print(f"[bold]{s.status}[/bold]: {s.steps} macro steps in {wall} ({rate}); "
               f"{len(s.mode_switches)} mode switches; results in {s.run_dir}", highlight=False)
+    if s.non_finite:
+        firsts = ", ".join(f"{port} at " + (f"step {at['step']} " if "step" in at else "") + f"(t={at['t']:g} s)"
+                           for port, at in sorted(s.non_finite.items(), key=lambda item: item[1]["t"]))
+        out.print(f"[yellow]warning:[/yellow] NaN or infinite values, first on each port: {firsts}", highlight=False)
 
 
 @app.command()

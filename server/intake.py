@@ -3,6 +3,10 @@
 Anything malformed (random bytes, wrong types, unknown ports, a step already past, a
 sender whose UID does not own the key it wrote on) is dropped, counted by reason and
 logged; the run goes on.
+
+A value that is NaN or infinite is no malformed frame (a diverging model gives one), so it
+is routed like any other; but the first one on each port is noted, with its step and time,
+because it poisons every value that depends on it from then on and a user should hear of it.
 """
 
 from __future__ import annotations
@@ -39,6 +43,7 @@ class Intake:
         self._nodes = {n.nodeName: n for n in nodes}
         self._types = {n.nodeName: [(p.name, _TYPES[p.type]) for p in n.output] for n in nodes}
         self.dropped: Counter[str] = Counter()
+        self.non_finite: dict[str, dict[str, float]] = {}  # "node.port" → first {"step", "t"} (or "t")
         self._log = structlog.get_logger("server.intake")
 
     def drop(self, reason: str, detail: str, step: int) -> None:
@@ -76,4 +81,13 @@ class Intake:
         for value, (port, types) in zip(values, ports):
             if type(value) not in types:
                 raise Dropped("wrong type", f"{node}.{port} got {type(value).__name__} {value!r:.40}")
+            if type(value) is float and not math.isfinite(value):
+                self._note_non_finite(f"{node}.{port}", frame, t, value)
         return frame
+
+    def _note_non_finite(self, label: str, frame: frames.Frame, t: float, value: float) -> None:
+        if label in self.non_finite:
+            return
+        first = {"t": t} if frame.kind == frames.SAMPLE else {"step": frame.fields[1], "t": t}
+        self.non_finite[label] = first
+        self._log.warning("non-finite value", port=label, value=repr(value), **first)

@@ -157,6 +157,7 @@ class Relay:
             if self.gateway is not None:
                 self.gateway.close(reason or status_text)
             self.recorder.close(status_text, reason=reason, dropped_frames=dict(self.intake.dropped),
+                                non_finite=self.intake.non_finite,
                                 reattached=dict(self.reattached), server_waits=self.inbox.waits,
                                 samples_received={n: h.received for n, h in self.histories.items()})
             for decl in (status, watcher, token):

@@ -40,6 +40,7 @@ class RunSummary:
     lateness: dict[str, float] | None = None
     mode_switches: list[dict[str, Any]] = field(default_factory=list)
     dropped_frames: dict[str, int] = field(default_factory=dict)
+    non_finite: dict[str, dict[str, int | float]] = field(default_factory=dict)
     async_age_ms: dict[str, float] = field(default_factory=dict)
     wait_strategy: str = ""
     server_waits: dict[str, int] = field(default_factory=dict)
@@ -56,6 +57,7 @@ class RunMeta(BaseModel):
     steps_per_s: float | None = None
     waitStrategy: str = ""
     dropped_frames: dict[str, int] = Field(default_factory=dict)
+    non_finite: dict[str, dict[str, int | float]] = Field(default_factory=dict)
     server_waits: dict[str, int] = Field(default_factory=dict)
 
 
@@ -178,7 +180,7 @@ def summarise(run_dir: Path, slowest: int = 5) -> RunSummary:
         mean_arrival_ms={n: 1000 * arrival_sum[n] / arrival_n[n] for n in sorted(arrival_sum)},
         slowest_steps=[row for *_, row in sorted(ranked, key=lambda e: e[:2], reverse=True)],
         lateness=lateness, mode_switches=read_events(run_dir),
-        dropped_frames=meta.dropped_frames, async_age_ms={k: 1000 * age_sum[k] / age_n[k] for k in age_sum},
+        dropped_frames=meta.dropped_frames, non_finite=meta.non_finite, async_age_ms={k: 1000 * age_sum[k] / age_n[k] for k in age_sum},
         wait_strategy=meta.waitStrategy, server_waits=meta.server_waits,
     )
 

@@ -456,3 +456,24 @@ def test_a_node_that_crashes_in_native_code_is_reported_with_its_signal_and_stac
     assert "Fatal Python error: Segmentation fault" in stack and 'crashing_model.py", line 14 in step' in stack
     assert "clock" not in res.stderr.replace(str(run_dir), "")
     assert len(read_rows(run_dir)) >= 5  # the steps before the crash are on disk
+
+
+def test_nan_outputs_are_routed_and_recorded_and_the_first_on_each_port_is_reported(tmp_path):
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "src", "UID": 1, "model": "tests.models.nan_model:Diverging", "output": ["y"]},
+        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+    ], [{"from": "src.y", "to": "g.u"}], cosim={"stepSize": 0.01, "stopTime": 0.3})
+    res = hycosim("run", str(cfg), "--runs-dir", str(tmp_path / "runs"), "--no-progress", timeout=90)
+    assert res.returncode == 0, res.stderr
+    run_dir = next((tmp_path / "runs").iterdir())
+    rows = read_rows(run_dir)
+    first_nan = {port: next(k for k, r in enumerate(rows) if r[port] == "nan") for port in ("src.y", "g.y")}
+    assert first_nan == {"src.y": 10, "g.y": 11}  # one Jacobi step later downstream
+    noted = meta(run_dir)["non_finite"]
+    assert {port: at["step"] for port, at in noted.items()} == first_nan
+    assert all(abs(at["t"] - float(rows[at["step"]]["t"])) < 1e-9 for at in noted.values())
+    expected = "NaN or infinite values, first on each port: src.y at step 10 (t=0.1 s), g.y at step 11 (t=0.11 s)"
+    assert expected in res.stdout
+    report = hycosim("report", str(run_dir))
+    assert report.returncode == 0 and expected in report.stdout
+    assert hycosim("plot", str(run_dir), "-o", str(tmp_path / "p.png")).returncode == 0
