@@ -126,6 +126,9 @@ class NodeRuntime:
                     self._on_stop(start)
                     return
                 if start.kind != frames.START:
+                    # A node process says HELLO once per run: a second one tells the server at
+                    # once that the node restarted, rather than after its linkGrace.
+                    self._send(self._hello(False))
                     at = f" (step {start.fields[0]})" if start.kind == frames.STEP else ""
                     raise NodeRunError(f"node {self.name!r}: the run on {self.endpoint} was already under way{at} "
                                        "when it attached; a node joins before the run starts, and a node "

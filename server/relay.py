@@ -256,6 +256,12 @@ class Relay:
             self.histories[node].add(float(t), values)
             return None
         if frame.kind == frames.HELLO:
+            if node in self.capabilities and step >= 0:
+                # A node process says HELLO once: this is a new process, whose model starts
+                # from scratch while the others are at step k. Not a link cut to wait out.
+                raise RunError(f"node {node!r} was started again at step {step} (t={self._time(step):g} s) while "
+                               "the run was under way: the state it had is gone, so the run cannot go on; "
+                               "start the run again")
             self.capabilities[node] = dict(frame.fields[1]) if isinstance(frame.fields[1], dict) else {}
             self._check_ports(node, self.capabilities[node].get("ports"))
             return None
