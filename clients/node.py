@@ -38,6 +38,9 @@ class NodeContext:
     step_size: float
     start_time: float
     project_dir: Path = field(default_factory=Path.cwd)
+    # Wall seconds per simulated second in a real-time run (coSimulation.realTime); None: the
+    # run goes as fast as it can, and simulated time has nothing to do with the wall clock.
+    real_time: float | None = None
 
     def parameter(self, key: str, default: Any) -> Any:
         return self.parameters.get(key, default)

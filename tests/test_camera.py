@@ -184,3 +184,41 @@ def test_the_emulated_rods_parameters_are_checked_by_name(tmp_path, physical, ex
                       step_size=0.01, start_time=0.0, project_dir=tmp_path)
     with pytest.raises(CameraError, match=f"camera node 'cam': {expected}"):
         CameraNode().setup(ctx)
+
+
+def test_live_frames_are_stamped_in_simulated_time_from_when_the_run_asks_for_them(tmp_path, camera):
+    """A live capture is stamped from the first request (the run's START), at the run's pace:
+    stamped from when the device opened, every frame was late by the attach wait."""
+    import time
+
+    from clients.camera.sources import LiveSource
+
+    path = tmp_path / "live.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (320, 240))
+    for a in range(-20, 21, 10):
+        writer.write(camera.render(math.radians(a)))
+    writer.release()
+    source = LiveSource(cv2.VideoCapture(str(path)), "test capture", start_time=5.0, factor=2.0)
+    time.sleep(0.4)  # the other nodes attaching: not part of simulated time
+    frames = source.frames()
+    first = next(frames)
+    time.sleep(0.4)
+    second = next(frames)
+    assert 5.0 <= first.t < 5.1  # not 5.2: the 0.4 s before the first request are not counted
+    assert 0.2 <= second.t - first.t < 0.3  # 0.4 s of wall time at 2 wall seconds per simulated one
+    rest = [next(frames) for _ in range(3)]
+    assert all(second.t <= f.t < second.t + 0.1 for f in rest)
+    with pytest.raises(CameraError, match=r"test capture stopped delivering frames at t=5\.\d\d s"):
+        next(frames)
+    source.close()
+
+
+def test_a_camera_device_needs_a_real_time_run(tmp_path):
+    from clients.camera.node import CameraNode
+    from clients.node import NodeContext
+
+    Calibration(1, 1, 0, 0, (0, 0), 1).save(tmp_path / "cal.json")
+    ctx = NodeContext(name="cam", uid=9, inputs=[], outputs=[], parameters={"source": "0", "calibration": "cal.json"},
+                      step_size=0.01, start_time=0.0, project_dir=tmp_path)
+    with pytest.raises(CameraError, match="camera device 0 is live, so the run must be paced by the clock"):
+        CameraNode().setup(ctx)

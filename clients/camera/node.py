@@ -67,8 +67,13 @@ class CameraNode(AsyncSource):
             if not cal_file:
                 raise CameraError(f"camera node {ctx.name!r}: a real source needs 'calibration' (a JSON file)")
             calibration = Calibration.load(ctx.project_dir / cal_file)
-            self.stream = (DeviceSource(int(source)) if source.isdigit()
-                           else VideoFileSource(ctx.project_dir / source)).frames()
+            if source.isdigit():
+                if ctx.real_time is None:
+                    raise CameraError(f"camera node {ctx.name!r}: camera device {source} is live, so the run must be "
+                                      'paced by the clock: set "realTime" in the project\'s coSimulation')
+                self.stream = DeviceSource(int(source), ctx.start_time, ctx.real_time).frames()
+            else:
+                self.stream = VideoFileSource(ctx.project_dir / source, ctx.start_time).frames()
         self.detector = RodDetector(calibration)
         self.tracker = Tracker()
         self.buffer_frames = int(params.get("buffer_frames", 2))

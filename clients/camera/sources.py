@@ -23,9 +23,10 @@ class CameraError(NodeModelError):
 
 @dataclass
 class VideoFileSource:
-    """Frames of a video file, timestamped by their position (frame index / the file's fps)."""
+    """Frames of a video file, timestamped by their position: ``start_time`` + frame index / the file's fps."""
 
     path: Path
+    start_time: float = 0.0
 
     def __post_init__(self) -> None:
         if not Path(self.path).is_file():
@@ -41,32 +42,44 @@ class VideoFileSource:
             ok, image = self.capture.read()
             if not ok:
                 return
-            yield Frame(self.index / self.fps, image)
+            yield Frame(self.start_time + self.index / self.fps, image)
             self.index += 1
 
     def close(self) -> None:
         self.capture.release()
 
 
-@dataclass
-class DeviceSource:
-    """Frames of a camera device (``cv2.VideoCapture(index)``), timestamped by the wall clock."""
+class LiveSource:
+    """Frames of a live capture, stamped in simulated time as they are read: ``start_time``
+    when the frames are first asked for (a node asks at the run's START), then the monotonic
+    clock's seconds since, divided by ``factor`` (a real-time run's wall seconds per simulated
+    second). Stamped from when the capture opened instead, every frame would be late by the
+    wait for the other nodes to attach."""
 
-    index: int
-
-    def __post_init__(self) -> None:
-        self.capture = cv2.VideoCapture(self.index)
-        if not self.capture.isOpened():
-            raise CameraError(f"camera device {self.index} cannot be opened (is it connected? /dev/video{self.index})")
-        self.t0 = time.monotonic()
+    def __init__(self, capture: cv2.VideoCapture, label: str, start_time: float = 0.0, factor: float = 1.0):
+        self.capture = capture
+        self.label = label
+        self.start_time = start_time
+        self.factor = factor
 
     def frames(self) -> Iterator[Frame]:
+        origin = time.monotonic()
         while True:
             ok, image = self.capture.read()
-            t = time.monotonic() - self.t0
+            t = self.start_time + (time.monotonic() - origin) / self.factor
             if not ok:
-                raise CameraError(f"camera device {self.index} stopped delivering frames at t={t:.2f} s")
+                raise CameraError(f"{self.label} stopped delivering frames at t={t:.2f} s")
             yield Frame(t, image)
 
     def close(self) -> None:
         self.capture.release()
+
+
+class DeviceSource(LiveSource):
+    """Frames of a camera device (``cv2.VideoCapture(index)``), stamped as a LiveSource."""
+
+    def __init__(self, index: int, start_time: float = 0.0, factor: float = 1.0):
+        capture = cv2.VideoCapture(index)
+        if not capture.isOpened():
+            raise CameraError(f"camera device {index} cannot be opened (is it connected? /dev/video{index})")
+        super().__init__(capture, f"camera device {index}", start_time, factor)
