@@ -8,6 +8,7 @@ is one, the variable.
 
 from __future__ import annotations
 
+import json
 import shutil
 import tempfile
 from dataclasses import dataclass
@@ -118,14 +119,33 @@ def map_driven(md: ModelDescription, node: Node, path: Path) -> ScalarVariable |
     return var
 
 
+def _fits(var_type: str, value: Any) -> bool:
+    """Whether a JSON value can be set on a variable of this FMI type without guessing."""
+    if var_type in _COMPATIBLE[PortType.REAL]:
+        return type(value) in (int, float)
+    if var_type == "Boolean":
+        return type(value) is bool or (type(value) is int and value in (0, 1))
+    if var_type == "String":
+        return type(value) is str
+    if var_type in _COMPATIBLE[PortType.INTEGER]:
+        return type(value) is int
+    return True  # Binary and the like: the FMU says
+
+
 def check_parameters(md: ModelDescription, node: str, parameters: dict[str, Any], path: Path) -> None:
-    """Raise FmuError unless every key of ``parameters`` names a variable of the FMU."""
-    names = {v.name for v in md.modelVariables}
-    unknown = sorted(set(parameters) - names)
+    """Raise FmuError unless every key of ``parameters`` names a variable of the FMU and its
+    value fits the variable's type (a number for a Real, a whole number for an Integer, …)."""
+    variables = {v.name: v for v in md.modelVariables}
+    unknown = sorted(set(parameters) - set(variables))
     if unknown:
         raise FmuError(f"node {node!r}: parameter {', '.join(map(repr, unknown))} "
                        f"{'is not a variable' if len(unknown) == 1 else 'are not variables'} of {path.name}"
-                       + did_you_mean(unknown, names))
+                       + did_you_mean(unknown, variables))
+    for name, value in parameters.items():
+        var_type = variables[name].type
+        if not _fits(var_type, value):
+            raise FmuError(f"node {node!r}: parameter {name!r} is {_a(var_type)} variable of {path.name}, "
+                           f"which {json.dumps(value)} is not")
 
 
 def check_fmu(path: Path, node: Node) -> None:

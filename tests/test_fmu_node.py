@@ -172,6 +172,13 @@ def test_missing_fmu_file_and_bad_parameter(tmp_path, fmus):
     assert res.returncode == 3 and "nope.fmu does not exist" in res.stderr
     with pytest.raises(FmuError, match="parameter 'gain' is not a variable of GainModel.fmu"):
         _instance(tmp_path, fmus["gain"], _gain_node(fmus["gain"], parameters={"gain": 1.0})).initialize(0.0)
+    # a value the variable's type cannot take: named before the FMU is loaded, not a ValueError
+    for value in ("two", [2.0], True):
+        with pytest.raises(FmuError, match=r"parameter 'k' is a Real variable of GainModel.fmu, which .* is not"):
+            _instance(tmp_path, fmus["gain"], _gain_node(fmus["gain"], parameters={"k": value}))
+    cfg = write_project(tmp_path / "q.json", [_gain_node(fmus["gain"], parameters={"k": "2.0"})])
+    res = hycosim("validate", str(cfg))
+    assert res.returncode == 2 and "parameter 'k' is a Real variable of GainModel.fmu, which \"2.0\" is not" in res.stderr
 
 
 def test_model_fmu_helper_errors_name_the_script(tmp_path):
