@@ -256,9 +256,10 @@ class Relay:
             self.histories[node].add(float(t), values)
             return None
         if frame.kind == frames.HELLO:
-            if node in self.capabilities and step >= 0:
+            if node in self.capabilities and step > 0:
                 # A node process says HELLO once: this is a new process, whose model starts
                 # from scratch while the others are at step k. Not a link cut to wait out.
+                # (While the START is collected, a fresh start is all that was asked of it.)
                 raise RunError(f"node {node!r} was started again at step {step} (t={self._time(step):g} s) while "
                                "the run was under way: the state it had is gone, so the run cannot go on; "
                                "start the run again")
