@@ -75,7 +75,6 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
     console = console or Console(stderr=True)
     endpoint = listen or free_loopback_endpoint()
     run_dir = run_dir_for(runs_dir, loaded.name)
-    run_dir.mkdir(parents=True)
     # -P: "python -m" would put the working directory first on the children's import path,
     # so a user's grp.py or zenoh.py there would replace the library in every node.
     cmd = [sys.executable, "-P", "-m", "hycosim"]

@@ -58,11 +58,13 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     except EndpointError as exc:
         return done(2, None, f"{'--gateway' if gateway else 'gatewayIP'}: {exc}")
     gateway_required = bool(gateway or loaded.project.gatewayIP)
-    run_dir = run_dir or run_dir_for(runs_dir, loaded.name)
     try:
-        run_dir.mkdir(parents=True, exist_ok=True)
+        if run_dir is None:
+            run_dir = run_dir_for(runs_dir, loaded.name)
+        else:
+            run_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        return done(2, None, f"{exc.filename or run_dir}: {exc.strerror or exc}")
+        return done(2, None, f"{exc.filename or run_dir or runs_dir}: {exc.strerror or exc}")
     logs.configure(run_dir / "server.log.jsonl")
     log = structlog.get_logger("server")
     meta: dict[str, Any] = {

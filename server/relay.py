@@ -471,11 +471,16 @@ class Relay:
 
 
 def run_dir_for(base: Path, project: str) -> Path:
-    """``runs/<project>-<timestamp>``, made unique if two runs start in the same second."""
+    """Make and return ``runs/<project>-<timestamp>``, suffixed ``-2``, ``-3``… when runs start in
+    the same second. Made here, not just named: two processes naming it at the same moment
+    would otherwise both take the same folder (or one fail on it)."""
     stamp = time.strftime("%Y%m%d-%H%M%S")
-    candidate = base / f"{project}-{stamp}"
+    base.mkdir(parents=True, exist_ok=True)
     n = 1
-    while candidate.exists():
-        n += 1
-        candidate = base / f"{project}-{stamp}-{n}"
-    return candidate
+    while True:
+        candidate = base / (f"{project}-{stamp}" if n == 1 else f"{project}-{stamp}-{n}")
+        try:
+            candidate.mkdir()
+            return candidate
+        except FileExistsError:
+            n += 1

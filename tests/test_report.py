@@ -205,3 +205,15 @@ def test_a_long_run_is_read_back_in_one_pass(tmp_path):
     assert list(_envelope(array("d", [0.0, 1.0]), short)[1]) == [1.0, 2.0]
     png = plot_run(run, ["a.y", "b.y"], tmp_path / "long.png")
     assert png.stat().st_size > 10_000
+
+
+def test_runs_started_in_the_same_second_get_folders_of_their_own(tmp_path):
+    """Two runs of one project started together (trials, CI jobs) each get their own folder."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from server.relay import run_dir_for
+
+    with ThreadPoolExecutor(8) as pool:
+        dirs = list(pool.map(lambda _: run_dir_for(tmp_path / "runs", "p"), range(24)))
+    assert len(set(dirs)) == 24 and all(d.is_dir() for d in dirs)
+    assert sorted(d.name for d in (tmp_path / "runs").iterdir()) == sorted(d.name for d in dirs)
