@@ -59,7 +59,7 @@ def model_class(spec: NodeSpec) -> type[Node] | type[AsyncSource]:
         raise NodeLoadError(f"node {spec.nodeName!r} is asynchronous but {target} is not an AsyncSource"
                             if spec.asynchronous else f"node {spec.nodeName!r}: {target} is not a Node")
     _check_names(spec, "parameter", spec.parameters, cls.PARAMETERS)
-    _check_names(spec, "input", spec.input_names(), getattr(cls, "INPUTS", None))
+    _check_names(spec, "input", spec.input_names(), cls.INPUTS)
     _check_names(spec, "output", spec.output_names(), cls.OUTPUTS)
     return cls
 

@@ -100,6 +100,7 @@ class AsyncSource(ABC):
     """A source that publishes timestamped samples at its own rate instead of stepping."""
 
     PARAMETERS: ClassVar[frozenset[str] | None] = None  # as for Node
+    INPUTS: ClassVar[frozenset[str] | None] = None  # as for Node (an asynchronous node has none)
     OUTPUTS: ClassVar[frozenset[str] | None] = None  # as for Node
 
     def setup(self, ctx: NodeContext) -> None:

@@ -148,15 +148,27 @@ def check_parameters(md: ModelDescription, node: str, parameters: dict[str, Any]
                            f"which {json.dumps(value)} is not")
 
 
-def check_fmu(path: Path, node: Node) -> None:
-    """Everything FmuInstance checks before it loads the binary: the FMU is readable, FMI 2.0
-    or 3.0 co-simulation with a binary for this platform, and the node's ports, drivenVariable
-    and parameters map onto its variables. Nothing is extracted or instantiated."""
+@dataclass(frozen=True)
+class FmuMapping:
+    """An FMU's model description and the node's ports and driven flag mapped onto it."""
+
+    md: ModelDescription
+    inputs: list[MappedPort]
+    outputs: list[MappedPort]
+    driven: ScalarVariable | None
+
+
+def check_fmu(path: Path, node: Node, parameters: dict[str, Any] | None = None) -> FmuMapping:
+    """Everything checked before an FMU's binary loads: the FMU is readable, FMI 2.0 or 3.0
+    co-simulation with a binary for this platform, and the node's ports, drivenVariable and
+    parameters (``parameters``, default the node's) map onto its variables. Nothing is
+    extracted or instantiated."""
     md = describe(path)
     check_platform(path, md, node.nodeName)
-    map_ports(md, node, path)
-    map_driven(md, node, path)
-    check_parameters(md, node.nodeName, node.parameters, path)
+    inputs, outputs = map_ports(md, node, path)
+    driven = map_driven(md, node, path)
+    check_parameters(md, node.nodeName, node.parameters if parameters is None else parameters, path)
+    return FmuMapping(md, inputs, outputs, driven)
 
 
 class FmuInstance:
@@ -165,11 +177,9 @@ class FmuInstance:
     def __init__(self, path: Path, node: Node, parameters: dict[str, Any]):
         self.path = path
         self.node = node.nodeName
-        self.md = describe(path)
-        check_platform(path, self.md, self.node)
-        self.inputs, self.outputs = map_ports(self.md, node, path)
-        self.driven_variable = map_driven(self.md, node, path)
-        check_parameters(self.md, self.node, parameters, path)
+        mapping = check_fmu(path, node, parameters)
+        self.md, self.inputs, self.outputs, self.driven_variable = (
+            mapping.md, mapping.inputs, mapping.outputs, mapping.driven)
         self.fmi3 = self.md.fmiVersion.startswith("3")
         cs = self.md.coSimulation
         self.can_rollback = bool(getattr(cs, "canGetAndSetFMUstate", False))

@@ -50,24 +50,21 @@ def _cell(value: Any) -> Any:
 
 
 class _RecordFile:
-    """A file the recorder writes through its own buffer: rows collect in memory and go to the
-    file at each flush; whatever a failed write (a full disk) left unwritten stays in memory
+    """A file the recorder writes through its own buffer: rows collect in ``buffer`` (written to
+    directly, by csv.writer in C, on the hot path) and go to the file at each flush; whatever a failed write (a full disk) left unwritten stays in memory
     for the next flush, in order. (A Python text file drops its pending text when the write
     under it fails: rows would go missing from the middle of the file.)"""
 
     def __init__(self, path: Path):
         self.name = path.name
         self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-        self._pending = io.StringIO()
+        self.buffer = io.StringIO()
         self._unwritten = b""
 
-    def write(self, text: str) -> int:
-        return self._pending.write(text)
-
     def flush(self) -> None:
-        data = self._unwritten + self._pending.getvalue().encode()
-        self._pending.seek(0)
-        self._pending.truncate()
+        data = self._unwritten + self.buffer.getvalue().encode()
+        self.buffer.seek(0)
+        self.buffer.truncate()
         while data:
             try:
                 written = os.write(self._fd, data)
@@ -95,10 +92,10 @@ class Recorder:
     """Writes ``values.csv``, ``timing.csv``, ``events.jsonl`` and ``meta.json`` in ``run_dir``."""
 
     def __init__(self, run_dir: Path, loaded: LoadedProject, meta: dict[str, Any]):
-        """Open the run's files; RecordError if they cannot be written (no space even for the reserve)."""
+        """Open the run's files in ``run_dir`` (made by the caller); RecordError if they cannot be
+        written (no space even for the reserve)."""
         self.run_dir = run_dir
         try:
-            run_dir.mkdir(parents=True, exist_ok=True)
             with open(run_dir / RESERVE_NAME, "wb") as reserve:
                 reserve.write(bytes(RESERVE_BYTES))
         except OSError as exc:
@@ -116,12 +113,12 @@ class Recorder:
         self._async_labels = [f"{r.dst_node}.{r.dst_port}" for r in loaded.routes
                               if project.node(r.src_node).asynchronous]
         self._values_file = _RecordFile(run_dir / "values.csv")
-        self._values = csv.writer(self._values_file)
+        self._values = csv.writer(self._values_file.buffer)
         out_cols = [f"{n.nodeName}.{p.name}" for n in project.nodeLists for p in n.output]
         in_cols = [f"{n.nodeName}.{p.name}" for n in project.nodeLists for p in n.input]
         self._values.writerow(["step", "t", "mode", *out_cols, *in_cols])
         self._timing_file = _RecordFile(run_dir / "timing.csv")
-        self._timing = csv.writer(self._timing_file)
+        self._timing = csv.writer(self._timing_file.buffer)
         self._timing.writerow(["step", "t", "wait_s", "holder", "lateness_s",
                                *(f"arrival_s:{n}" for n in self._stepping),
                                *(f"age_s:{label}" for label in self._async_labels)])
@@ -163,7 +160,7 @@ class Recorder:
 
     def event(self, record: dict[str, Any]) -> None:
         try:
-            self._events_file.write(json.dumps(record) + "\n")
+            self._events_file.buffer.write(json.dumps(record) + "\n")
             self._events_file.flush()
         except OSError as exc:
             raise RecordError.writing(self.run_dir, "events.jsonl", exc, record.get("step")) from None
