@@ -7,9 +7,9 @@ from contextlib import contextmanager
 from typing import Any
 
 from fmu_bridge.config import Node as NodeSpec
-from fmu_bridge.fmu_loader import FmuError, FmuInstance
+from fmu_bridge.fmu_loader import FmuError, FmuInstance, FmuTerminated
 
-from clients.node import Node, NodeContext, NodeModelError
+from clients.node import Node, NodeContext, NodeModelError, SimulationEnded
 
 
 @contextmanager
@@ -18,6 +18,8 @@ def _node_errors() -> Iterator[None]:
     # imports fmpy (and numpy), some 13 MB and a tenth of a second per process.
     try:
         yield
+    except FmuTerminated as exc:
+        raise SimulationEnded(exc.t, str(exc)) from None
     except FmuError as exc:
         raise NodeModelError(str(exc)) from None
 

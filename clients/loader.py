@@ -1,8 +1,17 @@
-"""Finding the implementation a node entry names: a reference model or ``module:Class``."""
+"""Finding the implementation a node entry names: a reference model, ``module:Class`` or
+``file.py:Class``.
+
+A model beside the project file loads without the user setting PYTHONPATH: ``module:Class``
+is looked up on the import path with the project file's folder last on it (so that a module
+there never shadows an installed one, nor the standard library; processes run ``python -P``),
+and ``path/to/file.py:Class`` names a file relative to the project file.
+"""
 
 from __future__ import annotations
 
 import importlib
+import importlib.util
+import sys
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -38,19 +47,44 @@ def _fmu_path(spec: NodeSpec, project_dir: Path) -> Path:
     return path
 
 
-def model_class(spec: NodeSpec) -> type[Node] | type[AsyncSource]:
+def _import(module_name: str, project_dir: Path):
+    """The module a model names: a ``.py`` file relative to the project's folder, or a module
+    on the import path, with that folder last on it."""
+    if module_name.endswith(".py"):
+        path = (project_dir / module_name).resolve()
+        if not path.is_file():
+            raise ImportError(f"no file {path}")
+        name = f"hycosim_model_{path.stem}_{abs(hash(str(path))):x}"
+        if name not in sys.modules:
+            spec = importlib.util.spec_from_file_location(name, path)
+            module = importlib.util.module_from_spec(spec)
+            sys.modules[name] = module
+            try:
+                spec.loader.exec_module(module)
+            except BaseException:
+                del sys.modules[name]
+                raise
+        return sys.modules[name]
+    folder = str(project_dir.resolve())
+    if folder not in sys.path:
+        sys.path.append(folder)
+    return importlib.import_module(module_name)
+
+
+def model_class(spec: NodeSpec, project_dir: Path | None = None) -> type[Node] | type[AsyncSource]:
     """The class a Python node entry names, imported and checked against the entry: a Node
-    for a stepping node, an AsyncSource for an asynchronous one, taking the parameters given."""
+    for a stepping node, an AsyncSource for an asynchronous one, taking the parameters given.
+    ``project_dir``: the project file's folder, where the user's own models may lie."""
     if not spec.model:
         raise NodeLoadError(f"node {spec.nodeName!r} names no 'model' to run; give a reference model "
-                            f"({', '.join(sorted(REFERENCE_MODELS))}) or 'module:Class'")
+                            f"({', '.join(sorted(REFERENCE_MODELS))}), 'module:Class' or 'file.py:Class'")
     target = REFERENCE_MODELS.get(spec.model, spec.model)
-    module_name, _, class_name = target.partition(":")
-    if not class_name:
+    module_name, _, class_name = target.rpartition(":")
+    if not module_name or not class_name:
         raise NodeLoadError(f"node {spec.nodeName!r}: model {spec.model!r} is neither a reference model "
-                            f"({', '.join(sorted(REFERENCE_MODELS))}) nor 'module:Class'")
+                            f"({', '.join(sorted(REFERENCE_MODELS))}) nor 'module:Class' or 'file.py:Class'")
     try:
-        cls = getattr(importlib.import_module(module_name), class_name)
+        cls = getattr(_import(module_name, project_dir or Path.cwd()), class_name)
     except Exception as exc:  # the user's module may fail to import in any way (SyntaxError, its own errors)
         detail = str(exc) if isinstance(exc, (ImportError, AttributeError)) else f"{type(exc).__name__}: {exc}"
         raise NodeLoadError(f"node {spec.nodeName!r}: cannot load model {spec.model!r}: {detail}") from None
@@ -74,7 +108,8 @@ def _check_names(spec: NodeSpec, kind: str, given: Iterable[str], declared: froz
 
 def check_node(spec: NodeSpec, project_dir: Path) -> None:
     """Raise NodeLoadError if the node's implementation could not be loaded as the entry says
-    (without making it: no model is set up, no FMU binary loaded)."""
+    (without making it: no model is set up, no FMU binary loaded). A stepping node with neither
+    model nor FMU is played by a bridge FMU in some tool: nothing to load here."""
     if spec.fmu:
         from fmu_bridge.fmu_loader import FmuError, check_fmu
 
@@ -82,8 +117,10 @@ def check_node(spec: NodeSpec, project_dir: Path) -> None:
             check_fmu(_fmu_path(spec, project_dir), spec)
         except FmuError as exc:
             raise NodeLoadError(str(exc)) from None
-    else:
-        model_class(spec)
+    elif spec.model:
+        model_class(spec, project_dir)
+    elif spec.asynchronous:
+        model_class(spec, project_dir)  # refused: an asynchronous node needs a model
 
 
 def load_node(spec: NodeSpec, project_dir: Path) -> Node | AsyncSource:
@@ -92,4 +129,4 @@ def load_node(spec: NodeSpec, project_dir: Path) -> Node | AsyncSource:
         from clients.fmu_node import FmuNode
 
         return FmuNode(spec, _fmu_path(spec, project_dir))
-    return model_class(spec)()
+    return model_class(spec, project_dir)()

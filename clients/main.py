@@ -7,7 +7,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from fmu_bridge import logs
+from fmu_bridge import logs, signals
 from fmu_bridge.config import LoadedProject, server_endpoint
 from fmu_bridge.endpoints import EndpointError, parse_endpoint
 from fmu_bridge.security import SecurityError, node_password
@@ -36,13 +36,14 @@ def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
         endpoint = str(parse_endpoint(connect)) if connect else server_endpoint(loaded.project.serverIP)
     except EndpointError as exc:
         return 2, f"{'--connect' if connect else 'serverIP'}: {exc}"
-    interrupted = threading.Event()
+    interrupted: list[int] = []  # the stop signal that came, if any
 
-    def on_sigint(signum: int, frame: Any) -> None:
-        interrupted.set()
-        signal.default_int_handler(signum, frame)
+    def on_stop(signum: int, frame: Any) -> None:
+        interrupted.append(signum)
+        raise signals.Stopped(signum)
 
-    previous = signal.signal(signal.SIGINT, on_sigint)
+    previous = {s: signal.signal(s, on_stop) for s in signals.STOP_SIGNALS} \
+        if threading.current_thread() is threading.main_thread() else {}
     try:
         password = node_password(loaded, name, password_file)
         impl = load_node(spec, loaded.path.parent if loaded.path else Path.cwd())
@@ -51,12 +52,14 @@ def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
     except RunFailedElsewhere as exc:
         return FAILED_ELSEWHERE, str(exc)
     except (NodeLoadError, NodeRunError, NodeModelError, ConnectError, SecurityError) as exc:
-        if interrupted.is_set():
+        if interrupted:
             # Ctrl-C while a model's extension module initialised surfaces as an ImportError.
-            return 130, f"node {name!r} interrupted by Ctrl-C"
+            stop = signals.Stopped(interrupted[0])
+            return signals.exit_code(stop), f"node {name!r} {signals.describe(stop)}"
         return 3, str(exc)
-    except KeyboardInterrupt:
-        return 130, f"node {name!r} interrupted by Ctrl-C"
+    except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM or SIGHUP
+        return signals.exit_code(exc), f"node {name!r} {signals.describe(exc)}"
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
     return 0, f"node {name!r} finished after {runtime.steps} steps"

@@ -51,6 +51,16 @@ class NodeModelError(RuntimeError):
     runtime reports it as it is (any other exception is reported with its type)."""
 
 
+class SimulationEnded(Exception):
+    """Raised by a model's ``step`` to end the simulation at time ``t`` (an FMU that asked to
+    terminate): the run ends cleanly at the last macro-step point every node reached, and
+    the run's records name this node, the time and the message."""
+
+    def __init__(self, t: float, message: str):
+        super().__init__(message)
+        self.t = t
+
+
 class Node(ABC):
     """A simulator advanced in macro steps by the runtime."""
 

@@ -9,22 +9,25 @@ server going away. Every wait has a timeout.
 from __future__ import annotations
 
 import json
+import math
 import os
+import signal
 import time
 from typing import Any
 
 import structlog
 import zenoh
 
-from fmu_bridge import frames
-from fmu_bridge.config import LoadedProject, PortType
-from fmu_bridge.inbox import Inbox
+from fmu_bridge import frames, signals
+from fmu_bridge.config import WIRE_TYPES, LoadedProject, PortType
+from fmu_bridge.drops import DropLog
+from fmu_bridge.inbox import LOCAL, Inbox
 from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
 from fmu_bridge.security import client_tls
 from fmu_bridge.session import ConnectError, FramePublisher, FrameTooLarge, client_config, open_session, token_held
 from fmu_bridge.sim_clock import RealTimeClock
 
-from clients.node import AsyncSource, Node, NodeContext, NodeModelError
+from clients.node import AsyncSource, Node, NodeContext, NodeModelError, SimulationEnded
 
 _COERCE = {
     PortType.REAL: float,
@@ -56,7 +59,11 @@ class NodeRuntime:
         self.keys = ProjectKeys(loaded.project.projectName)
         self._out_ports = [(p.name, _COERCE[p.type]) for p in self.spec.output]
         self._in_names = self.spec.input_names()
+        self._in_types = tuple(WIRE_TYPES[p.type] for p in self.spec.input)
+        # Releases carry inputs for the stepping nodes; an asynchronous source only reads their time.
+        self._release_for = None if self.spec.asynchronous else node_name
         self._log = structlog.get_logger("node").bind(node=node_name)
+        self.drops = DropLog(self._log)
         self.steps = 0
         self._server_lost: float | None = None
         self._server_seen = False  # its liveliness token, which tells this node when it goes
@@ -134,10 +141,14 @@ class NodeRuntime:
                     raise NodeRunError(f"node {self.name!r}: the run on {self.endpoint} was already under way{at} "
                                        "when it attached; a node joins before the run starts, and a node "
                                        "restarted mid-run has lost the state the run needs: start the run again")
-                if isinstance(self.impl, AsyncSource):
-                    self._run_async(start)
-                else:
-                    self._run_stepping(checkpoint=bool(start.fields[5].get("checkpoint")))
+                try:
+                    if isinstance(self.impl, AsyncSource):
+                        self._run_async(start)
+                    else:
+                        self._run_stepping(checkpoint=bool(start.fields[5].get("checkpoint")))
+                except KeyboardInterrupt as exc:
+                    self._say_stopped(exc)
+                    raise
             finally:
                 token.undeclare()
                 watch.undeclare()
@@ -199,18 +210,11 @@ class NodeRuntime:
                     continue  # woken for the grace check above
                 return None
             try:
-                frame = frames.decode(msg[1])
-                if frame.kind == frames.REPLAY:
-                    if frame.fields[0] != self.name:
-                        continue
-                    inner = frames.decode(frame.fields[1])
-                    if inner.kind not in (frames.START, frames.STEP):
-                        raise frames.FrameError(f"a replay of a frame of kind {inner.kind}")
-                    frame = frames.Frame(frames.REPLAY, (self.name, frames.check_release(inner, self.name)))
-                elif frame.kind in (frames.START, frames.STEP):
-                    frames.check_release(frame, self.name)
+                frame = self._accept(msg[0] == LOCAL, msg[1])
             except frames.FrameError as exc:
-                self._log.warning("frame dropped", reason=str(exc), step=self.steps)
+                self.drops.drop("not a release", str(exc), self.steps)
+                continue
+            if frame is None:
                 continue
             if frame.kind == frames.LIVE:
                 if frame.fields[1]:
@@ -224,15 +228,94 @@ class NodeRuntime:
                 continue
             return frame
 
+    def _accept(self, local: bool, payload: bytes) -> frames.Frame | None:
+        """A frame from ``down`` (or this process's own liveliness news) that this node can act
+        on; None for one meant for another node; FrameError for anything else."""
+        frame = frames.decode(payload)
+        kind = frame.kind
+        if local:
+            return frame  # liveliness news from this process's own subscriber
+        if kind in (frames.START, frames.STEP):
+            return frames.check_release(frame, self._release_for, self._in_types)
+        if kind == frames.REPLAY:
+            if frame.fields[0] != self.name:
+                return None
+            inner = frames.decode(frame.fields[1])
+            if inner.kind not in (frames.START, frames.STEP):
+                raise frames.FrameError(f"a replay of a {frames.KIND_NAMES[inner.kind]} frame")
+            return frames.Frame(frames.REPLAY, (self.name, frames.check_release(inner, self._release_for, self._in_types)))
+        if kind == frames.ROLLBACK:
+            k, t = frame.fields
+            if not (0 <= k < frames.MAX_STEP and math.isfinite(t)):
+                raise frames.FrameError(f"ROLLBACK frame to step {k}, t {t}: out of range")
+            return frame
+        if kind == frames.STOP:
+            return frame
+        raise frames.FrameError(f"a {frames.KIND_NAMES[kind]} frame is not for a node")
+
+    def _say_stopped(self, exc: BaseException) -> None:
+        """A node stopped by SIGTERM or SIGHUP (its supervisor) tells the server, which then names it
+        rather than a lost token. Not on Ctrl-C: a terminal's reaches the server too, which
+        reports its own interruption."""
+        if signals.signal_of(exc) == signal.SIGINT or isinstance(self.impl, AsyncSource):
+            return
+        try:
+            self._send(frames.encode(frames.END, self.spec.UID, self.steps + 1, 0.0, False,
+                                     f"node {self.name!r} {signals.describe(exc)} after step {self.steps}"))
+        except Exception:  # on its way out: the token's loss still tells the server
+            pass
+
+    def _end(self, step: int, t: float, clean: bool, message: str) -> None:
+        """Tell the server this node's model ended the run (``clean``) or failed, in place of its
+        outputs for ``step``, and wait for the server's STOP (so that it hears this first, not
+        that the node's token went). A failure is raised as this node's own."""
+        message = message[:2000]
+        try:
+            self._send(frames.encode(frames.END, self.spec.UID, step, t, clean, message))
+            deadline = time.monotonic() + min(10.0, self.cosim.stepTimeout)
+            while (left := deadline - time.monotonic()) > 0:
+                frame = self._next_frame(left)
+                if frame is None or frame.kind == frames.STOP:
+                    break
+        except NodeRunError:
+            pass  # the server is gone: the node's own message says enough
+        if not clean:
+            raise NodeRunError(message)
+        self._log.info("ended the simulation", step=step, t=t, message=message)
+
+    def _step_model(self, impl: Node, k: int, t: float, h: float | None, inputs: dict[str, Any]) -> bytes | None:
+        """Step the model from t by h (h None: only read its outputs at t, k = -1), send its
+        outputs at step k + 1 and return them as sent; None if it ended the simulation. A model
+        that fails, or whose outputs cannot be sent, is reported to the server (END) and raised."""
+        try:
+            if h is not None:
+                impl.step(t, h, inputs)
+            frame = frames.encode(frames.OUTPUTS, self.spec.UID, k + 1, t + (h or 0.0),
+                                  self._pack_outputs(impl.outputs()))
+            self._send(frame)
+            return frame
+        except SimulationEnded as exc:
+            self._end(k + 1, exc.t, True, f"{exc}")
+            return None
+        except NodeRunError as exc:
+            self._end(k + 1, t, False, str(exc))
+        except NodeModelError as exc:
+            self._end(k + 1, t, False, f"{exc} (step {k})")
+        except Exception as exc:
+            message = f"node {self.name!r}: its model failed at step {k} (t={t:g} s): {type(exc).__name__}: {exc}"
+            self._log.exception("model failed", step=k)
+            self._end(k + 1, t, False, message)
+        return None  # not reached: _end raises for a failure
+
     def _run_stepping(self, checkpoint: bool) -> None:
         impl = self.impl
         assert isinstance(impl, Node)
         checkpoint = checkpoint and impl.can_rollback
         saved_step, saved = -1, None
         self._send(self._hello(impl.can_rollback))
-        last_out = frames.encode(frames.OUTPUTS, self.spec.UID, 0, self.cosim.startTime,
-                                 self._pack_outputs(impl.outputs()))
-        self._send(last_out)
+        last_out = self._step_model(impl, -1, self.cosim.startTime, None, {})
+        if last_out is None:
+            return
         done = -1  # the last step integrated
         # The server enforces step timeouts; a node only needs to notice the server is gone,
         # which liveliness tells; this bound is the last resort for a frozen server.
@@ -255,8 +338,10 @@ class NodeRuntime:
             if frame.kind == frames.ROLLBACK:
                 k, t = frame.fields
                 if saved_step != k:
-                    raise NodeRunError(f"node {self.name!r}: asked to roll back to step {k}, "
-                                       f"but its last saved state is from step {saved_step}")
+                    # Not from this run's server, which rolls back only to the step it just released.
+                    self.drops.drop("not a release", f"ROLLBACK to step {k}; the state saved is of step {saved_step}",
+                                    self.steps)
+                    continue
                 impl.set_state(saved)
                 self._log.info("rollback", step=k, t=t)
                 continue
@@ -270,17 +355,10 @@ class NodeRuntime:
                 mode, driven = new_mode, now_driven
                 impl.set_mode(mode, driven)
                 self._log.info("mode", step=k, mode=mode, driven=driven)
-            mine = inputs.get(self.name, [])
-            try:
-                impl.step(t, h, dict(zip(self._in_names, mine)))
-            except NodeModelError as exc:
-                raise NodeRunError(f"{exc} (step {k})") from None
-            except Exception as exc:
-                raise NodeRunError(f"node {self.name!r}: its model failed at step {k} (t={t:g} s): "
-                                   f"{type(exc).__name__}: {exc}") from exc
-            self.steps, done = k + 1, k
-            last_out = frames.encode(frames.OUTPUTS, self.spec.UID, k + 1, t + h, self._pack_outputs(impl.outputs()))
-            self._send(last_out)
+            out = self._step_model(impl, k, t, h, dict(zip(self._in_names, inputs[self.name])))
+            if out is None:
+                return
+            self.steps, done, last_out = k + 1, k, out
 
     def _other_projects(self, session: zenoh.Session) -> str:
         """A hint for a node that heard nothing from its server: the endpoint may serve another project."""

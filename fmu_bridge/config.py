@@ -43,6 +43,16 @@ _ASSIGNABLE = {
     PortType.BINARY: {PortType.BINARY},
 }
 
+# The Python types a port's values have on the wire, exactly as msgpack yields them (it never
+# yields subclasses, and a bool is no int there): a Real port takes integers too.
+WIRE_TYPES: dict[PortType, tuple[type, ...]] = {
+    PortType.REAL: (float, int),
+    PortType.INTEGER: (int,),
+    PortType.BOOLEAN: (bool,),
+    PortType.STRING: (str,),
+    PortType.BINARY: (bytes, list),
+}
+
 _DEFAULT_START = {
     PortType.REAL: 0.0,
     PortType.INTEGER: 0,

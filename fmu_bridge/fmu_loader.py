@@ -38,6 +38,18 @@ class FmuError(RuntimeError):
     """An FMU that cannot serve as the node, or a call into it that failed."""
 
 
+_DISCARD = 2  # fmi2Discard and fmi3Discard
+
+
+class FmuTerminated(FmuError):
+    """The FMU asked to end the simulation (FMI 2: fmi2Discard with fmi2Terminated; FMI 3:
+    terminateSimulation) at ``t``, the end of its last successful step."""
+
+    def __init__(self, message: str, t: float):
+        super().__init__(message)
+        self.t = t
+
+
 @dataclass(frozen=True)
 class MappedPort:
     port: str
@@ -294,16 +306,39 @@ class FmuInstance:
                     event, terminate, early, last = self.fmu.doStep(
                         currentCommunicationPoint=now, communicationStepSize=end - now)
                     if terminate:
-                        raise FmuError(f"node {self.node!r}: {self.path.name} asked to terminate at t={last:g}")
+                        raise FmuTerminated(f"{self.path.name} asked to terminate the simulation at t={last:g} s "
+                                            "(terminateSimulation)", last)
                     if event and self.event_mode:
                         self.fmu.enterEventMode()
                         self._handle_events()
                     # An early return ends the call before `end`; go on from where it stopped.
                     now = last if early else end
         except FMICallException as exc:
-            kind = "discarded" if exc.status == 2 else "failed"
-            raise FmuError(f"node {self.node!r}: doStep from t={t:g} by {h:g} {kind} (status {exc.status})") from None
+            if exc.status != _DISCARD:
+                raise FmuError(f"node {self.node!r}: {self.path.name}: doStep from t={t:g} s by {h:g} s failed "
+                               f"(status {exc.status})") from None
+            if not self.fmi3:
+                ended = self._fmi2_terminated()
+                if ended is not None:
+                    raise FmuTerminated(f"{self.path.name} asked to terminate the simulation at t={ended:g} s "
+                                        "(fmi2Discard with fmi2Terminated)", ended) from None
+            raise FmuError(f"node {self.node!r}: {self.path.name} discarded doStep from t={t:g} s by {h:g} s "
+                           f"({'fmi3' if self.fmi3 else 'fmi2'}Discard) without asking to terminate") from None
         self.time = t + h
+
+    def _fmi2_terminated(self) -> float | None:
+        """After an fmi2Discard: the time the FMU ended the simulation at, or None if it did not."""
+        from fmpy.fmi2 import fmi2LastSuccessfulTime, fmi2Terminated
+
+        try:
+            if not self.fmu.getBooleanStatus(fmi2Terminated):
+                return None
+        except FMICallException:  # an FMU that cannot say: a plain discard
+            return None
+        try:
+            return self.fmu.getRealStatus(fmi2LastSuccessfulTime)
+        except FMICallException:
+            return self.time
 
     def get_state(self) -> Any:
         if not self.can_rollback:

@@ -19,11 +19,21 @@ Kinds and layouts (after version and kind):
 * ``ROLLBACK`` server → nodes: ``step, t``: restore the state saved before that step
 * ``REPLAY``   server → one node: ``node, release``: the last START/STEP again, for a node that
   came back after a link cut (it may have missed the release, or the server its outputs)
+* ``END``      node → server, in place of its outputs: ``uid, step, t, clean, message``: its model
+  ended the simulation at ``t`` (``clean``: an FMU that asked to terminate) or failed (the
+  message says how); the server stops the run with the node's own words
+
+:func:`decode` checks every field's type (exactly as msgpack yields them: a bool is no
+number, a float no step), so that no receiver meets a list where it reads a name or an
+int where it iterates. Anything else is a :class:`FrameError` whose message shows at
+most a short prefix of what came: a frame may be hostile and large.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+import math
+import reprlib
+from collections.abc import Callable, Iterable
 from typing import Any, NamedTuple
 
 import msgpack
@@ -39,13 +49,60 @@ LIVE = 6
 HELLO = 7
 ROLLBACK = 8
 REPLAY = 9
+END = 10
 
 # STOP reasons of a run that ended as asked; any other reason is a failure.
 STOP_COMPLETED = "completed"
 STOP_STOPPED = "stopped"
 CLEAN_STOPS = (STOP_COMPLETED, STOP_STOPPED)
 
-_ARITY = {OUTPUTS: 4, SAMPLE: 4, START: 6, STEP: 6, STOP: 2, LIVE: 2, HELLO: 2, ROLLBACK: 2, REPLAY: 2}
+KIND_NAMES = {OUTPUTS: "OUTPUTS", SAMPLE: "SAMPLE", START: "START", STEP: "STEP", STOP: "STOP", LIVE: "LIVE",
+              HELLO: "HELLO", ROLLBACK: "ROLLBACK", REPLAY: "REPLAY", END: "END"}
+
+# Steps and sequence numbers stay well inside int64 (the gateway packs them as such).
+MAX_STEP = 1 << 62
+
+_NUM = (int, float)  # exact types: msgpack yields bool for booleans, never an int subclass
+
+
+def _num(v: Any) -> bool:
+    return type(v) in _NUM
+
+
+def _int(v: Any) -> bool:
+    return type(v) is int
+
+
+def _str(v: Any) -> bool:
+    return type(v) is str
+
+
+# Per kind, the type of each field after version and kind. One predicate call per frame on
+# the hot path (OUTPUTS at the server, STEP at the nodes).
+_SHAPES: dict[int, tuple[int, Callable[[tuple], bool]]] = {
+    OUTPUTS: (4, lambda f: type(f[0]) is int and type(f[1]) is int and type(f[2]) in _NUM and type(f[3]) is list),
+    SAMPLE: (4, lambda f: type(f[0]) is int and type(f[1]) is int and type(f[2]) in _NUM and type(f[3]) is list),
+    START: (6, lambda f: _str(f[0]) and _num(f[1]) and _num(f[2]) and _num(f[3]) and (f[4] is None or _num(f[4]))
+            and type(f[5]) is dict),
+    STEP: (6, lambda f: type(f[0]) is int and type(f[1]) in _NUM and type(f[2]) in _NUM and type(f[3]) is str
+           and type(f[4]) is dict and type(f[5]) is list),
+    STOP: (2, lambda f: _int(f[0]) and _str(f[1])),
+    LIVE: (2, lambda f: _str(f[0]) and type(f[1]) is bool),
+    HELLO: (2, lambda f: _int(f[0]) and type(f[1]) is dict),
+    ROLLBACK: (2, lambda f: _int(f[0]) and _num(f[1])),
+    REPLAY: (2, lambda f: _str(f[0]) and type(f[1]) is bytes),
+    END: (5, lambda f: _int(f[0]) and _int(f[1]) and _num(f[2]) and type(f[3]) is bool and _str(f[4])),
+}
+
+_SHORT = reprlib.Repr()
+_SHORT.maxstring = _SHORT.maxother = 40
+_SHORT.maxlist = _SHORT.maxdict = 4
+_SHORT.maxlevel = 2
+
+
+def short(value: Any) -> str:
+    """A repr of at most a few dozen characters, whatever the value's size or depth (for messages)."""
+    return _SHORT.repr(value)
 
 
 class FrameError(ValueError):
@@ -68,47 +125,60 @@ def decode(payload: bytes) -> Frame:
     """Unpack and shape-check one frame; raise FrameError with the reason otherwise."""
     try:
         obj = msgpack.unpackb(payload, raw=False, strict_map_key=False)
-    except Exception as exc:  # msgpack raises several unrelated types for garbage
+    except Exception as exc:  # msgpack raises several unrelated types for garbage (and StackError for depth)
         raise FrameError(f"not msgpack ({type(exc).__name__})") from None
-    if not isinstance(obj, list) or len(obj) < 2:
-        raise FrameError("not a frame array")
+    if type(obj) is not list or len(obj) < 2:
+        raise FrameError(f"not a frame array: {short(obj)}")
     version, kind = obj[0], obj[1]
-    if version != VERSION:
-        raise FrameError(f"frame version {version!r}, expected {VERSION}")
-    if kind not in _ARITY:
-        raise FrameError(f"unknown frame kind {kind!r}")
+    if type(version) is not int or version != VERSION:
+        raise FrameError(f"frame version {short(version)}, expected {VERSION}")
+    shape = _SHAPES.get(kind) if type(kind) is int else None
+    if shape is None:
+        raise FrameError(f"unknown frame kind {short(kind)}")
     fields = tuple(obj[2:])
-    if len(fields) != _ARITY[kind]:
-        raise FrameError(f"frame kind {kind} has {len(fields)} fields, expected {_ARITY[kind]}")
+    arity, fits = shape
+    if len(fields) != arity:
+        raise FrameError(f"{KIND_NAMES[kind]} frame with {len(fields)} fields, expected {arity}")
+    if not fits(fields):
+        raise FrameError(f"{KIND_NAMES[kind]} frame with fields of the wrong types: {short(list(fields))}")
     return Frame(kind, fields)
 
 
-_NUMBER = (int, float)
+def _finite(*values: float) -> bool:
+    return all(math.isfinite(v) for v in values)
 
 
-def _is_number(value: Any) -> bool:
-    return isinstance(value, _NUMBER) and not isinstance(value, bool)
+def check_release(frame: Frame, node: str | None = None, input_types: tuple[tuple[type, ...], ...] | None = None
+                  ) -> Frame:
+    """Return a START or STEP frame a node can act on; raise FrameError otherwise.
 
-
-def check_release(frame: Frame, node: str | None = None) -> Frame:
-    """Return a START or STEP frame whose fields have the types a node reads; raise FrameError otherwise.
-
-    :func:`decode` checks only the shape; a node (or the gateway) reading a release that
-    anyone on an unsecured network may have written checks the types before it acts.
-    With ``node``, a STEP's inputs for that node, if any, must be a list.
+    :func:`decode` has checked the field types. Here: times finite, a step size above zero, a
+    step number in range, and with ``node``, a STEP that gives that node its inputs, exactly
+    ``len(input_types)`` of them, each of one of its port's types (``input_types``: per input,
+    the Python types msgpack yields for it). A release anyone on an unsecured network may have
+    written is checked before a node acts on it.
     """
     f = frame.fields
     if frame.kind == START:
-        ok = (isinstance(f[0], str) and _is_number(f[1]) and _is_number(f[2]) and _is_number(f[3])
-              and (f[4] is None or _is_number(f[4])) and isinstance(f[5], dict))
-    elif frame.kind == STEP:
-        ok = (type(f[0]) is int and _is_number(f[1]) and _is_number(f[2]) and isinstance(f[3], str)
-              and isinstance(f[4], dict) and isinstance(f[5], list)
-              and (node is None or isinstance(f[4].get(node, []), list)))
-    else:
-        raise FrameError(f"frame kind {frame.kind} is not a release")
-    if not ok:
-        raise FrameError(f"{'START' if frame.kind == START else 'STEP'} frame with fields of the wrong types")
+        if not (_finite(f[1], f[2], f[3]) and f[2] > 0 and (f[4] is None or (math.isfinite(f[4]) and f[4] > 0))):
+            raise FrameError(f"START frame with times that are not finite or a step size not above 0: "
+                             f"{short(list(f[1:5]))}")
+        return frame
+    if frame.kind != STEP:
+        raise FrameError(f"a {KIND_NAMES.get(frame.kind, frame.kind)} frame is not a release")
+    k, t, h, _, inputs, _ = f
+    if not (0 <= k < MAX_STEP and _finite(t, h) and h > 0):
+        raise FrameError(f"STEP frame with step {short(k)}, t {short(t)}, h {short(h)}: out of range")
+    if node is not None:
+        mine = inputs.get(node)
+        if type(mine) is not list:
+            raise FrameError(f"STEP {k} gives node {node!r} no inputs")
+        if input_types is not None:
+            if len(mine) != len(input_types):
+                raise FrameError(f"STEP {k} gives node {node!r} {len(mine)} inputs, it has {len(input_types)}")
+            for i, (value, types) in enumerate(zip(mine, input_types)):
+                if type(value) not in types:
+                    raise FrameError(f"STEP {k} gives node {node!r} a {type(value).__name__} for input {i}")
     return frame
 
 

@@ -15,6 +15,12 @@ it doubles when polling caught a sample and halves when the thread had to block,
 to none, with a short probe every so often; so a process that waits long for each frame
 (slow peers, real-time pacing) soon stops polling.
 
+Injected payloads come back under the key :data:`LOCAL`, which no Zenoh sample can have.
+They travel as session-local puts on ``local_key`` prefixed with a secret drawn per inbox:
+a put never leaves its session, so no peer can learn the secret, and a peer that writes on
+``local_key`` itself (it may be an ordinary key, the nodes' ``down``) is delivered as the
+network sample it is, never as a liveliness change or a wake-up.
+
 :attr:`Inbox.waits` counts how each ``recv`` got its sample, so a run can say whether
 polling paid: ``queued`` (already there), ``polled`` (caught while polling), ``slept``
 (the thread blocked; a blocking Inbox counts every wait here, queued or not). Wake-ups and
@@ -29,7 +35,9 @@ import time
 
 import zenoh
 
+LOCAL = ""  # the key recv gives injected payloads (Zenoh keys are never empty)
 _WAKE = b"\x00wake"
+_SECRET_LEN = 16
 # A poll is a sched_yield and a try_recv: 1–2 µs when no other process is runnable, a
 # hand-over of the core to one that is. Measured with benchmarks/barrier.py on 2 cores
 # (medians of interleaved runs): +20–50 % steps/s at N = 2, +25 % at N = 4, a sixth lost
@@ -49,6 +57,8 @@ class Inbox:
         # local_key must match key_expr; it carries wake-ups and injected events.
         self._session = session
         self._local_key = local_key
+        self._secret = os.urandom(_SECRET_LEN)
+        self._wake = self._secret + _WAKE
         self._sub = session.declare_subscriber(key_expr, zenoh.handlers.FifoChannel(capacity))
         self._deadline: float | None = None
         self._last_wake = 0.0
@@ -75,7 +85,7 @@ class Inbox:
             deadline = self._deadline
             if deadline is not None and (now >= deadline or now - self._last_wake >= _TICK):
                 self._last_wake = now
-                self.inject(_WAKE)
+                self._put_local(self._wake)
             until = now + _TICK if deadline is None else min(deadline, self._last_wake + _TICK)
             if until <= now:  # woken for a deadline already served: the next recv kicks
                 until = now + _TICK
@@ -94,11 +104,15 @@ class Inbox:
         return self._polls
 
     def inject(self, payload: bytes) -> None:
-        """Hand a payload to the reading thread, behind everything already queued.
+        """Hand a payload to the reading thread, behind everything already queued; ``recv``
+        returns it under the key :data:`LOCAL`.
 
         Once the session is closing there is no reader left: the payload is dropped rather
         than raising in whichever callback or thread injected it.
         """
+        self._put_local(self._secret + payload)
+
+    def _put_local(self, payload: bytes) -> None:
         try:
             self._session.put(self._local_key, payload, allowed_destination=zenoh.Locality.SESSION_LOCAL,
                               congestion_control=zenoh.CongestionControl.BLOCK)
@@ -106,7 +120,8 @@ class Inbox:
             pass
 
     def recv(self, timeout: float) -> tuple[str, bytes] | None:
-        """The next sample as (key, payload), or None once ``timeout`` seconds pass."""
+        """The next sample as (key, payload), or None once ``timeout`` seconds pass; an
+        injected payload comes as (LOCAL, payload)."""
         now = time.monotonic()
         deadline = now + timeout
         self._last_wake = now
@@ -117,11 +132,14 @@ class Inbox:
             while True:
                 sample = self._next()
                 payload = sample.payload.to_bytes()
-                if payload == _WAKE:
+                key = str(sample.key_expr)
+                if key != self._local_key or payload[:_SECRET_LEN] != self._secret:
+                    return key, payload
+                if payload == self._wake:
                     if time.monotonic() >= deadline:
                         return None
                     continue  # a wake-up meant for an earlier recv
-                return str(sample.key_expr), payload
+                return LOCAL, payload[_SECRET_LEN:]
         finally:
             self._deadline = None
 

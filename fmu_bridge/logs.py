@@ -55,6 +55,9 @@ def configure(log_file: Path | None = None, level: str = "info", stream: IO[str]
             structlog.contextvars.merge_contextvars,
             structlog.processors.add_log_level,
             structlog.processors.TimeStamper(fmt="%H:%M:%S" if terminal else "iso", utc=not terminal),
+            # log.exception(...) in a JSON line: the traceback as text under "exception" (without
+            # this processor the line said only "exc_info": true).
+            *([] if terminal else [structlog.processors.format_exc_info]),
             structlog.dev.ConsoleRenderer() if terminal else structlog.processors.JSONRenderer(),
         ],
         wrapper_class=structlog.make_filtering_bound_logger(logging.getLevelName(level.upper())),

@@ -101,29 +101,46 @@ def router_security(loaded: LoadedProject, endpoint: str = "") -> dict:
                                                 "dictionary_file": str(path)}, **router_tls(loaded, endpoint)}
     if not loaded.project.security.acl:
         return settings
-    keys = ProjectKeys(loaded.name)
-    nodes = [n.nodeName for n in loaded.project.nodeLists]
-    rules, subjects, policies = [], [], []
-    everything_out = {"id": "to-all", "flows": ["egress"], "permission": "allow", "key_exprs": [f"{keys.root}/**"],
-                      "messages": ["put", "declare_subscriber", "liveliness_token", "declare_liveliness_subscriber",
-                                   "reply", "declare_queryable"]}
-    rules.append(everything_out)
-    for node in nodes:
-        rules.append({"id": f"from-{node}", "flows": ["ingress"], "permission": "allow",
-                      "messages": ["put", "declare_subscriber", "liveliness_token", "declare_liveliness_subscriber",
-                                   "liveliness_query", "query"],
-                      "key_exprs": [keys.up(node), keys.down, keys.alive(node), keys.alive(SERVER_TOKEN), keys.status]})
-        subjects.append({"id": node, "usernames": [node]})
-        policies.append({"id": f"node-{node}", "rules": [f"from-{node}", "to-all"], "subjects": [node]})
-    monitors = sorted(set(users) - set(nodes) - {SERVER_USER})
-    if monitors:
-        rules.append({"id": "monitor", "flows": ["ingress"], "permission": "allow", "messages": ["query"],
-                      "key_exprs": [keys.status]})
-        subjects.append({"id": "monitors", "usernames": monitors})
-        policies.append({"id": "monitors", "rules": ["monitor", "to-all"], "subjects": ["monitors"]})
-    settings["access_control"] = {"enabled": True, "default_permission": "deny", "rules": rules,
-                                  "subjects": subjects, "policies": policies}
+    settings["access_control"] = access_rules(ProjectKeys(loaded.name), [n.nodeName for n in loaded.project.nodeLists],
+                                              sorted(set(users) - {n.nodeName for n in loaded.project.nodeLists}
+                                                     - {SERVER_USER}))
     return settings
+
+
+def _rule(rule_id: str, messages: list[str], key_exprs: list[str], flow: str = "ingress") -> dict:
+    return {"id": rule_id, "flows": [flow], "permission": "allow", "messages": messages, "key_exprs": key_exprs}
+
+
+def access_rules(keys: ProjectKeys, nodes: list[str], monitors: list[str]) -> dict:
+    """The router's ``access_control`` block: each permission granted on exactly its keys.
+
+    A node may put only on its own ``up/<node>``, declare only its own liveliness token,
+    subscribe to ``down``, watch and ask after the server's token (and ask after its own,
+    to refuse a second process), and query ``status``. Monitors (users that are no node) may
+    subscribe, watch liveliness and query. Nobody but the server, the router itself (whose
+    own session is not subject to these rules), may put on ``down``, declare a queryable or
+    delete; anything not allowed is denied. Egress is open: what a client may subscribe to
+    is decided on its way in.
+    """
+    rules = [_rule("to-all", ["put", "delete", "declare_subscriber", "liveliness_token",
+                              "declare_liveliness_subscriber", "reply", "declare_queryable"],
+                   [f"{keys.root}/**"], flow="egress"),
+             _rule("subscribe-down", ["declare_subscriber"], [keys.down]),
+             _rule("watch-server", ["declare_liveliness_subscriber", "liveliness_query"], [keys.alive(SERVER_TOKEN)]),
+             _rule("ask-status", ["query"], [keys.status])]
+    subjects, policies = [], []
+    common = ["to-all", "subscribe-down", "watch-server", "ask-status"]
+    for node in nodes:
+        rules.append(_rule(f"put-{node}", ["put"], [keys.up(node)]))
+        rules.append(_rule(f"token-{node}", ["liveliness_token", "liveliness_query"], [keys.alive(node)]))
+        subjects.append({"id": node, "usernames": [node]})
+        policies.append({"id": f"node-{node}", "rules": [*common, f"put-{node}", f"token-{node}"], "subjects": [node]})
+    if monitors:
+        rules.append(_rule("monitor", ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
+                           [f"{keys.root}/**"]))
+        subjects.append({"id": "monitors", "usernames": monitors})
+        policies.append({"id": "monitors", "rules": ["to-all", "ask-status", "monitor"], "subjects": ["monitors"]})
+    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies}
 
 
 def node_password(loaded: LoadedProject, node: str, password_file: Path | None) -> str | None:

@@ -22,6 +22,7 @@ from rich.table import Table
 
 from fmu_bridge.config import ConfigError, LoadedProject, load_project
 from fmu_bridge.endpoints import GATEWAY_PORT, EndpointError, parse_address, parse_endpoint
+from fmu_bridge.signals import ignore_stops
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="hycosim: hybrid time/event co-simulation on FMI, relayed over Zenoh.")
@@ -37,6 +38,12 @@ def _load(path: Path) -> LoadedProject:
         for issue in exc.issues:
             err.print(f"  {exc.source}: {issue.render()}", highlight=False, markup=False)
         raise typer.Exit(2) from None
+
+
+def _print_table(table: Table) -> None:
+    """A table on stdout, whole: on a pipe or in a file rich would cut cells to 80 columns
+    (``Float64_fixed_pa…``), and a name cut short is a wrong name."""
+    (out if out.is_terminal else Console(width=100_000)).print(table)
 
 
 def _say_outcome(console: Console, text: str) -> None:
@@ -83,6 +90,10 @@ def validate(
     out.print(f"OK {file}: project {p.projectName!r}, {len(p.nodeLists)} nodes, {len(p.linkLists)} links, "
               f"{len(loaded.routes)} routes, {len(p.events)} events" + ("" if models else " (models not checked)"),
               highlight=False)
+    bridged = [n.nodeName for n in p.nodeLists if not n.model and not n.fmu and not n.asynchronous]
+    if bridged:
+        out.print(f"{len(bridged)} node(s) wait for a bridge FMU in some tool: {', '.join(bridged)} "
+                  f"(build them with: hycosim fmu build {file} -o fmus)", highlight=False)
 
 
 @app.command()
@@ -140,8 +151,8 @@ def run(
     loaded = _load(file)
     listen = _endpoint("--listen", listen) if listen else None
     result = run_embedded(loaded, file, listen=listen, runs_dir=runs_dir, console=err, show_progress=progress)
-    if result.code == 130:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C pressed twice: the run is over, say so
+    if result.code >= 128:
+        ignore_stops()  # a Ctrl-C pressed twice: the run is over, say so
     if result.code:
         err.print(f"[red]error:[/red] {result.message}\n  results so far: {result.run_dir}", highlight=False)
         raise typer.Exit(result.code)
@@ -154,6 +165,10 @@ def _print_summary(s) -> None:
     wall = f"{s.wall_time_s:.2f} s" if s.wall_time_s else "-"
     out.print(f"[bold]{s.status}[/bold]: {s.steps} macro steps in {wall} ({rate}); "
               f"{len(s.mode_switches)} mode switches; results in {s.run_dir}", highlight=False)
+    if s.ended_by:
+        e = s.ended_by
+        out.print(f"node {e['node']!r} ended the simulation at t={e['t']:g} s (after step {e['step']}): "
+                  f"{e['message']}", highlight=False, markup=False)
     if s.non_finite:
         firsts = ", ".join(f"{port} at " + (f"step {at['step']} " if "step" in at else "") + f"(t={at['t']:g} s)"
                            for port, at in sorted(s.non_finite.items(), key=lambda item: item[1]["t"]))
@@ -347,14 +362,14 @@ def fmu_inspect(
                      "hasEventMode", "canReturnEarlyAfterIntermediateUpdate"):
             if hasattr(cs, attr):
                 caps.add_row(attr, str(bool(getattr(cs, attr))))
-    out.print(caps)
+    _print_table(caps)
     variables = Table(title="variables")
     for col in ("name", "causality", "variability", "type", "start", "unit"):
         variables.add_column(col)
     for v in md.modelVariables:
         variables.add_row(v.name, v.causality or "", v.variability or "", v.type, "" if v.start is None else str(v.start),
                           getattr(v, "unit", None) or "")
-    out.print(variables)
+    _print_table(variables)
     if config is None:
         return
     loaded = _load(config)
@@ -385,7 +400,7 @@ def fmu_inspect(
             mapping.add_row(m.port, direction, m.variable, str(m.vr), m.type)
     if driven is not None:
         mapping.add_row("(driven flag)", "input", driven.name, str(driven.valueReference), driven.type)
-    out.print(mapping)
+    _print_table(mapping)
 
 
 scene_app = typer.Typer(no_args_is_help=True, help="The robot scene: reachability, FMUs.")
@@ -743,10 +758,12 @@ def main() -> None:
     import sys
 
     from fmu_bridge.session import prefer_shared_runtime
+    from fmu_bridge.signals import raise_on_stop
 
     # A model that crashes in native code (an FMU's binary, an extension) kills the process
     # without a word from Python; the fault handler at least prints the stack it was at.
     faulthandler.enable()
+    raise_on_stop()  # SIGTERM and SIGHUP (a supervisor, a closed terminal) are ways out like Ctrl-C
     prefer_shared_runtime()  # before any session opens; the server and nodes it starts inherit it
     try:
         app(args=_join_multi_value_options(sys.argv[1:]), prog_name="hycosim")

@@ -22,6 +22,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
+from fmu_bridge import signals
 from fmu_bridge.config import LoadedProject
 from clients.main import FAILED_ELSEWHERE
 from server.relay import run_dir_for
@@ -49,9 +50,10 @@ def _tail(path: Path, lines: int = 5) -> str:
     return text.removeprefix("error: ")  # the CLI's prefix: the launcher adds its own
 
 
-def _node_failure(run_dir: Path, name: str, status: int) -> str:
+def _node_failure(run_dir: Path, name: str, status: int, before_start: bool = False) -> str:
     """What a node that ended with ``status`` said, or how its process died."""
     log = run_dir / f"node-{name}.stderr.txt"
+    when = " before the run started" if before_start else ""
     if status < 0:
         # A crash in a model's native code (an FMU, an extension): the process said nothing of
         # its own, but the fault handler (hycosim.cli.main) wrote the stack it was at to its stderr.
@@ -59,8 +61,13 @@ def _node_failure(run_dir: Path, name: str, status: int) -> str:
             cause = signal.Signals(-status).name
         except ValueError:
             cause = f"signal {-status}"
-        return f"its process died of {cause} (the Python stack at that moment: {log})"
-    return _tail(log) or f"exit status {status}"
+        said = _tail(log, 3)
+        return (f"its process died of {cause}{when} (the Python stack at that moment: {log})"
+                + (f"; its last words:\n{said}" if said else ""))
+    said = _tail(log)
+    if status == 0:
+        return f"its process ended{when} with exit status 0" + (f": {said}" if said else "")
+    return said or f"exit status {status}{when}"
 
 
 def _pump(stream, sink: queue.Queue) -> None:
@@ -94,7 +101,7 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
     cosim = loaded.project.coSimulation
     total = cosim.stopTime - cosim.startTime
     code, message, failures = None, "", {}
-    user_stopped = server_stopped = False
+    user_stopped = server_stopped = started = False
     progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(),
                         TextColumn("t={task.fields[t]:.3f}/{task.total:.3f} s"),
                         TextColumn("{task.fields[rate]:.0f} steps/s"), TextColumn("mode={task.fields[mode]}"),
@@ -115,22 +122,25 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
                     except json.JSONDecodeError:
                         continue
                     if "progress" in msg:
+                        started = True
                         p = msg["progress"]
                         progress.update(task, completed=p["t"] - cosim.startTime, t=p["t"] - cosim.startTime,
                                         rate=p["steps_per_s"], mode=p["mode"])
                     elif "done" in msg:
                         code, message = msg["done"], msg["message"]
                 for name, proc in nodes.items():
-                    if name not in failures and proc.poll() not in (None, 0, FAILED_ELSEWHERE):
-                        failures[name] = _node_failure(run_dir, name, proc.returncode)
+                    # Before the run starts no node has a reason to end: exit status 0 included.
+                    if name not in failures and proc.poll() is not None and (
+                            proc.returncode not in (0, FAILED_ELSEWHERE) or not started):
+                        failures[name] = _node_failure(run_dir, name, proc.returncode, before_start=not started)
                 # A node failed: stop the server, once it has started its records (a server
                 # stopped while it still imports would leave no meta.json to say what happened).
                 if failures and not server_stopped and server.poll() is None and (run_dir / "meta.json").exists():
                     server.send_signal(signal.SIGINT)
                     server_stopped = True
-    except KeyboardInterrupt:
-        server.send_signal(signal.SIGINT)
-        code, message = 130, "interrupted by Ctrl-C"
+    except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM or SIGHUP: the server is told the same
+        server.send_signal(signals.signal_of(exc))
+        code, message = signals.exit_code(exc), signals.describe(exc)
         user_stopped = True
     try:
         return _shut_down(server, nodes, run_dir, code, message, failures, user_stopped)
@@ -146,7 +156,7 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
             server.kill()
         for proc in (server, *nodes.values()):
             proc.wait()
-        return EmbeddedResult(130, run_dir, "interrupted by Ctrl-C", {})
+        return EmbeddedResult(code if code and code >= 128 else 130, run_dir, message or "interrupted by Ctrl-C", {})
 
 
 def _shut_down(server: subprocess.Popen, nodes: dict[str, subprocess.Popen], run_dir: Path, code: int | None,

@@ -14,6 +14,7 @@ the token: a lost node.
 
 from __future__ import annotations
 
+import math
 import socket
 import threading
 from typing import Callable
@@ -23,15 +24,25 @@ import zenoh
 
 from fmu_bridge import frames
 from fmu_bridge import gateway_protocol as gp
-from fmu_bridge.config import Node, PortType
+from fmu_bridge.config import WIRE_TYPES, Node, PortType
 from fmu_bridge.keys import ProjectKeys
 from fmu_bridge.session import token_held
 
+def _to_int(v: float) -> int:
+    # NaN and infinities have no integer: a ValueError the reader drops the frame for.
+    if not math.isfinite(v):
+        raise ValueError(f"{v} for an Integer output")
+    return int(round(v))
+
+
 _FROM_WIRE: dict[PortType, Callable[[float], object]] = {
     PortType.REAL: float,
-    PortType.INTEGER: lambda v: int(round(v)),
+    PortType.INTEGER: _to_int,
     PortType.BOOLEAN: lambda v: v != 0.0,
 }
+
+
+_MAX_HANDSHAKES = 64
 
 
 class GatewayError(RuntimeError):
@@ -44,15 +55,37 @@ class _Connection:
         self.node = node
         self.token = token
         self.lock = threading.Lock()
+        # Bridge FMUs carry Real, Integer and Boolean ports, all as f64: no value passes for another.
+        self.input_types = tuple(WIRE_TYPES[p.type] if p.type in _FROM_WIRE else () for p in node.input)
 
     def send(self, data: bytes) -> None:
         with self.lock:
             self.sock.sendall(data)
 
 
+def translate_release(payload: bytes, conns: list[_Connection]) -> dict[_Connection, bytes]:
+    """The gateway frames a message on ``down`` means for each connection (none for a kind that
+    is not for bridge FMUs); FrameError for anything that is not a release every connected
+    bridge FMU can act on, whatever the bytes."""
+    frame = frames.decode(payload)
+    if frame.kind == frames.START:
+        _, t0, h, _, _, _ = frames.check_release(frame).fields
+        return {c: gp.start(t0, h) for c in conns}
+    if frame.kind == frames.STEP:
+        k, t, h, _, inputs, driven = frames.check_release(frame).fields
+        data = {}
+        for c in conns:
+            frames.check_release(frame, c.node.nodeName, c.input_types)
+            data[c] = gp.step(k, t, h, c.node.nodeName in driven, [float(v) for v in inputs[c.node.nodeName]])
+        return data
+    if frame.kind == frames.STOP:
+        return {c: gp.text(gp.STOP, frame.fields[1]) for c in conns}
+    return {}
+
+
 class Gateway:
     def __init__(self, nodes: list[Node], session: zenoh.Session, keys: ProjectKeys, host: str, port: int,
-                 drop: Callable[[str, str, int], None],
+                 drop: Callable[..., None],
                  hello_timeout: float = 10.0):
         self._nodes = {n.nodeName: n for n in nodes}
         self._session = session
@@ -63,6 +96,7 @@ class Gateway:
         self._lock = threading.Lock()
         self._closing = threading.Event()
         self._started = threading.Event()  # START sent: a bridge FMU attaching now is too late
+        self._handshakes = threading.BoundedSemaphore(_MAX_HANDSHAKES)
         self._log = structlog.get_logger("server.gateway")
         try:
             self._listener = socket.create_server((host, port), reuse_port=False)
@@ -83,6 +117,12 @@ class Gateway:
                 sock, peer = self._listener.accept()
             except OSError:
                 return
+            # A thread per connection, and one waits up to hello_timeout for a HELLO: bound how
+            # many a flood of connections that never speak can hold at once.
+            if not self._handshakes.acquire(blocking=False):
+                self._drop("refused", f"connection from {peer}: {_MAX_HANDSHAKES} attaches already pending", -1)
+                sock.close()
+                continue
             threading.Thread(target=self._serve, args=(sock, peer), name=f"gateway-{peer}", daemon=True).start()
 
     def _refuse(self, sock: socket.socket, reason: str, counted_as: str) -> None:
@@ -105,7 +145,7 @@ class Gateway:
             return None
         node = self._nodes.get(name)
         if node is None or node.asynchronous:
-            self._refuse(sock, f"no stepping node named {name!r} in this project", "unknown sender")
+            self._refuse(sock, f"no stepping node named {frames.short(name)} in this project", "unknown sender")
             return None
         if uid != node.UID:
             self._refuse(sock, f"UID {uid} does not own node {name!r}", "not owner")
@@ -144,7 +184,10 @@ class Gateway:
         return node
 
     def _serve(self, sock: socket.socket, peer: object) -> None:
-        node = self._hello(sock)
+        try:
+            node = self._hello(sock)
+        finally:
+            self._handshakes.release()
         if node is None:
             return
         name = node.nodeName
@@ -156,24 +199,32 @@ class Gateway:
             while True:
                 kind, payload = gp.read_frame(sock)
                 if kind != gp.OUTPUTS:
-                    self._drop("wrong kind", f"{name} sent gateway frame type {kind}", -1)
+                    self._drop("wrong kind", f"{name} sent gateway frame type {kind}", -1, name)
                     continue
                 try:
                     step, t, values = gp.parse_outputs(payload)
                 except gp.ProtocolError as exc:
-                    self._drop("malformed", f"from {name}: {exc}", -1)
+                    self._drop("malformed", f"from {name}: {exc}", -1, name)
                     continue
                 if len(values) != len(convert):
-                    self._drop("unknown ports", f"{name} sent {len(values)} values for {len(convert)} outputs", step)
+                    self._drop("unknown ports", f"{name} sent {len(values)} values for {len(convert)} outputs", -1,
+                               name)
                     continue
-                typed = [c(v) for c, v in zip(convert, values)]
+                if not (0 <= step < frames.MAX_STEP and math.isfinite(t)):
+                    self._drop("wrong step", f"{name} sent step {step} at t={t}", -1, name)
+                    continue
+                try:
+                    typed = [c(v) for c, v in zip(convert, values)]
+                except ValueError as exc:
+                    self._drop("wrong type", f"{name}: {exc}", -1, name)
+                    continue
                 self._session.put(key, frames.encode(frames.OUTPUTS, node.UID, step, t, typed),
                                   allowed_destination=zenoh.Locality.SESSION_LOCAL,
                                   congestion_control=zenoh.CongestionControl.BLOCK)
         except gp.Truncated as exc:
-            self._drop("truncated", f"{name}: {exc}", -1)
+            self._drop("truncated", f"{name}: {exc}", -1, name)
         except gp.ProtocolError as exc:
-            self._drop("malformed", f"{name}: {exc}", -1)
+            self._drop("malformed", f"{name}: {exc}", -1, name)
         except (EOFError, OSError):
             pass
         finally:
@@ -200,21 +251,10 @@ class Gateway:
         if not conns:
             return
         try:
-            frame = frames.decode(sample.payload.to_bytes())
-            if frame.kind == frames.START:
-                _, t0, h, _, _, _ = frames.check_release(frame).fields
-                data = {c: gp.start(t0, h) for c in conns}
-            elif frame.kind == frames.STEP:
-                k, t, h, _, inputs, driven = frames.check_release(frame).fields
-                data = {c: gp.step(k, t, h, c.node.nodeName in driven, [float(v) for v in inputs[c.node.nodeName]])
-                        for c in conns}
-            elif frame.kind == frames.STOP:
-                data = {c: gp.text(gp.STOP, str(frame.fields[1])) for c in conns}
-            else:
-                return
-        except (frames.FrameError, KeyError, TypeError, ValueError) as exc:
+            data = translate_release(sample.payload.to_bytes(), conns)
+        except frames.FrameError as exc:
             # The down key is open to anyone on an unsecured network; only the server's releases pass.
-            self._drop("malformed release", f"on the release key: {type(exc).__name__}: {exc}", -1)
+            self._drop("malformed release", f"on the release key: {exc}", -1)
             return
         for conn, payload in data.items():
             try:

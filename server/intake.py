@@ -2,7 +2,8 @@
 
 Anything malformed (random bytes, wrong types, unknown ports, a step already past, a
 sender whose UID does not own the key it wrote on) is dropped, counted by reason and
-logged; the run goes on.
+logged (boundedly: fmu_bridge.drops); the run goes on. Nothing a payload holds can raise
+anything but :class:`Dropped` here.
 
 A value that is NaN or infinite is no malformed frame (a diverging model gives one), so it
 is routed like any other; but the first one on each port is noted, with its step and time,
@@ -17,17 +18,8 @@ from collections import Counter
 import structlog
 
 from fmu_bridge import frames
-from fmu_bridge.config import Node, PortType
-
-# Exact types as msgpack decodes them (it never yields subclasses): REAL takes ints too.
-_TYPES: dict[PortType, tuple[type, ...]] = {
-    PortType.REAL: (float, int),
-    PortType.INTEGER: (int,),
-    PortType.BOOLEAN: (bool,),
-    PortType.STRING: (str,),
-    PortType.BINARY: (bytes, list),
-}
-
+from fmu_bridge.drops import DropLog
+from fmu_bridge.config import WIRE_TYPES, Node
 
 class Dropped(Exception):
     """A frame that is not accepted: a short reason (counted) and a detail (logged)."""
@@ -41,46 +33,54 @@ class Dropped(Exception):
 class Intake:
     def __init__(self, nodes: list[Node]):
         self._nodes = {n.nodeName: n for n in nodes}
-        self._types = {n.nodeName: [(p.name, _TYPES[p.type]) for p in n.output] for n in nodes}
-        self.dropped: Counter[str] = Counter()
+        self._types = {n.nodeName: [(p.name, WIRE_TYPES[p.type]) for p in n.output] for n in nodes}
         self.non_finite: dict[str, dict[str, float]] = {}  # "node.port" → first {"step", "t"} (or "t")
         self._log = structlog.get_logger("server.intake")
+        self.drops = DropLog(self._log)
 
-    def drop(self, reason: str, detail: str, step: int) -> None:
-        self.dropped[reason] += 1
-        self._log.warning("frame dropped", reason=reason, detail=detail, step=step)
+    @property
+    def dropped(self) -> Counter[str]:
+        """Dropped frames by reason (exact)."""
+        return self.drops.counts
+
+    def drop(self, reason: str, detail: str, step: int, sender: str = "") -> None:
+        self.drops.drop(reason, detail, step, sender)
 
     def accept(self, node: str, payload: bytes) -> frames.Frame:
         """Decode and check a frame written on ``up/<node>``; raise Dropped otherwise."""
         spec = self._nodes.get(node)
         if spec is None:
-            raise Dropped("unknown sender", f"frame on key of unknown node {node!r}")
+            raise Dropped("unknown sender", f"frame on key of unknown node {frames.short(node)}")
         try:
             frame = frames.decode(payload)
         except frames.FrameError as exc:
             raise Dropped("malformed", f"from {node}: {exc}") from None
-        if frame.kind not in (frames.OUTPUTS, frames.SAMPLE, frames.HELLO):
-            raise Dropped("wrong kind", f"from {node}: frame kind {frame.kind} is not for the server")
+        if frame.kind not in (frames.OUTPUTS, frames.SAMPLE, frames.HELLO, frames.END):
+            raise Dropped("wrong kind", f"from {node}: a {frames.KIND_NAMES[frame.kind]} frame is not for the server")
         uid = frame.fields[0]
         if uid != spec.UID:
-            raise Dropped("not owner", f"frame on {node}'s key carries UID {uid!r}, {node} owns UID {spec.UID}")
+            raise Dropped("not owner", f"frame on {node}'s key carries UID {uid}, {node} owns UID {spec.UID}")
         if frame.kind == frames.HELLO:
             return frame
-        _, _, t, values = frame.fields
-        if (frame.kind == frames.SAMPLE) != spec.asynchronous:
-            raise Dropped("wrong kind", f"{node} is {'' if spec.asynchronous else 'not '}asynchronous")
-        if type(t) not in (float, int):
-            raise Dropped("wrong type", f"from {node}: time {t!r} is not a number")
+        if not 0 <= frame.fields[1] < frames.MAX_STEP:
+            raise Dropped("wrong step", f"from {node}: step or sequence number {frame.fields[1]} out of range")
+        t = frame.fields[2]
         if not math.isfinite(t):
             # An infinite sample time would outrank every later sample (held for ever); NaN breaks the order.
             raise Dropped("wrong type", f"from {node}: time {t!r} is not finite")
+        if frame.kind == frames.END:
+            if spec.asynchronous:
+                raise Dropped("wrong kind", f"{node} is asynchronous: it does not end a run")
+            return frame
+        values = frame.fields[3]
+        if (frame.kind == frames.SAMPLE) != spec.asynchronous:
+            raise Dropped("wrong kind", f"{node} is {'' if spec.asynchronous else 'not '}asynchronous")
         ports = self._types[node]
-        if type(values) is not list or len(values) != len(ports):
-            raise Dropped("unknown ports", f"from {node}: {len(values) if isinstance(values, list) else values!r} "
-                                           f"values for {len(ports)} outputs")
+        if len(values) != len(ports):
+            raise Dropped("unknown ports", f"from {node}: {len(values)} values for {len(ports)} outputs")
         for value, (port, types) in zip(values, ports):
             if type(value) not in types:
-                raise Dropped("wrong type", f"{node}.{port} got {type(value).__name__} {value!r:.40}")
+                raise Dropped("wrong type", f"{node}.{port} got {type(value).__name__} {frames.short(value)}")
             if type(value) is float and not math.isfinite(value):
                 self._note_non_finite(f"{node}.{port}", frame, t, value)
         return frame

@@ -13,7 +13,7 @@ from typing import Any
 
 import structlog
 
-from fmu_bridge import logs
+from fmu_bridge import logs, signals
 from fmu_bridge.config import LoadedProject, gateway_address, server_endpoint
 from fmu_bridge.endpoints import GATEWAY_PORT, EndpointError, parse_address, parse_endpoint
 from fmu_bridge.security import router_security
@@ -86,9 +86,9 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     try:
         session = open_session(router_config(endpoint, security=router_security(loaded, endpoint),
                                              low_latency=loaded.project.coSimulation.lowLatency), endpoint)
-    except KeyboardInterrupt:
-        recorder.close("interrupted", reason="interrupted by Ctrl-C before the run started")
-        return done(130, run_dir, "interrupted by Ctrl-C before the run started")
+    except KeyboardInterrupt as exc:
+        recorder.close("interrupted", reason=f"{signals.describe(exc)} before the run started")
+        return done(signals.exit_code(exc), run_dir, f"{signals.describe(exc)} before the run started")
     except Exception as exc:  # SecurityError or ConnectError, both with their own message
         recorder.close("failed", reason=str(exc))
         return done(3, run_dir, str(exc))
@@ -97,13 +97,16 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     try:
         relay.run()
         code, message = 0, f"completed {recorder.meta['steps']} macro steps"
+        if relay.ended_by is not None:
+            e = relay.ended_by
+            message += f"; node {e['node']!r} ended the simulation at t={e['t']:g} s: {e['message']}"
     except (RunError, RecordError, GuardEvaluationError) as exc:
         log.error("run failed", error=str(exc))
         code, message = 3, str(exc)
-    except KeyboardInterrupt:
-        code, message = 130, "interrupted by Ctrl-C; results so far are flushed"
+    except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM or SIGHUP
+        code, message = signals.exit_code(exc), f"{signals.describe(exc)}; results so far are flushed"
         if not recorder.closed:  # interrupted while the relay declared itself, before its own shutdown
-            recorder.close("interrupted", reason="interrupted by Ctrl-C")
+            recorder.close("interrupted", reason=signals.describe(exc))
     except Exception as exc:  # a bug, not bad input: keep the traceback in the log
         log.exception("internal error")
         code, message = 4, f"internal error {type(exc).__name__}: {exc} (traceback in {run_dir / 'server.log.jsonl'})"

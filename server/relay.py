@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import threading
+from signal import Signals
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,9 +24,9 @@ from typing import Any, Callable
 import structlog
 import zenoh
 
-from fmu_bridge import frames
+from fmu_bridge import frames, signals
 from fmu_bridge.config import FREE_MODE, LoadedProject
-from fmu_bridge.inbox import Inbox
+from fmu_bridge.inbox import LOCAL, Inbox
 from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
 from fmu_bridge.session import FramePublisher, FrameTooLarge
 from fmu_bridge.sim_clock import RealTimeClock
@@ -43,6 +43,15 @@ class RunError(RuntimeError):
     """A run that cannot go on; the message names the node and the step."""
 
 
+class _ModelEnded(Exception):
+    """A node's model ended the simulation (an FMU that asked to terminate): the run ends at
+    the last macro-step point every node reached."""
+
+
+# A node's own words about why it ended or failed are shown and recorded up to this length.
+_MESSAGE_MAX = 2000
+
+
 @dataclass
 class Progress:
     """What the server reports while running (read by ``hycosim run``'s progress bar)."""
@@ -54,25 +63,8 @@ class Progress:
     attached: list[str] = field(default_factory=list)
 
 
-def _ignore_ctrl_c() -> None:
-    """Ignore Ctrl-C from here on (the server's process is on its way out): a terminal's Ctrl-C
-    reaches every process of the group and the launcher passes on another, microseconds
-    apart, and a KeyboardInterrupt during the shutdown would leave the run's records unwritten."""
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
-def _ctrl_c_once() -> None:
-    """From here on Ctrl-C raises KeyboardInterrupt once; the handler ignores further ones
-    itself, before the interrupted code unwinds."""
-    if threading.current_thread() is not threading.main_thread():
-        return
-
-    def interrupt(signum: int, frame: Any) -> None:
-        _ignore_ctrl_c()
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGINT, interrupt)
+def signal_name(signum: int) -> str:
+    return Signals(signum).name
 
 
 class Relay:
@@ -89,6 +81,7 @@ class Relay:
         self.router = Router(loaded)
         self.intake = Intake(self.project.nodeLists)
         self.stepping = [n.nodeName for n in self.project.stepping_nodes()]
+        self._names = {n.nodeName for n in self.project.nodeLists}
         self.histories = {n.nodeName: SampleHistory([p.start_value() for p in n.output])
                           for n in self.project.async_nodes()}
         # Async nodes' outputs as seen at the current point (hold), for guards and records.
@@ -96,8 +89,13 @@ class Relay:
             n.nodeName: [p.start_value() for p in n.output] for n in self.project.nodeLists}
         self.alive: set[str] = set()
         self.capabilities: dict[str, dict[str, Any]] = {}
+        # Nodes whose token (re)appeared and whose HELLO has not come since: a HELLO is taken only
+        # from a node new to the run or one whose process may have changed, so that a forged
+        # one (the UIDs are in the project file) cannot pass for a restart and stop the run.
+        self._fresh: set[str] = set()
         self.lost: dict[str, float] = {}  # node → when its token went, while within linkGrace
         self.reattached: dict[str, int] = {}
+        self.ended_by: dict[str, Any] | None = None  # the node whose model ended the run, when, and why
         self._last_release: bytes | None = None
         self.progress = Progress()
         self._progress_every = progress_every_s
@@ -137,25 +135,33 @@ class Relay:
         watcher = self.session.liveliness().declare_subscriber(self.keys.alive_all, self._on_liveliness, history=True)
         status = self.session.declare_queryable(self.keys.status, self._on_status)
         status_text, reason = "failed", ""
-        _ctrl_c_once()
+        signals.stop_once()
         try:
             self._start_gateway()
             self._wait_for_nodes()
-            self._loop()
+            try:
+                self._loop()
+            except _ModelEnded:  # at the START: no macro step was taken
+                pass
             status_text = frames.STOP_COMPLETED if not self._stop_requested.is_set() else frames.STOP_STOPPED
-        except KeyboardInterrupt:
-            status_text, reason = "interrupted", "interrupted by Ctrl-C"
+            if self.ended_by is not None:
+                self.recorder.meta["ended_by"] = self.ended_by
+        except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM or SIGHUP
+            status_text, reason = "interrupted", signals.describe(exc)
+            self.recorder.meta["stopped_by"] = {"signal": signal_name(signals.signal_of(exc)),
+                                                "step": self.progress.step, "t": self.progress.t}
             raise
         except (RunError, RecordError) as exc:
             reason = str(exc)
             raise
         finally:
-            _ignore_ctrl_c()
+            signals.ignore_stops()
             self.recorder.free_reserve()
             self._broadcast_stop(status_text if not reason else reason)
             self._await_departures()
             if self.gateway is not None:
                 self.gateway.close(reason or status_text)
+            self.intake.drops.flush(self.progress.step)
             self.recorder.close(status_text, reason=reason, dropped_frames=dict(self.intake.dropped),
                                 non_finite=self.intake.non_finite,
                                 reattached=dict(self.reattached), server_waits=self.inbox.waits,
@@ -176,7 +182,7 @@ class Relay:
                 msg = self.inbox.recv(deadline - time.monotonic())
                 if msg is None:
                     break
-                if msg[0] == self._local_key:
+                if msg[0] == LOCAL:
                     node, alive = frames.decode(msg[1]).fields
                     if not alive:
                         self.alive.discard(node)
@@ -219,13 +225,15 @@ class Relay:
 
     def _handle_side_message(self, key: str, payload: bytes, step: int, collecting: bool) -> tuple[str, frames.Frame] | None:
         """Liveliness and samples are handled here; stepping outputs are returned to the caller."""
-        if key == self._local_key:
+        if key == LOCAL:
             frame = frames.decode(payload)
             node, alive = frame.fields
-            if node == SERVER_TOKEN:
-                return None
+            if node not in self._names:
+                return None  # the server's own token, or one no node of this project holds
             if alive:
                 self.alive.add(node)
+                if node not in self.capabilities or node in self.lost:
+                    self._fresh.add(node)
                 self.progress.attached = sorted(self.alive)
                 self._log.info("node attached", node=node, step=step)
                 if node in self.lost:
@@ -249,13 +257,18 @@ class Relay:
         try:
             frame = self.intake.accept(node, payload)
         except Dropped as exc:
-            self.intake.drop(exc.reason, exc.detail, step)
+            self.intake.drop(exc.reason, exc.detail, step, node if node in self._names else "")
             return None
         if frame.kind == frames.SAMPLE:
             _, _, t, values = frame.fields
             self.histories[node].add(float(t), values)
             return None
         if frame.kind == frames.HELLO:
+            if node in self.capabilities and node not in self._fresh and node not in self.lost:
+                self.intake.drop("duplicate hello", f"{node} said HELLO again while its process held its token",
+                                 step, node)
+                return None
+            self._fresh.discard(node)
             if node in self.capabilities and step > 0:
                 # A node process says HELLO once: this is a new process, whose model starts
                 # from scratch while the others are at step k. Not a link cut to wait out.
@@ -274,13 +287,14 @@ class Relay:
         ours = self.project.node(node).wire_ports()
         if theirs is None or theirs == ours:
             return
-        if not isinstance(theirs, dict):
+        if type(theirs) is not dict:
             theirs = {}
         differ = []
         for kind in ("input", "output"):
             given = theirs.get(kind)
             if given != ours[kind]:
-                shown = ", ".join(map(str, given)) if isinstance(given, list) else ""
+                shown = ", ".join(frames.short(g) if type(g) is not str else g[:64] for g in given[:32]) \
+                    if type(given) is list else ""
                 differ.append(f"its {kind}s are {shown or 'none'}, the server's {', '.join(ours[kind]) or 'none'}")
         raise RunError(f"node {node!r} attached with another version of its entry in the project file: "
                        f"{'; '.join(differ)}. Give every process the same project file")
@@ -312,18 +326,36 @@ class Relay:
             if got is None:
                 continue
             node, frame = got
-            _, frame_step, _, values = frame.fields
+            frame_step = frame.fields[1]
+            if frame.kind == frames.END and frame_step == step + 1 and not frame.fields[3]:
+                # A node stopped (SIGTERM) while waiting for a release: it names the next step.
+                self._on_end(node, step, frame)
             if frame_step != step:
-                reason = "step already past" if isinstance(frame_step, int) and frame_step < step else "wrong step"
-                self.intake.drop(reason, f"{node} sent step {frame_step!r} while collecting {step}", step)
+                reason = "step already past" if frame_step < step else "wrong step"
+                self.intake.drop(reason, f"{node} sent step {frame_step} while collecting {step}", step, node)
                 continue
+            if frame.kind == frames.END:
+                self._on_end(node, step, frame)
             if node not in pending:
-                self.intake.drop("duplicate", f"{node} sent step {step} twice", step)
+                self.intake.drop("duplicate", f"{node} sent step {step} twice", step, node)
                 continue
+            values = frame.fields[3]
             pending.discard(node)
             self.outputs[node] = values
             arrivals[node] = time.perf_counter() - released_at
         return arrivals
+
+    def _on_end(self, node: str, step: int, frame: frames.Frame) -> None:
+        """A node's END instead of its outputs for ``step``: its model ended the run, or failed."""
+        _, _, t, clean, message = frame.fields
+        message, k = message[:_MESSAGE_MAX], max(step - 1, 0)
+        if not clean:
+            # The node's runtime names itself and the step; a message that does not is prefixed.
+            raise RunError(message if message.startswith(f"node {node!r}")
+                           else f"node {node!r} failed at step {k} (t={self._time(k):g} s): {message}")
+        self.ended_by = {"node": node, "step": k, "t": t, "message": message}
+        self._log.info("node ended the simulation", node=node, step=k, t=t, message=message)
+        raise _ModelEnded
 
     def _localisation_plan(self) -> bool:
         """Whether steps may be rolled back to locate guard crossings; say why not in the metadata."""
@@ -454,12 +486,15 @@ class Relay:
             next_t = min(origin + (j + 1) * H, cosim.stopTime)
             h = next_t - t
             watched = localise and self.coordinator.pending_guard_holds(view)
-            arrivals, wait = self._release(k, t, h, mode, meanwhile=record)
-            localised = {}
-            if localise:
-                h_used, arrivals, wait, localised = self._localise(k, t, h, mode, watched, arrivals, wait)
-                if h_used != h:
-                    origin, j, next_t = t + h_used, -1, t + h_used
+            try:
+                arrivals, wait = self._release(k, t, h, mode, meanwhile=record)
+                localised = {}
+                if localise:
+                    h_used, arrivals, wait, localised = self._localise(k, t, h, mode, watched, arrivals, wait)
+            except _ModelEnded:
+                break  # point k, the last that every node reached, is recorded
+            if localise and h_used != h:
+                origin, j, next_t = t + h_used, -1, t + h_used
             t = next_t
             j += 1
             k += 1

@@ -44,6 +44,14 @@ class RunSummary:
     async_age_ms: dict[str, float] = field(default_factory=dict)
     wait_strategy: str = ""
     server_waits: dict[str, int] = field(default_factory=dict)
+    ended_by: dict[str, Any] | None = None  # a node whose model ended the run: node, step, t, message
+
+
+class EndedBy(BaseModel):
+    node: str
+    step: int
+    t: float
+    message: str = ""
 
 
 class RunMeta(BaseModel):
@@ -59,6 +67,7 @@ class RunMeta(BaseModel):
     dropped_frames: dict[str, int] = Field(default_factory=dict)
     non_finite: dict[str, dict[str, int | float]] = Field(default_factory=dict)
     server_waits: dict[str, int] = Field(default_factory=dict)
+    ended_by: EndedBy | None = None
 
 
 class ModeSwitchRecord(BaseModel):
@@ -182,6 +191,7 @@ def summarise(run_dir: Path, slowest: int = 5) -> RunSummary:
         lateness=lateness, mode_switches=read_events(run_dir),
         dropped_frames=meta.dropped_frames, non_finite=meta.non_finite, async_age_ms={k: 1000 * age_sum[k] / age_n[k] for k in age_sum},
         wait_strategy=meta.waitStrategy, server_waits=meta.server_waits,
+        ended_by=meta.ended_by.model_dump() if meta.ended_by else None,
     )
 
 

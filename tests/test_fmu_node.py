@@ -153,17 +153,21 @@ def test_an_fmi_1_fmu_is_refused_before_its_binary_loads(tmp_path, fmus):
         _instance(tmp_path, old, _gain_node(old))
 
 
-def test_do_step_failure_stops_the_run_naming_node_and_time(tmp_path, fmus):
+def test_a_pythonfmu_step_that_returns_false_ends_the_run_where_the_fmu_says(tmp_path, fmus):
+    # pythonfmu answers a do_step that returns False with fmi2Discard and reports fmi2Terminated:
+    # the FMU ends the simulation, which a master treats as the end of the run (a discard that
+    # is no termination is a failure: tests/test_fmu_termination.py).
     cfg = write_project(tmp_path / "p.json", [
         {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
         _gain_node(fmus["gain"], parameters={"fail_at": 0.5}),
     ], [{"from": "clock.y", "to": "g.u"}], cosim={"stepSize": 0.1, "stopTime": 1.0, "stepTimeout": 5.0})
     res = hycosim("run", str(cfg), "--runs-dir", str(tmp_path / "runs"), "--no-progress")
-    assert res.returncode == 3
-    assert "node 'g': doStep from t=0.5 by 0.1" in res.stderr
+    assert res.returncode == 0, res.stderr
+    assert "node 'g' ended the simulation at t=0.5 s (after step 5): GainModel.fmu asked to terminate" in res.stdout
     assert "Traceback" not in res.stderr
     run = next((tmp_path / "runs").iterdir())
-    assert len(read_rows(run)) == 6  # T_0..T_5 recorded before the failing step
+    assert len(read_rows(run)) == 6  # T_0..T_5 recorded before the step the FMU ended in
+    assert meta(run)["ended_by"]["node"] == "g"
 
 
 def test_missing_fmu_file_and_bad_parameter(tmp_path, fmus):

@@ -8,7 +8,7 @@ import time
 import pytest
 import zenoh
 
-from fmu_bridge.inbox import Inbox
+from fmu_bridge.inbox import LOCAL, Inbox
 from fmu_bridge.session import FramePublisher, client_config, open_session, router_config
 from tests.helpers import free_endpoint
 
@@ -191,7 +191,7 @@ def test_the_watchdog_sleeps_between_deadlines_and_keeps_short_ones():
         assert woken <= 16, f"the watchdog woke {woken} times in 2 s"
         for _ in range(5):
             inbox.inject(b"event")
-            assert inbox.recv(timeout=5.0) == ("t/up/local", b"event")  # the watchdog now aims at ~0.25 s
+            assert inbox.recv(timeout=5.0) == (LOCAL, b"event")  # the watchdog now aims at ~0.25 s
             t0 = time.monotonic()
             assert inbox.recv(timeout=0.03) is None
             assert 0.03 <= time.monotonic() - t0 < 0.15

@@ -1,0 +1,73 @@
+"""The signals that stop a hycosim process: Ctrl-C, and SIGTERM or SIGHUP from a supervisor.
+
+``docker compose down``, systemd and Kubernetes stop a service with SIGTERM, a closed
+terminal sends SIGHUP: each is a way out like Ctrl-C, so every process raises
+:class:`Stopped` (a KeyboardInterrupt, so that every ``except KeyboardInterrupt`` path
+that writes the records and leaves takes it too) and exits with 128 + the signal's number,
+as a shell reports a process a signal ended.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from typing import Any
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+class Stopped(KeyboardInterrupt):
+    """A stop asked for by a signal."""
+
+    def __init__(self, signum: int = signal.SIGINT):
+        super().__init__(signum)
+        self.signum = signum
+
+
+def signal_of(exc: BaseException) -> int:
+    """The signal behind a KeyboardInterrupt (SIGINT for Python's own)."""
+    return getattr(exc, "signum", signal.SIGINT)
+
+
+def describe(exc: BaseException) -> str:
+    """``interrupted by Ctrl-C`` or ``stopped by SIGTERM``, for messages and meta.json."""
+    signum = signal_of(exc)
+    return "interrupted by Ctrl-C" if signum == signal.SIGINT else f"stopped by {signal.Signals(signum).name}"
+
+
+def exit_code(exc: BaseException) -> int:
+    """128 + the signal's number: 130 for Ctrl-C, 143 for SIGTERM, 129 for SIGHUP."""
+    return 128 + signal_of(exc)
+
+
+def _raise(signum: int, frame: Any) -> None:
+    raise Stopped(signum)
+
+
+def raise_on_stop() -> None:
+    """SIGTERM and SIGHUP raise :class:`Stopped` like Ctrl-C (called once per process, early)."""
+    if threading.current_thread() is threading.main_thread():
+        for signum in STOP_SIGNALS[1:]:
+            signal.signal(signum, _raise)
+
+
+def ignore_stops() -> None:
+    """Ignore every stop signal from here on: the process is on its way out, and an
+    interruption during its shutdown would leave its records unwritten."""
+    if threading.current_thread() is threading.main_thread():
+        for signum in STOP_SIGNALS:
+            signal.signal(signum, signal.SIG_IGN)
+
+
+def stop_once() -> None:
+    """From here on the first stop signal raises :class:`Stopped`; its handler ignores every
+    further one before the interrupted code unwinds."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+
+    def interrupt(signum: int, frame: Any) -> None:
+        ignore_stops()
+        raise Stopped(signum)
+
+    for signum in STOP_SIGNALS:
+        signal.signal(signum, interrupt)

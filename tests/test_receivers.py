@@ -1,0 +1,215 @@
+"""Every receiver is total: property-based tests feed each one what the network may bring.
+
+In process, with hypothesis: frame decoding, the server's intake and side-message handling,
+a node's release handling, the gateway's framing and its translation of releases, and the
+bounded drop log. Whatever the bytes, each returns something it can act on or drops it with
+its own exception; nothing else escapes.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import socket
+from pathlib import Path
+
+import pytest
+import structlog
+from hypothesis import given
+from hypothesis import strategies as st
+
+from fmu_bridge import frames
+from fmu_bridge import gateway_protocol as gp
+from fmu_bridge.config import WIRE_TYPES, load_project
+from fmu_bridge.drops import DropLog
+from server.gateway import _Connection, translate_release
+from server.intake import Dropped, Intake
+from server.recorder import Recorder
+from server.relay import Relay
+from clients.runtime import NodeRuntime
+from tests.helpers import write_project
+from tests.wire_strategies import frame_arrays, gateway_streams, names, payloads
+
+NODES = [
+    {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+    {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"],
+     "output": ["y", {"name": "n", "type": "Integer"}, {"name": "b", "type": "Boolean"},
+                {"name": "s", "type": "String"}, {"name": "raw", "type": "Binary"}]},
+    {"nodeName": "h", "UID": 3, "model": "gain", "input": ["u", {"name": "k", "type": "Integer"},
+                                                           {"name": "on", "type": "Boolean"}], "output": ["y"]},
+    {"nodeName": "src", "UID": 4, "model": "ramp_source", "async": True, "rate": 10, "output": ["y"]},
+]
+
+
+@pytest.fixture(scope="module")
+def loaded(tmp_path_factory):
+    path = write_project(tmp_path_factory.mktemp("recv") / "p.json", NODES,
+                         [{"from": "clock.y", "to": "g.u"}, {"from": "g.y", "to": "h.u"}], name="recv")
+    return load_project(path)
+
+
+def _quiet() -> None:
+    structlog.configure(logger_factory=structlog.ReturnLoggerFactory())
+
+
+@given(payloads)
+def test_decode_returns_a_well_typed_frame_or_raises_frame_error(payload):
+    try:
+        frame = frames.decode(payload)
+    except frames.FrameError as exc:
+        assert len(str(exc)) < 400  # a hostile payload's size never reaches a message
+        return
+    arity, fits = frames._SHAPES[frame.kind]
+    assert len(frame.fields) == arity and fits(frame.fields)
+
+
+@given(st.sampled_from(["clock", "g", "h", "src", "nobody", "_local"]) | names, payloads)
+def test_the_servers_intake_accepts_only_frames_it_can_use(loaded, node, payload):
+    _quiet()
+    intake = Intake(loaded.project.nodeLists)
+    try:
+        frame = intake.accept(node, payload)
+    except Dropped as exc:
+        assert exc.reason and intake.dropped == {}  # counted by the caller
+        return
+    spec = loaded.project.node(node)
+    assert frame.fields[0] == spec.UID
+    if frame.kind in (frames.OUTPUTS, frames.SAMPLE):
+        assert 0 <= frame.fields[1] < frames.MAX_STEP and math.isfinite(frame.fields[2])
+        assert [type(v) in WIRE_TYPES[p.type] for v, p in zip(frame.fields[3], spec.output)] == [True] * len(spec.output)
+    else:
+        assert frame.kind in (frames.HELLO, frames.END)
+
+
+@pytest.fixture(scope="module")
+def relay(loaded, tmp_path_factory):
+    # One relay for every example: a stream of hostile frames through one server, as on the wire.
+    _quiet()
+    recorder = Recorder(tmp_path_factory.mktemp("relay"), loaded, {})
+    r = Relay(loaded, None, recorder)  # nothing here touches the session: no release is sent
+    for node in ("clock", "g", "h", "src"):
+        r.alive.add(node)
+        r.capabilities[node] = {"rollback": False}
+    yield r
+    recorder.close("done")
+
+
+@given(st.sampled_from(["clock", "g", "h", "src", "nobody", "_local", "*"]), payloads)
+def test_the_relay_drops_what_it_cannot_use_and_never_stops_on_a_payload(relay, node, payload):
+    before = sum(relay.intake.dropped.values())
+    got = relay._handle_side_message(f"hycosim/recv/up/{node}", payload, step=5, collecting=True)
+    if got is None:
+        return  # dropped (counted) or a sample taken into its history
+    name, frame = got
+    assert name == node and frame.kind in (frames.OUTPUTS, frames.END)
+    assert type(frame.fields[1]) is int and sum(relay.intake.dropped.values()) == before
+
+
+@pytest.mark.parametrize("node", ["g", "h"])
+@given(data=st.data())
+def test_a_node_acts_only_on_releases_that_give_it_exactly_its_inputs(loaded, node, data):
+    _quiet()
+    runtime = NodeRuntime(loaded, node, impl=None, endpoint="tcp/127.0.0.1:1")
+    payload = data.draw(payloads | frame_arrays([frames.STEP, frames.REPLAY]).map(frames.msgpack.packb))
+    try:
+        frame = runtime._accept(False, payload)
+    except frames.FrameError:
+        return
+    if frame is None:
+        return  # a replay for another node
+    assert frame.kind in (frames.START, frames.STEP, frames.REPLAY, frames.ROLLBACK, frames.STOP)
+    release = frame.fields[1] if frame.kind == frames.REPLAY else frame
+    if release.kind == frames.STEP:
+        mine = release.fields[4][node]
+        spec = loaded.project.node(node)
+        assert len(mine) == len(spec.input)
+        assert all(type(v) in WIRE_TYPES[p.type] for v, p in zip(mine, spec.input))
+        assert math.isfinite(release.fields[1]) and release.fields[2] > 0
+
+
+def test_only_this_process_can_speak_as_the_local_key(loaded):
+    # A LIVE frame from the network (anyone may write on `down`) is not liveliness news.
+    runtime = NodeRuntime(loaded, "g", impl=None, endpoint="tcp/127.0.0.1:1")
+    live = frames.encode(frames.LIVE, "_server", False)
+    with pytest.raises(frames.FrameError, match="LIVE frame is not for a node"):
+        runtime._accept(False, live)
+    assert runtime._accept(True, live).fields == ("_server", False)
+
+
+def _gateway_connections(loaded) -> list[_Connection]:
+    a, b = socket.socketpair()
+    a.close(), b.close()
+    return [_Connection(a, loaded.project.node(n), token=None) for n in ("g", "h")]
+
+
+@given(payloads | frame_arrays([frames.START, frames.STEP, frames.STOP]).map(frames.msgpack.packb))
+def test_the_gateway_translates_only_releases_every_bridge_fmu_can_take(loaded, payload):
+    conns = _gateway_connections(loaded)
+    try:
+        data = translate_release(payload, conns)
+    except frames.FrameError:
+        return
+    for conn, out in data.items():
+        magic, version, kind, _, length = gp.HEADER.unpack_from(out)
+        assert magic == gp.MAGIC and length == len(out) - gp.HEADER.size
+        if kind == gp.STEP:
+            assert gp.parse_step(out[gp.HEADER.size:])[4].__len__() == len(conn.node.input)
+
+
+@given(gateway_streams())
+def test_the_gateway_framing_reads_a_frame_or_names_what_is_wrong(stream):
+    a, b = socket.socketpair()
+    try:
+        b.settimeout(2.0)
+        a.sendall(stream)  # a few hundred bytes at most: the socket buffer holds them
+        a.shutdown(socket.SHUT_WR)
+        while True:
+            try:
+                kind, payload = gp.read_frame(b)
+            except (gp.ProtocolError, EOFError):
+                return
+            assert gp.HELLO <= kind <= gp.STOP and len(payload) <= gp.MAX_PAYLOAD
+            for parse in (gp.parse_hello, gp.parse_outputs):
+                try:
+                    parse(payload)
+                except gp.ProtocolError:
+                    pass
+    finally:
+        a.close()
+        b.close()
+
+
+class _Lines:
+    def __init__(self):
+        self.lines: list[dict] = []
+
+    def warning(self, event, **kw):
+        self.lines.append({"event": event, **kw})
+
+
+def test_the_drop_log_keeps_exact_counts_and_a_bounded_log():
+    log = _Lines()
+    drops = DropLog(log, full_per_sender=3, summary_every_s=3600)
+    for i in range(100_000):
+        drops.drop(("malformed", "wrong type", "not owner")[i % 3], f"frame {i}", i, sender=f"n{i % 4}")
+    for i in range(5_000):  # senders a peer makes up: tracked up to a bound, then summarised
+        drops.drop("unknown sender", "x", i, sender=f"made-up-{i}")
+    drops.flush(0)
+    assert drops.counts == {"malformed": 33_334, "wrong type": 33_333, "not owner": 33_333, "unknown sender": 5_000}
+    assert len(log.lines) < 300
+    summarised = sum(line.get("count", 0) for line in log.lines if line["event"] == "frames dropped")
+    assert summarised + sum(1 for line in log.lines if line["event"] == "frame dropped") == 105_000
+
+
+def test_a_logged_exception_carries_its_traceback_in_the_json_line(tmp_path):
+    from fmu_bridge import logs
+
+    path = tmp_path / "x.log.jsonl"
+    logs.configure(path)
+    try:
+        raise ValueError("the cause")
+    except ValueError:
+        structlog.get_logger("server").exception("internal error")
+    line = json.loads(Path(path).read_text().splitlines()[-1])
+    assert line["event"] == "internal error"
+    assert "Traceback (most recent call last)" in line["exception"] and "ValueError: the cause" in line["exception"]

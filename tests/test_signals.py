@@ -1,0 +1,128 @@
+"""SIGTERM and SIGHUP are ways out like Ctrl-C for the server, a node and the launcher; a node
+process that ends before the run starts is reported at once by the launcher."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import time
+
+import pytest
+
+from tests.helpers import HYCOSIM, REPO, env, meta, read_rows, reap, spawn, wait_for, write_project
+
+
+def _pair(tmp_path, **cosim):
+    settings = {"stepSize": 0.01, "stopTime": 20.0, "realTime": True, "stepTimeout": 5.0}
+    settings.update(cosim)
+    return write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+    ], [{"from": "clock.y", "to": "g.u"}], cosim=settings, name="sig")
+
+
+def _rows(run_dir) -> int:
+    return len(read_rows(run_dir)) if (run_dir / "values.csv").exists() else 0
+
+
+def _contiguous(run_dir) -> list[dict]:
+    rows = read_rows(run_dir)
+    assert [r["step"] for r in rows] == [str(i) for i in range(len(rows))]
+    return rows
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
+def test_a_signalled_server_writes_every_row_says_who_stopped_it_and_its_nodes_leave(tmp_path, sig):
+    cfg = _pair(tmp_path)
+    run_dir = tmp_path / "run"
+    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
+    nodes = [spawn("node", n, str(cfg)) for n in ("clock", "g")]
+    try:
+        wait_for(lambda: _rows(run_dir) > 30, 30, "30 steps")
+        server.send_signal(sig)
+        _, err = server.communicate(timeout=30)
+        assert server.returncode == 128 + sig, err
+        assert f"stopped by {sig.name}" in err and "Traceback" not in err
+        for node in nodes:  # told by the server's STOP, not left waiting for its timeout
+            _, node_err = node.communicate(timeout=20)
+            assert node.returncode == 5 and f"stopped by {sig.name}" in node_err
+    finally:
+        reap(server, *nodes)
+    m = meta(run_dir)
+    assert m["status"] == "interrupted" and m["reason"] == f"stopped by {sig.name}"
+    assert m["stopped_by"]["signal"] == sig.name and m["finished_at"] > m["started_at"]
+    rows = _contiguous(run_dir)
+    assert len(rows) >= 30 and int(rows[-1]["step"]) >= m["stopped_by"]["step"] - 1
+
+
+def test_a_node_sent_sigterm_leaves_and_the_server_names_it(tmp_path):
+    cfg = _pair(tmp_path)
+    run_dir = tmp_path / "run"
+    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
+    nodes = {n: spawn("node", n, str(cfg)) for n in ("clock", "g")}
+    try:
+        wait_for(lambda: _rows(run_dir) > 30, 30, "30 steps")
+        nodes["g"].send_signal(signal.SIGTERM)
+        _, node_err = nodes["g"].communicate(timeout=20)
+        assert nodes["g"].returncode == 143 and "node 'g' stopped by SIGTERM" in node_err
+        _, err = server.communicate(timeout=30)
+        assert server.returncode == 3
+        assert "node 'g' stopped by SIGTERM after step" in err and "liveliness" not in err
+        assert nodes["clock"].wait(timeout=20) == 5
+    finally:
+        reap(server, *nodes.values())
+    assert "node 'g' stopped by SIGTERM" in meta(run_dir)["reason"]
+    _contiguous(run_dir)
+
+
+def test_the_launcher_sent_sigterm_stops_the_run_and_keeps_its_records(tmp_path):
+    cfg = _pair(tmp_path)
+    runs = tmp_path / "runs"
+    proc = subprocess.Popen([*HYCOSIM, "run", str(cfg), "--runs-dir", str(runs), "--no-progress"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env(), cwd=REPO)
+    try:
+        wait_for(lambda: runs.exists() and any(_rows(d) > 30 for d in runs.iterdir()), 60, "30 steps")
+        proc.send_signal(signal.SIGTERM)
+        stopped = time.monotonic()
+        _, err = proc.communicate(timeout=60)
+        assert time.monotonic() - stopped < 20
+    finally:
+        reap(proc)
+    assert proc.returncode == 143 and "stopped by SIGTERM" in err, err
+    run_dir = next(runs.iterdir())
+    m = meta(run_dir)
+    assert m["status"] == "interrupted" and m["reason"] == "stopped by SIGTERM"
+    assert len(_contiguous(run_dir)) > 30
+
+
+_SELF_ENDING = '''
+import os, signal
+from clients.node import Node
+
+class Quitter(Node):
+    def setup(self, ctx):
+        {action}
+    def outputs(self):
+        return {{"y": 0.0}}
+    def step(self, t, h, inputs):
+        pass
+'''
+
+
+@pytest.mark.parametrize("action, expected", [
+    ("os.kill(os.getpid(), signal.SIGKILL)", "its process died of SIGKILL before the run started"),
+    ("os._exit(0)", "its process ended before the run started with exit status 0"),
+    ("raise SystemExit(7)", "exit status 7 before the run started"),
+])
+def test_a_node_process_that_ends_before_it_attaches_is_reported_at_once(tmp_path, action, expected):
+    (tmp_path / "quitter.py").write_text(_SELF_ENDING.format(action=action))
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "q", "UID": 2, "model": "quitter.py:Quitter", "input": ["u"], "output": ["y"]},
+    ], [{"from": "clock.y", "to": "q.u"}], cosim={"stepSize": 0.01, "stopTime": 1.0, "attachTimeout": 60.0})
+    started = time.monotonic()
+    res = subprocess.run([*HYCOSIM, "run", str(cfg), "--runs-dir", str(tmp_path / "runs"), "--no-progress"],
+                         capture_output=True, text=True, env=env(), cwd=REPO, timeout=120)
+    assert time.monotonic() - started < 30  # not the attachTimeout of 60 s
+    assert res.returncode == 3, res.stderr
+    assert f"q: {expected}" in res.stderr

@@ -1,0 +1,246 @@
+"""The wire under attack, live: real processes, real Zenoh sessions over TCP on 127.0.0.1.
+
+* a fuzzer on a second Zenoh session (and on the gateway socket) writes structure-aware garbage
+  on every key of a running project: the run completes with the same values.csv as without it;
+* with credentials and access control, each role may do exactly what it should on exactly its
+  keys, and a node authenticated with its own password cannot forge anything that reaches a
+  node or the records.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from fmu_bridge import frames
+from fmu_bridge.config import load_project
+from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
+from fmu_bridge.security import router_security
+from fmu_bridge.session import ConnectError, client_config, open_session, router_config
+from tests.helpers import HYCOSIM, env, free_endpoint, meta, read_rows, REPO, wait_for, write_project
+from tests.wire_strategies import examples, forgeable, gateway_streams, payloads
+
+NODES = [
+    {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+    {"nodeName": "g", "UID": 2, "model": "gain", "parameters": {"k": 0.5}, "input": ["u"], "output": ["y"]},
+    {"nodeName": "h", "UID": 3, "model": "gain", "input": ["u"], "output": ["y"]},
+]
+LINKS = [{"from": "clock.y", "to": "g.u"}, {"from": "g.y", "to": "h.u"}]
+UIDS = {n["nodeName"]: n["UID"] for n in NODES}
+
+
+def _project(path: Path, endpoint: str, **extra) -> Path:
+    write_project(path, NODES, LINKS, name="wire", cosim={"stepSize": 0.01, "stopTime": 4.0, "realTime": True,
+                                                          "stepTimeout": 10.0}, **extra)
+    doc = json.loads(path.read_text())
+    doc["serverIP"] = endpoint
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def _run(cfg: Path, runs: Path, endpoint: str) -> subprocess.Popen:
+    return subprocess.Popen([*HYCOSIM, "run", str(cfg), "--runs-dir", str(runs), "--no-progress", "--listen", endpoint],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env(), cwd=REPO)
+
+
+def _finish(proc: subprocess.Popen, runs: Path) -> Path:
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 0, f"{out}\n{err}"
+    return next(runs.iterdir())
+
+
+def _running_dir(runs: Path) -> Path:
+    wait_for(lambda: runs.exists() and any((d / "values.csv").exists() and len(read_rows(d)) > 50
+                                           for d in runs.iterdir()), 60, "the run's first 50 steps")
+    return next(runs.iterdir())
+
+
+def _fuzz_gateway(port: int, streams: list[bytes]) -> None:
+    for stream in streams:
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=2.0) as s:
+                s.sendall(stream)
+                s.settimeout(0.05)
+                try:
+                    s.recv(4096)
+                except OSError:
+                    pass
+        except OSError:
+            pass
+
+
+def test_fuzzing_every_key_and_the_gateway_leaves_the_run_and_its_values_unchanged(tmp_path):
+    clean_ep, fuzz_ep = free_endpoint(), free_endpoint()
+    clean = _finish(_run(_project(tmp_path / "clean.json", clean_ep), tmp_path / "clean", clean_ep), tmp_path / "clean")
+
+    keys = ProjectKeys("wire")
+    targets = [keys.up("clock"), keys.up("g"), keys.up("h"), keys.up("nobody"), f"{keys.root}/up/_local",
+               keys.down, keys.alive("g"), keys.status]
+    corpus = examples(payloads, 1500)
+    sends = [(targets[i % len(targets)], p) for i, p in enumerate(corpus * 2)]
+    sends = [(k, p) for k, p in sends if not forgeable(p, k, UIDS)]
+    streams = examples(gateway_streams(), 60)
+
+    cfg = _project(tmp_path / "fuzz.json", fuzz_ep)
+    proc = _run(cfg, tmp_path / "fuzz", fuzz_ep)
+    try:
+        run_dir = _running_dir(tmp_path / "fuzz")
+        with zenoh.open(client_config(fuzz_ep)) as fuzzer:
+            for key, payload in sends:
+                fuzzer.put(key, payload, congestion_control=zenoh.CongestionControl.BLOCK)
+        _fuzz_gateway(int(fuzz_ep.rsplit(":", 1)[1]) + 1, streams)
+        still_running = proc.poll() is None
+        fuzzed = _finish(proc, tmp_path / "fuzz")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert still_running  # every frame went in while the run was on
+    assert (fuzzed / "values.csv").read_text() == (clean / "values.csv").read_text()
+    m = meta(fuzzed)
+    on_up = sum(1 for k, _ in sends if "/up/" in k)
+    assert sum(m["dropped_frames"].values()) >= on_up
+    log = run_dir / "server.log.jsonl"
+    assert log.stat().st_size < 256 * 1024  # bounded: a few lines per reason and sender, then summaries
+    for node in UIDS:
+        assert (fuzzed / f"node-{node}.log.jsonl").stat().st_size < 256 * 1024
+
+
+# --- access control ----------------------------------------------------------------------
+
+KINDS = ["put", "delete", "declare_subscriber", "liveliness_token", "declare_liveliness_subscriber",
+         "liveliness_query", "query", "declare_queryable"]
+
+
+def _keys() -> dict[str, str]:
+    k = ProjectKeys("wire")
+    return {"up/self": k.up("g"), "up/other": k.up("clock"), "down": k.down, "alive/self": k.alive("g"),
+            "alive/other": k.alive("clock"), "alive/server": k.alive(SERVER_TOKEN), "status": k.status}
+
+
+def _probe(router: zenoh.Session, client: zenoh.Session, keys: dict[str, str]) -> set[tuple[str, str]]:
+    """Which (message kind, key) the client could use, each tried for real through the router."""
+    passed: set[tuple[str, str]] = set()
+    root = "hycosim/wire/**"
+    got: list[zenoh.Sample] = []
+    sub = router.declare_subscriber(root, got.append)
+    time.sleep(0.3)
+    for name, key in keys.items():
+        client.put(key, b"probe", congestion_control=zenoh.CongestionControl.BLOCK)
+        client.delete(key)
+    time.sleep(0.5)
+    sub.undeclare()
+    by_key = {v: n for n, v in keys.items()}
+    for s in got:
+        passed.add(("put" if s.kind == zenoh.SampleKind.PUT else "delete", by_key[str(s.key_expr)]))
+
+    subs = {name: client.declare_subscriber(key, zenoh.handlers.FifoChannel(16)) for name, key in keys.items()}
+    time.sleep(0.4)
+    for key in keys.values():
+        router.put(key, b"to-client")
+    time.sleep(0.5)
+    passed |= {("declare_subscriber", n) for n, s in subs.items() if s.try_recv() is not None}
+    for s in subs.values():
+        s.undeclare()
+
+    tokens = [client.liveliness().declare_token(key) for key in keys.values()]
+    time.sleep(0.5)
+    seen = {str(r.ok.key_expr) for r in router.liveliness().get(root, timeout=1.0) if r.ok is not None}
+    passed |= {("liveliness_token", by_key[k]) for k in seen if k in by_key}
+    for t in tokens:
+        t.undeclare()
+    time.sleep(0.3)
+
+    server_tokens = [router.liveliness().declare_token(key) for key in keys.values()]
+    time.sleep(0.3)
+    watchers = {name: client.liveliness().declare_subscriber(key, zenoh.handlers.FifoChannel(16), history=True)
+                for name, key in keys.items()}
+    time.sleep(0.5)
+    passed |= {("declare_liveliness_subscriber", n) for n, w in watchers.items() if w.try_recv() is not None}
+    for w in watchers.values():
+        w.undeclare()
+    for name, key in keys.items():
+        if any(r.ok is not None for r in client.liveliness().get(key, timeout=0.5)):
+            passed.add(("liveliness_query", name))
+    for t in server_tokens:
+        t.undeclare()
+
+    answering = [router.declare_queryable(key, lambda q: q.reply(q.key_expr, b"answer")) for key in keys.values()]
+    time.sleep(0.3)
+    for name, key in keys.items():
+        if any(r.ok is not None for r in client.get(key, timeout=0.5)):
+            passed.add(("query", name))
+    for q in answering:
+        q.undeclare()
+
+    theirs = [client.declare_queryable(key, lambda q: q.reply(q.key_expr, b"answer")) for key in keys.values()]
+    time.sleep(0.4)
+    for name, key in keys.items():
+        if any(r.ok is not None for r in router.get(key, timeout=0.5)):
+            passed.add(("declare_queryable", name))
+    for q in theirs:
+        q.undeclare()
+    return passed
+
+
+def _secure(tmp_path: Path, endpoint: str) -> Path:
+    (tmp_path / "creds.txt").write_text("server:s-pw\nclock:c-pw\ng:g-pw\nh:h-pw\nwatcher:w-pw\n")
+    return _project(tmp_path / "secure.json", endpoint, security={"credentials": "creds.txt"})
+
+
+def test_access_control_grants_each_permission_on_exactly_its_keys(tmp_path):
+    endpoint = free_endpoint()
+    loaded = load_project(_secure(tmp_path, endpoint))
+    keys = _keys()
+    with open_session(router_config(endpoint, security=router_security(loaded, endpoint)), endpoint) as router:
+        found = {}
+        for role, user, password in (("node", "g", "g-pw"), ("monitor", "watcher", "w-pw")):
+            with open_session(client_config(endpoint, user=user, password=password), endpoint) as client:
+                found[role] = _probe(router, client, keys)
+        with pytest.raises(ConnectError):
+            open_session(client_config(endpoint, timeout_s=2.0, user="g", password="wrong"), endpoint)
+        with pytest.raises(ConnectError):
+            open_session(client_config(endpoint, timeout_s=2.0), endpoint)
+    assert found["node"] == {("put", "up/self"), ("declare_subscriber", "down"), ("liveliness_token", "alive/self"),
+                             ("declare_liveliness_subscriber", "alive/server"), ("liveliness_query", "alive/self"),
+                             ("liveliness_query", "alive/server"), ("query", "status")}
+    everything = set(keys)
+    assert found["monitor"] == ({("declare_subscriber", k) for k in everything}
+                                | {("declare_liveliness_subscriber", k) for k in everything}
+                                | {("liveliness_query", k) for k in everything} | {("query", "status")})
+
+
+def test_an_authenticated_node_cannot_forge_releases_or_other_nodes_outputs(tmp_path):
+    clean_ep, attack_ep = free_endpoint(), free_endpoint()
+    (tmp_path / "c").mkdir()
+    (tmp_path / "a").mkdir()
+    clean = _finish(_run(_secure(tmp_path / "c", clean_ep), tmp_path / "c" / "runs", clean_ep), tmp_path / "c" / "runs")
+    cfg = _secure(tmp_path / "a", attack_ep)
+    proc = _run(cfg, tmp_path / "a" / "runs", attack_ep)
+    keys = ProjectKeys("wire")
+    sent = 0
+    try:
+        _running_dir(tmp_path / "a" / "runs")
+        with zenoh.open(client_config(attack_ep, user="g", password="g-pw")) as forger:
+            for k in range(60, 1060):
+                # Releases as the server would send them, STOPs, and outputs under the others' keys and UIDs.
+                forger.put(keys.down, frames.encode(frames.STEP, k, k * 0.01, 0.01, "free",
+                                                    {"clock": [], "g": [99.0], "h": [99.0]}, []),
+                           congestion_control=zenoh.CongestionControl.BLOCK)
+                forger.put(keys.up("h"), frames.encode(frames.OUTPUTS, 3, k, k * 0.01, [-1.0]),
+                           congestion_control=zenoh.CongestionControl.BLOCK)
+                sent += 2
+            forger.put(keys.down, frames.encode(frames.STOP, 0, "forged"), congestion_control=zenoh.CongestionControl.BLOCK)
+        still_running = proc.poll() is None
+        attacked = _finish(proc, tmp_path / "a" / "runs")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert still_running and sent == 2000
+    assert (attacked / "values.csv").read_text() == (clean / "values.csv").read_text()
+    assert meta(attacked)["dropped_frames"] == {}  # the router refused them: none reached the server
