@@ -43,6 +43,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/fmu_overhead.py
 	$(PY) benchmarks/scene_fmus.py
 	$(PY) benchmarks/memory.py
+	$(PY) benchmarks/fuzz.py
 
 # The rod and robot-scene FMUs that configs/grasp-fmu.json uses.
 fmus: $(STAMP)

@@ -144,10 +144,6 @@ def decode(payload: bytes) -> Frame:
     return Frame(kind, fields)
 
 
-def _finite(*values: float) -> bool:
-    return all(math.isfinite(v) for v in values)
-
-
 def check_release(frame: Frame, node: str | None = None, input_types: tuple[tuple[type, ...], ...] | None = None
                   ) -> Frame:
     """Return a START or STEP frame a node can act on; raise FrameError otherwise.
@@ -159,15 +155,17 @@ def check_release(frame: Frame, node: str | None = None, input_types: tuple[tupl
     written is checked before a node acts on it.
     """
     f = frame.fields
+    isfinite = math.isfinite
     if frame.kind == START:
-        if not (_finite(f[1], f[2], f[3]) and f[2] > 0 and (f[4] is None or (math.isfinite(f[4]) and f[4] > 0))):
+        if not (isfinite(f[1]) and isfinite(f[2]) and isfinite(f[3]) and f[2] > 0
+                and (f[4] is None or (isfinite(f[4]) and f[4] > 0))):
             raise FrameError(f"START frame with times that are not finite or a step size not above 0: "
                              f"{short(list(f[1:5]))}")
         return frame
     if frame.kind != STEP:
         raise FrameError(f"a {KIND_NAMES.get(frame.kind, frame.kind)} frame is not a release")
     k, t, h, _, inputs, _ = f
-    if not (0 <= k < MAX_STEP and _finite(t, h) and h > 0):
+    if not (0 <= k < MAX_STEP and isfinite(t) and isfinite(h) and h > 0):
         raise FrameError(f"STEP frame with step {short(k)}, t {short(t)}, h {short(h)}: out of range")
     if node is not None:
         mine = inputs.get(node)
@@ -176,9 +174,10 @@ def check_release(frame: Frame, node: str | None = None, input_types: tuple[tupl
         if input_types is not None:
             if len(mine) != len(input_types):
                 raise FrameError(f"STEP {k} gives node {node!r} {len(mine)} inputs, it has {len(input_types)}")
-            for i, (value, types) in enumerate(zip(mine, input_types)):
+            for value, types in zip(mine, input_types):
                 if type(value) not in types:
-                    raise FrameError(f"STEP {k} gives node {node!r} a {type(value).__name__} for input {i}")
+                    raise FrameError(f"STEP {k} gives node {node!r} a {type(value).__name__} for input "
+                                     f"{[type(v) in ts for v, ts in zip(mine, input_types)].index(False)}")
     return frame
 
 

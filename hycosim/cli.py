@@ -286,7 +286,7 @@ def status(
                     answer = json.loads(reply.ok.payload.to_bytes())
                 except ValueError:
                     continue  # not a hycosim server's answer (anyone may answer on the key)
-                if isinstance(answer, dict) and {"project", "step", "t", "mode", "attached", "expected"} <= answer.keys():
+                if _is_status(answer):
                     answers.append(answer)
     finally:
         session.close()
@@ -296,6 +296,17 @@ def status(
     for a in answers:
         out.print(f"{a['project']}: step {a['step']} t={a['t']:g} s mode={a['mode']}; "
                   f"attached {len(a['attached'])}/{len(a['expected'])}: {', '.join(a['attached'])}", highlight=False)
+
+
+def _is_status(answer: object) -> bool:
+    """Whether a reply on the status key reads as a hycosim server's (anyone may answer there)."""
+    if not isinstance(answer, dict):
+        return False
+    number = (int, float)
+    return (isinstance(answer.get("project"), str) and isinstance(answer.get("mode"), str)
+            and type(answer.get("step")) is int and type(answer.get("t")) in number
+            and all(isinstance(answer.get(k), list) and all(isinstance(n, str) for n in answer[k])
+                    for k in ("attached", "expected")))
 
 
 fmu_app = typer.Typer(no_args_is_help=True, help="Build bridge FMUs from a project; inspect FMUs.")

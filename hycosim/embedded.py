@@ -70,6 +70,22 @@ def _node_failure(run_dir: Path, name: str, status: int, before_start: bool = Fa
     return said or f"exit status {status}{when}"
 
 
+def _record_failure(run_dir: Path, message: str) -> None:
+    """The launcher stopped the server (with SIGINT) because a node failed: its meta.json says
+    it was interrupted; say why instead, so that the run directory tells what the user was told."""
+    path = run_dir / "meta.json"
+    try:
+        meta = json.loads(path.read_text())
+        if meta.get("status") != "interrupted":
+            return
+        meta.update(status="failed", reason=message)
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(meta, indent=2))
+        tmp.replace(path)
+    except (OSError, ValueError):
+        pass  # the message still reaches the user
+
+
 def _pump(stream, sink: queue.Queue) -> None:
     for line in stream:
         sink.put(line)
@@ -199,6 +215,7 @@ def _shut_down(server: subprocess.Popen, nodes: dict[str, subprocess.Popen], run
     if failures and code in (0, 130):
         code = 3
         message = "; ".join(f"{n}: {m}" for n, m in failures.items())
+        _record_failure(run_dir, message)
     elif failures:
         message += "".join(f"\n  node {n}: {m}" for n, m in failures.items() if m)
     return EmbeddedResult(code, run_dir, message, failures)

@@ -90,7 +90,10 @@ def test_status_ignores_answers_that_are_not_a_hycosim_servers(tmp_path):
     from tests.helpers import free_endpoint
 
     endpoint = free_endpoint()
-    strangers = [b"not json", b"[1, 2]", b'{"project": "x"}']
+    strangers = [b"not json", b"[1, 2]", b'{"project": "x"}',
+                 # every key of a server's answer, with values of the wrong types
+                 b'{"project": "x", "step": 1, "t": 0, "mode": "free", "attached": 3, "expected": []}',
+                 b'{"project": ["x"], "step": "1", "t": null, "mode": 1, "attached": [1], "expected": {}}']
     with zenoh.open(router_config(endpoint)) as session:
         queryables = [session.declare_queryable(ProjectKeys(f"p{i}").status,
                                                 lambda q, answer=answer: q.reply(q.key_expr, answer))

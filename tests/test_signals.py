@@ -10,15 +10,12 @@ import time
 import pytest
 
 from tests.helpers import HYCOSIM, REPO, env, meta, read_rows, reap, spawn, wait_for, write_project
+from tests.test_faults import _pair as fault_pair
 
 
-def _pair(tmp_path, **cosim):
-    settings = {"stepSize": 0.01, "stopTime": 20.0, "realTime": True, "stepTimeout": 5.0}
-    settings.update(cosim)
-    return write_project(tmp_path / "p.json", [
-        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
-        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
-    ], [{"from": "clock.y", "to": "g.u"}], cosim=settings, name="sig")
+def _pair(tmp_path):
+    # The two-node project of the fault tests, paced long enough to be stopped midway.
+    return fault_pair(tmp_path, stopTime=20.0)
 
 
 def _rows(run_dir) -> int:
@@ -126,3 +123,5 @@ def test_a_node_process_that_ends_before_it_attaches_is_reported_at_once(tmp_pat
     assert time.monotonic() - started < 30  # not the attachTimeout of 60 s
     assert res.returncode == 3, res.stderr
     assert f"q: {expected}" in res.stderr
+    m = meta(next((tmp_path / "runs").iterdir()))  # the run directory says what the user was told
+    assert m["status"] == "failed" and expected in m["reason"]
