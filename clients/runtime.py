@@ -345,7 +345,8 @@ class NodeRuntime:
                 impl.set_state(saved)
                 self._log.info("rollback", step=k, t=t)
                 continue
-            if frame.kind != frames.STEP:
+            if frame.kind != frames.STEP:  # a START: this run has started already
+                self.drops.drop("not a release", "a START while the run is under way", self.steps)
                 continue
             k, t, h, new_mode, inputs, driven_nodes = frame.fields
             if checkpoint and saved_step != k:
@@ -380,7 +381,7 @@ class NodeRuntime:
     def _on_stop(self, frame: frames.Frame) -> None:
         """The server's STOP: the end of the run, or of a failed one, which is this node's failure too."""
         reason = frame.fields[1]
-        self._log.info("stop", step=self.steps, reason=reason, waits=self.inbox.waits)
+        self._log.info("stop", step=self.steps, reason=reason, waits=self.inbox.waits, dropped=dict(self.drops.counts))
         if reason not in frames.CLEAN_STOPS:  # the reason names the step where it matters
             raise RunFailedElsewhere(f"node {self.name!r}: the server stopped the run: {reason}")
 

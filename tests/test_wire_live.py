@@ -3,8 +3,8 @@
 * a fuzzer on a second Zenoh session (and on the gateway socket) writes structure-aware garbage
   on every key of a running project: the run completes with the same values.csv as without it;
 * with credentials and access control, each role may do exactly what it should on exactly its
-  keys, and a node authenticated with its own password cannot forge anything that reaches a
-  node or the records.
+  keys (a node authenticated with its own password forging frames: benchmarks/fuzz.py, run
+  at a small scale by tests/test_benchmarks.py).
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import subprocess
 import time
 from pathlib import Path
 
+import msgpack
 import pytest
 import zenoh
 
@@ -96,8 +97,23 @@ def test_fuzzing_every_key_and_the_gateway_leaves_the_run_and_its_values_unchang
     assert sum(m["dropped_frames"].values()) >= on_up
     log = run_dir / "server.log.jsonl"
     assert log.stat().st_size < 256 * 1024  # bounded: a few lines per reason and sender, then summaries
+    # Every frame on `down` is one no node can act on; a well-formed REPLAY naming another node
+    # is passed over, not counted as dropped.
+    on_down = sum(1 for k, p in sends if k == keys.down and not _replay_for_someone(p))
     for node in UIDS:
-        assert (fuzzed / f"node-{node}.log.jsonl").stat().st_size < 256 * 1024
+        log = fuzzed / f"node-{node}.log.jsonl"
+        assert log.stat().st_size < 256 * 1024
+        stop = [json.loads(line) for line in log.read_text().splitlines() if '"stop"' in line][-1]
+        assert on_down > 0 and sum(stop["dropped"].values()) >= on_down  # each node dropped them all
+
+
+def _replay_for_someone(payload: bytes) -> bool:
+    try:
+        obj = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+    except Exception:
+        return False
+    return (type(obj) is list and len(obj) == 4 and type(obj[0]) is int and obj[0] == frames.VERSION
+            and type(obj[1]) is int and obj[1] == frames.REPLAY and type(obj[2]) is str and type(obj[3]) is bytes)
 
 
 # --- access control ----------------------------------------------------------------------
@@ -206,32 +222,5 @@ def test_access_control_grants_each_permission_on_exactly_its_keys(tmp_path):
                                 | {("liveliness_query", k) for k in everything} | {("query", "status")})
 
 
-def test_an_authenticated_node_cannot_forge_releases_or_other_nodes_outputs(tmp_path):
-    clean_ep, attack_ep = free_endpoint(), free_endpoint()
-    (tmp_path / "c").mkdir()
-    (tmp_path / "a").mkdir()
-    clean = _finish(_run(_secure(tmp_path / "c", clean_ep), tmp_path / "c" / "runs", clean_ep), tmp_path / "c" / "runs")
-    cfg = _secure(tmp_path / "a", attack_ep)
-    proc = _run(cfg, tmp_path / "a" / "runs", attack_ep)
-    keys = ProjectKeys("wire")
-    sent = 0
-    try:
-        _running_dir(tmp_path / "a" / "runs")
-        with zenoh.open(client_config(attack_ep, user="g", password="g-pw")) as forger:
-            for k in range(60, 1060):
-                # Releases as the server would send them, STOPs, and outputs under the others' keys and UIDs.
-                forger.put(keys.down, frames.encode(frames.STEP, k, k * 0.01, 0.01, "free",
-                                                    {"clock": [], "g": [99.0], "h": [99.0]}, []),
-                           congestion_control=zenoh.CongestionControl.BLOCK)
-                forger.put(keys.up("h"), frames.encode(frames.OUTPUTS, 3, k, k * 0.01, [-1.0]),
-                           congestion_control=zenoh.CongestionControl.BLOCK)
-                sent += 2
-            forger.put(keys.down, frames.encode(frames.STOP, 0, "forged"), congestion_control=zenoh.CongestionControl.BLOCK)
-        still_running = proc.poll() is None
-        attacked = _finish(proc, tmp_path / "a" / "runs")
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert still_running and sent == 2000
-    assert (attacked / "values.csv").read_text() == (clean / "values.csv").read_text()
-    assert meta(attacked)["dropped_frames"] == {}  # the router refused them: none reached the server
+# The forgery by an authenticated node (releases on `down`, outputs under other nodes' keys, tokens
+# and queryables it has no right to) runs in tests/test_benchmarks.py through benchmarks/fuzz.py.
