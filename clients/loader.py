@@ -34,6 +34,10 @@ REFERENCE_MODELS = {
 }
 
 
+# The FMUs `hycosim scene fmus` builds (clients.scene_fmus), named in a missing-file message.
+SCENE_FMUS = ("Rod.fmu", "RobotScene6.fmu")
+
+
 class NodeLoadError(RuntimeError):
     """A node entry whose implementation cannot be found or made."""
 
@@ -41,7 +45,9 @@ class NodeLoadError(RuntimeError):
 def _fmu_path(spec: NodeSpec, project_dir: Path) -> Path:
     path = (project_dir / spec.fmu).resolve()
     if not path.is_file():
-        raise NodeLoadError(f"node {spec.nodeName!r}: FMU file {path} does not exist")
+        hint = (f"; build it with: hycosim scene fmus -o {path.parent}" if path.name in SCENE_FMUS
+                else f"; a bridge FMU is built with: hycosim fmu build PROJECT -o {path.parent}")
+        raise NodeLoadError(f"node {spec.nodeName!r}: FMU file {path} does not exist{hint}")
     if spec.asynchronous:
         raise NodeLoadError(f"node {spec.nodeName!r}: an FMU node steps; it cannot be asynchronous")
     return path

@@ -29,3 +29,16 @@ def build_scene_fmus(out_dir: Path) -> dict[str, Path]:
             "rod": build_model_fmu(HERE / "rod" / "rod_fmu.py", out_dir, resources=[staged]),
             "robot": build_model_fmu(HERE / "robot" / "robot_fmu.py", out_dir, resources=[staged]),
         }
+
+
+def _sources() -> list[Path]:
+    return [HERE / rel for rel in _PACKAGED] + [HERE / "rod" / "rod_fmu.py", HERE / "robot" / "robot_fmu.py"]
+
+
+def ensure_scene_fmus(out_dir: Path) -> dict[str, Path]:
+    """The scene FMUs in ``out_dir``, built (again) when missing or older than their sources."""
+    built = {"rod": out_dir / "Rod.fmu", "robot": out_dir / "RobotScene6.fmu"}
+    newest = max(p.stat().st_mtime for p in _sources())
+    if all(p.is_file() and p.stat().st_mtime >= newest for p in built.values()):
+        return built
+    return build_scene_fmus(out_dir)

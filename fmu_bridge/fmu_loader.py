@@ -106,6 +106,13 @@ def map_ports(md: ModelDescription, node: Node, path: Path) -> tuple[list[Mapped
                            f"{name!r} of {path.name} is {var.type}")
         return MappedPort(port.name, name, var.valueReference, var.type)
 
+    missing = [f"{kind} {p.name!r}" + (f" (variable {p.variable!r})" if p.variable else "")
+               for kind, ports in (("input", node.input), ("output", node.output))
+               for p in ports if (p.variable or p.name) not in variables]
+    if missing:
+        # All at once: an FMU built for other ports (an old build) usually lacks several.
+        raise FmuError(f"node {node.nodeName!r}: {path.name} has no variable for {', '.join(missing)} "
+                       "(an FMU built for other ports than the project names? rebuild it)")
     inputs = [one(p, ("input", "parameter"), "input") for p in node.input]
     outputs = [one(p, ("output", "local"), "output") for p in node.output]
     return inputs, outputs

@@ -685,13 +685,18 @@ def trials(
     n: Annotated[int, typer.Option("--trials", min=1, help="trials per angle")] = 20,
     correction: Annotated[bool, typer.Option("--correction/--no-correction", help="camera correction of the twin")] = True,
     driver: Annotated[str, typer.Option(help="'policy' (pretrained DDPG) or 'reference' (scripted)")] = "policy",
+    nodes: Annotated[str, typer.Option(help="the rod and the robot scene as 'fmu' (the FMUs `hycosim scene fmus` "
+                                            "builds, built when missing) or as 'python' nodes")] = "fmu",
     output: Annotated[Path, typer.Option("-o", "--output")] = Path("runs/trials"),
 ) -> None:
     """Rerun the paper's trials: co-simulation, EthernetKRL export, emulated controller, Table 2."""
-    from hycosim.trials import PAPER, TrialsInterrupted, run_trials, summarise, write_outputs
+    from hycosim.trials import NODE_KINDS, PAPER, TrialsInterrupted, run_trials, summarise, write_outputs
 
     if driver not in ("policy", "reference"):
         err.print("[red]error:[/red] --driver is 'policy' or 'reference'", highlight=False)
+        raise typer.Exit(2)
+    if nodes not in NODE_KINDS:
+        err.print(f"[red]error:[/red] --nodes is {' or '.join(map(repr, NODE_KINDS))}", highlight=False)
         raise typer.Exit(2)
     try:
         angle_list = [float(a) for a in angles.replace(",", " ").split()]
@@ -714,7 +719,7 @@ def trials(
 
     interrupted = None
     try:
-        results = run_trials(angle_list, n, output, correction, driver, progress)
+        results = run_trials(angle_list, n, output, correction, driver, progress, nodes)
     except TrialsInterrupted as exc:
         # Ctrl-C again must not cut short the table and files of the finished trials (a second or two).
         signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -723,7 +728,8 @@ def trials(
             err.print(f"[red]error:[/red] {exc}; nothing to tabulate", highlight=False)
             raise typer.Exit(130) from None
     csv_path, png = write_outputs(results, output)
-    table = Table(title=f"grasping trials ({'with' if correction else 'without'} camera correction, {driver}): "
+    table = Table(title=f"grasping trials ({'with' if correction else 'without'} camera correction, {driver}, "
+                        f"rod and robot as {'FMUs' if nodes == 'fmu' else 'Python nodes'}): "
                         "grasp distance error, execution time, success")
     for col in ("angle", "mm", "s", "success", "paper mm", "paper s", "paper %"):
         table.add_column(col, no_wrap=True)

@@ -1,8 +1,9 @@
 """The paper's trials (Table 2), rerun: ``hycosim trials --angles 30 40 50 60 --trials 20``.
 
 Per trial: the full distributed co-simulation (server and every node as processes over
-Zenoh on loopback: the rod twin, the robot scene, the policy, and, with correction on,
-the camera watching the emulated physical rod), then the robot's path exported as
+Zenoh on loopback: the rod twin and the robot scene, as FMUs by default (``configs/grasp-paper.json``)
+or as Python nodes, the policy, and, with correction on, the camera watching the emulated
+physical rod), then the robot's path exported as
 EthernetKRL files and streamed over TCP to the emulated controller, which executes it
 against the physical rod. The physical rod differs from the twin per trial (length ±3 %,
 release angle ±2°, damping ±30 %, seeded), as a real rod differs from its model.
@@ -45,6 +46,7 @@ class TrialResult:
     physical_length: float
     physical_angle_deg: float
     physical_damping: float
+    nodes: str = "fmu"  # how the rod and the robot scene ran: as FMUs or as Python nodes
     error: str = ""  # why the trial could not be carried out (it counts as not grasped)
 
 
@@ -60,28 +62,53 @@ def trial_seed(angle: float, trial: int, seed_base: int = 1000) -> int:
     return seed_base + int(angle) * 100 + trial
 
 
-def trial_project(angle: float, physical: RodParams, correction: bool, driver: str, seed: int) -> dict:
-    """The project JSON of one trial: grasp-policy.json (or grasp.json) plus, with correction, the camera."""
-    base = json.loads((REPO / "configs" / ("grasp-policy.json" if driver == "policy" else "grasp.json")).read_text())
+NODE_KINDS = ("fmu", "python")
+# The shipped project each trial starts from, by node kind and driver: the rod and the robot
+# scene as FMUs (the paper's design) or as Python nodes; the policy or the scripted controller.
+_BASES = {("fmu", "policy"): "grasp-paper.json", ("fmu", "reference"): "grasp-fmu.json",
+          ("python", "policy"): "grasp-policy.json", ("python", "reference"): "grasp.json"}
+_CAMERA_LINK = {"from": "camera", "to": "rod", "pairs": [["meas_angle", "meas_angle"], ["meas_t", "meas_t"],
+                                                         ["meas_valid", "meas_valid"]]}
+
+
+def _port_name(port) -> str:
+    return port if isinstance(port, str) else port["name"]
+
+
+def trial_project(angle: float, physical: RodParams, correction: bool, driver: str, seed: int,
+                  nodes: str = "fmu") -> dict:
+    """The project JSON of one trial: the shipped scenario of that node kind and driver, released
+    at ``angle``, with the camera on the trial's physical rod (with correction) or without it."""
+    configs = REPO / "configs"
+    base = json.loads((configs / _BASES[nodes, driver]).read_text())
     base["projectName"] = f"trial-{angle:g}-{seed}"
+    camera = {"source": "emulated", "noise_sigma": 25, "seed": seed,
+              "physical": {"length": physical.length, "damping": physical.damping,
+                           "initial_angle_deg": math.degrees(physical.initial_angle)}}
     for node in base["nodeLists"]:
-        if "parameters" in node:
-            node["parameters"] = dict(node["parameters"], initial_angle_deg=angle)
+        if "fmu" in node:  # FMU paths are relative to the shipped config; the trial's file lies elsewhere
+            node["fmu"] = str((configs / node["fmu"]).resolve())
+        params = node.get("parameters")
+        if node["nodeName"] == "camera":
+            node["parameters"] = dict(params, **camera)
+        elif "fmu" in node and "initial_angle" in params:  # the rod FMU: radians, as FMI variables are
+            node["parameters"] = dict(params, initial_angle=math.radians(angle))
+        elif params is not None and "fmu" not in node:
+            node["parameters"] = dict(params, initial_angle_deg=angle)
     rod = base["nodeLists"][0]
     rod["parameters"]["observer_gain"] = 12.0 if correction else 0.0
-    if not any(p == "meas_t" or (isinstance(p, dict) and p["name"] == "meas_t") for p in rod["input"]):
+    if "meas_t" not in map(_port_name, rod["input"]):
         rod["input"].append("meas_t")
-    if correction:
+    has_camera = any(n["nodeName"] == "camera" for n in base["nodeLists"])
+    if correction and not has_camera:
         base["nodeLists"].append({
-            "nodeName": "camera", "UID": 9, "model": "camera", "async": True, "rate": 60,
-            "parameters": {"source": "emulated", "noise_sigma": 25, "seed": seed,
-                           "physical": {"length": physical.length, "damping": physical.damping,
-                                        "initial_angle_deg": math.degrees(physical.initial_angle)}},
+            "nodeName": "camera", "UID": 9, "model": "camera", "async": True, "rate": 60, "parameters": camera,
             "output": ["meas_angle", "meas_omega", "meas_t", "meas_conf", {"name": "meas_valid", "type": "Boolean"},
                        "latency", "true_angle"]})
-        base["linkLists"].append({"from": "camera", "to": "rod", "pairs": [["meas_angle", "meas_angle"],
-                                                                           ["meas_t", "meas_t"],
-                                                                           ["meas_valid", "meas_valid"]]})
+        base["linkLists"].append(dict(_CAMERA_LINK))
+    elif not correction and has_camera:
+        base["nodeLists"] = [n for n in base["nodeLists"] if n["nodeName"] != "camera"]
+        base["linkLists"] = [link for link in base["linkLists"] if not str(link["from"]).startswith("camera")]
     base["nodeNum"], base["linkNum"] = len(base["nodeLists"]), len(base["linkLists"])
     # Paced at real time: the camera lives on the wall clock, and rendering 60 frames per
     # second already takes a third of a core here (at twice real time it fell behind on
@@ -92,12 +119,12 @@ def trial_project(angle: float, physical: RodParams, correction: bool, driver: s
 
 
 def run_trial(angle: float, trial: int, out: Path, correction: bool = True, driver: str = "policy",
-              seed_base: int = 1000) -> TrialResult:
+              seed_base: int = 1000, nodes: str = "fmu") -> TrialResult:
     from hycosim.embedded import run_embedded
 
     seed = trial_seed(angle, trial, seed_base)
     physical = physical_rod(angle, seed)
-    doc = trial_project(angle, physical, correction, driver, seed)
+    doc = trial_project(angle, physical, correction, driver, seed, nodes)
     folder = out / f"{angle:g}deg-{trial:02d}"
     folder.mkdir(parents=True, exist_ok=True)
     cfg = folder / "project.json"
@@ -120,7 +147,7 @@ def run_trial(angle: float, trial: int, out: Path, correction: bool = True, driv
     events = (result.run_dir / "events.jsonl").read_text()
     return TrialResult(angle, trial, correction, answer["grasped"], answer["grasp_error_mm"],
                        answer["grasp_time_s"], '"to": "grasp"' in events, str(result.run_dir),
-                       physical.length, math.degrees(physical.initial_angle), physical.damping)
+                       physical.length, math.degrees(physical.initial_angle), physical.damping, nodes)
 
 
 def summarise(results: list[TrialResult]) -> dict[float, dict[str, float]]:
@@ -213,7 +240,7 @@ class TrialsInterrupted(Exception):
 
 
 def run_trials(angles: list[float], trials: int, out: Path, correction: bool = True, driver: str = "policy",
-               progress: Callable[[TrialResult], None] | None = None) -> list[TrialResult]:
+               progress: Callable[[TrialResult], None] | None = None, nodes: str = "fmu") -> list[TrialResult]:
     """Every trial, in order; one that fails to run is recorded as not grasped, with its error,
     and the others go on. ``trials.csv`` is rewritten after each trial. Ctrl-C stops them:
     TrialsInterrupted carries the finished ones (the interrupted trial is not counted)."""
@@ -221,18 +248,22 @@ def run_trials(angles: list[float], trials: int, out: Path, correction: bool = T
 
     out.mkdir(parents=True, exist_ok=True)
     logs.configure(out / "trials.log.jsonl")
+    if nodes == "fmu":
+        from clients.scene_fmus import ensure_scene_fmus
+
+        ensure_scene_fmus(REPO / "build" / "fmus")
     results = []
     for angle in angles:
         for i in range(trials):
             try:
-                r = run_trial(angle, i, out, correction, driver)
+                r = run_trial(angle, i, out, correction, driver, nodes=nodes)
             except KeyboardInterrupt:
                 raise TrialsInterrupted(results) from None
             except (RuntimeError, OSError, ValueError) as exc:
                 physical = physical_rod(angle, trial_seed(angle, i))
                 r = TrialResult(angle, i, correction, False, None, None, False, str(out / f"{angle:g}deg-{i:02d}"),
                                 physical.length, math.degrees(physical.initial_angle), physical.damping,
-                                error=str(exc))
+                                nodes, error=str(exc))
             results.append(r)
             write_csv(results, out)
             if progress:

@@ -13,6 +13,7 @@ import pytest
 import yaml
 import zenoh
 
+from clients.scene_fmus import build_scene_fmus
 from fmu_bridge import frames
 from fmu_bridge.keys import ProjectKeys
 from fmu_bridge.session import client_config
@@ -27,22 +28,29 @@ def test_compose_file_is_valid_against_the_compose_schema():
                           str(COMPOSE)], capture_output=True, text=True)
     assert res.returncode == 0, res.stdout + res.stderr
     spec = yaml.safe_load(COMPOSE.read_text())
-    assert set(spec["services"]) == {"server", "rod", "robot", "controller"}
-    grasp = json.loads((REPO / "configs" / "grasp.json").read_text())
+    assert set(spec["services"]) == {"server", "rod", "robot", "policy", "camera"}
+    grasp = json.loads((REPO / "configs" / "grasp-paper.json").read_text())
     assert {n["nodeName"] for n in grasp["nodeLists"]} == set(spec["services"]) - {"server"}
+    assert all("/config/grasp-paper.json" in s["command"] for s in spec["services"].values())
+    # The image builds the FMUs where the config names them from /config.
+    assert "hycosim scene fmus -o /build/fmus" in (REPO / "docker" / "Dockerfile").read_text()
+    assert {n["fmu"] for n in grasp["nodeLists"] if "fmu" in n} == {"../build/fmus/Rod.fmu",
+                                                                     "../build/fmus/RobotScene6.fmu"}
 
 
 def test_compose_services_run_together_as_local_processes(tmp_path):
     """No Docker engine here: run each service's exact command, with the compose network's
-    names mapped onto loopback and the volumes onto folders."""
+    names mapped onto loopback and the volumes onto folders (the image's FMUs built beside the
+    config as the Dockerfile builds them), and check that together they grasp the rod."""
     spec = yaml.safe_load(COMPOSE.read_text())
     endpoint = free_endpoint()
     port = endpoint.rsplit(":", 1)[1]
-    doc = json.loads((REPO / "configs" / "grasp.json").read_text())
+    doc = json.loads((REPO / "configs" / "grasp-paper.json").read_text())
     doc["coSimulation"]["stopTime"] = 1.5
     config_dir = tmp_path / "config"
     config_dir.mkdir()
-    (config_dir / "grasp.json").write_text(json.dumps(doc))
+    (config_dir / "grasp-paper.json").write_text(json.dumps(doc))
+    build_scene_fmus(tmp_path / "build" / "fmus")
 
     def local(args: list[str]) -> list[str]:
         mapped = []
@@ -64,6 +72,10 @@ def test_compose_services_run_together_as_local_processes(tmp_path):
     run = next((tmp_path / "runs").iterdir())
     assert meta(run)["status"] == "completed" and len(read_rows(run)) == 151
     assert port in meta(run)["endpoint"]
+    events = (run / "events.jsonl").read_text()
+    assert '"to": "grasp"' in events  # the policy closed the gripper on the rod
+    rows = read_rows(run)
+    assert any(r["rod.meas_valid"] == "1" for r in rows)  # the camera measured the physical rod for the twin
 
 
 def _chain(tmp_path: Path, grace: float, stop: float) -> Path:

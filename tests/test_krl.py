@@ -152,6 +152,7 @@ def test_export_and_controller_cli_errors(tmp_path):
     (["--angles", "-5", "40"], "-5° outside (0°, 90°)"),  # and "-o" after it is still an option
     (["--angles", "30", "--trials", "0"], "'--trials'"),
     (["--angles", "thirty"], "give numbers in degrees"),
+    (["--angles", "30", "--nodes", "modelica"], "--nodes is 'fmu' or 'python'"),
 ])
 def test_trials_refuse_bad_angles_and_counts_before_running(tmp_path, args, message):
     res = hycosim("trials", *args, "-o", str(tmp_path / "out"))
@@ -163,14 +164,29 @@ def test_short_trials_run_produces_the_table_and_files(tmp_path):
     out = tmp_path / "trials"
     res = hycosim("trials", "--angles", "30", "40", "50", "60", "--trials", "2", "-o", str(out), timeout=900)
     assert res.returncode == 0, res.stderr[-2000:]
-    assert "paper %" in res.stdout and "│ 60°" in res.stdout
+    assert "paper %" in res.stdout and "│ 60°" in res.stdout and "rod and robot as FMUs" in res.stdout
     with open(out / "trials.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     assert len(rows) == 8 and {r["angle"] for r in rows} == {"30.0", "40.0", "50.0", "60.0"}
+    assert {r["nodes"] for r in rows} == {"fmu"}  # the paper's design: the rod and robot scene as FMUs
+    project = json.loads(next(out.glob("30deg-00/project.json")).read_text())
+    assert [n["nodeName"] for n in project["nodeLists"] if "fmu" in n] == ["rod", "robot"]
     assert sum(r["success"] == "True" for r in rows) >= 6
     assert (out / "trials.png").stat().st_size > 20_000
     one = next(out.glob("30deg-00/krl/frames.xml"))
     assert one.read_text().strip().splitlines()[-1].startswith('<Robot><Pos A1=""')
+
+
+def test_trials_with_python_nodes_say_so_and_grasp(tmp_path):
+    out = tmp_path / "trials"
+    res = hycosim("trials", "--angles", "50", "--trials", "1", "--nodes", "python", "-o", str(out), timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "rod and robot as Python nodes" in res.stdout
+    with open(out / "trials.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert [(r["nodes"], r["success"]) for r in rows] == [("python", "True")]
+    project = json.loads(next(out.glob("50deg-00/project.json")).read_text())
+    assert not any("fmu" in n for n in project["nodeLists"])
 
 
 def test_a_trial_that_cannot_run_is_recorded_and_the_others_go_on(tmp_path):

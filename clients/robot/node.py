@@ -15,7 +15,7 @@ import numpy as np
 
 from clients.node import Node, NodeContext
 from clients.robot import kr6
-from clients.robot.scene import RobotScene, SceneOutputs, SceneParams
+from clients.robot.scene import RobotScene, SceneOutputs, SceneParams, euler_zyx
 from clients.rod.node import ROD_PARAMETERS, rod_params
 
 
@@ -28,12 +28,6 @@ def scene_params(parameters: dict[str, Any]) -> SceneParams:
     return SceneParams(base=tuple(float(v) for v in parameters.get("base", (0.0, 0.0, 0.0))),
                        rod_length=rod.length, rod_radius=rod.radius, pivot=rod.pivot, grasp_distance=rod.grasp_distance,
                        check_reach=bool(parameters.get("check_reach", True)))
-
-
-def euler_zyx(rot: np.ndarray) -> tuple[float, float, float]:
-    """(roll, pitch, yaw) of a rotation matrix, ZYX convention."""
-    pitch = math.asin(max(-1.0, min(1.0, -rot[2, 0])))
-    return math.atan2(rot[2, 1], rot[2, 2]), pitch, math.atan2(rot[1, 0], rot[0, 0])
 
 
 def scene_output_dict(o: SceneOutputs) -> dict[str, Any]:

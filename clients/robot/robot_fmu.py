@@ -1,7 +1,8 @@
 """The KR6 R700 robot scene as an FMI 2.0 co-simulation FMU (pythonfmu): the same RobotScene as the node.
 
-Inputs: q_cmd1..6 (rad), grip_cmd, rod_angle. Outputs: q1..6, tcp_x/y/z, dist, gap,
-grip_x/y/z, grasped, collision, reachable, near_miss. Parameters (fixed): rod geometry
+Inputs: q_cmd1..6 (rad), grip_cmd, rod_angle. Outputs: q1..6, tcp_x/y/z,
+tcp_roll/pitch/yaw (ZYX Euler, rad), dist, gap, grip_x/y/z, grasped, collision, reachable,
+near_miss: the robot node's outputs (clients.robot.node). Parameters (fixed): rod geometry
 (length, radius, pivot_x/y/z, grasp_distance) and the base position.
 """
 
@@ -9,9 +10,10 @@ import numpy as np
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Real
 
 from clients.robot import kr6
-from clients.robot.scene import RobotScene, SceneParams
+from clients.robot.scene import RobotScene, SceneParams, euler_zyx
 
-_REAL_OUT = ("tcp_x", "tcp_y", "tcp_z", "dist", "gap", "grip_x", "grip_y", "grip_z")
+_REAL_OUT = ("tcp_x", "tcp_y", "tcp_z", "tcp_roll", "tcp_pitch", "tcp_yaw", "dist", "gap", "grip_x", "grip_y",
+             "grip_z")
 _BOOL_OUT = ("grasped", "collision", "reachable", "near_miss")
 _PARAMS = ("rod_length", "rod_radius", "pivot_x", "pivot_y", "pivot_z", "grasp_distance", "base_x", "base_y", "base_z")
 
@@ -54,6 +56,7 @@ class RobotScene6(Fmi2Slave):
         for i in range(6):
             setattr(self, f"q{i + 1}", float(o.q[i]))
         self.tcp_x, self.tcp_y, self.tcp_z = (float(v) for v in o.tcp)
+        self.tcp_roll, self.tcp_pitch, self.tcp_yaw = euler_zyx(o.tcp_rot)
         self.dist, self.gap = float(o.distance), float(o.gap)
         self.grip_x, self.grip_y, self.grip_z = (float(v) for v in o.grip_target)
         self.grasped, self.collision, self.reachable, self.near_miss = o.grasped, o.collision, o.reachable, o.near_miss

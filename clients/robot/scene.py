@@ -208,3 +208,9 @@ class RobotScene:
             reachable = bool(r.position_error < 2e-3 and r.rotation_error < math.radians(2))
         return SceneOutputs(self.q.copy(), tcp, self.tcp_rot, distance, grasped, bool(self.collisions()),
                             reachable, near_miss, self.gap, self.grip_target())
+
+
+def euler_zyx(rot: np.ndarray) -> tuple[float, float, float]:
+    """(roll, pitch, yaw) of a rotation matrix, ZYX convention."""
+    pitch = math.asin(max(-1.0, min(1.0, -rot[2, 0])))
+    return math.atan2(rot[2, 1], rot[2, 2]), pitch, math.atan2(rot[1, 0], rot[0, 0])

@@ -1,9 +1,11 @@
 """The rod as an FMI 2.0 co-simulation FMU (pythonfmu): the same RodModel as the node.
 
 Parameters (fixed): length, mass, radius, damping, pivot_x/y/z, grasp_distance,
-initial_angle (rad), observer_gain. Inputs: driven, grip_x/y/z, meas_angle, meas_valid.
-Outputs: angle, omega, grasp_x/y/z, tip_x/y/z. State save/restore covers MuJoCo's state,
-so the coordinator can roll it back.
+initial_angle (rad), observer_gain. Inputs: driven, grip_x/y/z, meas_angle, meas_t (the
+measurement's capture time), meas_valid. Outputs: angle, omega, grasp_x/y/z, tip_x/y/z.
+It steps exactly as the rod node does (clients.rod.node): held, it follows the gripper; free,
+the camera's measurement corrects it. State save/restore covers MuJoCo's state, so the
+coordinator can roll it back.
 """
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Real
@@ -12,7 +14,7 @@ from clients.rod.model import RodModel, RodParams
 
 _PARAMS = ("length", "mass", "radius", "damping", "pivot_x", "pivot_y", "pivot_z", "grasp_distance",
            "initial_angle", "observer_gain")
-_INPUTS = ("grip_x", "grip_y", "grip_z", "meas_angle")
+_INPUTS = ("grip_x", "grip_y", "grip_z", "meas_angle", "meas_t")
 _OUTPUTS = ("angle", "omega", "grasp_x", "grasp_y", "grasp_z", "tip_x", "tip_y", "tip_z")
 
 
@@ -30,7 +32,7 @@ class Rod(Fmi2Slave):
             self.register_variable(Real(name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
         self.driven = False
         self.meas_valid = False
-        self.grip_x, self.grip_y, self.grip_z, self.meas_angle = d.pivot[0], 0.0, 0.0, 0.0
+        self.grip_x, self.grip_y, self.grip_z, self.meas_angle, self.meas_t = d.pivot[0], 0.0, 0.0, 0.0, 0.0
         self.register_variable(Boolean("driven", causality=Fmi2Causality.input, variability=Fmi2Variability.discrete))
         self.register_variable(Boolean("meas_valid", causality=Fmi2Causality.input, variability=Fmi2Variability.discrete))
         for name in _INPUTS:
@@ -58,11 +60,13 @@ class Rod(Fmi2Slave):
         self._refresh(RodModel(self._params()))
 
     def do_step(self, current_time, step_size):
-        if self.driven:
+        driven = bool(self.driven)
+        if driven:
             self.model.set_gripper([self.grip_x, self.grip_y, self.grip_z])
-        self.model.set_driven(bool(self.driven))
-        if self.meas_valid:
-            self.model.correct(self.meas_angle, step_size)
+        self.model.set_driven(driven)
+        # Held by the gripper, the rod follows it; the camera corrects the free swing only.
+        if not driven and self.meas_valid:
+            self.model.correct(self.meas_angle, step_size, self.meas_t)
         self.model.advance(step_size)
         self._refresh()
         return True
