@@ -10,7 +10,7 @@ from hypothesis import HealthCheck, settings  # noqa: E402
 
 # Property-based tests draw the same examples on every run (derandomize) and a bounded number of
 # them, so that `make test` and CI are repeatable; HYPOTHESIS_PROFILE=dev explores afresh.
-settings.register_profile("ci", derandomize=True, max_examples=300, deadline=None,
+settings.register_profile("ci", derandomize=True, max_examples=150, deadline=None,
                           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 settings.register_profile("dev", max_examples=2000, deadline=None,
                           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])

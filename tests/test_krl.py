@@ -162,45 +162,38 @@ def test_trials_refuse_bad_angles_and_counts_before_running(tmp_path, args, mess
 
 def test_short_trials_run_produces_the_table_and_files(tmp_path):
     out = tmp_path / "trials"
-    res = hycosim("trials", "--angles", "30", "40", "50", "60", "--trials", "2", "-o", str(out), timeout=900)
+    res = hycosim("trials", "--angles", "30", "60", "--trials", "2", "-o", str(out), timeout=900)
     assert res.returncode == 0, res.stderr[-2000:]
     assert "paper %" in res.stdout and "│ 60°" in res.stdout and "rod and robot as FMUs" in res.stdout
     with open(out / "trials.csv", newline="") as f:
         rows = list(csv.DictReader(f))
-    assert len(rows) == 8 and {r["angle"] for r in rows} == {"30.0", "40.0", "50.0", "60.0"}
+    assert len(rows) == 4 and {r["angle"] for r in rows} == {"30.0", "60.0"}
     assert {r["nodes"] for r in rows} == {"fmu"}  # the paper's design: the rod and robot scene as FMUs
     project = json.loads(next(out.glob("30deg-00/project.json")).read_text())
     assert [n["nodeName"] for n in project["nodeLists"] if "fmu" in n] == ["rod", "robot"]
-    assert sum(r["success"] == "True" for r in rows) >= 6
+    assert sum(r["success"] == "True" for r in rows) >= 3
     assert (out / "trials.png").stat().st_size > 20_000
     one = next(out.glob("30deg-00/krl/frames.xml"))
     assert one.read_text().strip().splitlines()[-1].startswith('<Robot><Pos A1=""')
-
-
-def test_trials_with_python_nodes_say_so_and_grasp(tmp_path):
-    out = tmp_path / "trials"
-    res = hycosim("trials", "--angles", "50", "--trials", "1", "--nodes", "python", "-o", str(out), timeout=300)
-    assert res.returncode == 0, res.stderr[-2000:]
-    assert "rod and robot as Python nodes" in res.stdout
-    with open(out / "trials.csv", newline="") as f:
-        rows = list(csv.DictReader(f))
-    assert [(r["nodes"], r["success"]) for r in rows] == [("python", "True")]
-    project = json.loads(next(out.glob("50deg-00/project.json")).read_text())
-    assert not any("fmu" in n for n in project["nodeLists"])
 
 
 def test_a_trial_that_cannot_run_is_recorded_and_the_others_go_on(tmp_path):
     out = tmp_path / "trials"
     out.mkdir()
     (out / "30deg-00").write_text("a file where the first trial's folder goes")
-    res = hycosim("trials", "--angles", "30", "--trials", "2", "-o", str(out), timeout=300)
+    # With the Python nodes (--nodes python) rather than the FMUs: the table and the CSV say which ran.
+    res = hycosim("trials", "--angles", "30", "--trials", "2", "--nodes", "python", "-o", str(out), timeout=300)
     assert res.returncode == 3 and "30° #0: not run" in res.stderr and "1 of 2 trials could not be run" in res.stderr
+    assert "rod and robot as Python nodes" in res.stdout
     assert "Traceback" not in res.stderr
     with open(out / "trials.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     assert [r["trial"] for r in rows] == ["0", "1"]
     assert rows[0]["success"] == "False" and "30deg-00" in rows[0]["error"]
     assert rows[1]["error"] == "" and rows[1]["success"] == "True"
+    assert [r["nodes"] for r in rows] == ["python", "python"]
+    project = json.loads(next(out.glob("30deg-01/project.json")).read_text())
+    assert not any("fmu" in n for n in project["nodeLists"])
     assert "50 % of 2" in res.stdout
 
 
