@@ -174,10 +174,9 @@ def check_release(frame: Frame, node: str | None = None, input_types: tuple[tupl
         if input_types is not None:
             if len(mine) != len(input_types):
                 raise FrameError(f"STEP {k} gives node {node!r} {len(mine)} inputs, it has {len(input_types)}")
-            for value, types in zip(mine, input_types):
+            for i, (value, types) in enumerate(zip(mine, input_types)):
                 if type(value) not in types:
-                    raise FrameError(f"STEP {k} gives node {node!r} a {type(value).__name__} for input "
-                                     f"{[type(v) in ts for v, ts in zip(mine, input_types)].index(False)}")
+                    raise FrameError(f"STEP {k} gives node {node!r} a {type(value).__name__} for input {i}")
     return frame
 
 

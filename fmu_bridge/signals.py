@@ -29,10 +29,14 @@ def signal_of(exc: BaseException) -> int:
     return getattr(exc, "signum", signal.SIGINT)
 
 
+def name_of(exc: BaseException) -> str:
+    """``SIGINT``, ``SIGTERM``…: the name of the signal behind a KeyboardInterrupt."""
+    return signal.Signals(signal_of(exc)).name
+
+
 def describe(exc: BaseException) -> str:
     """``interrupted by Ctrl-C`` or ``stopped by SIGTERM``, for messages and meta.json."""
-    signum = signal_of(exc)
-    return "interrupted by Ctrl-C" if signum == signal.SIGINT else f"stopped by {signal.Signals(signum).name}"
+    return "interrupted by Ctrl-C" if signal_of(exc) == signal.SIGINT else f"stopped by {name_of(exc)}"
 
 
 def exit_code(exc: BaseException) -> int:

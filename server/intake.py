@@ -18,8 +18,9 @@ from collections import Counter
 import structlog
 
 from fmu_bridge import frames
-from fmu_bridge.drops import DropLog
 from fmu_bridge.config import WIRE_TYPES, Node
+from fmu_bridge.drops import DropLog
+
 
 class Dropped(Exception):
     """A frame that is not accepted: a short reason (counted) and a detail (logged)."""

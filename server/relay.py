@@ -15,7 +15,6 @@ from __future__ import annotations
 import json
 import os
 import threading
-from signal import Signals
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -61,10 +60,6 @@ class Progress:
     mode: str = FREE_MODE
     steps_per_s: float = 0.0
     attached: list[str] = field(default_factory=list)
-
-
-def signal_name(signum: int) -> str:
-    return Signals(signum).name
 
 
 class Relay:
@@ -148,7 +143,7 @@ class Relay:
                 self.recorder.meta["ended_by"] = self.ended_by
         except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM or SIGHUP
             status_text, reason = "interrupted", signals.describe(exc)
-            self.recorder.meta["stopped_by"] = {"signal": signal_name(signals.signal_of(exc)),
+            self.recorder.meta["stopped_by"] = {"signal": signals.name_of(exc),
                                                 "step": self.progress.step, "t": self.progress.t}
             raise
         except (RunError, RecordError) as exc:
