@@ -72,6 +72,18 @@ class FmuNode(Node):
         with _node_errors():
             self.fmu.set_state(state)
 
+    @property
+    def can_serialize(self) -> bool:
+        return bool(self.fmu and self.fmu.can_serialize)
+
+    def serialize_state(self) -> bytes:
+        with _node_errors():
+            return self.fmu.serialize_state()
+
+    def deserialize_state(self, data: bytes) -> None:
+        with _node_errors():
+            self.fmu.deserialize_state(data)
+
     def teardown(self) -> None:
         if self.fmu is not None:
             self.fmu.close()

@@ -8,6 +8,11 @@ A stepping node is advanced by the runtime once per macro step::
     step(t, h, inputs)              integrate from t to t+h on inputs sampled at t
     teardown()                      once, at the end (also after a failure)
 
+A node that can save and restore its state (``can_rollback``) lets the coordinator retry a
+step (event localisation); one whose state survives its process as bytes (``can_serialize``)
+takes part in checkpoints, so that a run goes on after a crash: a Python node's
+``get_state`` returns bytes (:func:`pack_state` of plain lists and numbers) for both.
+
 In a mode where ``driven`` is True the node stops following its own dynamics and
 follows its inputs (the paper's s_A = g_B(s_B)); how is the node's business.
 
@@ -22,6 +27,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
+
+import msgpack
 
 from fmu_bridge.config import Port
 
@@ -98,12 +105,50 @@ class Node(ABC):
         return False
 
     def get_state(self) -> Any:
-        """A snapshot of the node's state (called before a step that may be retried)."""
+        """A snapshot of everything the node's step reads (called before a step that may be
+        retried, and for checkpoints): bytes, for a node that can serialize."""
         raise NotImplementedError
 
     def set_state(self, state: Any) -> None:
-        """Restore a snapshot taken by get_state."""
+        """Restore a snapshot taken by get_state (in this process or, as bytes, in another)."""
         raise NotImplementedError
+
+    # Checkpoints: a node whose state survives its process takes part in them, so that the run
+    # goes on after any process crashes. A Python node's get_state gives bytes: both at once.
+    @property
+    def can_serialize(self) -> bool:
+        return self.can_rollback
+
+    def serialize_state(self) -> bytes:
+        """The node's state as bytes another process of the same node can restore."""
+        state = self.get_state()
+        if type(state) is not bytes:
+            raise NodeModelError(f"{type(self).__name__}.get_state gave a {type(state).__name__}, not bytes: "
+                                 "it cannot go into a checkpoint")
+        return state
+
+    def deserialize_state(self, data: bytes) -> None:
+        """Restore what :meth:`serialize_state` gave."""
+        self.set_state(data)
+
+
+def pack_state(state: dict[str, Any]) -> bytes:
+    """A node's state (plain lists, numbers, strings, bools, None) as bytes: msgpack, which
+    keeps every float exact and runs no code when read back, as bytes from a network may not."""
+    return msgpack.packb(state, use_bin_type=True)
+
+
+def unpack_state(data: Any, keys: frozenset[str] | set[str]) -> dict[str, Any]:
+    """The state :func:`pack_state` packed; ValueError unless it is a map holding ``keys``."""
+    if type(data) is not bytes:
+        raise ValueError(f"a state must be bytes, not {type(data).__name__}")
+    try:
+        state = msgpack.unpackb(data, raw=False, strict_map_key=False)
+    except Exception:
+        raise ValueError("a state that is not msgpack") from None
+    if type(state) is not dict or not set(keys) <= state.keys():
+        raise ValueError(f"a state without {', '.join(sorted(set(keys) - (state.keys() if type(state) is dict else set())))}")
+    return state
 
 
 class AsyncSource(ABC):

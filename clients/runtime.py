@@ -133,19 +133,25 @@ class NodeRuntime:
                 if start.kind == frames.STOP:
                     self._on_stop(start)
                     return
-                if start.kind != frames.START:
-                    # A node process says HELLO once per run: a second one tells the server at
-                    # once that the node restarted, rather than after its linkGrace.
-                    self._send(self._hello(False))
+                if start.kind == frames.STEP and not isinstance(self.impl, AsyncSource):
+                    # The run is under way: this process is a restart. Say so at once (a node
+                    # process says HELLO once per run); a server that takes checkpoints
+                    # restores the run, and this node with it; one that does not stops the run.
+                    start = self._await_restore(start.fields[0])
+                    if start is None:
+                        return
+                if start.kind not in (frames.START, frames.RESTORE) or (
+                        start.kind == frames.RESTORE and isinstance(self.impl, AsyncSource)):
                     at = f" (step {start.fields[0]})" if start.kind == frames.STEP else ""
                     raise NodeRunError(f"node {self.name!r}: the run on {self.endpoint} was already under way{at} "
-                                       "when it attached; a node joins before the run starts, and a node "
-                                       "restarted mid-run has lost the state the run needs: start the run again")
+                                       "when it attached; a node joins before the run starts")
                 try:
                     if isinstance(self.impl, AsyncSource):
                         self._run_async(start)
+                    elif start.kind == frames.RESTORE:
+                        self._run_stepping(bool(start.fields[6].get("checkpoint")), restore=start)
                     else:
-                        self._run_stepping(checkpoint=bool(start.fields[5].get("checkpoint")))
+                        self._run_stepping(bool(start.fields[5].get("checkpoint")))
                 except KeyboardInterrupt as exc:
                     self._say_stopped(exc)
                     raise
@@ -251,6 +257,18 @@ class NodeRuntime:
             return frame
         if kind == frames.STOP:
             return frame
+        if kind == frames.CHECKPOINT:
+            if not 0 <= frame.fields[0] < frames.MAX_STEP:
+                raise frames.FrameError(f"CHECKPOINT frame at step {frame.fields[0]}: out of range")
+            return frame
+        if kind == frames.RESTORE:
+            node, step, t, index, count, chunk, _ = frame.fields
+            if node != self.name:
+                return None
+            frames.check_chunk(step, index, count, chunk)
+            if not math.isfinite(t):
+                raise frames.FrameError(f"RESTORE frame to t {t}: not finite")
+            return frame
         raise frames.FrameError(f"a {frames.KIND_NAMES[kind]} frame is not for a node")
 
     def _say_stopped(self, exc: BaseException) -> None:
@@ -307,16 +325,72 @@ class NodeRuntime:
             self._end(k + 1, t, False, message)
         return None  # not reached: _end raises for a failure
 
-    def _run_stepping(self, checkpoint: bool) -> None:
+    def _await_restore(self, step: int) -> frames.Frame | None:
+        """A restarted process (the run was at ``step`` when it attached): say HELLO, then wait
+        for the server to restore the run from its last checkpoint. Return the first piece of
+        this node's state (a RESTORE frame), or None when the server stopped the run instead."""
+        self._send(self._hello(False, restart=True))
+        self._log.info("restarted: waiting for the run to be restored", step=step)
+        wait = self.cosim.attachTimeout + self.cosim.stepTimeout
+        deadline = time.monotonic() + wait
+        while (left := deadline - time.monotonic()) > 0:
+            frame = self._next_frame(left)
+            if frame is None:
+                break
+            if frame.kind == frames.STOP:
+                self._on_stop(frame)
+                return None
+            if frame.kind == frames.RESTORE:
+                return frame
+        raise NodeRunError(f"node {self.name!r}: the run on {self.endpoint} was already under way (step {step}) "
+                           f"when it attached, and the server did not restore it within {wait:g} s: a node "
+                           "restarted mid-run goes on only from a checkpoint (coSimulation.checkpointEvery)")
+
+    def _restore(self, impl: Node, first: frames.Frame) -> tuple[int, float, bytes] | None:
+        """Collect the pieces of this node's state that ``first`` begins, set it, and answer with a
+        HELLO and the outputs at the checkpoint's point. Return (step, t, outputs sent), or None
+        when a piece is missing or the state is not this node's (the frame is dropped)."""
+        chunks = frames.Chunks()
+        frame = first
+        while True:
+            node, step, t, index, count, chunk, _ = frame.fields
+            data = chunks.add(step, index, count, chunk)
+            if data is not None:
+                break
+            frame = self._next_frame(self.cosim.stepTimeout)
+            if frame is None or frame.kind != frames.RESTORE:
+                self.drops.drop("not a release", f"the state to restore at step {step} came in part", self.steps)
+                return None
+        try:
+            impl.deserialize_state(data)
+        except Exception as exc:  # a state from another build of the model, or a forged frame
+            self.drops.drop("not a release", f"a state to restore at step {step} that does not fit: "
+                            f"{type(exc).__name__}: {exc}", self.steps)
+            return None
+        self._log.info("restored", step=step, t=t)
+        self._send(self._hello(impl.can_rollback))
+        out = self._step_model(impl, step - 1, t, None, {})
+        return None if out is None else (step, t, out)
+
+    def _run_stepping(self, checkpoint: bool, restore: frames.Frame | None = None) -> None:
         impl = self.impl
         assert isinstance(impl, Node)
         checkpoint = checkpoint and impl.can_rollback
         saved_step, saved = -1, None
-        self._send(self._hello(impl.can_rollback))
-        last_out = self._step_model(impl, -1, self.cosim.startTime, None, {})
-        if last_out is None:
-            return
-        done = -1  # the last step integrated
+        if restore is None:
+            self._send(self._hello(impl.can_rollback))
+            last_out = self._step_model(impl, -1, self.cosim.startTime, None, {})
+            if last_out is None:
+                return
+            done = -1  # the last step integrated
+        else:
+            restored = self._restore(impl, restore)
+            if restored is None:
+                raise NodeRunError(f"node {self.name!r}: the state the server sent to restore could not be set "
+                                   f"(see {self.name}'s log)")
+            k, _, last_out = restored
+            self.steps, done = k, k - 1
+        pending_state: tuple[int, bytes] | None = None  # a checkpoint's state, sent after the next outputs
         # The server enforces step timeouts; a node only needs to notice the server is gone,
         # which liveliness tells; this bound is the last resort for a frozen server.
         silence = self.cosim.stepTimeout + 30.0
@@ -335,6 +409,17 @@ class NodeRuntime:
                     self._send(last_out)
                     self._log.info("outputs re-sent", step=done + 1)
                     continue
+            if frame.kind == frames.CHECKPOINT:
+                if frame.fields[0] == done + 1:
+                    pending_state = self._checkpoint_state(impl, frame.fields[0])
+                continue
+            if frame.kind == frames.RESTORE:
+                restored = self._restore(impl, frame)
+                if restored is not None:
+                    # The whole run went back to a checkpoint: this node's saved states are of the future.
+                    k, _, last_out = restored
+                    self.steps, done, mode, saved_step, pending_state = k, k - 1, None, -1, None
+                continue
             if frame.kind == frames.ROLLBACK:
                 k, t = frame.fields
                 if saved_step != k:
@@ -360,6 +445,10 @@ class NodeRuntime:
             if out is None:
                 return
             self.steps, done, last_out = k + 1, k, out
+            if pending_state is not None and pending_state[0] == k:
+                for i, chunk in enumerate(chunks := frames.state_chunks(pending_state[1])):
+                    self._send(frames.encode(frames.STATE, self.spec.UID, k, i, len(chunks), chunk))
+                pending_state = None
 
     def _other_projects(self, session: zenoh.Session) -> str:
         """A hint for a node that heard nothing from its server: the endpoint may serve another project."""
@@ -375,8 +464,22 @@ class NodeRuntime:
         return (f"; the server there runs project {', '.join(map(repr, sorted(found)))}, not "
                 f"{self.loaded.project.projectName!r}: is this the project file the server was started with?")
 
-    def _hello(self, rollback: bool) -> bytes:
-        return frames.encode(frames.HELLO, self.spec.UID, {"rollback": rollback, "ports": self.spec.wire_ports()})
+    def _checkpoint_state(self, impl: Node, step: int) -> tuple[int, bytes] | None:
+        """This node's state at point ``step`` for a checkpoint, or None if it cannot give one (the
+        server then keeps its previous checkpoint)."""
+        if not impl.can_serialize:
+            return None
+        try:
+            return step, impl.serialize_state()
+        except Exception as exc:
+            self._log.warning("cannot serialise its state for a checkpoint", step=step,
+                              error=f"{type(exc).__name__}: {exc}")
+            return None
+
+    def _hello(self, rollback: bool, restart: bool = False) -> bytes:
+        serialize = isinstance(self.impl, Node) and self.impl.can_serialize
+        return frames.encode(frames.HELLO, self.spec.UID, {"rollback": rollback, "serialize": serialize,
+                                                           "restart": restart, "ports": self.spec.wire_ports()})
 
     def _on_stop(self, frame: frames.Frame) -> None:
         """The server's STOP: the end of the run, or of a failed one, which is this node's failure too."""

@@ -10,6 +10,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
+from fmu_bridge import model_fmu
 from fmu_bridge.model_fmu import build_model_fmu
 
 HERE = Path(__file__).resolve().parent
@@ -32,7 +33,9 @@ def build_scene_fmus(out_dir: Path) -> dict[str, Path]:
 
 
 def _sources() -> list[Path]:
-    return [HERE / rel for rel in _PACKAGED] + [HERE / "rod" / "rod_fmu.py", HERE / "robot" / "robot_fmu.py"]
+    # model_fmu: how they are packaged (which FMI capabilities they declare) counts as their source too.
+    return [HERE / rel for rel in _PACKAGED] + [HERE / "rod" / "rod_fmu.py", HERE / "robot" / "robot_fmu.py",
+                                                Path(model_fmu.__file__)]
 
 
 def ensure_scene_fmus(out_dir: Path) -> dict[str, Path]:

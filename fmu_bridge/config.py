@@ -153,6 +153,11 @@ class CoSimulation(_Strict):
     # stepping node can save and restore its state); None: fixed macro steps.
     eventTolerance: float | None = Field(default=None, gt=0)
     attachTimeout: float = Field(default=30.0, gt=0)
+    # Take a checkpoint of the whole co-simulation every this many seconds of simulated time
+    # (at the first macro-step point at or after each multiple, and at the start). A node
+    # process that dies is then started again and the run goes on from the last checkpoint;
+    # a server that dies goes on with --resume. None: no checkpoints, a lost node ends the run.
+    checkpointEvery: float | None = Field(default=None, gt=0)
     # A node (or the server) whose link drops may come back within this many seconds and
     # the run resumes without losing a step; 0: a lost node stops the run at once.
     linkGrace: float = Field(default=0.0, ge=0)

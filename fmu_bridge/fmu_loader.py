@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import struct
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -202,6 +203,7 @@ class FmuInstance:
         self.fmi3 = self.md.fmiVersion.startswith("3")
         cs = self.md.coSimulation
         self.can_rollback = bool(getattr(cs, "canGetAndSetFMUstate", False))
+        self.can_serialize = self.can_rollback and bool(getattr(cs, "canSerializeFMUstate", False))
         self.event_mode = bool(self.fmi3 and getattr(cs, "hasEventMode", False))
         self.early_return = bool(self.fmi3 and getattr(cs, "canReturnEarlyAfterIntermediateUpdate", False))
         self._variables = {v.name: v for v in self.md.modelVariables}
@@ -358,6 +360,39 @@ class FmuInstance:
 
     def free_state(self, state: Any) -> None:
         (self.fmu.freeFMUState if self.fmi3 else self.fmu.freeFMUstate)(state[0])
+
+    def serialize_state(self) -> bytes:
+        """The FMU's current state as bytes that outlive this process (fmi2SerializeFMUstate /
+        fmi3SerializeFMUState), prefixed by the communication time it is at."""
+        if not self.can_serialize:
+            raise FmuError(f"node {self.node!r}: {self.path.name} cannot serialize its state (canSerializeFMUstate)")
+        try:
+            handle = self.fmu.getFMUState() if self.fmi3 else self.fmu.getFMUstate()
+            try:
+                data = (self.fmu.serializeFMUState if self.fmi3 else self.fmu.serializeFMUstate)(handle)
+            finally:
+                (self.fmu.freeFMUState if self.fmi3 else self.fmu.freeFMUstate)(handle)
+        except FMICallException as exc:
+            raise FmuError(f"node {self.node!r}: {self.path.name}: serializing its state failed ({exc})") from None
+        return struct.pack("<d", self.time) + bytes(data)
+
+    def deserialize_state(self, data: bytes) -> None:
+        """Set the state :meth:`serialize_state` gave (from this FMU, in any process)."""
+        if len(data) < 8:
+            raise FmuError(f"node {self.node!r}: {self.path.name}: a serialized state of {len(data)} bytes")
+        (t,) = struct.unpack_from("<d", data)
+        try:
+            if self.fmi3:
+                handle = self.fmu.deserializeFMUState(data[8:])
+                self.fmu.setFMUState(handle)
+                self.fmu.freeFMUState(handle)
+            else:
+                handle = self.fmu.deSerializeFMUstate(data[8:])
+                self.fmu.setFMUstate(handle)
+                self.fmu.freeFMUstate(handle)
+        except FMICallException as exc:
+            raise FmuError(f"node {self.node!r}: {self.path.name}: restoring a serialized state failed ({exc})") from None
+        self.time = t
 
     def close(self) -> None:
         try:

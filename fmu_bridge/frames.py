@@ -22,6 +22,14 @@ Kinds and layouts (after version and kind):
 * ``END``      node → server, in place of its outputs: ``uid, step, t, clean, message``: its model
   ended the simulation at ``t`` (``clean``: an FMU that asked to terminate) or failed (the
   message says how); the server stops the run with the node's own words
+* ``CHECKPOINT`` server → nodes, just before a release: ``step``: serialise the state at this
+  macro-step point (before integrating ``step``) and send it after the step's outputs
+* ``STATE``    node → server: ``uid, step, index, count, chunk``: chunk ``index`` of ``count`` of
+  the node's serialised state at point ``step`` (states are cut in STATE_CHUNK pieces: a
+  frame must fit the low-latency transport, an FMU's state need not)
+* ``RESTORE``  server → nodes: ``node, step, t, index, count, chunk, options``: set that node's
+  state to a checkpoint's (chunked as STATE) and answer with a HELLO and its outputs at point
+  ``step``; options as START's
 
 :func:`decode` checks every field's type (exactly as msgpack yields them: a bool is no
 number, a float no step), so that no receiver meets a list where it reads a name or an
@@ -50,6 +58,9 @@ HELLO = 7
 ROLLBACK = 8
 REPLAY = 9
 END = 10
+CHECKPOINT = 11
+STATE = 12
+RESTORE = 13
 
 # STOP reasons of a run that ended as asked; any other reason is a failure.
 STOP_COMPLETED = "completed"
@@ -57,10 +68,16 @@ STOP_STOPPED = "stopped"
 CLEAN_STOPS = (STOP_COMPLETED, STOP_STOPPED)
 
 KIND_NAMES = {OUTPUTS: "OUTPUTS", SAMPLE: "SAMPLE", START: "START", STEP: "STEP", STOP: "STOP", LIVE: "LIVE",
-              HELLO: "HELLO", ROLLBACK: "ROLLBACK", REPLAY: "REPLAY", END: "END"}
+              HELLO: "HELLO", ROLLBACK: "ROLLBACK", REPLAY: "REPLAY", END: "END",
+              CHECKPOINT: "CHECKPOINT", STATE: "STATE", RESTORE: "RESTORE"}
 
 # Steps and sequence numbers stay well inside int64 (the gateway packs them as such).
 MAX_STEP = 1 << 62
+
+# A serialised state travels in pieces of at most this many bytes (STATE, RESTORE), and of
+# at most MAX_CHUNKS pieces (a state of up to 192 MiB, which bounds what a forged one takes).
+STATE_CHUNK = 24 * 1024
+MAX_CHUNKS = 1 << 13
 
 _NUM = (int, float)  # exact types: msgpack yields bool for booleans, never an int subclass
 
@@ -92,6 +109,10 @@ _SHAPES: dict[int, tuple[int, Callable[[tuple], bool]]] = {
     ROLLBACK: (2, lambda f: _int(f[0]) and _num(f[1])),
     REPLAY: (2, lambda f: _str(f[0]) and type(f[1]) is bytes),
     END: (5, lambda f: _int(f[0]) and _int(f[1]) and _num(f[2]) and type(f[3]) is bool and _str(f[4])),
+    CHECKPOINT: (1, lambda f: _int(f[0])),
+    STATE: (5, lambda f: _int(f[0]) and _int(f[1]) and _int(f[2]) and _int(f[3]) and type(f[4]) is bytes),
+    RESTORE: (7, lambda f: _str(f[0]) and _int(f[1]) and _num(f[2]) and _int(f[3]) and _int(f[4])
+              and type(f[5]) is bytes and type(f[6]) is dict),
 }
 
 _SHORT = reprlib.Repr()
@@ -178,6 +199,37 @@ def check_release(frame: Frame, node: str | None = None, input_types: tuple[tupl
                 if type(value) not in types:
                     raise FrameError(f"STEP {k} gives node {node!r} a {type(value).__name__} for input {i}")
     return frame
+
+
+def state_chunks(data: bytes) -> list[bytes]:
+    """``data`` cut into STATE_CHUNK pieces (one empty piece for no data)."""
+    return [data[i:i + STATE_CHUNK] for i in range(0, len(data), STATE_CHUNK)] or [b""]
+
+
+def check_chunk(step: int, index: int, count: int, chunk: bytes) -> None:
+    """FrameError unless ``chunk``, piece ``index`` of ``count`` of a state at ``step``, is in range."""
+    if not (0 <= step < MAX_STEP and 0 < count <= MAX_CHUNKS and 0 <= index < count and len(chunk) <= STATE_CHUNK):
+        raise FrameError(f"state piece {short(index)} of {short(count)} at step {short(step)}: out of range")
+
+
+class Chunks:
+    """Reassembles one state from its pieces, in any order; a piece of another step or count
+    starts over (the sender began another state)."""
+
+    def __init__(self) -> None:
+        self.key: tuple[int, int] | None = None
+        self._parts: dict[int, bytes] = {}
+
+    def add(self, step: int, index: int, count: int, chunk: bytes) -> bytes | None:
+        """Keep a piece (checked by :func:`check_chunk`); return the whole state once complete."""
+        if self.key != (step, count):
+            self.key, self._parts = (step, count), {}
+        self._parts[index] = chunk
+        if len(self._parts) < count:
+            return None
+        data = b"".join(self._parts[i] for i in range(count))
+        self.key, self._parts = None, {}
+        return data
 
 
 def largest_values(named: Iterable[tuple[str, Any]], count: int = 3) -> str:

@@ -23,7 +23,10 @@ def build_model_fmu(script: Path, dest: Path, *, resources: list[Path] | None = 
     """Build ``dest`` (a folder or a ``.fmu`` path) from the model class in ``script``; return the FMU path.
 
     ``can_get_and_set_state`` declares fmi2GetFMUstate/SetFMUstate support (pythonfmu saves
-    the registered variables), which lets the coordinator roll steps back to locate events.
+    the registered variables), which lets the coordinator roll steps back to locate events,
+    and fmi2SerializeFMUstate (pythonfmu writes the saved state as JSON), which lets a run's
+    checkpoints hold the FMU's state. A model with state beyond its variables saves it in
+    its own ``_get_fmu_state``/``_set_fmu_state``.
     """
     script = Path(script)
     if not script.is_file():
@@ -33,12 +36,14 @@ def build_model_fmu(script: Path, dest: Path, *, resources: list[Path] | None = 
             from pythonfmu3 import FmuBuilder
 
             path = FmuBuilder.build_FMU(script, dest=dest, project_files=resources or [],
-                                        canGetAndSetFMUState=can_get_and_set_state)
+                                        canGetAndSetFMUState=can_get_and_set_state,
+                                        canSerializeFMUState=can_get_and_set_state)
         else:
             from pythonfmu import FmuBuilder
 
             path = FmuBuilder.build_FMU(script, dest=dest, project_files=resources or [],
-                                        canGetAndSetFMUstate=can_get_and_set_state)
+                                        canGetAndSetFMUstate=can_get_and_set_state,
+                                        canSerializeFMUstate=can_get_and_set_state)
     except Exception as exc:
         raise ModelFmuError(f"{script}: packaging as FMI {fmi_version} failed: {exc}") from None
     return Path(path)

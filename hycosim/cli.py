@@ -105,13 +105,15 @@ def server(
     progress_jsonl: Annotated[bool, typer.Option(help="print progress as JSON lines (for launchers)")] = False,
     gateway: Annotated[Optional[str], typer.Option(help="HOST:PORT for bridge FMUs (default: gatewayIP, "
                                                         "or the server's port + 1)")] = None,
+    resume: Annotated[Optional[Path], typer.Option(help="go on with the run in this directory (its server died) "
+                                                       "from its last checkpoint")] = None,
 ) -> None:
     """Run the relay server for one co-simulation (Zenoh nodes and bridge FMUs)."""
     from server.main import serve
 
     loaded = _load(file)
     code, rdir, message = serve(loaded, listen=listen, runs_dir=runs_dir, run_dir=run_dir,
-                                progress_jsonl=progress_jsonl, gateway=gateway)
+                                progress_jsonl=progress_jsonl, gateway=gateway, resume=resume)
     if code:
         _say_outcome(err, f"[red]error:[/red] {message}" + (f"\n  results so far: {rdir}" if rdir else ""))
     elif not progress_jsonl:
@@ -143,6 +145,10 @@ def run(
     listen: Annotated[Optional[str], typer.Option(help="endpoint for the server (default: a free loopback port)")] = None,
     runs_dir: Annotated[Path, typer.Option(help="where run directories are made")] = Path("runs"),
     progress: Annotated[bool, typer.Option(help="show the progress bar")] = True,
+    restarts: Annotated[int, typer.Option(min=0, help="with checkpoints: how often a node process that dies "
+                                                       "is started again")] = 3,
+    resume: Annotated[Optional[Path], typer.Option(help="go on with the run in this directory (its server died) "
+                                                       "from its last checkpoint")] = None,
 ) -> None:
     """Run the server and every node as local processes on loopback."""
     from hycosim.embedded import run_embedded
@@ -150,7 +156,11 @@ def run(
 
     loaded = _load(file)
     listen = _endpoint("--listen", listen) if listen else None
-    result = run_embedded(loaded, file, listen=listen, runs_dir=runs_dir, console=err, show_progress=progress)
+    if resume is not None and not (resume / "meta.json").is_file():
+        err.print(f"[red]error:[/red] --resume: {resume} is not a run directory (no meta.json)", highlight=False)
+        raise typer.Exit(2)
+    result = run_embedded(loaded, file, listen=listen, runs_dir=runs_dir, console=err, show_progress=progress,
+                          restarts=restarts, resume=resume)
     if result.code >= 128:
         ignore_stops()  # a Ctrl-C pressed twice: the run is over, say so
     if result.code:

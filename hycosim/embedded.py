@@ -94,24 +94,33 @@ def _pump(stream, sink: queue.Queue) -> None:
 
 def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None = None,
                  runs_dir: Path = Path("runs"), console: Console | None = None,
-                 show_progress: bool = True) -> EmbeddedResult:
+                 show_progress: bool = True, restarts: int = 3, resume: Path | None = None) -> EmbeddedResult:
+    """Run the server and every node on loopback. With checkpoints (coSimulation.checkpointEvery)
+    a node process that dies mid-run is started again, at most ``restarts`` times per node;
+    ``resume``: go on with the run in that directory from its last checkpoint."""
     console = console or Console(stderr=True)
     endpoint = listen or free_loopback_endpoint()
-    run_dir = run_dir_for(runs_dir, loaded.name)
+    run_dir = resume if resume is not None else run_dir_for(runs_dir, loaded.name)
     # -P: "python -m" would put the working directory first on the children's import path,
     # so a user's grp.py or zenoh.py there would replace the library in every node.
     cmd = [sys.executable, "-P", "-m", "hycosim"]
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    server = subprocess.Popen([*cmd, "server", str(config_path), "--listen", endpoint, "--run-dir", str(run_dir),
-                               "--progress-jsonl"], stdout=subprocess.PIPE, stderr=open(run_dir / "server.stderr.txt", "w"),
+    mode = "a" if resume is not None else "w"
+    server = subprocess.Popen([*cmd, "server", str(config_path), "--listen", endpoint, "--progress-jsonl",
+                               *(["--resume", str(run_dir)] if resume is not None else ["--run-dir", str(run_dir)])],
+                              stdout=subprocess.PIPE, stderr=open(run_dir / "server.stderr.txt", mode),
                               text=True, env=env)
-    nodes: dict[str, subprocess.Popen] = {}
-    for spec in loaded.project.nodeLists:
-        err = open(run_dir / f"node-{spec.nodeName}.stderr.txt", "w")
-        nodes[spec.nodeName] = subprocess.Popen(
-            [*cmd, "node", spec.nodeName, str(config_path), "--connect", endpoint,
-             "--log-file", str(run_dir / f"node-{spec.nodeName}.log.jsonl")],
-            stdout=err, stderr=subprocess.STDOUT, env=env)
+
+    def start_node(name: str, mode: str) -> subprocess.Popen:
+        err = open(run_dir / f"node-{name}.stderr.txt", mode)
+        return subprocess.Popen([*cmd, "node", name, str(config_path), "--connect", endpoint,
+                                 "--log-file", str(run_dir / f"node-{name}.log.jsonl")],
+                                stdout=err, stderr=subprocess.STDOUT, env=env)
+
+    nodes: dict[str, subprocess.Popen] = {spec.nodeName: start_node(spec.nodeName, mode)
+                                          for spec in loaded.project.nodeLists}
+    restartable = loaded.project.coSimulation.checkpointEvery is not None
+    restarted: dict[str, int] = {}
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=_pump, args=(server.stdout, lines), daemon=True).start()
     cosim = loaded.project.coSimulation
@@ -144,10 +153,19 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
                                         rate=p["steps_per_s"], mode=p["mode"])
                     elif "done" in msg:
                         code, message = msg["done"], msg["message"]
-                for name, proc in nodes.items():
+                for name, proc in list(nodes.items()):
                     # Before the run starts no node has a reason to end: exit status 0 included.
                     if name not in failures and proc.poll() is not None and (
                             proc.returncode not in (0, FAILED_ELSEWHERE) or not started):
+                        if restartable and started and restarted.get(name, 0) < restarts and code is None:
+                            # The server holds the barrier and restores the run from its last
+                            # checkpoint once the new process says HELLO.
+                            restarted[name] = restarted.get(name, 0) + 1
+                            cause = _node_failure(run_dir, name, proc.returncode)
+                            with open(run_dir / f"node-{name}.stderr.txt", "a") as log:
+                                log.write(f"\n[hycosim run] started again ({restarted[name]} of {restarts}): {cause}\n")
+                            nodes[name] = start_node(name, "a")
+                            continue
                         failures[name] = _node_failure(run_dir, name, proc.returncode, before_start=not started)
                 # A node failed: stop the server, once it has started its records (a server
                 # stopped while it still imports would leave no meta.json to say what happened).

@@ -33,6 +33,16 @@ class SampleHistory:
         self.received += 1
         return True
 
+    def snapshot(self) -> dict[str, Any]:
+        """The kept samples and the count received (for a checkpoint)."""
+        return {"samples": [[t, list(v)] for t, v in self._samples], "received": self.received}
+
+    def restore(self, snap: dict[str, Any]) -> None:
+        """Back to what :meth:`snapshot` gave."""
+        self._samples.clear()
+        self._samples.extend((float(t), list(v)) for t, v in snap["samples"])
+        self.received = int(snap["received"])
+
     def _newest_index(self, t: float) -> int:
         """Index of the newest sample taken at or before t (0 if all are newer)."""
         if self._samples[-1][0] <= t + 1e-12:

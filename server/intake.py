@@ -56,12 +56,21 @@ class Intake:
             frame = frames.decode(payload)
         except frames.FrameError as exc:
             raise Dropped("malformed", f"from {node}: {exc}") from None
-        if frame.kind not in (frames.OUTPUTS, frames.SAMPLE, frames.HELLO, frames.END):
+        if frame.kind not in (frames.OUTPUTS, frames.SAMPLE, frames.HELLO, frames.END, frames.STATE):
             raise Dropped("wrong kind", f"from {node}: a {frames.KIND_NAMES[frame.kind]} frame is not for the server")
         uid = frame.fields[0]
         if uid != spec.UID:
             raise Dropped("not owner", f"frame on {node}'s key carries UID {uid}, {node} owns UID {spec.UID}")
         if frame.kind == frames.HELLO:
+            return frame
+        if frame.kind == frames.STATE:
+            _, step, index, count, chunk = frame.fields
+            try:
+                frames.check_chunk(step, index, count, chunk)
+            except frames.FrameError as exc:
+                raise Dropped("wrong step", f"from {node}: {exc}") from None
+            if spec.asynchronous:
+                raise Dropped("wrong kind", f"{node} is asynchronous: it has no state to checkpoint")
             return frame
         if not 0 <= frame.fields[1] < frames.MAX_STEP:
             raise Dropped("wrong step", f"from {node}: step or sequence number {frame.fields[1]} out of range")

@@ -19,9 +19,14 @@ from fmu_bridge.endpoints import GATEWAY_PORT, EndpointError, parse_address, par
 from fmu_bridge.security import router_security
 from fmu_bridge.session import open_session, router_config
 
+from server import checkpoints
 from server.coordinator import GuardEvaluationError
 from server.recorder import Recorder, RecordError
 from server.relay import Relay, RunError, run_dir_for
+
+
+# The project file as the run began, in its run directory.
+PROJECT_COPY = "project.json"
 
 
 def _versions() -> dict[str, str]:
@@ -34,13 +39,63 @@ def _versions() -> dict[str, str]:
     return found
 
 
+def _project_differences(recorded: Any, given: Any, at: str = "") -> list[str]:
+    """Where two project files differ, as ``path: recorded → given`` (the first few)."""
+    if type(recorded) is dict and type(given) is dict:
+        found = []
+        for key in sorted(set(recorded) | set(given), key=str):
+            path = f"{at}.{key}" if at else str(key)
+            if key not in given:
+                found.append(f"{path} is gone")
+            elif key not in recorded:
+                found.append(f"{path} is new")
+            else:
+                found += _project_differences(recorded[key], given[key], path)
+        return found
+    if type(recorded) is list and type(given) is list and len(recorded) == len(given):
+        return [d for i, (a, b) in enumerate(zip(recorded, given)) for d in _project_differences(a, b, f"{at}[{i}]")]
+    if recorded != given:
+        return [f"{at or 'the file'}: {json.dumps(recorded)[:60]} → {json.dumps(given)[:60]}"]
+    return []
+
+
+def _resume_plan(loaded: LoadedProject, run_dir: Path) -> tuple[dict[str, Any], dict[str, int], int]:
+    """The meta, record offsets and recorded steps of a run to resume; ValueError saying why it cannot be."""
+    try:
+        meta = json.loads((run_dir / "meta.json").read_text())
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{run_dir}: not a run directory (no readable meta.json: {exc})") from None
+    if meta.get("config_sha256") != loaded.digest:
+        differ = ["(the recorded copy is missing)"]
+        try:
+            differ = _project_differences(json.loads((run_dir / PROJECT_COPY).read_text()),
+                                          json.loads(loaded.path.read_text()) if loaded.path else {}) or \
+                ["(only in layout)"]
+        except (OSError, ValueError):
+            pass
+        raise ValueError(f"{run_dir} was run with another project file than {loaded.path}: "
+                         f"{'; '.join(differ[:5])}{' …' if len(differ) > 5 else ''}")
+    cp, passed = checkpoints.latest(run_dir, loaded.digest)
+    if cp is None:
+        raise ValueError(f"{run_dir}: no checkpoint to resume from"
+                         + (f" ({'; '.join(passed)})" if passed else " (was coSimulation.checkpointEvery set?)"))
+    try:
+        with open(run_dir / "values.csv", "rb") as f:
+            recorded = max(sum(1 for _ in f) - 1, 0)
+    except OSError:
+        recorded = cp.step
+    meta["checkpoints_passed_over"] = meta.get("checkpoints_passed_over", []) + passed
+    return meta, cp.server["records"], recorded
+
+
 def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = Path("runs"),
           run_dir: Path | None = None, progress_jsonl: bool = False,
-          gateway: str | None = None) -> tuple[int, Path | None, str]:
+          gateway: str | None = None, resume: Path | None = None) -> tuple[int, Path | None, str]:
     """Run one co-simulation as its server; return (exit code, run directory, message).
 
     Addresses are checked before anything is written: one that cannot be used gives
-    exit code 2 and no run directory.
+    exit code 2 and no run directory. ``resume``: go on with the run in that directory, whose
+    server died, from its last complete checkpoint (exit code 2 if it cannot be).
     """
     def done(code: int, run_dir: Path | None, message: str) -> tuple[int, Path | None, str]:
         # A launcher reading --progress-jsonl learns the outcome from this line, on every path.
@@ -58,6 +113,13 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     except EndpointError as exc:
         return done(2, None, f"{'--gateway' if gateway else 'gatewayIP'}: {exc}")
     gateway_required = bool(gateway or loaded.project.gatewayIP)
+    resume_at, recorded = None, None
+    if resume is not None:
+        try:
+            old_meta, resume_at, recorded = _resume_plan(loaded, resume)
+        except ValueError as exc:
+            return done(2, None, f"--resume: {exc}")
+        run_dir = resume
     try:
         if run_dir is None:
             run_dir = run_dir_for(runs_dir, loaded.name)
@@ -75,8 +137,15 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         "lowLatency": loaded.project.coSimulation.lowLatency,
         "waitStrategy": loaded.project.coSimulation.waitStrategy, "zenoh_runtime": os.environ.get("ZENOH_RUNTIME"),
     }
+    if resume_at is not None:
+        meta = {**old_meta, "endpoint": endpoint, "versions": meta["versions"]}
     try:
-        recorder = Recorder(run_dir, loaded, meta)
+        recorder = Recorder(run_dir, loaded, meta, resume_at=resume_at)
+        if resume_at is None and loaded.path is not None:
+            # What the project was, for a resume to compare with (the hash alone cannot say where it differs).
+            (run_dir / PROJECT_COPY).write_bytes(loaded.path.read_bytes())
+    except OSError as exc:
+        return done(3, run_dir, f"cannot write {run_dir / PROJECT_COPY}: {exc.strerror or exc}")
     except RecordError as exc:
         return done(3, run_dir, str(exc))
     on_progress = None
@@ -93,7 +162,7 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         recorder.close("failed", reason=str(exc))
         return done(3, run_dir, str(exc))
     relay = Relay(loaded, session, recorder, progress_every_s=0.1, on_progress=on_progress,
-                  gateway_address=(gw.host, gw.port), gateway_required=gateway_required)
+                  gateway_address=(gw.host, gw.port), gateway_required=gateway_required, resume=recorded)
     try:
         relay.run()
         code, message = 0, f"completed {recorder.meta['steps']} macro steps"

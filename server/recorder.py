@@ -55,11 +55,27 @@ class _RecordFile:
     for the next flush, in order. (A Python text file drops its pending text when the write
     under it fails: rows would go missing from the middle of the file.)"""
 
-    def __init__(self, path: Path):
+    def __init__(self, path: Path, resume_at: int | None = None):
+        """Open ``path`` afresh, or (``resume_at``) the file a run wrote, cut back to that offset."""
         self.name = path.name
-        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | (0 if resume_at is not None else os.O_TRUNC), 0o644)
         self.buffer = io.StringIO()
         self._unwritten = b""
+        if resume_at is not None:
+            self.cut(resume_at)
+
+    def position(self) -> int:
+        """Where the file ends once what is buffered is written (flushes)."""
+        self.flush()
+        return os.lseek(self._fd, 0, os.SEEK_CUR)
+
+    def cut(self, offset: int) -> None:
+        """Drop everything after ``offset`` (the file and what is buffered): back to a checkpoint."""
+        self.buffer.seek(0)
+        self.buffer.truncate()
+        self._unwritten = b""
+        os.ftruncate(self._fd, offset)
+        os.lseek(self._fd, offset, os.SEEK_SET)
 
     def flush(self) -> None:
         data = self._unwritten + self.buffer.getvalue().encode()
@@ -91,9 +107,11 @@ class _RecordFile:
 class Recorder:
     """Writes ``values.csv``, ``timing.csv``, ``events.jsonl`` and ``meta.json`` in ``run_dir``."""
 
-    def __init__(self, run_dir: Path, loaded: LoadedProject, meta: dict[str, Any]):
+    def __init__(self, run_dir: Path, loaded: LoadedProject, meta: dict[str, Any],
+                 resume_at: dict[str, int] | None = None):
         """Open the run's files in ``run_dir`` (made by the caller); RecordError if they cannot be
-        written (no space even for the reserve)."""
+        written (no space even for the reserve). ``resume_at``: go on with the files a run left
+        there, each cut back to its offset (a checkpoint's), under the meta it wrote."""
         self.run_dir = run_dir
         try:
             with open(run_dir / RESERVE_NAME, "wb") as reserve:
@@ -112,20 +130,28 @@ class Recorder:
         self._stepping = [n.nodeName for n in project.stepping_nodes()]
         self._async_labels = [f"{r.dst_node}.{r.dst_port}" for r in loaded.routes
                               if project.node(r.src_node).asynchronous]
-        self._values_file = _RecordFile(run_dir / "values.csv")
+        at = resume_at or {}
+        try:
+            self._values_file = _RecordFile(run_dir / "values.csv", at.get("values.csv"))
+            self._timing_file = _RecordFile(run_dir / "timing.csv", at.get("timing.csv"))
+            self._events_file = _RecordFile(run_dir / "events.jsonl", at.get("events.jsonl"))
+        except OSError as exc:
+            raise RecordError(f"cannot open the run's records in {run_dir}: {exc.strerror or exc}") from None
         self._values = csv.writer(self._values_file.buffer)
-        out_cols = [f"{n.nodeName}.{p.name}" for n in project.nodeLists for p in n.output]
-        in_cols = [f"{n.nodeName}.{p.name}" for n in project.nodeLists for p in n.input]
-        self._values.writerow(["step", "t", "mode", *out_cols, *in_cols])
-        self._timing_file = _RecordFile(run_dir / "timing.csv")
         self._timing = csv.writer(self._timing_file.buffer)
-        self._timing.writerow(["step", "t", "wait_s", "holder", "lateness_s",
-                               *(f"arrival_s:{n}" for n in self._stepping),
-                               *(f"age_s:{label}" for label in self._async_labels)])
-        self._events_file = _RecordFile(run_dir / "events.jsonl")
+        if resume_at is None:
+            out_cols = [f"{n.nodeName}.{p.name}" for n in project.nodeLists for p in n.output]
+            in_cols = [f"{n.nodeName}.{p.name}" for n in project.nodeLists for p in n.input]
+            self._values.writerow(["step", "t", "mode", *out_cols, *in_cols])
+            self._timing.writerow(["step", "t", "wait_s", "holder", "lateness_s",
+                                   *(f"arrival_s:{n}" for n in self._stepping),
+                                   *(f"age_s:{label}" for label in self._async_labels)])
         self._flushed = time.monotonic()
         self.meta = dict(meta)
-        self.meta.update(status="running", started_at=time.time(), steps=0)
+        if resume_at is None:
+            self.meta.update(status="running", started_at=time.time(), steps=0)
+        else:
+            self.meta.update(status="running")
         self.write_meta()
         self._files = {"values.csv": self._values_file, "timing.csv": self._timing_file,
                        "events.jsonl": self._events_file}
@@ -149,6 +175,22 @@ class Recorder:
         if now - self._flushed >= FLUSH_EVERY_S:
             self.flush(step)
             self._flushed = now
+
+    def positions(self, step: int | None = None) -> dict[str, int]:
+        """Where each record file ends now (for a checkpoint); flushes them."""
+        try:
+            return {name: f.position() for name, f in self._files.items()}
+        except OSError as exc:
+            raise RecordError.writing(self.run_dir, "the records", exc, step) from None
+
+    def cut(self, positions: dict[str, int], steps: int) -> None:
+        """Back to a checkpoint: every record file ends where ``positions`` says, ``steps`` rows recorded."""
+        try:
+            for name, f in self._files.items():
+                f.cut(positions[name])
+        except OSError as exc:
+            raise RecordError.writing(self.run_dir, "the records", exc) from None
+        self.meta["steps"] = steps
 
     def flush(self, step: int | None = None) -> None:
         """Write what is buffered; RecordError naming the file if the disk refuses it."""

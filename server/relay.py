@@ -13,6 +13,7 @@ Read top to bottom, :meth:`Relay.run` is the whole algorithm (Jacobi coupling):
 from __future__ import annotations
 
 import json
+import math
 import os
 import threading
 import time
@@ -30,6 +31,7 @@ from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
 from fmu_bridge.session import FramePublisher, FrameTooLarge
 from fmu_bridge.sim_clock import RealTimeClock
 
+from server import checkpoints
 from server.async_sources import SampleHistory
 from server.coordinator import Coordinator, GuardEvaluationError
 from server.gateway import Gateway, GatewayError
@@ -40,6 +42,24 @@ from server.routing import OutputView, Router
 
 class RunError(RuntimeError):
     """A run that cannot go on; the message names the node and the step."""
+
+
+class _Recover(Exception):
+    """A node's process was started again mid-run: the run goes back to its last checkpoint."""
+
+    def __init__(self, node: str, step: int, cause: str):
+        super().__init__(cause)
+        self.node, self.step, self.cause = node, step, cause
+
+
+@dataclass
+class _PendingCheckpoint:
+    """A checkpoint asked for at point ``step``: the server's state then, and the nodes' as they come."""
+
+    step: int
+    server: dict[str, Any]
+    states: dict[str, bytes] = field(default_factory=dict)
+    chunks: dict[str, frames.Chunks] = field(default_factory=dict)
 
 
 class _ModelEnded(Exception):
@@ -65,7 +85,8 @@ class Progress:
 class Relay:
     def __init__(self, loaded: LoadedProject, session: zenoh.Session, recorder: Recorder,
                  progress_every_s: float = 0.0, on_progress: Any = None,
-                 gateway_address: tuple[str, int] | None = None, gateway_required: bool = False):
+                 gateway_address: tuple[str, int] | None = None, gateway_required: bool = False,
+                 resume: int | None = None):
         self.loaded = loaded
         self.project = loaded.project
         self.cosim = self.project.coSimulation
@@ -92,6 +113,16 @@ class Relay:
         self.reattached: dict[str, int] = {}
         self.ended_by: dict[str, Any] | None = None  # the node whose model ended the run, when, and why
         self._last_release: bytes | None = None
+        self._start_frame: bytes | None = None
+        # Checkpoints (coSimulation.checkpointEvery): on once every stepping node said it can
+        # serialise its state; the one being gathered; restores done (node, steps, cause, time).
+        self._checkpoints = False
+        self._pending: _PendingCheckpoint | None = None
+        self.checkpoints_taken = 0
+        self.recoveries: list[dict[str, Any]] = []
+        self._restoring = False
+        # Go on from the run directory's last checkpoint (its server died after recording this many steps).
+        self._resume = resume
         self.progress = Progress()
         self._progress_every = progress_every_s
         self._on_progress = on_progress
@@ -160,6 +191,7 @@ class Relay:
             self.recorder.close(status_text, reason=reason, dropped_frames=dict(self.intake.dropped),
                                 non_finite=self.intake.non_finite,
                                 reattached=dict(self.reattached), server_waits=self.inbox.waits,
+                                checkpoints_taken=self.checkpoints_taken,
                                 samples_received={n: h.received for n, h in self.histories.items()})
             for decl in (status, watcher, token):
                 try:
@@ -234,16 +266,18 @@ class Relay:
                 if node in self.lost:
                     del self.lost[node]
                     self.reattached[node] = self.reattached.get(node, 0) + 1
-                    if self._last_release is not None:
+                    # An asynchronous source that restarted needs the run's START (its clock).
+                    last = self._start_frame if self.project.node(node).asynchronous else self._last_release
+                    if last is not None:
                         try:
-                            self.release.put(frames.encode(frames.REPLAY, node, self._last_release))
+                            self.release.put(frames.encode(frames.REPLAY, node, last))
                         except FrameTooLarge as exc:
                             raise RunError(f"cannot replay the last release to {node!r}: {exc}") from None
             elif node in self.alive:
                 self.alive.discard(node)
-                if step >= 0 and self.cosim.linkGrace > 0:
+                if step >= 0 and self._grace() > 0:
                     self.lost[node] = time.monotonic()
-                    self._log.warning("node lost, waiting for it", node=node, step=step, grace_s=self.cosim.linkGrace)
+                    self._log.warning("node lost, waiting for it", node=node, step=step, grace_s=self._grace())
                 elif collecting or step >= 0:
                     raise RunError(f"node {node!r} was lost at step {step} (t={self._time(step):g} s): "
                                    "its liveliness token disappeared (process killed or link lost)")
@@ -258,23 +292,183 @@ class Relay:
             _, _, t, values = frame.fields
             self.histories[node].add(float(t), values)
             return None
+        if frame.kind == frames.STATE:
+            self._on_state(node, frame, step)
+            return None
         if frame.kind == frames.HELLO:
             if node in self.capabilities and node not in self._fresh and node not in self.lost:
                 self.intake.drop("duplicate hello", f"{node} said HELLO again while its process held its token",
                                  step, node)
                 return None
             self._fresh.discard(node)
-            if node in self.capabilities and step > 0:
+            said = frame.fields[1]
+            if node in self.capabilities and step > 0 and said.get("restart") is True:
+                self._restarted(node, step)
+                if self.project.node(node).asynchronous:
+                    return None  # a source lives on the wall clock: it just goes on sampling
+            elif node in self.capabilities and step > 0 and not self._restoring:
                 # A node process says HELLO once: this is a new process, whose model starts
                 # from scratch while the others are at step k. Not a link cut to wait out.
                 # (While the START is collected, a fresh start is all that was asked of it.)
                 raise RunError(f"node {node!r} was started again at step {step} (t={self._time(step):g} s) while "
                                "the run was under way: the state it had is gone, so the run cannot go on; "
                                "start the run again")
-            self.capabilities[node] = dict(frame.fields[1]) if isinstance(frame.fields[1], dict) else {}
+            self.capabilities[node] = dict(said)
             self._check_ports(node, self.capabilities[node].get("ports"))
             return None
         return node, frame
+
+    def _grace(self) -> float:
+        """How long a lost node is waited for: its linkGrace, or with checkpoints its restart
+        (attachTimeout: a new process attaches as a first one does)."""
+        return max(self.cosim.linkGrace, self.cosim.attachTimeout if self._checkpoints else 0.0)
+
+    def _restarted(self, node: str, step: int) -> None:
+        """A node's new process said HELLO mid-run: go back to the last checkpoint, or say why not."""
+        at = f"at step {step} (t={self._time(step):g} s)"
+        if self.project.node(node).asynchronous and self._checkpoints:
+            self.recoveries.append({"node": node, "step": step, "t": self._time(step), "cause": "restarted",
+                                    "restored": None, "at": time.time()})
+            self._log.warning("asynchronous node restarted", node=node, step=step)
+            return
+        if not self._checkpoints:
+            why = self.recorder.meta.get("checkpoints", "off")
+            raise RunError(f"node {node!r} was started again {at} while the run was under way: the state it had "
+                           f"is gone and the run cannot go back to a checkpoint (checkpoints {why}); start the run again")
+        raise _Recover(node, step, "restarted")
+
+    def _on_state(self, node: str, frame: frames.Frame, step: int) -> None:
+        """A piece of a node's state for the checkpoint being gathered; the checkpoint is written
+        once every stepping node's state is whole."""
+        _, at, index, count, chunk = frame.fields
+        p = self._pending
+        if p is None or at != p.step or self.project.node(node).asynchronous:
+            self.intake.drop("stale state", f"{node} sent its state at step {at}, no checkpoint of it is gathered",
+                             step, node)
+            return
+        data = p.chunks.setdefault(node, frames.Chunks()).add(at, index, count, chunk)
+        if data is None:
+            return
+        p.states[node] = data
+        if len(p.states) < len(self.stepping):
+            return
+        self._pending = None
+        try:
+            path = checkpoints.write(self.recorder.run_dir, p.step, p.server, p.states, self.loaded.digest)
+        except checkpoints.CheckpointError as exc:
+            self._log.warning("checkpoint not written", step=p.step, error=str(exc))
+            self.recorder.meta["checkpoint_error"] = str(exc)
+            return
+        self.checkpoints_taken += 1
+        self.recorder.meta["last_checkpoint"] = {"step": p.step, "t": p.server["t"], "path": str(path)}
+        self._log.info("checkpoint", step=p.step, t=p.server["t"], bytes=sum(map(len, p.states.values())))
+
+    def _checkpoint_plan(self) -> bool:
+        """Whether checkpoints are taken; say why not in the metadata."""
+        every = self.cosim.checkpointEvery
+        if every is None:
+            self.recorder.meta["checkpoints"] = "off (no checkpointEvery)"
+            return False
+        fixed = sorted(n for n in self.stepping if not self.capabilities.get(n, {}).get("serialize"))
+        if fixed:
+            self.recorder.meta["checkpoints"] = f"off: {', '.join(fixed)} cannot serialise their state"
+            self._log.warning("no checkpoints", cannot_serialise=fixed)
+            return False
+        self.recorder.meta["checkpoints"] = f"every {every:g} s of simulated time"
+        return True
+
+    def _take_checkpoint(self, k: int, t: float, origin: float, j: int, localised: dict[str, Any]) -> None:
+        """Ask every stepping node for its state at point k (they send it after their next
+        outputs) and keep the server's own, records included, until theirs are in."""
+        if self._pending is not None:
+            missing = sorted(set(self.stepping) - set(self._pending.states))
+            self._log.warning("checkpoint abandoned", step=self._pending.step, missing=missing)
+        server = {"step": k, "t": float(t), "origin": float(origin), "j": j, "mode": self.coordinator.mode,
+                  "disarmed": sorted(self.coordinator.disarmed),
+                  "outputs": {n: list(v) for n, v in self.outputs.items()},
+                  "inputs": {n: list(v) for n, v in self.router.inputs.items()},
+                  "histories": {n: h.snapshot() for n, h in self.histories.items()},
+                  "records": self.recorder.positions(k), "localised": localised}
+        self._pending = _PendingCheckpoint(k, server)
+        self.release.put(frames.encode(frames.CHECKPOINT, k))
+
+    def _restore(self, cause: _Recover) -> tuple[dict[str, Any], dict[str, float], float]:
+        """Take the whole run back to its last readable checkpoint: every stepping node gets its
+        state back and answers with its outputs there, the records are cut back to it, and the
+        server takes its own state back. Return the server's state, arrivals and wait."""
+        began = time.monotonic()
+        while True:
+            cp, passed = checkpoints.latest(self.recorder.run_dir, self.loaded.digest)
+            for reason in passed:
+                self._log.warning("checkpoint passed over", reason=reason)
+                self.recorder.meta.setdefault("checkpoints_passed_over", []).append(reason)
+            if cp is None:
+                raise RunError(f"node {cause.node!r} was started again at step {cause.step}, and no checkpoint "
+                               f"of the run could be read to go on from"
+                               + (f": {'; '.join(passed)}" if passed else ""))
+            self._log.warning("restoring checkpoint", node=cause.node, lost_at=cause.step, step=cp.step)
+            self._restoring = True
+            try:
+                self._pending = None
+                self._fresh.update(self.stepping)
+                self._send_restore(cp)
+                if cause.node == "server" and self._start_frame is not None:
+                    start = frames.decode(self._start_frame).fields
+                    self._start_frame = frames.encode(frames.START, start[0], cp.server["t"], *start[2:])
+                    self.release.put(self._start_frame)
+                released = time.perf_counter()
+                arrivals = self._collect(cp.step, released)
+                wait = time.perf_counter() - released
+            except _Recover as again:  # another process restarted meanwhile: once more
+                cause = again
+                continue
+            finally:
+                self._restoring = False
+            break
+        restored = self._apply(cp)
+        self.recoveries.append({"node": cause.node, "step": cause.step, "t": self._time(cause.step),
+                                "cause": cause.cause, "restored": cp.step, "restored_t": cp.server["t"],
+                                "seconds": round(time.monotonic() - began, 3), "at": time.time()})
+        self.recorder.meta["recoveries"] = self.recorder.meta.get("recoveries", []) + [self.recoveries[-1]]
+        self.recorder.write_meta()
+        return restored, arrivals, wait
+
+    def _send_restore(self, cp: checkpoints.Checkpoint) -> None:
+        options = {"checkpoint": self.cosim.eventTolerance is not None}
+        for node in self.stepping:
+            if node not in cp.states:
+                raise RunError(f"checkpoint {cp.path} holds no state of node {node!r}")
+            pieces = frames.state_chunks(cp.states[node])
+            for i, chunk in enumerate(pieces):
+                self.release.put(frames.encode(frames.RESTORE, node, cp.step, cp.server["t"], i, len(pieces),
+                                               chunk, options))
+
+    def _apply(self, cp: checkpoints.Checkpoint) -> dict[str, Any]:
+        """The server's own state at the checkpoint, and its records cut back to it."""
+        s = cp.server
+        for name in ("outputs", "inputs"):
+            ours = self.outputs if name == "outputs" else self.router.inputs
+            theirs = s[name]
+            if set(theirs) != set(ours) or any(type(theirs[n]) is not list or len(theirs[n]) != len(ours[n])
+                                               for n in ours):
+                raise RunError(f"checkpoint {cp.path} does not fit the project: its {name} differ")
+        if s["mode"] not in self.project.modes():
+            raise RunError(f"checkpoint {cp.path} is in mode {s['mode']!r}, which the project does not have")
+        for node, values in self.outputs.items():
+            if not self.project.node(node).asynchronous and values != s["outputs"][node]:
+                self._log.warning("restored outputs differ from the checkpoint's", node=node, step=cp.step)
+        self.coordinator.mode = s["mode"]
+        self.coordinator.disarmed = set(s["disarmed"])
+        for node in self.outputs:
+            self.outputs[node] = list(s["outputs"][node])
+            self.router.inputs[node][:] = s["inputs"][node]
+        for node, history in self.histories.items():
+            newer = [(t, v) for t, v in history.snapshot()["samples"]]
+            history.restore(s["histories"].get(node, {"samples": [], "received": 0}))
+            for t, v in newer:  # samples taken since keep their place: a source is not rolled back
+                history.add(t, v)
+        self.recorder.cut(s["records"], steps=s["step"])
+        return s
 
     def _check_ports(self, node: str, theirs: Any) -> None:
         """Stop the run if a node's copy of the project file gives it other ports than ours:
@@ -302,11 +496,14 @@ class Relay:
         pending = set(self.stepping)
         arrivals: dict[str, float] = {}
         deadline = time.monotonic() + self.cosim.stepTimeout
-        grace = self.cosim.linkGrace
+        grace = self._grace()
         while pending:
             wait = deadline - time.monotonic()
             if self.lost:
                 node, since = min(self.lost.items(), key=lambda item: item[1])
+                # While a node is away the step's own timeout does not run: its return (or a
+                # restore) gives the others a fresh one.
+                deadline = max(deadline, time.monotonic() + self.cosim.stepTimeout)
                 if time.monotonic() - since > grace:
                     raise RunError(f"node {node!r} was lost at step {step} (t={self._time(step):g} s) and did not "
                                    f"come back within the link grace of {grace:g} s")
@@ -420,25 +617,45 @@ class Relay:
         rt = cosim.real_time_factor()
         wall0 = time.time()
         checkpoint = cosim.eventTolerance is not None
-        self._last_release = frames.encode(frames.START, self.recorder.run_dir.name, cosim.startTime,
-                                           H, wall0, rt, {"checkpoint": checkpoint})
-        self.release.put(self._last_release)
-        released_at = time.perf_counter()
-        clock = RealTimeClock(cosim.startTime, wall0, rt) if rt is not None else None
-        if self.gateway is not None:
-            self.gateway.run_started()
-        arrivals = self._collect(0, released_at)
-        wait = time.perf_counter() - released_at
-        localise = self._localisation_plan()
+        every = cosim.checkpointEvery
         # Points lie on a grid origin + j·H; a located event starts a new grid at its time.
-        origin, j = cosim.startTime, 0
-        t = origin
+        origin, j, k, t = cosim.startTime, 0, 0, cosim.startTime
+        localised: dict[str, Any] = {}
+        next_checkpoint = t
+        if self._resume is not None:
+            # Every node is a new process: each gets its state at the last checkpoint (the run's
+            # START follows, for asynchronous sources, with the clock from there).
+            self._start_frame = frames.encode(frames.START, self.recorder.run_dir.name, cosim.startTime, H, wall0,
+                                              rt, {"checkpoint": checkpoint})
+            self._checkpoints = every is not None
+            point, arrivals, wait = self._restore(_Recover("server", self._resume, "resumed"))
+            k, t, origin, j, localised = (point["step"], point["t"], point["origin"], point["j"],
+                                          dict(point["localised"]))
+            next_checkpoint = cosim.startTime + (math.floor((t - cosim.startTime) / every + 1e-9) + 1) * every
+            clock = RealTimeClock(t, time.time(), rt) if rt is not None else None
+            if self.gateway is not None:
+                self.gateway.run_started()
+        else:
+            self._last_release = self._start_frame = frames.encode(
+                frames.START, self.recorder.run_dir.name, cosim.startTime, H, wall0, rt, {"checkpoint": checkpoint})
+            self.release.put(self._last_release)
+            released_at = time.perf_counter()
+            clock = RealTimeClock(cosim.startTime, wall0, rt) if rt is not None else None
+            if self.gateway is not None:
+                self.gateway.run_started()
+            arrivals = self._collect(0, released_at)
+            wait = time.perf_counter() - released_at
+        localise = self._localisation_plan()
+        self._checkpoints = self._checkpoint_plan()
         end = cosim.stopTime - 1e-9 * H
         perf0 = time.perf_counter()
+        k0 = k
         last_progress = 0.0
-        localised: dict[str, Any] = {}
-        k = 0
         while True:
+            if self._checkpoints and next_checkpoint - 1e-9 * H <= t < end:
+                self._take_checkpoint(k, t, origin, j, localised)
+                # On a grid of its own from startTime: a run restored to a checkpoint takes the same ones.
+                next_checkpoint = cosim.startTime + (math.floor((t - cosim.startTime) / every + 1e-9) + 1) * every
             for node, history in self.histories.items():
                 held = history.at(t)
                 if held is not None:
@@ -467,7 +684,7 @@ class Relay:
             now = time.perf_counter()
             if self._on_progress is not None and now - last_progress >= self._progress_every:
                 last_progress = now
-                self.progress.steps_per_s = k / (now - perf0) if now > perf0 else 0.0
+                self.progress.steps_per_s = (k - k0) / (now - perf0) if now > perf0 else 0.0
                 self._on_progress(self.progress)
 
             def record() -> None:
@@ -488,13 +705,22 @@ class Relay:
                     h_used, arrivals, wait, localised = self._localise(k, t, h, mode, watched, arrivals, wait)
             except _ModelEnded:
                 break  # point k, the last that every node reached, is recorded
+            except _Recover as cause:
+                # Back to the last checkpoint: its point is taken again from the top, as it was.
+                point, arrivals, wait = self._restore(cause)
+                k, t, origin, j, localised = (point["step"], point["t"], point["origin"], point["j"],
+                                              dict(point["localised"]))
+                next_checkpoint = cosim.startTime + (math.floor((t - cosim.startTime) / every + 1e-9) + 1) * every
+                if clock is not None:
+                    clock = RealTimeClock(t, time.time(), rt)
+                continue
             if localise and h_used != h:
                 origin, j, next_t = t + h_used, -1, t + h_used
             t = next_t
             j += 1
             k += 1
         elapsed = time.perf_counter() - perf0
-        self.recorder.meta["steps_per_s"] = k / elapsed if elapsed > 0 else None
+        self.recorder.meta["steps_per_s"] = (k - k0) / elapsed if elapsed > 0 else None
         if self._on_progress is not None:
             self.progress.steps_per_s = self.recorder.meta["steps_per_s"] or 0.0
             self._on_progress(self.progress)

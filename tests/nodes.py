@@ -20,3 +20,18 @@ class Text(Node):
 
     def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
         self.k += 1
+
+
+class Clock(Node):
+    """``y`` = the time reached; a node that cannot save its state (no rollback, no checkpoints)."""
+
+    OUTPUTS = frozenset({"y"})
+
+    def setup(self, ctx: NodeContext) -> None:
+        self.t = ctx.start_time
+
+    def outputs(self) -> dict[str, Any]:
+        return {"y": self.t}
+
+    def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
+        self.t = t + h

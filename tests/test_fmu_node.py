@@ -239,7 +239,7 @@ def test_rollback_locates_the_impact_within_tolerance(tmp_path, fmus):
 
 
 def test_without_rollback_the_event_falls_on_the_grid_and_meta_says_why(tmp_path, fmus):
-    cfg = _ball_project(tmp_path, fmus["ball"], [{"nodeName": "clock", "UID": 2, "model": "ramp", "output": ["y", "v"]}],
+    cfg = _ball_project(tmp_path, fmus["ball"], [{"nodeName": "clock", "UID": 2, "model": "tests.nodes:Clock", "output": ["y"]}],
                         eventTolerance=1e-4)
     run = run_project(cfg, tmp_path / "runs")
     event = json.loads((run / "events.jsonl").read_text().splitlines()[0])

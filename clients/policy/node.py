@@ -16,9 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from clients.node import Node, NodeContext
+from clients.node import Node, NodeContext, pack_state, unpack_state
 from clients.policy.ddpg import load_policy
-from clients.policy.features import Predictor, action_to_targets, grip_reflex, missed, observe
+from clients.policy.features import Predictor, TurningPoint, action_to_targets, grip_reflex, missed, observe
 from clients.robot import kr6
 from clients.robot.node import SCENE_PARAMETERS, scene_params
 from clients.robot.scene import RobotScene, SceneParams
@@ -69,3 +69,27 @@ class PolicyNode(Node):
             # Decided on the values at t, the command reaches the robot at t + h: one step late.
             self.grip = self.grip or grip_reflex(t, tcp, gap, points, self.rod_radius, delay=1.5 * h)
         self.infer_ms = 1000 * (time.perf_counter() - started)
+
+    # The prediction rod is reset from the inputs at each prediction: the predicted turning
+    # points, the scene's reach seed and the commands carry over from one step to the next.
+    @property
+    def can_rollback(self) -> bool:
+        return True
+
+    def get_state(self) -> bytes:
+        p = self.predictor
+        points = [[tp.t, tp.angle, tp.q.tolist(), tp.ok, tp.grasp.tolist()] for tp in p.points]
+        return pack_state({"scene": p.scene.snapshot(), "points": points, "predicted_at": p.predicted_at,
+                           "q_cmd": self.q_cmd.tolist(), "grip": self.grip, "infer_ms": self.infer_ms})
+
+    def set_state(self, state: bytes) -> None:
+        s = unpack_state(state, {"scene", "points", "predicted_at", "q_cmd", "grip", "infer_ms"})
+        q_cmd = np.asarray(s["q_cmd"], dtype=float)
+        if q_cmd.shape != (6,) or type(s["points"]) is not list:
+            raise ValueError("not a state of the policy node")
+        p = self.predictor
+        p.scene.restore(s["scene"])
+        p.points = [TurningPoint(float(t), float(a), np.asarray(q, dtype=float), bool(ok), np.asarray(g, dtype=float))
+                    for t, a, q, ok, g in s["points"]]
+        p.predicted_at = float(s["predicted_at"])
+        self.q_cmd, self.grip, self.infer_ms = q_cmd, bool(s["grip"]), float(s["infer_ms"])

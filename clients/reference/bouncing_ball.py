@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from clients.node import Node, NodeContext
+from clients.node import Node, NodeContext, pack_state, unpack_state
 
 
 def fall(h0: float, v0: float, g: float, e: float, duration: float) -> tuple[float, float, int]:
@@ -69,8 +69,9 @@ class BouncingBall(Node):
     def can_rollback(self) -> bool:
         return True
 
-    def get_state(self) -> tuple[float, float, int, bool]:
-        return self.h, self.v, self.impacts, self.driven
+    def get_state(self) -> bytes:
+        return pack_state({"h": self.h, "v": self.v, "impacts": self.impacts, "driven": self.driven})
 
-    def set_state(self, state: tuple[float, float, int, bool]) -> None:
-        self.h, self.v, self.impacts, self.driven = state
+    def set_state(self, state: bytes) -> None:
+        s = unpack_state(state, {"h", "v", "impacts", "driven"})
+        self.h, self.v, self.impacts, self.driven = float(s["h"]), float(s["v"]), int(s["impacts"]), bool(s["driven"])

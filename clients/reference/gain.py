@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from clients.node import Node, NodeContext
+from clients.node import Node, NodeContext, pack_state, unpack_state
 
 
 class Gain(Node):
@@ -35,3 +35,14 @@ class Gain(Node):
         if self.work_s > 0:
             time.sleep(self.work_s)
         self.y = self.k * inputs["u"] + self.b
+
+    @property
+    def can_rollback(self) -> bool:
+        return True
+
+    def get_state(self) -> bytes:
+        return pack_state({"y": self.y})
+
+    def set_state(self, state: bytes) -> None:
+        s = unpack_state(state, {"y"})
+        self.y = float(s["y"])

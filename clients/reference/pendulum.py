@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from clients.node import Node, NodeContext
+from clients.node import Node, NodeContext, pack_state, unpack_state
 
 
 class Pendulum(Node):
@@ -53,3 +53,14 @@ class Pendulum(Node):
             th += dt / 6 * (k1[0] + 2 * k2[0] + 2 * k3[0] + k4[0])
             om += dt / 6 * (k1[1] + 2 * k2[1] + 2 * k3[1] + k4[1])
         self.theta, self.omega = th, om
+
+    @property
+    def can_rollback(self) -> bool:
+        return True
+
+    def get_state(self) -> bytes:
+        return pack_state({"theta": self.theta, "omega": self.omega, "driven": self.driven})
+
+    def set_state(self, state: bytes) -> None:
+        s = unpack_state(state, {"theta", "omega", "driven"})
+        self.theta, self.omega, self.driven = float(s["theta"]), float(s["omega"]), bool(s["driven"])

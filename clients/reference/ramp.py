@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from clients.node import Node, NodeContext
+from clients.node import Node, NodeContext, pack_state, unpack_state
 
 
 class Ramp(Node):
@@ -24,3 +24,14 @@ class Ramp(Node):
 
     def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
         self.t = t + h
+
+    @property
+    def can_rollback(self) -> bool:
+        return True
+
+    def get_state(self) -> bytes:
+        return pack_state({"t": self.t})
+
+    def set_state(self, state: bytes) -> None:
+        s = unpack_state(state, {"t"})
+        self.t = float(s["t"])

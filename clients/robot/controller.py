@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from clients.node import Node, NodeContext
+from clients.node import Node, NodeContext, pack_state, unpack_state
 from clients.robot import kr6
 from clients.robot.node import SCENE_PARAMETERS, scene_params
 from clients.robot.scene import RobotScene, SceneParams
@@ -116,3 +116,24 @@ class ReferenceController(Node):
         self.grip = self.plan.t_turn - now <= lead
         if now > self.plan.t_turn + 0.2:  # missed it: open and plan again
             self.plan, self.grip = None, False
+
+    # The planning rod is reset from the inputs at each plan: only the scene's reach seed,
+    # the plan and the commands carry over from one step to the next.
+    @property
+    def can_rollback(self) -> bool:
+        return True
+
+    def get_state(self) -> bytes:
+        plan = None if self.plan is None else [self.plan.t_turn, self.plan.angle, self.plan.q.tolist()]
+        return pack_state({"scene": self.scene.snapshot(), "q_cmd": self.q_cmd.tolist(), "grip": self.grip,
+                           "plan": plan, "planned_at": self.planned_at})
+
+    def set_state(self, state: bytes) -> None:
+        s = unpack_state(state, {"scene", "q_cmd", "grip", "plan", "planned_at"})
+        self.scene.restore(s["scene"])
+        q_cmd = np.asarray(s["q_cmd"], dtype=float)
+        if q_cmd.shape != (6,):
+            raise ValueError("not a state of the reference controller")
+        plan = s["plan"]
+        self.plan = None if plan is None else Plan(float(plan[0]), float(plan[1]), np.asarray(plan[2], dtype=float))
+        self.q_cmd, self.grip, self.planned_at = q_cmd, bool(s["grip"]), float(s["planned_at"])

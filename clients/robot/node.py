@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from clients.node import Node, NodeContext
+from clients.node import Node, NodeContext, pack_state, unpack_state
 from clients.robot import kr6
-from clients.robot.scene import RobotScene, SceneOutputs, SceneParams, euler_zyx
+from clients.robot.scene import RobotScene, SceneOutputs, SceneParams, euler_zyx, outputs_restore, outputs_snapshot
 from clients.rod.node import ROD_PARAMETERS, rod_params
 
 
@@ -61,3 +61,15 @@ class RobotNode(Node):
         q_cmd = np.array([float(inputs.get(f"q_cmd{i + 1}", self.scene.q[i])) for i in range(6)])
         self.last = self.scene.step(h, q_cmd, float(inputs.get("grip_cmd", 0.0)) > 0.5,
                                     float(inputs.get("rod_angle", 0.0)))
+
+    @property
+    def can_rollback(self) -> bool:
+        return True
+
+    def get_state(self) -> bytes:
+        return pack_state({"scene": self.scene.snapshot(), "last": outputs_snapshot(self.last)})
+
+    def set_state(self, state: bytes) -> None:
+        s = unpack_state(state, {"scene", "last"})
+        self.scene.restore(s["scene"])
+        self.last = outputs_restore(s["last"])

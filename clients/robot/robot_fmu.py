@@ -61,6 +61,17 @@ class RobotScene6(Fmi2Slave):
         self.grip_x, self.grip_y, self.grip_z = (float(v) for v in o.grip_target)
         self.grasped, self.collision, self.reachable, self.near_miss = o.grasped, o.collision, o.reachable, o.near_miss
 
+    def _get_fmu_state(self):
+        state = super()._get_fmu_state()
+        state["_scene"] = self.scene.snapshot()
+        return state
+
+    def _set_fmu_state(self, state):
+        state = dict(state)
+        snap = state.pop("_scene")
+        super()._set_fmu_state(state)  # the outputs as they were: recomputing them would move the reach seed
+        self.scene.restore(snap)
+
     def exit_initialization_mode(self):
         self._build()
 

@@ -51,6 +51,21 @@ class SceneOutputs:
     grip_target: np.ndarray = field(repr=False)
 
 
+def outputs_snapshot(o: SceneOutputs) -> dict:
+    """A SceneOutputs as plain lists and numbers (for a node's or an FMU's saved state)."""
+    return {"q": o.q.tolist(), "tcp": o.tcp.tolist(), "tcp_rot": o.tcp_rot.tolist(), "distance": float(o.distance),
+            "grasped": bool(o.grasped), "collision": bool(o.collision), "reachable": bool(o.reachable),
+            "near_miss": bool(o.near_miss), "gap": float(o.gap), "grip_target": o.grip_target.tolist()}
+
+
+def outputs_restore(snap: dict) -> SceneOutputs:
+    """The SceneOutputs :func:`outputs_snapshot` gave."""
+    return SceneOutputs(np.asarray(snap["q"], dtype=float), np.asarray(snap["tcp"], dtype=float),
+                        np.asarray(snap["tcp_rot"], dtype=float).reshape(3, 3), float(snap["distance"]),
+                        bool(snap["grasped"]), bool(snap["collision"]), bool(snap["reachable"]),
+                        bool(snap["near_miss"]), float(snap["gap"]), np.asarray(snap["grip_target"], dtype=float))
+
+
 def grasp_rotation(angle: float) -> np.ndarray:
     """Target TCP orientation for grasping the rod at ``angle``: approach +x, jaws across the rod."""
     c, s = math.cos(angle), math.sin(angle)
@@ -103,6 +118,21 @@ class RobotScene:
             self.holding = False
         self._update()
         return self.outputs(grip_close)
+
+    def snapshot(self) -> dict:
+        """Everything a step reads, as plain lists and numbers (JSON and msgpack alike); the
+        MuJoCo data follows from it (poses are set, not integrated)."""
+        return {"q": self.q.tolist(), "reach_q": np.asarray(self._reach_q, dtype=float).tolist(),
+                "gap": float(self.gap), "holding": bool(self.holding), "rod_angle": float(self.rod_angle)}
+
+    def restore(self, snap: dict) -> None:
+        """Set the state :meth:`snapshot` gave; ValueError if it is not a state of this scene."""
+        q, reach_q = np.asarray(snap["q"], dtype=float), np.asarray(snap["reach_q"], dtype=float)
+        if q.shape != (6,) or reach_q.shape != (6,):
+            raise ValueError("not a state of this robot scene")
+        self.q, self._reach_q = q, reach_q
+        self.gap, self.holding, self.rod_angle = float(snap["gap"]), bool(snap["holding"]), float(snap["rod_angle"])
+        self._update()
 
     def set_state(self, q: np.ndarray, gap: float, rod_angle: float) -> None:
         self.q = np.asarray(q, dtype=float).copy()

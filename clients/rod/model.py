@@ -162,6 +162,28 @@ class RodModel:
         self.data.qpos[self._hinge] += 2 * l * e * dt
         self.data.qvel[self._dof] += l * l * e * dt
 
+    def snapshot(self) -> dict:
+        """Everything a step reads, as plain lists and floats (JSON and msgpack alike): MuJoCo's
+        integration state (mj_getState) and the observer's history of the twin's angles."""
+        spec = mujoco.mjtState.mjSTATE_INTEGRATION
+        state = np.empty(mujoco.mj_stateSize(self.model, spec))
+        mujoco.mj_getState(self.model, self.data, state, spec)
+        return {"mujoco": state.tolist(), "history": [v for pair in self._history for v in pair],
+                "last_measurement": self._last_measurement}
+
+    def restore(self, snap: dict) -> None:
+        """Set the state :meth:`snapshot` gave; ValueError if it is not one of this rod's."""
+        spec = mujoco.mjtState.mjSTATE_INTEGRATION
+        state = np.asarray(snap["mujoco"], dtype=float)
+        history = [float(v) for v in snap["history"]]
+        if state.shape != (mujoco.mj_stateSize(self.model, spec),) or not history or len(history) % 2:
+            raise ValueError("not a state of this rod model")
+        mujoco.mj_setState(self.model, self.data, state, spec)
+        mujoco.mj_kinematics(self.model, self.data)
+        self._history.clear()
+        self._history.extend(zip(history[0::2], history[1::2]))
+        self._last_measurement = float(snap["last_measurement"])
+
     def advance(self, h: float) -> None:
         """Integrate h seconds with MuJoCo's own steps (the macro step's micro-steps)."""
         n = max(1, round(h / self.model.opt.timestep))

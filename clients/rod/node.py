@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from clients.node import Node, NodeContext
+from clients.node import Node, NodeContext, pack_state, unpack_state
 from clients.rod.model import RodModel, RodParams
 
 
@@ -74,10 +74,10 @@ class RodNode(Node):
     def can_rollback(self) -> bool:
         return True
 
-    def get_state(self) -> Any:
-        d = self.rod.data
-        return d.time, d.qpos.copy(), d.qvel.copy(), d.qacc_warmstart.copy(), d.eq_active.copy(), d.mocap_pos.copy()
+    def get_state(self) -> bytes:
+        return pack_state({"rod": self.rod.snapshot(), "driven": self.mode_driven})
 
-    def set_state(self, state: Any) -> None:
-        d = self.rod.data
-        d.time, d.qpos[:], d.qvel[:], d.qacc_warmstart[:], d.eq_active[:], d.mocap_pos[:] = state
+    def set_state(self, state: bytes) -> None:
+        s = unpack_state(state, {"rod", "driven"})
+        self.rod.restore(s["rod"])
+        self.mode_driven = bool(s["driven"])

@@ -73,16 +73,12 @@ class Rod(Fmi2Slave):
 
     def _get_fmu_state(self):
         state = super()._get_fmu_state()
-        d = self.model.data
-        state["_mujoco"] = (d.time, d.qpos.tolist(), d.qvel.tolist(), d.qacc_warmstart.tolist(),
-                            d.eq_active.tolist(), d.mocap_pos.tolist())
+        state["_rod"] = self.model.snapshot()
         return state
 
     def _set_fmu_state(self, state):
         state = dict(state)
-        t, qpos, qvel, warm, eq, mocap = state.pop("_mujoco")
+        snap = state.pop("_rod")
         super()._set_fmu_state(state)
-        d = self.model.data
-        d.time = t
-        d.qpos[:], d.qvel[:], d.qacc_warmstart[:], d.eq_active[:], d.mocap_pos[:] = qpos, qvel, warm, eq, mocap
+        self.model.restore(snap)
         self._refresh()
