@@ -129,6 +129,26 @@ def check_node(spec: NodeSpec, project_dir: Path) -> None:
         model_class(spec, project_dir)  # refused: an asynchronous node needs a model
 
 
+def why_no_checkpoint(spec: NodeSpec, project_dir: Path) -> str | None:
+    """Why the node cannot take part in checkpoints (its state cannot outlive its process), or
+    None if it can. The node must load (:func:`check_node`)."""
+    if spec.asynchronous:
+        return None  # a source is not rolled back: it goes on sampling
+    if spec.fmu:
+        from fmu_bridge.fmu_loader import describe
+
+        cs = describe(_fmu_path(spec, project_dir)).coSimulation
+        if not (getattr(cs, "canGetAndSetFMUstate", False) and getattr(cs, "canSerializeFMUstate", False)):
+            return "its FMU does not declare canGetAndSetFMUstate and canSerializeFMUstate"
+        return None
+    if spec.model:
+        cls = model_class(spec, project_dir)
+        if cls.get_state is Node.get_state and cls.serialize_state is Node.serialize_state:
+            return f"its model {cls.__name__} has no get_state/set_state"
+        return None
+    return "a bridge FMU cannot serialise the state of the tool it runs in"
+
+
 def load_node(spec: NodeSpec, project_dir: Path) -> Node | AsyncSource:
     """Instantiate the implementation named by the node's ``model`` or ``fmu``."""
     if spec.fmu:

@@ -90,6 +90,13 @@ def validate(
     out.print(f"OK {file}: project {p.projectName!r}, {len(p.nodeLists)} nodes, {len(p.linkLists)} links, "
               f"{len(loaded.routes)} routes, {len(p.events)} events" + ("" if models else " (models not checked)"),
               highlight=False)
+    if p.coSimulation.checkpointEvery is not None and models:
+        from clients.loader import why_no_checkpoint
+
+        unable = [(n.nodeName, why) for n in p.nodeLists if (why := why_no_checkpoint(n, loaded.path.parent))]
+        for name, why in unable:
+            err.print(f"[yellow]warning:[/yellow] coSimulation.checkpointEvery: node {name!r} cannot take part in "
+                      f"checkpoints: {why}; the run takes none, and a lost node ends it", highlight=False)
     bridged = [n.nodeName for n in p.nodeLists if not n.model and not n.fmu and not n.asynchronous]
     if bridged:
         out.print(f"{len(bridged)} node(s) wait for a bridge FMU in some tool: {', '.join(bridged)} "

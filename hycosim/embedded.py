@@ -50,6 +50,13 @@ def _tail(path: Path, lines: int = 5) -> str:
     return text.removeprefix("error: ")  # the CLI's prefix: the launcher adds its own
 
 
+def _signal_name(number: int) -> str:
+    try:
+        return signal.Signals(number).name
+    except ValueError:
+        return f"signal {number}"
+
+
 def _node_failure(run_dir: Path, name: str, status: int, before_start: bool = False) -> str:
     """What a node that ended with ``status`` said, or how its process died."""
     log = run_dir / f"node-{name}.stderr.txt"
@@ -57,10 +64,7 @@ def _node_failure(run_dir: Path, name: str, status: int, before_start: bool = Fa
     if status < 0:
         # A crash in a model's native code (an FMU, an extension): the process said nothing of
         # its own, but the fault handler (hycosim.cli.main) wrote the stack it was at to its stderr.
-        try:
-            cause = signal.Signals(-status).name
-        except ValueError:
-            cause = f"signal {-status}"
+        cause = _signal_name(-status)
         said = _tail(log, 3)
         return (f"its process died of {cause}{when} (the Python stack at that moment: {log})"
                 + (f"; its last words:\n{said}" if said else ""))
@@ -202,6 +206,10 @@ def _shut_down(server: subprocess.Popen, nodes: dict[str, subprocess.Popen], run
         server.kill()
     if code is None:
         code, message = (server.returncode or 3), _tail(run_dir / "server.stderr.txt") or "the server exited"
+        if server.returncode < 0:
+            code, message = 3, f"the server's process died of {_signal_name(-server.returncode)}"
+        if (run_dir / "checkpoints").is_dir():
+            message += f"; the run can go on from its last checkpoint: hycosim run FILE --resume {run_dir}"
     # After a completed run the nodes have their STOP and leave by themselves. After a failed
     # one, a node may still wait for a START or a step that will not come, until its own
     # timeout: it is interrupted after a short grace, and its complaint is not a failure.

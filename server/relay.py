@@ -121,6 +121,7 @@ class Relay:
         self.checkpoints_taken = 0
         self.recoveries: list[dict[str, Any]] = []
         self._restoring = False
+        self._went: dict[str, float] = {}  # node → when its token last went (recovery times are measured from it)
         # Go on from the run directory's last checkpoint (its server died after recording this many steps).
         self._resume = resume
         self.progress = Progress()
@@ -275,12 +276,16 @@ class Relay:
                             raise RunError(f"cannot replay the last release to {node!r}: {exc}") from None
             elif node in self.alive:
                 self.alive.discard(node)
+                self._went[node] = time.monotonic()
                 if step >= 0 and self._grace() > 0:
                     self.lost[node] = time.monotonic()
                     self._log.warning("node lost, waiting for it", node=node, step=step, grace_s=self._grace())
                 elif collecting or step >= 0:
+                    why = self.recorder.meta.get("checkpoints", "")
                     raise RunError(f"node {node!r} was lost at step {step} (t={self._time(step):g} s): "
-                                   "its liveliness token disappeared (process killed or link lost)")
+                                   "its liveliness token disappeared (process killed or link lost)"
+                                   + (f"; the run cannot go on from a checkpoint (checkpoints {why})"
+                                      if self.cosim.checkpointEvery is not None else ""))
             return None
         node = ProjectKeys.last_chunk(key)
         try:
@@ -428,7 +433,8 @@ class Relay:
         restored = self._apply(cp)
         self.recoveries.append({"node": cause.node, "step": cause.step, "t": self._time(cause.step),
                                 "cause": cause.cause, "restored": cp.step, "restored_t": cp.server["t"],
-                                "seconds": round(time.monotonic() - began, 3), "at": time.time()})
+                                "seconds": round(time.monotonic() - self._went.get(cause.node, began), 3),
+                                "at": time.time()})
         self.recorder.meta["recoveries"] = self.recorder.meta.get("recoveries", []) + [self.recoveries[-1]]
         self.recorder.write_meta()
         return restored, arrivals, wait

@@ -77,6 +77,10 @@ def test_the_servers_intake_accepts_only_frames_it_can_use(loaded, node, payload
     if frame.kind in (frames.OUTPUTS, frames.SAMPLE):
         assert 0 <= frame.fields[1] < frames.MAX_STEP and math.isfinite(frame.fields[2])
         assert [type(v) in WIRE_TYPES[p.type] for v, p in zip(frame.fields[3], spec.output)] == [True] * len(spec.output)
+    elif frame.kind == frames.STATE:
+        _, step, index, count, chunk = frame.fields
+        assert not spec.asynchronous and 0 <= step < frames.MAX_STEP and 0 <= index < count <= frames.MAX_CHUNKS
+        assert len(chunk) <= frames.STATE_CHUNK
     else:
         assert frame.kind in (frames.HELLO, frames.END)
 
@@ -110,14 +114,23 @@ def test_the_relay_drops_what_it_cannot_use_and_never_stops_on_a_payload(relay, 
 def test_a_node_acts_only_on_releases_that_give_it_exactly_its_inputs(loaded, node, data):
     _quiet()
     runtime = NodeRuntime(loaded, node, impl=None, endpoint="tcp/127.0.0.1:1")
-    payload = data.draw(payloads | frame_arrays([frames.STEP, frames.REPLAY]).map(frames.msgpack.packb))
+    payload = data.draw(payloads | frame_arrays([frames.STEP, frames.REPLAY, frames.RESTORE, frames.CHECKPOINT])
+                        .map(frames.msgpack.packb))
     try:
         frame = runtime._accept(False, payload)
     except frames.FrameError:
         return
     if frame is None:
         return  # a replay for another node
-    assert frame.kind in (frames.START, frames.STEP, frames.REPLAY, frames.ROLLBACK, frames.STOP)
+    assert frame.kind in (frames.START, frames.STEP, frames.REPLAY, frames.ROLLBACK, frames.STOP, frames.CHECKPOINT,
+                          frames.RESTORE)
+    if frame.kind == frames.RESTORE:
+        name, step, t, index, count, chunk, _ = frame.fields
+        assert name == node and 0 <= step < frames.MAX_STEP and 0 <= index < count and math.isfinite(t)
+        return
+    if frame.kind == frames.CHECKPOINT:
+        assert 0 <= frame.fields[0] < frames.MAX_STEP
+        return
     release = frame.fields[1] if frame.kind == frames.REPLAY else frame
     if release.kind == frames.STEP:
         mine = release.fields[4][node]

@@ -43,9 +43,14 @@ _PLAUSIBLE: dict[int, tuple[st.SearchStrategy, ...]] = {
                   st.lists(names, max_size=3)),
     frames.STOP: (steps, st.sampled_from(list(frames.CLEAN_STOPS)) | st.text(max_size=20)),
     frames.LIVE: (names, st.booleans()),
-    frames.HELLO: (uids, st.fixed_dictionaries({"rollback": values, "ports": values}) | values),
+    frames.HELLO: (uids, st.fixed_dictionaries({"rollback": values, "restart": st.booleans() | values,
+                                                "ports": values}) | values),
     frames.ROLLBACK: (steps, times),
     frames.END: (uids, steps, times, st.booleans(), st.text(max_size=30)),
+    frames.CHECKPOINT: (steps,),
+    frames.STATE: (uids, steps, st.integers(-1, 3), st.integers(-1, 3) | st.integers(0, 2 ** 20), st.binary(max_size=24)),
+    frames.RESTORE: (names, steps, times, st.integers(-1, 3), st.integers(-1, 3), st.binary(max_size=24),
+                     st.fixed_dictionaries({"checkpoint": st.booleans()}) | values),
 }
 
 

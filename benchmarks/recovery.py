@@ -1,0 +1,222 @@
+"""Crash recovery: runs that lose node processes or their server end as if nothing happened.
+
+One deterministic project of four nodes (the grasp scenario's rod and robot-scene FMUs, its
+reference controller and a pendulum, both Python nodes; H = 10 ms), with checkpoints every
+``--every`` s, runs three times in one go:
+
+* as it is (the reference);
+* with ``--node-kills`` SIGKILLs of random node processes, spread over the run (``hycosim run``
+  starts each dead node again; the server restores the last checkpoint);
+* with ``--server-kills`` SIGKILLs of the server, each followed by ``hycosim run --resume``.
+
+Each must complete with a ``values.csv`` identical, byte for byte, to the reference's, one row
+per step. Then the cost of taking checkpoints: the barrier benchmark's ring (N = 2, H = 1 ms)
+with checkpoints every 1 s against the same without, interleaved rounds, medians. Recovery
+times (a node's death to the restored run) come from the run's meta.json.
+
+    python benchmarks/recovery.py [--stop 60] [--node-kills 20] [--server-kills 3] [--every 1]
+                                  [--ring-steps 20000] [--repeat 3] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+from _procs import free_port
+from barrier import ring_config
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+sys.path.insert(0, str(REPO))
+
+
+def project(dir_: Path, stop: float, every: float) -> Path:
+    """The grasp scenario on FMUs plus a pendulum: four nodes, FMU and Python, checkpoints on."""
+    from clients.scene_fmus import ensure_scene_fmus
+
+    fmus = ensure_scene_fmus(REPO / "build" / "fmus")
+    doc = json.loads((REPO / "configs" / "grasp-fmu.json").read_text())
+    doc["projectName"] = "recovery"
+    doc["serverIP"] = f"127.0.0.1:{free_port()}"
+    for node in doc["nodeLists"]:
+        if node["nodeName"] in fmus:
+            node["fmu"] = str(fmus[node["nodeName"]])
+    doc["nodeLists"].append({"nodeName": "pendulum", "UID": 9, "model": "pendulum",
+                             "parameters": {"theta0": 0.7, "damping": 0.02}, "input": [], "output": ["theta", "omega"]})
+    doc["nodeNum"] = len(doc["nodeLists"])
+    doc["coSimulation"].update(stopTime=stop, checkpointEvery=every, attachTimeout=30.0)
+    path = dir_ / "recovery.json"
+    path.write_text(json.dumps(doc, indent=1))
+    return path
+
+
+def pids(pattern: str) -> list[int]:
+    """Processes whose command line holds ``pattern``."""
+    found = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            cmd = Path(f"/proc/{entry}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            continue
+        if pattern in cmd and "recovery.py" not in cmd:
+            found.append(int(entry))
+    return found
+
+
+def hycosim_run(cfg: Path, runs: Path, *extra: str, timeout: float = 900.0) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", str(runs), "--no-progress",
+                           *extra], capture_output=True, text=True, timeout=timeout, cwd=REPO)
+
+
+def newest_run(runs: Path) -> Path:
+    return max((p for p in runs.iterdir() if p.is_dir()), key=lambda p: p.stat().st_mtime)
+
+
+def killer(cfg: Path, runs: Path, names: list[str], kills: int, span: float, rng: random.Random, log: list) -> None:
+    """SIGKILL ``kills`` random node processes over ``span`` seconds, once the run has its first checkpoint."""
+    deadline = time.monotonic() + 120
+    before = set(runs.iterdir())
+    while time.monotonic() < deadline and not any((p / "checkpoints").is_dir() for p in set(runs.iterdir()) - before):
+        time.sleep(0.1)
+    for i in range(kills):
+        time.sleep(span / kills * rng.uniform(0.6, 1.4))
+        name = rng.choice(names)
+        for pid in pids(f"hycosim node {name} {cfg}"):
+            try:
+                os.kill(pid, signal.SIGKILL)
+                log.append((time.time(), name, pid))
+            except ProcessLookupError:
+                pass
+
+
+def check_rows(values: Path) -> int:
+    """The number of rows; AssertionError unless the steps run 0, 1, 2… without a gap or repeat."""
+    lines = values.read_text().splitlines()[1:]
+    steps = [int(line.split(",", 1)[0]) for line in lines]
+    assert steps == list(range(len(steps))), "a step lost or recorded twice"
+    return len(steps)
+
+
+def node_kills(cfg: Path, runs: Path, names: list[str], kills: int, span: float, seed: int) -> tuple[Path, list, dict]:
+    log: list = []
+    t = threading.Thread(target=killer, args=(cfg, runs, names, kills, span, random.Random(seed), log), daemon=True)
+    t.start()
+    res = hycosim_run(cfg, runs, "--restarts", str(kills))
+    t.join()
+    if res.returncode:
+        raise RuntimeError(f"the run with node kills failed: {res.stderr[-2000:]}")
+    run = newest_run(runs)
+    return run, log, json.loads((run / "meta.json").read_text())
+
+
+def server_kills(cfg: Path, runs: Path, kills: int, after: float) -> tuple[Path, dict]:
+    proc = subprocess.Popen([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", str(runs), "--no-progress"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO)
+    run = None
+    for i in range(kills):
+        time.sleep(after)
+        for pid in pids(f"hycosim server {cfg}"):
+            os.kill(pid, signal.SIGKILL)
+        proc.communicate(timeout=120)
+        run = newest_run(runs)
+        proc = subprocess.Popen([sys.executable, "-m", "hycosim", "run", str(cfg), "--no-progress", "--resume", str(run)],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO)
+    out, err = proc.communicate(timeout=900)
+    if proc.returncode:
+        raise RuntimeError(f"the resumed run failed: {err[-2000:]}")
+    return run, json.loads((run / "meta.json").read_text())
+
+
+def ring_rate(n: int, steps: int, every: float | None, tmp: Path) -> float:
+    cfg = ring_config(n, steps, tmp / f"ring-{every}.json")
+    doc = json.loads(cfg.read_text())
+    doc["coSimulation"].update(stepSize=0.001, stopTime=steps * 0.001)
+    if every is not None:
+        doc["coSimulation"]["checkpointEvery"] = every
+    cfg.write_text(json.dumps(doc))
+    res = hycosim_run(cfg, tmp / "ring-runs", timeout=300)
+    if res.returncode:
+        raise RuntimeError(res.stderr[-2000:])
+    return float(json.loads((newest_run(tmp / "ring-runs") / "meta.json").read_text())["steps_per_s"])
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--stop", type=float, default=60.0, help="simulated seconds")
+    ap.add_argument("--every", type=float, default=1.0, help="checkpointEvery, simulated seconds")
+    ap.add_argument("--node-kills", type=int, default=20)
+    ap.add_argument("--server-kills", type=int, default=3)
+    ap.add_argument("--ring-steps", type=int, default=20000)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    results: dict = {}
+    with tempfile.TemporaryDirectory() as tmp_:
+        tmp = Path(tmp_)
+        cfg = project(tmp, args.stop, args.every)
+        names = [n["nodeName"] for n in json.loads(cfg.read_text())["nodeLists"]]
+        runs = tmp / "runs"
+        runs.mkdir()
+        started = time.perf_counter()
+        res = hycosim_run(cfg, runs)
+        if res.returncode:
+            raise SystemExit(f"the reference run failed: {res.stderr[-2000:]}")
+        reference = newest_run(runs)
+        wall = time.perf_counter() - started
+        rows = check_rows(reference / "values.csv")
+        ref_bytes = (reference / "values.csv").read_bytes()
+        results["reference"] = {"rows": rows, "wall_s": round(wall, 1)}
+        if args.node_kills:
+            run, log, meta = node_kills(cfg, runs, names, args.node_kills, max(wall - 4.0, 5.0), args.seed)
+            recov = [r for r in meta.get("recoveries", []) if r["node"] != "server"]
+            secs = sorted(r["seconds"] for r in recov)
+            results["node_kills"] = {
+                "kills": len(log), "restores": len(recov), "identical": (run / "values.csv").read_bytes() == ref_bytes,
+                "rows": check_rows(run / "values.csv"),
+                "recovery_s": {"median": statistics.median(secs) if secs else None, "max": max(secs) if secs else None}}
+        if args.server_kills:
+            run, meta = server_kills(cfg, runs, args.server_kills, max(wall / (args.server_kills + 2), 4.0))
+            results["server_kills"] = {
+                "resumes": sum(1 for r in meta.get("recoveries", []) if r["node"] == "server"),
+                "identical": (run / "values.csv").read_bytes() == ref_bytes, "rows": check_rows(run / "values.csv")}
+        rates: dict[str, list[float]] = {"without": [], "with": []}
+        for _ in range(args.repeat):
+            rates["without"].append(ring_rate(2, args.ring_steps, None, tmp))
+            rates["with"].append(ring_rate(2, args.ring_steps, 1.0, tmp))
+        med = {k: statistics.median(v) for k, v in rates.items()}
+        results["checkpoint_cost"] = {"steps_per_s": med, "ratio": med["with"] / med["without"], "rounds": rates}
+    if args.json:
+        print(json.dumps(results, indent=1))
+    else:
+        r = results
+        print(f"reference: {r['reference']['rows']} steps in {r['reference']['wall_s']} s")
+        if "node_kills" in r:
+            n = r["node_kills"]
+            print(f"{n['kills']} node kills, {n['restores']} restores: values.csv identical: {n['identical']}; "
+                  f"recovery median {n['recovery_s']['median']} s, max {n['recovery_s']['max']} s")
+        if "server_kills" in r:
+            s = r["server_kills"]
+            print(f"{s['resumes']} server kills and resumes: values.csv identical: {s['identical']}")
+        c = r["checkpoint_cost"]
+        print(f"ring N=2, H=1 ms: {c['steps_per_s']['without']:.0f} steps/s without checkpoints, "
+              f"{c['steps_per_s']['with']:.0f} with one every 1 s: ratio {c['ratio']:.3f}")
+    ok = all(results.get(k, {}).get("identical", True) for k in ("node_kills", "server_kills"))
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
