@@ -91,6 +91,7 @@ def killer(cfg: Path, runs: Path, names: list[str], kills: int, span: float, rng
     before = set(runs.iterdir())
     while time.monotonic() < deadline and not any((p / "checkpoints").is_dir() for p in set(runs.iterdir()) - before):
         time.sleep(0.1)
+    run = next(iter(set(runs.iterdir()) - before), None)
     for i in range(kills):
         time.sleep(span / kills * rng.uniform(0.6, 1.4))
         name = rng.choice(names)
@@ -100,6 +101,14 @@ def killer(cfg: Path, runs: Path, names: list[str], kills: int, span: float, rng
                 log.append((time.time(), name, pid))
             except ProcessLookupError:
                 pass
+        # One kill, one restore: the next waits until the run is back (meta.json lists it).
+        while run is not None and time.monotonic() < deadline + 60 * (i + 1):
+            try:
+                if len(json.loads((run / "meta.json").read_text()).get("recoveries", [])) > i:
+                    break
+            except (OSError, ValueError):
+                pass
+            time.sleep(0.05)
 
 
 def check_rows(values: Path) -> int:
@@ -181,7 +190,7 @@ def main() -> int:
         ref_bytes = (reference / "values.csv").read_bytes()
         results["reference"] = {"rows": rows, "wall_s": round(wall, 1)}
         if args.node_kills:
-            run, log, meta = node_kills(cfg, runs, names, args.node_kills, max(wall - 4.0, 5.0), args.seed)
+            run, log, meta = node_kills(cfg, runs, names, args.node_kills, max(wall / 2, 5.0), args.seed)
             recov = [r for r in meta.get("recoveries", []) if r["node"] != "server"]
             secs = sorted(r["seconds"] for r in recov)
             results["node_kills"] = {

@@ -120,3 +120,17 @@ def test_fuzz_benchmark_reports_an_unharmed_run_at_a_small_scale():
     assert fuzz["server_log_bytes"] < 1 << 20
     assert forgery["exit_code"] == 0 and forgery["identical_values"] and forgery["all_sent_during_run"]
     assert forgery["reached_server"] == 0 and forgery["reached_nodes"] == 0 and sum(forgery["by_key"].values()) == 700
+
+
+def test_recovery_benchmark_reports_identical_records_at_a_small_scale():
+    res = subprocess.run([sys.executable, "benchmarks/recovery.py", "--stop", "6", "--every", "0.5", "--node-kills", "2",
+                          "--server-kills", "1", "--ring-steps", "2000", "--repeat", "1", "--json"],
+                         capture_output=True, text=True, timeout=400, cwd=REPO, env=env())
+    assert res.returncode == 0, res.stderr
+    r = json.loads(res.stdout)
+    assert r["reference"]["rows"] == 601
+    kills = r["node_kills"]
+    assert kills["kills"] == 2 and kills["restores"] == 2 and kills["identical"] and kills["rows"] == 601
+    assert 0 < kills["recovery_s"]["max"] < 30
+    assert r["server_kills"] == {"resumes": 1, "identical": True, "rows": 601}
+    assert r["checkpoint_cost"]["ratio"] > 0
