@@ -190,7 +190,7 @@ def main() -> int:
         ref_bytes = (reference / "values.csv").read_bytes()
         results["reference"] = {"rows": rows, "wall_s": round(wall, 1)}
         if args.node_kills:
-            run, log, meta = node_kills(cfg, runs, names, args.node_kills, max(wall / 2, 5.0), args.seed)
+            run, log, meta = node_kills(cfg, runs, names, args.node_kills, max(wall / 2, 0.5), args.seed)
             recov = [r for r in meta.get("recoveries", []) if r["node"] != "server"]
             secs = sorted(r["seconds"] for r in recov)
             results["node_kills"] = {
