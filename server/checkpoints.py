@@ -17,6 +17,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +29,10 @@ KEEP = 2
 FOLDER = "checkpoints"
 SERVER_FILE = "server.msgpack"
 MANIFEST = "manifest.json"
+# What a file of a checkpoint may be called (node names are of this kind): no path, no NUL.
+_FILE_NAME = re.compile(r"[A-Za-z0-9_.\-]+")
+# The record files whose ends a checkpoint holds (server.recorder's).
+RECORD_FILES = {"values.csv", "timing.csv", "events.jsonl"}
 
 # The server's state: each key and the type it must have when read back.
 _SERVER_KEYS = {"step": int, "t": float, "origin": float, "j": int, "mode": str, "disarmed": list,
@@ -98,6 +103,8 @@ def read(path: Path, config_sha256: str | None = None) -> Checkpoint:
                               f"{str(manifest.get('config_sha256'))[:12]}…, this one {config_sha256[:12]}…)")
     data: dict[str, bytes] = {}
     for name, entry in files.items():
+        if not _FILE_NAME.fullmatch(name) or name in (".", ".."):
+            raise CheckpointError(f"{path}: {MANIFEST} names {name[:60]!r}, not a file of the checkpoint")
         try:
             raw = (path / name).read_bytes()
         except OSError as exc:
@@ -112,11 +119,23 @@ def read(path: Path, config_sha256: str | None = None) -> Checkpoint:
         server = msgpack.unpackb(data[SERVER_FILE], raw=False, strict_map_key=False)
     except Exception:
         raise CheckpointError(f"{path / SERVER_FILE} is not msgpack") from None
-    if type(server) is not dict or any(not isinstance(server.get(k), tp) for k, tp in _SERVER_KEYS.items()):
+    if type(server) is not dict or any(type(server.get(k)) is not tp for k, tp in _SERVER_KEYS.items()):
         raise CheckpointError(f"{path / SERVER_FILE} does not hold a server state")
+    records = server["records"]
+    if not (0 <= server["step"] < 1 << 62 and all(type(v) is int and v >= 0 for v in records.values())
+            and set(records) == RECORD_FILES):
+        raise CheckpointError(f"{path / SERVER_FILE} holds a step or record offsets out of range")
+    for history in server["histories"].values():
+        samples = history.get("samples") if type(history) is dict else None
+        if type(samples) is not list or type(history.get("received")) is not int or not all(
+                type(s) is list and len(s) == 2 and type(s[0]) in (int, float) and type(s[1]) is list for s in samples):
+            raise CheckpointError(f"{path / SERVER_FILE} holds an asynchronous history that is not one")
+    for name in ("outputs", "inputs"):
+        if not all(type(v) is list for v in server[name].values()):
+            raise CheckpointError(f"{path / SERVER_FILE} holds {name} that are not lists")
     states = {}
     for node in manifest["nodes"]:
-        if f"{node}.state" not in data:
+        if type(node) is not str or f"{node}.state" not in data:
             raise CheckpointError(f"{path}: the state of node {node!r} is missing")
         states[node] = data[f"{node}.state"]
     return Checkpoint(server["step"], path, server, states)

@@ -65,6 +65,8 @@ def _resume_plan(loaded: LoadedProject, run_dir: Path) -> tuple[dict[str, Any], 
         meta = json.loads((run_dir / "meta.json").read_text())
     except (OSError, ValueError) as exc:
         raise ValueError(f"{run_dir}: not a run directory (no readable meta.json: {exc})") from None
+    if type(meta) is not dict:
+        raise ValueError(f"{run_dir}: not a run directory (its meta.json holds no object)")
     if meta.get("config_sha256") != loaded.digest:
         differ = ["(the recorded copy is missing)"]
         try:
@@ -84,7 +86,8 @@ def _resume_plan(loaded: LoadedProject, run_dir: Path) -> tuple[dict[str, Any], 
             recorded = max(sum(1 for _ in f) - 1, 0)
     except OSError:
         recorded = cp.step
-    meta["checkpoints_passed_over"] = meta.get("checkpoints_passed_over", []) + passed
+    earlier = meta.get("checkpoints_passed_over")
+    meta["checkpoints_passed_over"] = (earlier if type(earlier) is list else []) + passed
     return meta, cp.server["records"], recorded
 
 

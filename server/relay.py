@@ -382,6 +382,12 @@ class Relay:
         self.recorder.meta["checkpoints"] = f"every {every:g} s of simulated time"
         return True
 
+    def _next_checkpoint(self, t: float) -> float:
+        """The first checkpoint time after t, on a grid of its own from startTime: a run restored
+        to a checkpoint takes the same ones again."""
+        start, every = self.cosim.startTime, self.cosim.checkpointEvery or math.inf
+        return start + (math.floor((t - start) / every + 1e-9) + 1) * every
+
     def _take_checkpoint(self, k: int, t: float, origin: float, j: int, localised: dict[str, Any]) -> None:
         """Ask every stepping node for its state at point k (they send it after their next
         outputs) and keep the server's own, records included, until theirs are in."""
@@ -435,7 +441,8 @@ class Relay:
                                 "cause": cause.cause, "restored": cp.step, "restored_t": cp.server["t"],
                                 "seconds": round(time.monotonic() - self._went.get(cause.node, began), 3),
                                 "at": time.time()})
-        self.recorder.meta["recoveries"] = self.recorder.meta.get("recoveries", []) + [self.recoveries[-1]]
+        earlier = self.recorder.meta.get("recoveries")  # a resumed run's, from its meta.json
+        self.recorder.meta["recoveries"] = (earlier if type(earlier) is list else []) + [self.recoveries[-1]]
         self.recorder.write_meta()
         return restored, arrivals, wait
 
@@ -637,7 +644,7 @@ class Relay:
             point, arrivals, wait = self._restore(_Recover("server", self._resume, "resumed"))
             k, t, origin, j, localised = (point["step"], point["t"], point["origin"], point["j"],
                                           dict(point["localised"]))
-            next_checkpoint = cosim.startTime + (math.floor((t - cosim.startTime) / every + 1e-9) + 1) * every
+            next_checkpoint = self._next_checkpoint(t)
             clock = RealTimeClock(t, time.time(), rt) if rt is not None else None
             if self.gateway is not None:
                 self.gateway.run_started()
@@ -660,8 +667,7 @@ class Relay:
         while True:
             if self._checkpoints and next_checkpoint - 1e-9 * H <= t < end:
                 self._take_checkpoint(k, t, origin, j, localised)
-                # On a grid of its own from startTime: a run restored to a checkpoint takes the same ones.
-                next_checkpoint = cosim.startTime + (math.floor((t - cosim.startTime) / every + 1e-9) + 1) * every
+                next_checkpoint = self._next_checkpoint(t)
             for node, history in self.histories.items():
                 held = history.at(t)
                 if held is not None:
@@ -716,7 +722,7 @@ class Relay:
                 point, arrivals, wait = self._restore(cause)
                 k, t, origin, j, localised = (point["step"], point["t"], point["origin"], point["j"],
                                               dict(point["localised"]))
-                next_checkpoint = cosim.startTime + (math.floor((t - cosim.startTime) / every + 1e-9) + 1) * every
+                next_checkpoint = self._next_checkpoint(t)
                 if clock is not None:
                     clock = RealTimeClock(t, time.time(), rt)
                 continue

@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import re
+import shutil
 import signal
-import time
 from pathlib import Path
 
+import msgpack
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from fmu_bridge import frames
 from server import checkpoints
@@ -67,6 +72,20 @@ def _kill(pattern: str) -> None:
         os.kill(pid, signal.SIGKILL)
 
 
+def _run_killing(cfg: Path, runs: Path, kills: list[tuple[str, int]], *args: str) -> tuple[int, str]:
+    """``hycosim run`` the project, SIGKILLing each named process ("node NAME" or "server") once the
+    records reach its row count; return the run's exit status and stderr."""
+    proc = spawn("run", str(cfg), "--runs-dir", str(runs), "--no-progress", *args)
+    try:
+        for who, at in kills:
+            wait_for(lambda: _rows(runs) >= at, 60, f"{at} rows")
+            _kill(f"hycosim {who} {cfg}")
+        _, err = proc.communicate(timeout=120)
+    finally:
+        reap(proc)
+    return proc.returncode, err
+
+
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory) -> bytes:
     tmp = tmp_path_factory.mktemp("reference")
@@ -77,15 +96,8 @@ def reference(tmp_path_factory) -> bytes:
 def test_a_run_whose_nodes_are_killed_records_what_a_run_never_killed_does(tmp_path, reference):
     cfg = _project(tmp_path)
     runs = tmp_path / "runs"
-    proc = spawn("run", str(cfg), "--runs-dir", str(runs), "--no-progress", "--restarts", "2")
-    try:
-        for name, at in (("rod", 150), ("g2", 450)):
-            wait_for(lambda: _rows(runs) >= at, 60, f"{at} rows")
-            _kill(f"hycosim node {name} {cfg}")
-        out, err = proc.communicate(timeout=120)
-    finally:
-        reap(proc)
-    assert proc.returncode == 0, err
+    code, err = _run_killing(cfg, runs, [("node rod", 150), ("node g2", 450)], "--restarts", "2")
+    assert code == 0, err
     run = next(runs.iterdir())
     assert (run / "values.csv").read_bytes() == reference
     m = meta(run)
@@ -100,14 +112,8 @@ def test_a_run_whose_nodes_are_killed_records_what_a_run_never_killed_does(tmp_p
 def test_a_resumed_server_goes_on_from_its_last_good_checkpoint_and_records_the_same(tmp_path, reference):
     cfg = _project(tmp_path)
     runs = tmp_path / "runs"
-    proc = spawn("run", str(cfg), "--runs-dir", str(runs), "--no-progress")
-    try:
-        wait_for(lambda: _rows(runs) >= 400, 60, "400 rows")
-        _kill(f"hycosim server {cfg}")
-        out, err = proc.communicate(timeout=60)
-    finally:
-        reap(proc)
-    assert proc.returncode == 3 and "died of SIGKILL" in err and "--resume" in err
+    code, err = _run_killing(cfg, runs, [("server", 400)])
+    assert code == 3 and "died of SIGKILL" in err and "--resume" in err
     run = next(runs.iterdir())
     newest = checkpoints.steps(run)[-1]
     state = run / "checkpoints" / str(newest) / "rod.state"
@@ -139,21 +145,15 @@ def test_a_node_that_cannot_serialise_is_named_by_validate_and_by_the_run_it_end
     res = hycosim("validate", str(cfg))
     assert res.returncode == 0 and "node 'g2' cannot take part in checkpoints" in res.stderr
     runs = tmp_path / "runs"
-    proc = spawn("run", str(cfg), "--runs-dir", str(runs), "--no-progress")
-    try:
-        wait_for(lambda: _rows(runs) >= 100, 60, "100 rows")
-        _kill(f"hycosim node rod {cfg}")
-        out, err = proc.communicate(timeout=120)
-    finally:
-        reap(proc)
-    assert proc.returncode == 3
+    code, err = _run_killing(cfg, runs, [("node rod", 100)])
+    assert code == 3
     assert "node 'rod' was" in err and "g2 cannot serialise their state" in err
     assert meta(next(runs.iterdir()))["checkpoints"] == "off: g2 cannot serialise their state"
 
 
 def test_checkpoints_are_written_whole_kept_two_deep_and_checked_when_read(tmp_path):
     server = {"step": 0, "t": 0.0, "origin": 0.0, "j": 0, "mode": "free", "disarmed": [], "outputs": {},
-              "inputs": {}, "histories": {}, "records": {}, "localised": {}}
+              "inputs": {}, "histories": {}, "records": dict.fromkeys(checkpoints.RECORD_FILES, 0), "localised": {}}
     for step in (10, 20, 30):
         checkpoints.write(tmp_path, step, {**server, "step": step}, {"a": bytes([step]) * 100}, "hash")
     assert checkpoints.steps(tmp_path) == [20, 30]
@@ -227,3 +227,69 @@ def test_the_scene_fmus_serialise_their_whole_state(tmp_path):
         finally:
             for node in made:
                 node.teardown()
+
+
+# What a hand, a full disk or a crash may leave in a checkpoint folder or a run directory.
+_json_values = st.recursive(st.none() | st.booleans() | st.integers(-3, 1 << 40) | st.floats(allow_nan=False)
+                            | st.text(max_size=12),
+                            lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=14), inner,
+                                                                                        max_size=4), max_leaves=12)
+_file_names = (st.sampled_from(["server.msgpack", "a.state", "../a.state", ".", "", "manifest.json", "\x00", "/etc/hosts"])
+               | st.text(max_size=8))
+
+
+@st.composite
+def _checkpoint_folders(draw):
+    """A plausible manifest (sizes and hashes right or not) over files of plausible or random bytes."""
+    server = draw(st.fixed_dictionaries({
+        "step": st.integers(-1, 5) | st.integers(-(2 ** 63), 2 ** 64 - 1), "t": st.floats() | st.integers(0, 2), "origin": st.floats(),
+        "j": st.integers(0, 3), "mode": st.text(max_size=5), "disarmed": st.lists(st.text(max_size=3), max_size=2),
+        "outputs": st.dictionaries(st.text(max_size=3), _json_values, max_size=2),
+        "inputs": st.dictionaries(st.text(max_size=3), _json_values, max_size=2),
+        "histories": st.dictionaries(st.text(max_size=3), _json_values, max_size=2),
+        "records": st.dictionaries(st.sampled_from(sorted(checkpoints.RECORD_FILES)) | st.text(max_size=4),
+                                   st.integers(-2, 100) | _json_values, max_size=4),
+        "localised": _json_values}) | _json_values)
+    files = {"server.msgpack": draw(st.just(msgpack.packb(server, use_bin_type=True)) | st.binary(max_size=40))}
+    files.update(draw(st.dictionaries(_file_names, st.binary(max_size=20), max_size=3)))
+    honest = draw(st.booleans())
+    manifest = {"step": draw(_json_values), "config_sha256": draw(st.sampled_from(["h", "other"])),
+                "nodes": draw(st.lists(st.sampled_from(["a", "b"]) | _json_values, max_size=3)),
+                "files": {name: {"size": len(data) if honest else draw(_json_values),
+                                 "sha256": hashlib.sha256(data).hexdigest() if honest else draw(_json_values)}
+                          for name, data in files.items()}}
+    text = draw(st.just(json.dumps(manifest)) | st.text(max_size=30) | _json_values.map(json.dumps))
+    return files, text
+
+
+@settings(suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(_checkpoint_folders())
+def test_a_checkpoint_folder_is_read_whole_or_refused_with_its_name(tmp_path, folder):
+    files, manifest = folder
+    path = tmp_path / "checkpoints" / "7"
+    shutil.rmtree(tmp_path / "checkpoints", ignore_errors=True)
+    path.mkdir(parents=True)
+    for name, data in files.items():
+        if re.fullmatch(r"[A-Za-z0-9_.\-]+", name) and name not in (".", ".."):
+            (path / name).write_bytes(data)
+    (path / checkpoints.MANIFEST).write_text(manifest)
+    try:
+        cp = checkpoints.read(path, "h")
+    except checkpoints.CheckpointError as exc:
+        assert str(path) in str(exc)
+        return
+    assert set(cp.server["records"]) == checkpoints.RECORD_FILES and 0 <= cp.step
+    assert all(type(data) is bytes for data in cp.states.values())
+
+
+@settings(suppress_health_check=[HealthCheck.function_scoped_fixture], max_examples=40)
+@given(st.text(max_size=40) | _json_values.map(json.dumps))
+def test_a_resume_reads_any_meta_json_without_a_traceback(tmp_path, meta_text):
+    from fmu_bridge.config import load_project
+    from server.main import _resume_plan
+
+    cfg = _project(tmp_path)
+    (tmp_path / "meta.json").write_text(meta_text)
+    with pytest.raises(ValueError) as exc:  # no checkpoint here: every path ends in a refusal
+        _resume_plan(load_project(cfg), tmp_path)
+    assert str(tmp_path) in str(exc.value) or "another project file" in str(exc.value)
