@@ -10,12 +10,15 @@ reference controller and a pendulum, both Python nodes; H = 10 ms), with checkpo
 * with ``--server-kills`` SIGKILLs of the server, each followed by ``hycosim run --resume``.
 
 Each must complete with a ``values.csv`` identical, byte for byte, to the reference's, one row
-per step. Then the cost of taking checkpoints: the barrier benchmark's ring (N = 2, H = 1 ms)
+per step. Then replay: the paper's scenario (rod and robot FMUs, policy, camera at 60 Hz, paced
+by the wall clock) runs once as a trial, and again with its camera played back from the trial's
+run directory: the two ``values.csv`` must be identical (the policy's ``infer_ms``, a wall-clock
+measurement, is left out of both). Then the cost of taking checkpoints: the barrier benchmark's ring (N = 2, H = 1 ms)
 with checkpoints every 1 s against the same without, interleaved rounds, medians. Recovery
 times (a node's death to the restored run) come from the run's meta.json.
 
     python benchmarks/recovery.py [--stop 60] [--node-kills 20] [--server-kills 3] [--every 1]
-                                  [--ring-steps 20000] [--repeat 3] [--json]
+                                  [--replay-stop 2.6] [--ring-steps 20000] [--repeat 3] [--json]
 """
 
 from __future__ import annotations
@@ -149,6 +152,38 @@ def server_kills(cfg: Path, runs: Path, kills: int, after: float) -> tuple[Path,
     return run, json.loads((run / "meta.json").read_text())
 
 
+def replay_trial(tmp: Path, stop: float) -> dict:
+    """A grasp trial of the paper's scenario, then the same with its camera replayed."""
+    from clients.scene_fmus import ensure_scene_fmus
+
+    fmus = ensure_scene_fmus(REPO / "build" / "fmus")
+    doc = json.loads((REPO / "configs" / "grasp-paper.json").read_text())
+    doc["serverIP"] = f"127.0.0.1:{free_port()}"
+    doc["coSimulation"]["stopTime"] = stop
+    for node in doc["nodeLists"]:
+        if node.get("fmu"):
+            node["fmu"] = str(fmus[node["nodeName"]])
+        if node["nodeName"] == "policy":
+            node["output"] = [p for p in node["output"] if (p if type(p) is str else p["name"]) != "infer_ms"]
+    trial_cfg = tmp / "trial.json"
+    trial_cfg.write_text(json.dumps(doc))
+    if (res := hycosim_run(trial_cfg, tmp / "trial-runs")).returncode:
+        raise RuntimeError(f"the trial failed: {res.stderr[-2000:]}")
+    trial = newest_run(tmp / "trial-runs")
+    for node in doc["nodeLists"]:
+        if node["nodeName"] == "camera":
+            node["replay"] = str(trial)
+    replay_cfg = tmp / "replayed.json"
+    replay_cfg.write_text(json.dumps(doc))
+    if (res := hycosim_run(replay_cfg, tmp / "replay-runs")).returncode:
+        raise RuntimeError(f"the replay failed: {res.stderr[-2000:]}")
+    again = newest_run(tmp / "replay-runs")
+    grasped = '"to": "grasp"' in (trial / "events.jsonl").read_text()
+    return {"identical": (again / "values.csv").read_bytes() == (trial / "values.csv").read_bytes(),
+            "rows": check_rows(trial / "values.csv"), "grasped": grasped,
+            "samples": len((trial / "samples.jsonl").read_text().splitlines())}
+
+
 def ring_rate(n: int, steps: int, every: float | None, tmp: Path) -> float:
     cfg = ring_config(n, steps, tmp / f"ring-{every}.json")
     doc = json.loads(cfg.read_text())
@@ -168,6 +203,7 @@ def main() -> int:
     ap.add_argument("--every", type=float, default=1.0, help="checkpointEvery, simulated seconds")
     ap.add_argument("--node-kills", type=int, default=20)
     ap.add_argument("--server-kills", type=int, default=3)
+    ap.add_argument("--replay-stop", type=float, default=2.6, help="simulated seconds of the replayed trial; 0: none")
     ap.add_argument("--ring-steps", type=int, default=20000)
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--seed", type=int, default=1)
@@ -202,6 +238,8 @@ def main() -> int:
             results["server_kills"] = {
                 "resumes": sum(1 for r in meta.get("recoveries", []) if r["node"] == "server"),
                 "identical": (run / "values.csv").read_bytes() == ref_bytes, "rows": check_rows(run / "values.csv")}
+        if args.replay_stop > 0:
+            results["replay"] = replay_trial(tmp, args.replay_stop)
         rates: dict[str, list[float]] = {"without": [], "with": []}
         for _ in range(args.repeat):
             rates["without"].append(ring_rate(2, args.ring_steps, None, tmp))
@@ -220,10 +258,14 @@ def main() -> int:
         if "server_kills" in r:
             s = r["server_kills"]
             print(f"{s['resumes']} server kills and resumes: values.csv identical: {s['identical']}")
+        if "replay" in r:
+            p = r["replay"]
+            print(f"grasp trial ({p['rows']} steps, {p['samples']} camera samples, grasped: {p['grasped']}) "
+                  f"with its camera replayed: values.csv identical: {p['identical']}")
         c = r["checkpoint_cost"]
         print(f"ring N=2, H=1 ms: {c['steps_per_s']['without']:.0f} steps/s without checkpoints, "
               f"{c['steps_per_s']['with']:.0f} with one every 1 s: ratio {c['ratio']:.3f}")
-    ok = all(results.get(k, {}).get("identical", True) for k in ("node_kills", "server_kills"))
+    ok = all(results.get(k, {}).get("identical", True) for k in ("node_kills", "server_kills", "replay"))
     return 0 if ok else 1
 
 

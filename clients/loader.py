@@ -15,6 +15,7 @@ import sys
 from collections.abc import Iterable
 from pathlib import Path
 
+from fmu_bridge.config import CoSimulation
 from fmu_bridge.config import Node as NodeSpec
 from fmu_bridge.hints import did_you_mean
 
@@ -112,11 +113,25 @@ def _check_names(spec: NodeSpec, kind: str, given: Iterable[str], declared: froz
                             + did_you_mean(unknown, declared))
 
 
-def check_node(spec: NodeSpec, project_dir: Path) -> None:
+def _player(spec: NodeSpec, project_dir: Path, cosim: CoSimulation) -> Node | AsyncSource:
+    from fmu_bridge.recordings import RecordingError
+
+    from clients.replay import player
+
+    try:
+        return player(spec, project_dir, cosim)
+    except RecordingError as exc:
+        raise NodeLoadError(f"node {spec.nodeName!r}: {exc}") from None
+
+
+def check_node(spec: NodeSpec, project_dir: Path, cosim: CoSimulation | None = None) -> None:
     """Raise NodeLoadError if the node's implementation could not be loaded as the entry says
     (without making it: no model is set up, no FMU binary loaded). A stepping node with neither
-    model nor FMU is played by a bridge FMU in some tool: nothing to load here."""
-    if spec.fmu:
+    model nor FMU is played by a bridge FMU in some tool: nothing to load here. A node that
+    replays a recording (``cosim``: the project's, whose step size it must have) needs only that."""
+    if spec.replay:
+        _player(spec, project_dir, cosim or CoSimulation())  # reads the recording whole, as the node will
+    elif spec.fmu:
         from fmu_bridge.fmu_loader import FmuError, check_fmu
 
         try:
@@ -132,8 +147,8 @@ def check_node(spec: NodeSpec, project_dir: Path) -> None:
 def why_no_checkpoint(spec: NodeSpec, project_dir: Path) -> str | None:
     """Why the node cannot take part in checkpoints (its state cannot outlive its process), or
     None if it can. The node must load (:func:`check_node`)."""
-    if spec.asynchronous:
-        return None  # a source is not rolled back: it goes on sampling
+    if spec.asynchronous or spec.replay:
+        return None  # a source is not rolled back (it goes on sampling); a player's state is its time
     if spec.fmu:
         from fmu_bridge.fmu_loader import describe
 
@@ -149,8 +164,11 @@ def why_no_checkpoint(spec: NodeSpec, project_dir: Path) -> str | None:
     return "a bridge FMU cannot serialise the state of the tool it runs in"
 
 
-def load_node(spec: NodeSpec, project_dir: Path) -> Node | AsyncSource:
-    """Instantiate the implementation named by the node's ``model`` or ``fmu``."""
+def load_node(spec: NodeSpec, project_dir: Path, cosim: CoSimulation | None = None) -> Node | AsyncSource:
+    """Instantiate the implementation named by the node's ``model`` or ``fmu``, or the player
+    of the recording its ``replay`` names."""
+    if spec.replay:
+        return _player(spec, project_dir, cosim or CoSimulation())
     if spec.fmu:
         from clients.fmu_node import FmuNode
 

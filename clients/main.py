@@ -46,7 +46,7 @@ def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
         if threading.current_thread() is threading.main_thread() else {}
     try:
         password = node_password(loaded, name, password_file)
-        impl = load_node(spec, loaded.path.parent if loaded.path else Path.cwd())
+        impl = load_node(spec, loaded.path.parent if loaded.path else Path.cwd(), loaded.project.coSimulation)
         runtime = NodeRuntime(loaded, name, impl, endpoint, password=password)
         runtime.run()
     except RunFailedElsewhere as exc:

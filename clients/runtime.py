@@ -28,6 +28,7 @@ from fmu_bridge.session import ConnectError, FramePublisher, FrameTooLarge, clie
 from fmu_bridge.sim_clock import RealTimeClock
 
 from clients.node import AsyncSource, Node, NodeContext, NodeModelError, SimulationEnded
+from clients.replay import SamplePlayer
 
 _COERCE = {
     PortType.REAL: float,
@@ -128,7 +129,10 @@ class NodeRuntime:
                     start = self._wait(self.cosim.attachTimeout + self.cosim.stepTimeout, "START")
                 except NodeRunError as exc:
                     raise NodeRunError(f"{exc}{self._other_projects(session)}") from None
-                if start.kind == frames.REPLAY:  # START again, after a link cut during the attach
+                # START again, after a link cut during the attach; or, to a process that
+                # replaces one that died, the run's START (a source) or last release (a player).
+                returning = start.kind == frames.REPLAY
+                if returning:
                     start = start.fields[1]
                 if start.kind == frames.STOP:
                     self._on_stop(start)
@@ -140,14 +144,17 @@ class NodeRuntime:
                     start = self._await_restore(start.fields[0])
                     if start is None:
                         return
-                if start.kind not in (frames.START, frames.RESTORE) or (
-                        start.kind == frames.RESTORE and isinstance(self.impl, AsyncSource)):
+                played = isinstance(self.impl, SamplePlayer)
+                if not played and (start.kind not in (frames.START, frames.RESTORE) or (
+                        start.kind == frames.RESTORE and isinstance(self.impl, AsyncSource))):
                     at = f" (step {start.fields[0]})" if start.kind == frames.STEP else ""
                     raise NodeRunError(f"node {self.name!r}: the run on {self.endpoint} was already under way{at} "
                                        "when it attached; a node joins before the run starts")
                 try:
-                    if isinstance(self.impl, AsyncSource):
-                        self._run_async(start)
+                    if played:
+                        self._run_played(start, returning)
+                    elif isinstance(self.impl, AsyncSource):
+                        self._run_async(start, returning)
                     elif start.kind == frames.RESTORE:
                         self._run_stepping(bool(start.fields[6].get("checkpoint")), restore=start)
                     else:
@@ -488,10 +495,10 @@ class NodeRuntime:
         if reason not in frames.CLEAN_STOPS:  # the reason names the step where it matters
             raise RunFailedElsewhere(f"node {self.name!r}: the server stopped the run: {reason}")
 
-    def _run_async(self, start: frames.Frame) -> None:
+    def _run_async(self, start: frames.Frame, restart: bool) -> None:
         impl = self.impl
         assert isinstance(impl, AsyncSource)
-        self._send(self._hello(False))
+        self._send(self._hello(False, restart=restart))
         _, t0, _, wall0, rt, _ = start.fields
         clock = RealTimeClock(t0, wall0, rt) if rt else None
         sim_now, seq = t0, 0
@@ -517,3 +524,40 @@ class NodeRuntime:
             if frame is not None and frame.kind == frames.STOP:
                 self._on_stop(frame)
                 return
+
+    def _run_played(self, frame: frames.Frame, restart: bool) -> None:
+        """An asynchronous node played from a recording, paced by the releases: before the server
+        gathers point k it gets every sample the recorded server had first had at k, then
+        OUTPUTS for k, the word that they are all sent (it waits for that as for a stepping
+        node's outputs). A release seen again (a located event's retry, a replay after a link
+        cut) sends no sample twice; a restore goes on from its point."""
+        impl = self.impl
+        assert isinstance(impl, SamplePlayer)
+        self._send(self._hello(False, restart=restart))
+        held = self._pack_outputs({p.name: p.start_value() for p in self.spec.output})  # the server ignores them
+        # The last point whose samples are sent: by the process this one replaces, if any.
+        sent = frame.fields[0] if restart and frame.kind == frames.STEP else -1
+        seq, silence = 0, self.cosim.stepTimeout + 30.0
+        while True:
+            if frame.kind == frames.STOP:
+                self._on_stop(frame)
+                return
+            if frame.kind == frames.REPLAY:
+                frame = frame.fields[1]
+            point: int | None = None
+            if frame.kind == frames.START and sent < 0:
+                point, t = 0, frame.fields[1]
+            elif frame.kind == frames.STEP:
+                point, t = frame.fields[0] + 1, frame.fields[1] + frame.fields[2]
+            elif frame.kind == frames.RESTORE:
+                point, t = frame.fields[1], frame.fields[2]
+                sent = point  # the server's restored histories hold what came before
+            if point is not None:  # not a CHECKPOINT, ROLLBACK or the START a resume sends again
+                for sample in impl.due(sent, point):
+                    self._send(frames.encode(frames.SAMPLE, self.spec.UID, seq, sample.t,
+                                             self._pack_outputs(impl.values(sample))))
+                    seq += 1
+                sent = max(sent, point)
+                self._send(frames.encode(frames.OUTPUTS, self.spec.UID, point, t, held))
+                self.steps = point
+            frame = self._wait(silence, "release")

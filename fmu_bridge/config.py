@@ -100,6 +100,9 @@ class Node(_Strict):
     # Asynchronous sources publish timestamped samples instead of stepping.
     asynchronous: bool = Field(default=False, alias="async")
     rate: float | None = Field(default=None, gt=0)
+    # A run directory (relative to the project JSON): the node plays back what this node
+    # recorded there instead of running its model or FMU (kept in the entry, to go back to).
+    replay: str | None = Field(default=None, min_length=1)
 
     @field_validator("input", "output", mode="before")
     @classmethod
@@ -241,6 +244,11 @@ class Project(_Strict):
 
     def async_nodes(self) -> list[Node]:
         return [n for n in self.nodeLists if n.asynchronous]
+
+    def paced_nodes(self) -> list[Node]:
+        """Asynchronous nodes played back from a recording: each sends the samples the recorded
+        run had received by a macro-step point before that point, so the barrier waits for it."""
+        return [n for n in self.nodeLists if n.asynchronous and n.replay]
 
     def polls_before_blocking(self, cpus: int | None) -> bool:
         """Whether a hycosim process on a machine with ``cpus`` cores polls before it blocks."""

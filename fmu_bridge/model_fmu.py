@@ -11,6 +11,9 @@ writes no InitialUnknowns unless outputs are registered with ``initial=exact``.
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 from pathlib import Path
 
 
@@ -31,19 +34,29 @@ def build_model_fmu(script: Path, dest: Path, *, resources: list[Path] | None = 
     script = Path(script)
     if not script.is_file():
         raise ModelFmuError(f"{script}: no such model script")
+    module, flag = ("pythonfmu3", "FMUState") if fmi_version.startswith("3") else ("pythonfmu", "FMUstate")
+    job = {"script": str(script.resolve()), "dest": str(Path(dest).resolve()),
+           "resources": [str(Path(r).resolve()) for r in resources or []],
+           "flags": {f"canGetAndSet{flag}": can_get_and_set_state, f"canSerialize{flag}": can_get_and_set_state}}
+    # In a fresh interpreter: a process that has loaded a pythonfmu FMU has imported the copy of
+    # pythonfmu inside that FMU's resources, which lacks the binaries the builder packs, and
+    # would build FMUs without them.
     try:
-        if fmi_version.startswith("3"):
-            from pythonfmu3 import FmuBuilder
-
-            path = FmuBuilder.build_FMU(script, dest=dest, project_files=resources or [],
-                                        canGetAndSetFMUState=can_get_and_set_state,
-                                        canSerializeFMUState=can_get_and_set_state)
-        else:
-            from pythonfmu import FmuBuilder
-
-            path = FmuBuilder.build_FMU(script, dest=dest, project_files=resources or [],
-                                        canGetAndSetFMUstate=can_get_and_set_state,
-                                        canSerializeFMUstate=can_get_and_set_state)
-    except Exception as exc:
+        res = subprocess.run([sys.executable, "-P", "-c", _BUILD.format(module=module), json.dumps(job)],
+                             capture_output=True, text=True, timeout=600)
+    except (OSError, subprocess.TimeoutExpired) as exc:
         raise ModelFmuError(f"{script}: packaging as FMI {fmi_version} failed: {exc}") from None
-    return Path(path)
+    if res.returncode:
+        why = (res.stderr.strip().splitlines() or ["no message"])[-1]
+        raise ModelFmuError(f"{script}: packaging as FMI {fmi_version} failed: {why}")
+    return Path(res.stdout.strip().splitlines()[-1])
+
+
+_BUILD = """
+import json, sys
+from pathlib import Path
+from {module} import FmuBuilder
+job = json.loads(sys.argv[1])
+print(FmuBuilder.build_FMU(Path(job["script"]), dest=job["dest"], project_files=[Path(p) for p in job["resources"]],
+                           **job["flags"]))
+"""

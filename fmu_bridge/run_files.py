@@ -28,7 +28,7 @@ class MissingColumns(RunFileError):
         self.columns = columns
 
 
-def _finished_lines(path: Path) -> Iterator[str]:
+def finished_lines(path: Path) -> Iterator[str]:
     """The file's lines, newline kept, one at a time; a last line without one (torn) is left out."""
     try:
         f = open(path, newline="")  # noqa: SIM115 - closed below, also when the reader stops early
@@ -53,7 +53,7 @@ def iter_csv_rows(path: Path, numeric: Callable[[str], bool] | None = None,
     naming the file, the line and the column.
     """
     required = tuple(required)
-    reader = csv.DictReader(_finished_lines(path))
+    reader = csv.DictReader(finished_lines(path))
     try:
         header = reader.fieldnames or []
         missing = [c for c in required if c not in header]
@@ -95,7 +95,7 @@ def read_jsonl(path: Path) -> list[dict[str, Any]]:
     if not path.exists():
         return []
     records = []
-    for number, line in enumerate(_finished_lines(path), start=1):
+    for number, line in enumerate(finished_lines(path), start=1):
         if not line.strip():
             continue
         try:

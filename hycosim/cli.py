@@ -79,7 +79,7 @@ def validate(
         problems = []
         for i, node in enumerate(p.nodeLists):
             try:
-                check_node(node, loaded.path.parent)
+                check_node(node, loaded.path.parent, p.coSimulation)
             except NodeLoadError as exc:
                 problems.append(f"{file}: nodeLists[{i}]: {exc}")
         if problems:
@@ -97,7 +97,7 @@ def validate(
         for name, why in unable:
             err.print(f"[yellow]warning:[/yellow] coSimulation.checkpointEvery: node {name!r} cannot take part in "
                       f"checkpoints: {why}; the run takes none, and a lost node ends it", highlight=False)
-    bridged = [n.nodeName for n in p.nodeLists if not n.model and not n.fmu and not n.asynchronous]
+    bridged = [n.nodeName for n in p.nodeLists if not (n.model or n.fmu or n.replay or n.asynchronous)]
     if bridged:
         out.print(f"{len(bridged)} node(s) wait for a bridge FMU in some tool: {', '.join(bridged)} "
                   f"(build them with: hycosim fmu build {file} -o fmus)", highlight=False)

@@ -32,7 +32,7 @@ MANIFEST = "manifest.json"
 # What a file of a checkpoint may be called (node names are of this kind): no path, no NUL.
 _FILE_NAME = re.compile(r"[A-Za-z0-9_.\-]+")
 # The record files whose ends a checkpoint holds (server.recorder's).
-RECORD_FILES = {"values.csv", "timing.csv", "events.jsonl"}
+RECORD_FILES = {"values.csv", "timing.csv", "events.jsonl", "samples.jsonl"}
 
 # The server's state: each key and the type it must have when read back.
 _SERVER_KEYS = {"step": int, "t": float, "origin": float, "j": int, "mode": str, "disarmed": list,

@@ -83,7 +83,8 @@ class Intake:
                 raise Dropped("wrong kind", f"{node} is asynchronous: it does not end a run")
             return frame
         values = frame.fields[3]
-        if (frame.kind == frames.SAMPLE) != spec.asynchronous:
+        # A played asynchronous node also sends OUTPUTS: its word that a point's samples are all sent.
+        if (frame.kind == frames.SAMPLE) != spec.asynchronous and not (spec.replay and spec.asynchronous):
             raise Dropped("wrong kind", f"{node} is {'' if spec.asynchronous else 'not '}asynchronous")
         ports = self._types[node]
         if len(values) != len(ports):

@@ -1,4 +1,5 @@
-"""The run directory: every routed value at every macro step, events, timing, metadata.
+"""The run directory: every routed value at every macro step, events, timing, every
+asynchronous sample as received (``samples.jsonl``, which a replay plays back), metadata.
 
 Rows are written as each macro step completes and flushed at least every 0.1 s of wall
 time (a flush per step costs the barrier about a tenth of its rate), and always on close,
@@ -23,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from fmu_bridge.config import LoadedProject, PortType
+from fmu_bridge.recordings import SAMPLES_FILE, encode_sample
 
 
 FLUSH_EVERY_S = 0.1
@@ -135,6 +137,7 @@ class Recorder:
             self._values_file = _RecordFile(run_dir / "values.csv", at.get("values.csv"))
             self._timing_file = _RecordFile(run_dir / "timing.csv", at.get("timing.csv"))
             self._events_file = _RecordFile(run_dir / "events.jsonl", at.get("events.jsonl"))
+            self._samples_file = _RecordFile(run_dir / SAMPLES_FILE, at.get(SAMPLES_FILE))
         except OSError as exc:
             raise RecordError(f"cannot open the run's records in {run_dir}: {exc.strerror or exc}") from None
         self._values = csv.writer(self._values_file.buffer)
@@ -154,7 +157,7 @@ class Recorder:
             self.meta.update(status="running")
         self.write_meta()
         self._files = {"values.csv": self._values_file, "timing.csv": self._timing_file,
-                       "events.jsonl": self._events_file}
+                       "events.jsonl": self._events_file, SAMPLES_FILE: self._samples_file}
 
     def row(self, step: int, t: float, mode: str, outputs: dict[str, list[Any]], inputs: dict[str, list[Any]]) -> None:
         cells: list[Any] = [step, repr(t), mode]
@@ -164,6 +167,11 @@ class Recorder:
             cells.extend(inputs[n] if self._plain_in[n] else map(_cell, inputs[n]))
         self._values.writerow(cells)
         self.meta["steps"] = step + 1
+
+    def sample(self, node: str, point: int, t: float, values: list[Any]) -> None:
+        """A sample of asynchronous ``node`` received while point ``point`` was gathered (written
+        with the next flush: a camera's samples cost the barrier no write of their own)."""
+        self._samples_file.buffer.write(encode_sample(node, point, t, values))
 
     def timing(self, step: int, t: float, wait_s: float, holder: str, lateness_s: float | None,
                arrivals: dict[str, float], ages: dict[str, float | None]) -> None:

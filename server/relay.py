@@ -97,6 +97,9 @@ class Relay:
         self.router = Router(loaded)
         self.intake = Intake(self.project.nodeLists)
         self.stepping = [n.nodeName for n in self.project.stepping_nodes()]
+        # Asynchronous nodes played from a recording take part in the barrier: each point waits
+        # for the samples the recorded run had by then, so that a replay gives the same values.
+        self.paced = [n.nodeName for n in self.project.paced_nodes()]
         self._names = {n.nodeName for n in self.project.nodeLists}
         self.histories = {n.nodeName: SampleHistory([p.start_value() for p in n.output])
                           for n in self.project.async_nodes()}
@@ -267,8 +270,10 @@ class Relay:
                 if node in self.lost:
                     del self.lost[node]
                     self.reattached[node] = self.reattached.get(node, 0) + 1
-                    # An asynchronous source that restarted needs the run's START (its clock).
-                    last = self._start_frame if self.project.node(node).asynchronous else self._last_release
+                    # An asynchronous source that restarted needs the run's START (its clock);
+                    # the others, a played one included, the last release.
+                    last = (self._start_frame if self.project.node(node).asynchronous and node not in self.paced
+                            else self._last_release)
                     if last is not None:
                         try:
                             self.release.put(frames.encode(frames.REPLAY, node, last))
@@ -296,6 +301,8 @@ class Relay:
         if frame.kind == frames.SAMPLE:
             _, _, t, values = frame.fields
             self.histories[node].add(float(t), values)
+            # Received while point ``step`` is gathered: usable from that point on.
+            self.recorder.sample(node, max(step, 0), float(t), values)
             return None
         if frame.kind == frames.STATE:
             self._on_state(node, frame, step)
@@ -332,8 +339,8 @@ class Relay:
         """A node's new process said HELLO mid-run: go back to the last checkpoint, or say why not."""
         at = f"at step {step} (t={self._time(step):g} s)"
         if self.project.node(node).asynchronous and self._checkpoints:
-            self.recoveries.append({"node": node, "step": step, "t": self._time(step), "cause": "restarted",
-                                    "restored": None, "at": time.time()})
+            self._note_recovery({"node": node, "step": step, "t": self._time(step), "cause": "restarted",
+                                 "restored": None, "at": time.time()})
             self._log.warning("asynchronous node restarted", node=node, step=step)
             return
         if not self._checkpoints:
@@ -437,17 +444,23 @@ class Relay:
                 self._restoring = False
             break
         restored = self._apply(cp)
-        self.recoveries.append({"node": cause.node, "step": cause.step, "t": self._time(cause.step),
-                                "cause": cause.cause, "restored": cp.step, "restored_t": cp.server["t"],
-                                "seconds": round(time.monotonic() - self._went.get(cause.node, began), 3),
-                                "at": time.time()})
-        earlier = self.recorder.meta.get("recoveries")  # a resumed run's, from its meta.json
-        self.recorder.meta["recoveries"] = (earlier if type(earlier) is list else []) + [self.recoveries[-1]]
-        self.recorder.write_meta()
+        self._note_recovery({"node": cause.node, "step": cause.step, "t": self._time(cause.step),
+                             "cause": cause.cause, "restored": cp.step, "restored_t": cp.server["t"],
+                             "seconds": round(time.monotonic() - self._went.get(cause.node, began), 3),
+                             "at": time.time()})
         return restored, arrivals, wait
+
+    def _note_recovery(self, entry: dict[str, Any]) -> None:
+        """A restart or resume, in the metadata at once (the run may yet die)."""
+        self.recoveries.append(entry)
+        earlier = self.recorder.meta.get("recoveries")  # a resumed run's, from its meta.json
+        self.recorder.meta["recoveries"] = (earlier if type(earlier) is list else []) + [entry]
+        self.recorder.write_meta()
 
     def _send_restore(self, cp: checkpoints.Checkpoint) -> None:
         options = {"checkpoint": self.cosim.eventTolerance is not None}
+        for node in self.paced:  # no state: a played source goes on from the checkpoint's point
+            self.release.put(frames.encode(frames.RESTORE, node, cp.step, cp.server["t"], 0, 1, b"", options))
         for node in self.stepping:
             if node not in cp.states:
                 raise RunError(f"checkpoint {cp.path} holds no state of node {node!r}")
@@ -475,12 +488,13 @@ class Relay:
         for node in self.outputs:
             self.outputs[node] = list(s["outputs"][node])
             self.router.inputs[node][:] = s["inputs"][node]
+        self.recorder.cut(s["records"], steps=s["step"])
         for node, history in self.histories.items():
             newer = [(t, v) for t, v in history.snapshot()["samples"]]
             history.restore(s["histories"].get(node, {"samples": [], "received": 0}))
             for t, v in newer:  # samples taken since keep their place: a source is not rolled back
-                history.add(t, v)
-        self.recorder.cut(s["records"], steps=s["step"])
+                if history.add(t, v):
+                    self.recorder.sample(node, s["step"], t, v)  # as if received again at the checkpoint
         return s
 
     def _check_ports(self, node: str, theirs: Any) -> None:
@@ -505,8 +519,9 @@ class Relay:
         return self.cosim.startTime + max(step, 0) * self.cosim.stepSize
 
     def _collect(self, step: int, released_at: float) -> dict[str, float]:
-        """Gather every stepping node's outputs for ``step``; return arrival offsets (s)."""
-        pending = set(self.stepping)
+        """Gather every stepping node's outputs for ``step`` (and a played source's word that its
+        samples for ``step`` are sent); return arrival offsets (s)."""
+        pending = set(self.stepping) | set(self.paced)
         arrivals: dict[str, float] = {}
         deadline = time.monotonic() + self.cosim.stepTimeout
         grace = self._grace()
@@ -544,9 +559,9 @@ class Relay:
             if node not in pending:
                 self.intake.drop("duplicate", f"{node} sent step {step} twice", step, node)
                 continue
-            values = frame.fields[3]
             pending.discard(node)
-            self.outputs[node] = values
+            if node not in self.histories:  # a played source's values are its samples'
+                self.outputs[node] = frame.fields[3]
             arrivals[node] = time.perf_counter() - released_at
         return arrivals
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -85,3 +86,45 @@ def wait_for(predicate, timeout: float, what: str) -> None:
             return
         time.sleep(0.05)
     raise AssertionError(f"timed out waiting for {what}")
+
+
+def pids(pattern: str) -> list[int]:
+    found = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                cmd = Path(f"/proc/{entry}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+            except OSError:
+                continue
+            if pattern in cmd:
+                found.append(int(entry))
+    return found
+
+
+def recorded_rows(runs: Path) -> int:
+    try:
+        run = next(runs.iterdir())
+        return max(len((run / "values.csv").read_bytes().splitlines()) - 1, 0)
+    except (StopIteration, OSError):
+        return 0
+
+
+def kill_process(pattern: str) -> None:
+    found = pids(pattern)
+    assert found, f"no process {pattern!r}"
+    for pid in found:
+        os.kill(pid, signal.SIGKILL)
+
+
+def run_killing(cfg: Path, runs: Path, kills: list[tuple[str, int]], *args: str) -> tuple[int, str]:
+    """``hycosim run`` the project, SIGKILLing each named process ("node NAME" or "server") once the
+    records reach its row count; return the run's exit status and stderr."""
+    proc = spawn("run", str(cfg), "--runs-dir", str(runs), "--no-progress", *args)
+    try:
+        for who, at in kills:
+            wait_for(lambda: recorded_rows(runs) >= at, 60, f"{at} rows")
+            kill_process(f"hycosim {who} {cfg}")
+        _, err = proc.communicate(timeout=120)
+    finally:
+        reap(proc)
+    return proc.returncode, err

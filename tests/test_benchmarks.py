@@ -124,7 +124,8 @@ def test_fuzz_benchmark_reports_an_unharmed_run_at_a_small_scale():
 
 def test_recovery_benchmark_reports_identical_records_at_a_small_scale():
     res = subprocess.run([sys.executable, "benchmarks/recovery.py", "--stop", "10", "--every", "0.5", "--node-kills", "2",
-                          "--server-kills", "1", "--ring-steps", "2000", "--repeat", "1", "--json"],
+                          "--server-kills", "1", "--replay-stop", "0", "--ring-steps", "2000", "--repeat", "1",
+                          "--json"],
                          capture_output=True, text=True, timeout=400, cwd=REPO, env=env())
     assert res.returncode == 0, res.stderr
     r = json.loads(res.stdout)
@@ -135,3 +136,4 @@ def test_recovery_benchmark_reports_identical_records_at_a_small_scale():
     assert 0 < kills["recovery_s"]["max"] < 30
     assert r["server_kills"] == {"resumes": 1, "identical": True, "rows": 1001}
     assert r["checkpoint_cost"]["ratio"] > 0
+    assert "replay" not in r  # tests/test_replay.py runs the replayed trial

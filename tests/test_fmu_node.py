@@ -188,6 +188,25 @@ def test_missing_fmu_file_and_bad_parameter(tmp_path, fmus):
 def test_model_fmu_helper_errors_name_the_script(tmp_path):
     with pytest.raises(ModelFmuError, match="no such model script"):
         build_model_fmu(tmp_path / "missing.py", tmp_path)
+    broken = tmp_path / "broken.py"
+    broken.write_text("def (:\n")
+    with pytest.raises(ModelFmuError, match=f"{broken}: packaging as FMI 2.0 failed: .*SyntaxError"):
+        build_model_fmu(broken, tmp_path)
+
+
+def test_a_process_that_loaded_a_model_fmu_still_builds_whole_ones(tmp_path, fmus):
+    """A pythonfmu FMU loaded in-process imports the copy of pythonfmu in its resources (no
+    binaries there): FMUs built afterwards in that process must still carry their binaries."""
+    import sys
+    import zipfile
+
+    instance = _instance(tmp_path, fmus["gain"], _gain_node(fmus["gain"]))
+    try:
+        assert "resources" in sys.modules["pythonfmu"].__file__  # the FMU's own copy is the one imported
+        built = build_model_fmu(MODELS / "gain_model.py", tmp_path / "again")
+    finally:
+        instance.close()
+    assert "binaries/linux64/GainModel.so" in zipfile.ZipFile(built).namelist()
 
 
 def test_inspect_lists_capabilities_variables_and_mapping(tmp_path, fmus):

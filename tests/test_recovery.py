@@ -4,10 +4,8 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import re
 import shutil
-import signal
 from pathlib import Path
 
 import msgpack
@@ -17,7 +15,7 @@ from hypothesis import strategies as st
 
 from fmu_bridge import frames
 from server import checkpoints
-from tests.helpers import REPO, hycosim, meta, run_project, spawn, reap, wait_for, write_project
+from tests.helpers import REPO, hycosim, meta, run_killing, run_project, write_project
 
 from clients.node import NodeContext
 
@@ -44,48 +42,6 @@ def _project(tmp_path: Path, every: float | None = 0.5, clock: bool = False) -> 
     return write_project(tmp_path / "p.json", nodes, links, cosim=cosim, name="rec")
 
 
-def _pids(pattern: str) -> list[int]:
-    found = []
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                cmd = Path(f"/proc/{entry}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-            except OSError:
-                continue
-            if pattern in cmd:
-                found.append(int(entry))
-    return found
-
-
-def _rows(runs: Path) -> int:
-    try:
-        run = next(runs.iterdir())
-        return max(len((run / "values.csv").read_bytes().splitlines()) - 1, 0)
-    except (StopIteration, OSError):
-        return 0
-
-
-def _kill(pattern: str) -> None:
-    pids = _pids(pattern)
-    assert pids, f"no process {pattern!r}"
-    for pid in pids:
-        os.kill(pid, signal.SIGKILL)
-
-
-def _run_killing(cfg: Path, runs: Path, kills: list[tuple[str, int]], *args: str) -> tuple[int, str]:
-    """``hycosim run`` the project, SIGKILLing each named process ("node NAME" or "server") once the
-    records reach its row count; return the run's exit status and stderr."""
-    proc = spawn("run", str(cfg), "--runs-dir", str(runs), "--no-progress", *args)
-    try:
-        for who, at in kills:
-            wait_for(lambda: _rows(runs) >= at, 60, f"{at} rows")
-            _kill(f"hycosim {who} {cfg}")
-        _, err = proc.communicate(timeout=120)
-    finally:
-        reap(proc)
-    return proc.returncode, err
-
-
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory) -> bytes:
     tmp = tmp_path_factory.mktemp("reference")
@@ -96,7 +52,7 @@ def reference(tmp_path_factory) -> bytes:
 def test_a_run_whose_nodes_are_killed_records_what_a_run_never_killed_does(tmp_path, reference):
     cfg = _project(tmp_path)
     runs = tmp_path / "runs"
-    code, err = _run_killing(cfg, runs, [("node rod", 150), ("node g2", 450)], "--restarts", "2")
+    code, err = run_killing(cfg, runs, [("node rod", 150), ("node g2", 450)], "--restarts", "2")
     assert code == 0, err
     run = next(runs.iterdir())
     assert (run / "values.csv").read_bytes() == reference
@@ -112,7 +68,7 @@ def test_a_run_whose_nodes_are_killed_records_what_a_run_never_killed_does(tmp_p
 def test_a_resumed_server_goes_on_from_its_last_good_checkpoint_and_records_the_same(tmp_path, reference):
     cfg = _project(tmp_path)
     runs = tmp_path / "runs"
-    code, err = _run_killing(cfg, runs, [("server", 400)])
+    code, err = run_killing(cfg, runs, [("server", 400)])
     assert code == 3 and "died of SIGKILL" in err and "--resume" in err
     run = next(runs.iterdir())
     newest = checkpoints.steps(run)[-1]
@@ -145,7 +101,7 @@ def test_a_node_that_cannot_serialise_is_named_by_validate_and_by_the_run_it_end
     res = hycosim("validate", str(cfg))
     assert res.returncode == 0 and "node 'g2' cannot take part in checkpoints" in res.stderr
     runs = tmp_path / "runs"
-    code, err = _run_killing(cfg, runs, [("node rod", 100)])
+    code, err = run_killing(cfg, runs, [("node rod", 100)])
     assert code == 3
     assert "node 'rod' was" in err and "g2 cannot serialise their state" in err
     assert meta(next(runs.iterdir()))["checkpoints"] == "off: g2 cannot serialise their state"
