@@ -1,4 +1,5 @@
-"""A node played by any FMI co-simulation FMU, through fmpy."""
+"""A node played by any FMI 2.0 or 3.0 FMU, through fmpy: co-simulation, or Model Exchange
+integrated by the node (fmu_bridge.fmu_me)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from fmu_bridge.config import Node as NodeSpec
-from fmu_bridge.fmu_loader import FmuError, FmuInstance, FmuTerminated
+from fmu_bridge.fmu_loader import FmuError, FmuInstance, FmuTerminated, open_fmu
 
 from clients.node import Node, NodeContext, NodeModelError, SimulationEnded
 
@@ -26,7 +27,8 @@ def _node_errors() -> Iterator[None]:
 
 class FmuNode(Node):
     """Ports map to FMU variables by name (a port's ``variable`` renames); node parameters
-    and input start values are set before initialisation; one doStep per macro step.
+    and input start values are set before initialisation; one doStep per macro step (a Model
+    Exchange FMU: its integration over the step).
 
     The driven flag has no FMI call: an FMU that can be driven names an input for it in
     the node's ``drivenVariable``, which set_mode sets before the next doStep.
@@ -40,7 +42,7 @@ class FmuNode(Node):
 
     def setup(self, ctx: NodeContext) -> None:
         with _node_errors():
-            self.fmu = FmuInstance(self.path, self.spec, dict(ctx.parameters))
+            self.fmu = open_fmu(self.path, self.spec, dict(ctx.parameters), ctx.stop_time)
             self.fmu.initialize(ctx.start_time)
 
     @property

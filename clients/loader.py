@@ -150,9 +150,9 @@ def why_no_checkpoint(spec: NodeSpec, project_dir: Path) -> str | None:
     if spec.asynchronous or spec.replay:
         return None  # a source is not rolled back (it goes on sampling); a player's state is its time
     if spec.fmu:
-        from fmu_bridge.fmu_loader import describe
+        from fmu_bridge.fmu_loader import check_fmu
 
-        cs = describe(_fmu_path(spec, project_dir)).coSimulation
+        cs = check_fmu(_fmu_path(spec, project_dir), spec).capabilities
         if not (getattr(cs, "canGetAndSetFMUstate", False) and getattr(cs, "canSerializeFMUstate", False)):
             return "its FMU does not declare canGetAndSetFMUstate and canSerializeFMUstate"
         return None

@@ -48,6 +48,8 @@ class NodeContext:
     # Wall seconds per simulated second in a real-time run (coSimulation.realTime); None: the
     # run goes as fast as it can, and simulated time has nothing to do with the wall clock.
     real_time: float | None = None
+    # Where the run ends (coSimulation.stopTime), for a model that sizes something by it.
+    stop_time: float | None = None
 
     def parameter(self, key: str, default: Any) -> Any:
         return self.parameters.get(key, default)

@@ -76,7 +76,7 @@ class NodeRuntime:
         project_dir = self.loaded.path.parent if self.loaded.path else None
         return NodeContext(self.name, self.spec.UID, list(self.spec.input), list(self.spec.output), params,
                            self.cosim.stepSize, self.cosim.startTime, **({"project_dir": project_dir} if project_dir else {}),
-                           real_time=self.cosim.real_time_factor())
+                           real_time=self.cosim.real_time_factor(), stop_time=self.cosim.stopTime)
 
     def _pack_outputs(self, values: dict[str, Any]) -> list[Any]:
         packed = []

@@ -100,6 +100,12 @@ class Node(_Strict):
     # Asynchronous sources publish timestamped samples instead of stepping.
     asynchronous: bool = Field(default=False, alias="async")
     rate: float | None = Field(default=None, gt=0)
+    # FMU nodes: which interface of an FMU that has both ("CoSimulation" unless said), and for
+    # Model Exchange how the node integrates it over each macro step.
+    interface: Literal["CoSimulation", "ModelExchange"] | None = None
+    solver: Literal["CVode", "Euler"] | None = None
+    relativeTolerance: float | None = Field(default=None, gt=0, lt=1)
+    maxStep: float | None = Field(default=None, gt=0)
     # A run directory (relative to the project JSON): the node plays back what this node
     # recorded there instead of running its model or FMU (kept in the entry, to go back to).
     replay: str | None = Field(default=None, min_length=1)
@@ -496,6 +502,15 @@ def check_semantics(project: Project) -> tuple[list[Route], dict[str, EventGuard
                 seen_ports.add(p.name)
         if n.model and n.fmu:
             issues.append(Issue(f"nodeLists[{i}]", f"node {n.nodeName!r} names both 'model' and 'fmu'", "keep one"))
+        solver_keys = [k for k in ("solver", "relativeTolerance", "maxStep") if getattr(n, k) is not None]
+        if (n.interface or solver_keys) and not n.fmu:
+            issues.append(Issue(f"nodeLists[{i}]", f"node {n.nodeName!r} names "
+                                f"{', '.join(['interface'] * bool(n.interface) + solver_keys)} but no 'fmu'",
+                                "they choose how an FMU node runs"))
+        elif solver_keys and n.interface == "CoSimulation":
+            issues.append(Issue(f"nodeLists[{i}].interface", f"node {n.nodeName!r} runs its FMU as co-simulation, "
+                                f"which integrates itself: {', '.join(solver_keys)} would do nothing",
+                                'set "interface": "ModelExchange", or leave them out'))
         if n.drivenVariable is not None and not n.fmu:
             issues.append(Issue(f"nodeLists[{i}].drivenVariable", f"node {n.nodeName!r} is not an FMU node",
                                 "a Python node is told it is driven through set_mode; a bridge FMU through "

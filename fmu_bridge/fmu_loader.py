@@ -1,9 +1,10 @@
-"""Loading a co-simulation FMU with fmpy and mapping a node's ports onto its variables.
+"""Loading an FMU with fmpy and mapping a node's ports onto its variables.
 
 One class, :class:`FmuInstance`, one method per thing the node runtime needs (set
 inputs, step, get outputs, save and restore state), each a thin call into fmpy's FMI 2.0
-or 3.0 slave. Every failure is an :class:`FmuError` that names the node and, where there
-is one, the variable.
+or 3.0 slave; a Model Exchange FMU is the same with an integrator inside its step
+(:mod:`fmu_bridge.fmu_me`). :func:`open_fmu` makes the one the node entry asks for. Every
+failure is an :class:`FmuError` that names the node and, where there is one, the variable.
 """
 
 from __future__ import annotations
@@ -69,15 +70,40 @@ def describe(path: Path) -> ModelDescription:
         raise FmuError(f"{path}: not a readable FMU ({exc})") from None
 
 
+CO_SIMULATION, MODEL_EXCHANGE = "CoSimulation", "ModelExchange"
+
+
+def interface_of(md: ModelDescription, node: Node, path: Path) -> str:
+    """The interface the node runs its FMU through: the one its entry names, else co-simulation
+    when the FMU has it, else Model Exchange; FmuError if the FMU lacks it, or if the entry
+    sets an integrator (solver, relativeTolerance, maxStep) for an FMU that runs as co-simulation."""
+    name = node.nodeName
+    if node.interface == MODEL_EXCHANGE:
+        if md.modelExchange is None:
+            raise FmuError(f"node {name!r}: {path.name} has no Model Exchange interface (co-simulation only); "
+                           'leave out "interface"')
+        return MODEL_EXCHANGE
+    if node.interface == CO_SIMULATION or md.coSimulation is not None:
+        if md.coSimulation is None:
+            raise FmuError(f"node {name!r}: {path.name} has no co-simulation interface (Model Exchange only); "
+                           'leave out "interface" and hycosim integrates it')
+        given = [k for k in ("solver", "relativeTolerance", "maxStep") if getattr(node, k) is not None]
+        if given and node.interface is None:
+            raise FmuError(f"node {name!r}: {', '.join(given)} set, but {path.name} has a co-simulation interface, "
+                           'which the node uses unless told: add "interface": "ModelExchange"')
+        return CO_SIMULATION
+    if md.modelExchange is None:
+        raise FmuError(f"node {name!r}: {path.name} has neither a co-simulation nor a Model Exchange interface")
+    return MODEL_EXCHANGE
+
+
 def check_platform(path: Path, md: ModelDescription, node: str) -> None:
-    """Raise FmuError unless the FMU is FMI 2.0 or 3.0 with co-simulation and a binary for this platform."""
+    """Raise FmuError unless the FMU is FMI 2.0 or 3.0 with a binary for this platform."""
     if not md.fmiVersion.startswith(("2", "3")):
         # FMI 1.0 names every C function differently (fmiDoStep, no fmi2 prefix): refused here
         # rather than failing on a missing symbol when the binary loads.
         raise FmuError(f"node {node!r}: {path.name} is an FMI {md.fmiVersion} FMU; hycosim runs FMI 2.0 and 3.0 "
-                       "co-simulation FMUs (export it again as FMI 2.0 or 3.0)")
-    if md.coSimulation is None:
-        raise FmuError(f"node {node!r}: {path.name} has no co-simulation interface (model exchange only)")
+                       "FMUs (export it again as FMI 2.0 or 3.0)")
     platforms = fmpy.supported_platforms(str(path))
     want = fmpy.platform_tuple if md.fmiVersion.startswith("3") else fmpy.platform
     if want not in platforms and not (md.fmiVersion.startswith("3") and fmpy.platform in platforms):
@@ -176,32 +202,50 @@ class FmuMapping:
     inputs: list[MappedPort]
     outputs: list[MappedPort]
     driven: ScalarVariable | None
+    interface: str = CO_SIMULATION
+
+    @property
+    def capabilities(self) -> Any:
+        """The model description's element of the interface used (its capability flags)."""
+        return self.md.coSimulation if self.interface == CO_SIMULATION else self.md.modelExchange
 
 
 def check_fmu(path: Path, node: Node, parameters: dict[str, Any] | None = None) -> FmuMapping:
     """Everything checked before an FMU's binary loads: the FMU is readable, FMI 2.0 or 3.0
-    co-simulation with a binary for this platform, and the node's ports, drivenVariable and
-    parameters (``parameters``, default the node's) map onto its variables. Nothing is
-    extracted or instantiated."""
+    with the interface the node uses (:func:`interface_of`) and a binary for this platform,
+    and the node's ports, drivenVariable and parameters (``parameters``, default the node's)
+    map onto its variables. Nothing is extracted or instantiated."""
     md = describe(path)
     check_platform(path, md, node.nodeName)
+    interface = interface_of(md, node, path)
     inputs, outputs = map_ports(md, node, path)
     driven = map_driven(md, node, path)
     check_parameters(md, node.nodeName, node.parameters if parameters is None else parameters, path)
-    return FmuMapping(md, inputs, outputs, driven)
+    return FmuMapping(md, inputs, outputs, driven, interface)
+
+
+def open_fmu(path: Path, node: Node, parameters: dict[str, Any], stop_time: float | None = None) -> FmuInstance:
+    """Instantiate the FMU as the node's entry says: a co-simulation slave, or a Model Exchange
+    model with its integrator (``stop_time``: the run's, for the default largest step)."""
+    mapping = check_fmu(path, node, parameters)
+    if mapping.interface == MODEL_EXCHANGE:
+        from fmu_bridge.fmu_me import MeInstance
+
+        return MeInstance(path, node, parameters, mapping, stop_time)
+    return FmuInstance(path, node, parameters, mapping)
 
 
 class FmuInstance:
     """One instantiated co-simulation FMU playing one node."""
 
-    def __init__(self, path: Path, node: Node, parameters: dict[str, Any]):
+    def __init__(self, path: Path, node: Node, parameters: dict[str, Any], mapping: FmuMapping | None = None):
         self.path = path
         self.node = node.nodeName
-        mapping = check_fmu(path, node, parameters)
+        mapping = mapping or check_fmu(path, node, parameters)
         self.md, self.inputs, self.outputs, self.driven_variable = (
             mapping.md, mapping.inputs, mapping.outputs, mapping.driven)
         self.fmi3 = self.md.fmiVersion.startswith("3")
-        cs = self.md.coSimulation
+        cs = mapping.capabilities
         self.can_rollback = bool(getattr(cs, "canGetAndSetFMUstate", False))
         self.can_serialize = self.can_rollback and bool(getattr(cs, "canSerializeFMUstate", False))
         self.event_mode = bool(self.fmi3 and getattr(cs, "hasEventMode", False))
@@ -211,19 +255,28 @@ class FmuInstance:
         self._parameters = parameters
         self._unzipdir = tempfile.mkdtemp(prefix=f"hycosim-{self.node}-")
         fmpy.extract(str(path), self._unzipdir)
-        kwargs = dict(guid=self.md.guid, unzipDirectory=self._unzipdir,
-                      modelIdentifier=cs.modelIdentifier, instanceName=self.node)
+        try:
+            self.fmu = self._instantiate(dict(guid=self.md.guid, unzipDirectory=self._unzipdir,
+                                              modelIdentifier=cs.modelIdentifier, instanceName=self.node))
+        except Exception as exc:  # a binary without the interface's functions, or one that fails to load
+            shutil.rmtree(self._unzipdir, ignore_errors=True)
+            raise FmuError(f"node {self.node!r}: {path.name}: its binary cannot be loaded as {mapping.interface} "
+                           f"({type(exc).__name__}: {exc})") from None
+        self.time = 0.0
+
+    def _instantiate(self, kwargs: dict[str, Any]) -> Any:
+        """The fmpy object of the FMU's co-simulation interface, instantiated."""
         if self.fmi3:
             from fmpy.fmi3 import FMU3Slave
 
-            self.fmu = FMU3Slave(**kwargs)
-            self.fmu.instantiate(eventModeUsed=self.event_mode, earlyReturnAllowed=self.early_return)
+            fmu = FMU3Slave(**kwargs)
+            fmu.instantiate(eventModeUsed=self.event_mode, earlyReturnAllowed=self.early_return)
         else:
             from fmpy.fmi2 import FMU2Slave
 
-            self.fmu = FMU2Slave(**kwargs)
-            self.fmu.instantiate()
-        self.time = 0.0
+            fmu = FMU2Slave(**kwargs)
+            fmu.instantiate()
+        return fmu
 
     # --- values ---------------------------------------------------------------------
 

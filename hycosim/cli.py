@@ -378,18 +378,26 @@ def fmu_inspect(
     except FmuError as exc:
         err.print(f"[red]error:[/red] {exc}", highlight=False)
         raise typer.Exit(2) from None
-    cs = md.coSimulation
+    cs, me = md.coSimulation, md.modelExchange
     caps = Table(title=f"{fmu.name}: FMI {md.fmiVersion}, {md.modelName}")
     caps.add_column("capability")
     caps.add_column("value")
-    caps.add_row("co-simulation", "yes" if cs else "no (model exchange only)")
+    caps.add_row("interfaces", ", ".join(["co-simulation"] * bool(cs) + ["Model Exchange (the node integrates it)"] * bool(me))
+                 or "none")
     caps.add_row("platforms", ", ".join(fmpy.supported_platforms(str(fmu))) or "-")
-    if cs:
-        caps.add_row("modelIdentifier", cs.modelIdentifier)
-        for attr in ("canGetAndSetFMUstate", "canHandleVariableCommunicationStepSize", "needsExecutionTool",
-                     "hasEventMode", "canReturnEarlyAfterIntermediateUpdate"):
-            if hasattr(cs, attr):
-                caps.add_row(attr, str(bool(getattr(cs, attr))))
+    for label, element, attrs in (
+            ("co-simulation", cs, ("canGetAndSetFMUstate", "canSerializeFMUstate", "canHandleVariableCommunicationStepSize",
+                                   "needsExecutionTool", "hasEventMode", "canReturnEarlyAfterIntermediateUpdate")),
+            ("Model Exchange", me, ("canGetAndSetFMUstate", "canSerializeFMUstate", "needsCompletedIntegratorStep"))):
+        if element is None:
+            continue
+        caps.add_row(f"{label}: modelIdentifier", element.modelIdentifier)
+        for attr in attrs:
+            if hasattr(element, attr):
+                caps.add_row(f"{label}: {attr}", str(bool(getattr(element, attr))))
+    if me is not None:
+        caps.add_row("continuous states, event indicators",
+                     f"{md.numberOfContinuousStates or 0}, {md.numberOfEventIndicators or 0}")
     _print_table(caps)
     variables = Table(title="variables")
     for col in ("name", "causality", "variability", "type", "start", "unit"):

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from fmu_bridge.config import load_project
-from fmu_bridge.fmu_loader import FmuError, FmuInstance
+from fmu_bridge.fmu_loader import FmuError, FmuInstance, open_fmu
 from fmu_bridge.model_fmu import ModelFmuError, build_model_fmu
 from tests.helpers import REPO, column, hycosim, meta, read_rows, run_project, write_project
 
@@ -63,7 +63,7 @@ def test_fmi3_model_fmu_runs_as_a_node(tmp_path, fmus):
 def _instance(tmp_path: Path, fmu: Path, node: dict) -> FmuInstance:
     cfg = write_project(tmp_path / "p.json", [node])
     spec = load_project(cfg).project.node(node["nodeName"])
-    return FmuInstance(fmu, spec, node.get("parameters", {}))
+    return open_fmu(fmu, spec, node.get("parameters", {}))
 
 
 def test_missing_variable_names_node_and_variable(tmp_path, fmus):
@@ -124,6 +124,9 @@ def test_fmu_without_co_simulation(tmp_path, fmus):
         return name, data
     me = _rewrite(fmus["gain"], tmp_path / "me.fmu", to_me)
     with pytest.raises(FmuError, match="node 'g': me.fmu has no co-simulation interface"):
+        _instance(tmp_path, me, _gain_node(me, interface="CoSimulation"))
+    # Taken at its word it runs as Model Exchange; its binary (pythonfmu's) has no such functions.
+    with pytest.raises(FmuError, match=r"node 'g': me.fmu: its binary cannot be loaded as ModelExchange \(.*fmi2"):
         _instance(tmp_path, me, _gain_node(me))
 
 

@@ -1,0 +1,205 @@
+"""Model Exchange FMUs as nodes: the node integrates them (CVode or Euler), with time, state and
+step events inside a macro step, and matches FMPy's own simulation of the same FMU."""
+
+from __future__ import annotations
+
+import math
+import shutil
+import subprocess
+import uuid
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy import simulate_fmu
+
+from clients.fmu_node import FmuNode
+from clients.node import NodeContext
+from fmu_bridge.config import load_project
+from tests.helpers import REPO, column, hycosim, meta, read_rows, run_project, write_project
+
+FMI_HEADERS = Path(__import__("fmpy").__file__).parent / "c-code"
+
+_VARIABLES = """
+  <ModelVariables>
+    <ScalarVariable name="h" valueReference="0" causality="output" variability="continuous" initial="exact">
+      <Real start="1"/></ScalarVariable>
+    <ScalarVariable name="der(h)" valueReference="1" causality="local" variability="continuous">
+      <Real derivative="1"/></ScalarVariable>
+    <ScalarVariable name="v" valueReference="2" causality="output" variability="continuous" initial="exact">
+      <Real start="0"/></ScalarVariable>
+    <ScalarVariable name="der(v)" valueReference="3" causality="local" variability="continuous">
+      <Real derivative="3"/></ScalarVariable>
+    <ScalarVariable name="g" valueReference="4" causality="parameter" variability="fixed" initial="exact">
+      <Real start="9.81"/></ScalarVariable>
+    <ScalarVariable name="e" valueReference="5" causality="parameter" variability="tunable" initial="exact">
+      <Real start="0.7"/></ScalarVariable>
+    <ScalarVariable name="a" valueReference="6" causality="input" variability="continuous">
+      <Real start="0"/></ScalarVariable>
+    <ScalarVariable name="kick_at" valueReference="7" causality="parameter" variability="fixed" initial="exact">
+      <Real start="-1"/></ScalarVariable>
+    <ScalarVariable name="kick" valueReference="8" causality="parameter" variability="fixed" initial="exact">
+      <Real start="0"/></ScalarVariable>
+    <ScalarVariable name="steps" valueReference="9" causality="local" variability="continuous" initial="exact">
+      <Real start="0"/></ScalarVariable>
+    <ScalarVariable name="bounces" valueReference="0" causality="output" variability="discrete" initial="exact">
+      <Integer start="0"/></ScalarVariable>
+    <ScalarVariable name="max_bounces" valueReference="1" causality="parameter" variability="fixed" initial="exact">
+      <Integer start="1000000"/></ScalarVariable>
+  </ModelVariables>
+  <ModelStructure>
+    <Outputs><Unknown index="1"/><Unknown index="3"/><Unknown index="11"/></Outputs>
+    <Derivatives><Unknown index="2"/><Unknown index="4"/></Derivatives>
+  </ModelStructure>
+"""
+_CAPS = 'modelIdentifier="ball" canGetAndSetFMUstate="true" canSerializeFMUstate="true"'
+_ME = f'<ModelExchange {_CAPS} completedIntegratorStepNotNeeded="false"/>'
+_CS = f'<CoSimulation {_CAPS} canHandleVariableCommunicationStepSize="true"/>'
+
+
+def _fmu(out: Path, so: Path, name: str, interfaces: str) -> Path:
+    xml = (f'<?xml version="1.0" encoding="UTF-8"?>\n<fmiModelDescription fmiVersion="2.0" modelName="Ball" '
+           f'guid="{{{uuid.uuid4()}}}" numberOfEventIndicators="1">\n  {interfaces}\n{_VARIABLES}'
+           '</fmiModelDescription>\n')
+    path = out / f"{name}.fmu"
+    with zipfile.ZipFile(path, "w") as z:
+        z.writestr("modelDescription.xml", xml)
+        z.write(so, "binaries/linux64/ball.so")
+    return path
+
+
+@pytest.fixture(scope="module")
+def fmus(tmp_path_factory) -> dict[str, Path]:
+    if shutil.which("gcc") is None:
+        pytest.skip("needs gcc")
+    out = tmp_path_factory.mktemp("me")
+    so = out / "ball.so"
+    subprocess.run(["gcc", "-shared", "-fPIC", "-O1", "-Wall", "-Werror", "-Wno-unused-parameter",
+                    f"-I{FMI_HEADERS}", "-o", str(so), str(REPO / "tests" / "c" / "ball_me2.c")],
+                   check=True, capture_output=True)
+    return {"me": _fmu(out, so, "BallME", _ME), "both": _fmu(out, so, "BallBoth", _ME + "\n  " + _CS)}
+
+
+def _ball(fmu: Path, **entry) -> dict:
+    node = {"nodeName": "ball", "UID": 1, "fmu": str(fmu), "output": ["h", "v", {"name": "bounces", "type": "Integer"}]}
+    node.update(entry)
+    return node
+
+
+def test_a_model_exchange_fmu_runs_as_fmpy_simulates_it(tmp_path, fmus):
+    """Two bounces in 1.5 s: CVode locates the state events inside the macro steps, as in FMPy."""
+    cfg = write_project(tmp_path / "p.json", [_ball(fmus["me"])], cosim={"stepSize": 0.01, "stopTime": 1.5})
+    assert hycosim("validate", str(cfg)).returncode == 0
+    rows = read_rows(run_project(cfg, tmp_path / "runs"))
+    ref = simulate_fmu(str(fmus["me"]), fmi_type="ModelExchange", solver="CVode", stop_time=1.5,
+                       output_interval=0.01, output=["h", "v", "bounces"], record_events=False)
+    assert len(rows) == len(ref) == 151
+    assert np.allclose(column(rows, "ball.h"), ref["h"], rtol=1e-5, atol=1e-6)
+    assert np.allclose(column(rows, "ball.v"), ref["v"], rtol=1e-5, atol=1e-5)
+    assert column(rows, "ball.bounces") == list(ref["bounces"])
+    assert column(rows, "ball.bounces")[-1] == 2
+    # Euler: one step per macro step, as FMPy's Euler takes one per output interval; with maxStep
+    # the node takes several (1 ms: h(0.01) = 1 - g·(1 ms)²·(0 + 1 + … + 9)).
+    cfg = write_project(tmp_path / "e.json", [_ball(fmus["me"], solver="Euler")], cosim={"stepSize": 0.01, "stopTime": 1.5})
+    rows = read_rows(run_project(cfg, tmp_path / "runs-euler"))
+    ref = simulate_fmu(str(fmus["me"]), fmi_type="ModelExchange", solver="Euler", step_size=0.01, stop_time=1.5,
+                       output_interval=0.01, output=["h", "v"], record_events=False)
+    assert np.allclose(column(rows, "ball.h"), ref["h"], rtol=1e-12, atol=1e-12)
+    cfg = write_project(tmp_path / "m.json", [_ball(fmus["me"], solver="Euler", maxStep=0.001)],
+                        cosim={"stepSize": 0.01, "stopTime": 0.02})
+    rows = read_rows(run_project(cfg, tmp_path / "runs-max"))
+    assert float(rows[1]["ball.h"]) == pytest.approx(1 - 9.81 * 1e-6 * 45, abs=1e-12)
+
+
+def test_inputs_time_events_and_termination_inside_a_macro_step(tmp_path, fmus):
+    """A routed input holds the ball up (a = g); a kick at 0.505 s (a time event between two
+    points) sends it up at 2 m/s from exactly then; a lower g lets it fall to its second bounce,
+    where the FMU asks to end the run."""
+    lift = {"nodeName": "lift", "UID": 2, "model": "gain", "parameters": {"k": 0.0, "b": 9.81},
+            "input": ["u"], "output": ["y"]}
+    cfg = write_project(tmp_path / "p.json", [
+        lift, _ball(fmus["me"], input=["a"], parameters={"kick_at": 0.505, "kick": 2.0})],
+        [{"from": "lift.y", "to": "ball.a"}], cosim={"stepSize": 0.01, "stopTime": 1.0})
+    rows = read_rows(run_project(cfg, tmp_path / "runs"))
+    t, h, v = column(rows, "t"), column(rows, "ball.h"), column(rows, "ball.v")
+    assert t[51] == pytest.approx(0.51) and len(t) == 101
+    for ti, hi, vi in zip(t, h, v):
+        if ti <= 0.5:
+            assert (hi, vi) == (1.0, 0.0)  # held up from the first step (the lift's output at t0 is routed)
+        else:
+            assert vi == pytest.approx(2.0, abs=1e-9) and hi == pytest.approx(1 + 2.0 * (ti - 0.505), abs=1e-9)
+    # Termination at the second bounce: the run ends cleanly there, naming the FMU.
+    cfg = write_project(tmp_path / "t.json", [_ball(fmus["me"], parameters={"max_bounces": 2})],
+                        cosim={"stepSize": 0.01, "stopTime": 3.0})
+    run = run_project(cfg, tmp_path / "runs-t")
+    ended = meta(run)["ended_by"]
+    bounce2 = math.sqrt(2 / 9.81) * (1 + 2 * 0.7)  # the second floor contact, analytically
+    assert ended["node"] == "ball" and ended["t"] == pytest.approx(bounce2, abs=1e-4)
+    assert "BallME.fmu asked to terminate the simulation" in ended["message"]
+
+
+def test_an_fmu_with_both_interfaces_runs_as_co_simulation_unless_told(tmp_path, fmus):
+    cosim = {"stepSize": 0.01, "stopTime": 1.0}
+    cs = read_rows(run_project(write_project(tmp_path / "cs.json", [_ball(fmus["both"])], cosim=cosim),
+                               tmp_path / "cs"))
+    me = read_rows(run_project(write_project(tmp_path / "me.json", [_ball(fmus["both"], interface="ModelExchange")],
+                                             cosim=cosim), tmp_path / "me"))
+    ref = simulate_fmu(str(fmus["both"]), fmi_type="ModelExchange", stop_time=1.0, output_interval=0.01, output=["h"],
+                       record_events=False)
+    assert np.allclose(column(me, "ball.h"), ref["h"], rtol=1e-5, atol=1e-6)
+    # The co-simulation interface's own Euler bounces at another time: a visible difference.
+    assert max(abs(a - b) for a, b in zip(column(cs, "ball.h"), column(me, "ball.h"))) > 1e-3
+
+    shown = hycosim("fmu", "inspect", str(fmus["both"]))
+    assert shown.returncode == 0, shown.stderr
+    assert "co-simulation, Model Exchange (the node integrates it)" in shown.stdout
+    assert "needsCompletedIntegratorStep" in shown.stdout and "2, 1" in shown.stdout
+
+    def refused(entry: dict) -> str:
+        cfg = write_project(tmp_path / "bad.json", [entry], cosim=cosim)
+        res = hycosim("validate", str(cfg))
+        assert res.returncode == 2
+        return res.stderr
+
+    assert ("node 'ball': solver set, but BallBoth.fmu has a co-simulation interface, which the node uses "
+            'unless told: add "interface": "ModelExchange"') in refused(_ball(fmus["both"], solver="Euler"))
+    assert "BallME.fmu has no co-simulation interface (Model Exchange only)" in refused(
+        _ball(fmus["me"], interface="CoSimulation"))
+    assert "node 'ball' names interface but no 'fmu'" in refused(
+        {"nodeName": "ball", "UID": 1, "model": "gain", "interface": "ModelExchange", "input": ["u"], "output": ["y"]})
+    assert "runs its FMU as co-simulation, which integrates itself: relativeTolerance would do nothing" in refused(
+        _ball(fmus["both"], interface="CoSimulation", relativeTolerance=1e-6))
+
+
+def test_a_model_exchange_node_rolls_back_and_continues_from_its_serialised_state(tmp_path, fmus):
+    """Get/set and serialised state carry the integrator's start and the announced time event:
+    a step retried after a rollback, and a new instance restored from bytes, go on identically."""
+    cfg = write_project(tmp_path / "p.json", [_ball(fmus["me"], parameters={"kick_at": 0.3, "kick": 1.0})],
+                        cosim={"stepSize": 0.05, "stopTime": 2.0})
+    spec = load_project(cfg).project.node("ball")
+
+    def made() -> FmuNode:
+        node = FmuNode(spec, fmus["me"])
+        node.setup(NodeContext("ball", 1, [], list(spec.output), dict(spec.parameters), 0.05, 0.0, stop_time=2.0))
+        return node
+
+    a, b = made(), made()
+    try:
+        for k in range(4):  # to 0.2 s: the kick (0.3 s) still ahead, announced
+            a.step(k * 0.05, 0.05, {})
+        saved, data = a.get_state(), a.serialize_state()
+        b.deserialize_state(data)
+        first = []
+        for k in range(4, 30):
+            a.step(k * 0.05, 0.05, {})
+            first.append(a.outputs())
+        a.set_state(saved)
+        for k in range(4, 30):
+            a.step(k * 0.05, 0.05, {})
+            b.step(k * 0.05, 0.05, {})
+            assert a.outputs() == first[k - 4] == b.outputs()
+        assert first[-1]["bounces"] >= 1 and max(o["v"] for o in first) > 0.5  # kicked and bounced
+    finally:
+        a.teardown()
+        b.teardown()
