@@ -5,6 +5,9 @@
    co-simulation over Zenoh (one node, so the barrier's round trip is the rest).
 2. A generated native bridge FMU driven by a C-only importer through the TCP gateway,
    against a Zenoh Python node and the raw Zenoh round trip (benchmarks/_zenoh_floor.py).
+3. A Model Exchange FMU (the tests' bouncing ball, C, FMI 2.0) integrated by its node with
+   CVode, macro step by macro step, against ``fmpy.simulate_fmu`` of it with the macro step as
+   output interval, both in this process: the node's overhead per macro step.
 
     python benchmarks/fmu_overhead.py [--steps 3000] [--repeat 3] [--timeout 300] [--json]
 
@@ -39,7 +42,7 @@ from fmu_bridge.model_fmu import build_model_fmu  # noqa: E402
 from _procs import free_port, run, start, stop_all  # noqa: E402
 
 KEYS = ["python_node_step_us", "fmu_node_step_us", "python_node_cosim_steps_per_s", "fmu_node_cosim_steps_per_s",
-        "bridge_fmu_cosim_steps_per_s", "zenoh_floor_steps_per_s"]
+        "bridge_fmu_cosim_steps_per_s", "zenoh_floor_steps_per_s", "me_node_step_us", "fmpy_me_step_us"]
 BRIDGE_NODE = {"nodeName": "tool", "UID": 9, "input": ["u"], "output": ["y"]}
 
 
@@ -84,6 +87,35 @@ def in_process(fmu: Path, steps: int) -> tuple[float, float]:
         results.append((time.perf_counter() - t0) / steps)
         impl.teardown()
     return results[0], results[1]
+
+
+def model_exchange(fmu: Path, steps: int) -> tuple[float, float]:
+    """Seconds per macro step (H = 10 ms) of the ME ball: its node stepped in this process, and
+    fmpy.simulate_fmu of it with that output interval."""
+    import logging
+
+    import structlog
+    from fmpy import simulate_fmu
+
+    from clients.fmu_node import FmuNode
+    from clients.node import NodeContext
+
+    h, stop = 0.01, steps * 0.01
+    structlog.configure(wrapper_class=structlog.make_filtering_bound_logger(logging.WARNING))  # its events: not here
+    spec = parse_project({"nodeNum": 1, "nodeLists": [{"nodeName": "ball", "UID": 1, "fmu": str(fmu),
+                                                       "output": ["h", "v"]}]}).project.node("ball")
+    node = FmuNode(spec, fmu)
+    node.setup(NodeContext("ball", 1, [], list(spec.output), {}, h, 0.0, stop_time=stop))
+    t0 = time.perf_counter()
+    for k in range(steps):
+        node.step(k * h, h, {})
+        node.outputs()
+    ours = (time.perf_counter() - t0) / steps
+    node.teardown()
+    t0 = time.perf_counter()
+    simulate_fmu(str(fmu), fmi_type="ModelExchange", stop_time=stop, output_interval=h, output=["h", "v"],
+                 record_events=False)
+    return ours, (time.perf_counter() - t0) / steps
 
 
 @dataclass
@@ -153,6 +185,9 @@ def measure(steps: int, timeout: float, repeat: int) -> dict[str, float]:
         tmp = Path(tmpname)
         fmu = build_model_fmu(REPO / "tests" / "models" / "gain_model.py", tmp)
         built = build_bridge(tmp, steps)
+        from tests.me_fmus import build_me_fmus
+
+        ball = build_me_fmus(tmp)["me"]
         python_node = {"nodeName": "py", "UID": 1, "model": "gain", "parameters": {"k": 0.5, "b": 1.0},
                        "input": ["u"], "output": ["y"]}
         fmu_node = {"nodeName": "fmu", "UID": 1, "fmu": str(fmu), "input": ["u"], "output": ["y"]}
@@ -175,6 +210,9 @@ def measure(steps: int, timeout: float, repeat: int) -> dict[str, float]:
             if floor.returncode:
                 raise RuntimeError(f"the Zenoh floor failed:\n{floor.stderr[-2000:]}")
             runs["zenoh_floor_steps_per_s"].append(float(floor.stdout.split()[-1]))
+            me_step, fmpy_step = model_exchange(ball, steps)
+            runs["me_node_step_us"].append(me_step * 1e6)
+            runs["fmpy_me_step_us"].append(fmpy_step * 1e6)
     return {key: statistics.median(values) for key, values in runs.items()}
 
 
@@ -189,6 +227,9 @@ def report(f: dict[str, float]) -> None:
     print(f"round trip:        raw Zenoh {1e6 / floor_rate:7.1f} µs   hycosim Zenoh node {1e6 / py_cosim:7.1f} µs"
           f"   bridge FMU (C importer, TCP gateway) {1e6 / bridge_rate:7.1f} µs"
           f"   bridge/raw {floor_rate / bridge_rate:.2f}×")
+    me, ref = f["me_node_step_us"], f["fmpy_me_step_us"]
+    print(f"Model Exchange:    node (CVode) {me:8.1f} µs/step   fmpy.simulate_fmu {ref:8.1f} µs/step"
+          f"   ratio {me / ref:.2f}×   overhead {me - ref:+.1f} µs/step")
 
 
 if __name__ == "__main__":

@@ -7,6 +7,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
+import structlog
+
 from fmu_bridge.config import Node as NodeSpec
 from fmu_bridge.fmu_loader import FmuError, FmuInstance, FmuTerminated, open_fmu
 
@@ -57,6 +59,12 @@ class FmuNode(Node):
         with _node_errors():
             self.fmu.set_inputs(inputs)
             self.fmu.do_step(t, h)
+        events = getattr(self.fmu, "events", None)  # a Model Exchange FMU's, inside the step
+        if events:
+            log = structlog.get_logger("node").bind(node=self.spec.nodeName)
+            for at, kind in events:
+                log.info("fmu event", t=at, kind=kind)
+            events.clear()
 
     def set_mode(self, mode: str, driven: bool) -> None:
         with _node_errors():

@@ -58,7 +58,7 @@ class MeInstance(FmuInstance):
         self._next_event: float | None = None  # the FMU's next time event
         self._restart = False  # the solver starts afresh at the next step
         self._held: dict[str, Any] = {}
-        self.events = 0
+        self.events: list[tuple[float, str]] = []  # (time, kind) of the events since the caller last took them
 
     def _instantiate(self, kwargs: dict[str, Any]) -> Any:
         if self.fmi3:
@@ -86,7 +86,7 @@ class MeInstance(FmuInstance):
             else:
                 self.fmu.enterInitializationMode()
             self.fmu.exitInitializationMode()
-            self._iterate_events(start_time, initial=True)
+            self._iterate_events(start_time)
             self.solver = self._make_solver(start_time)
         except FMICallException as exc:
             raise FmuError(f"node {self.node!r}: initialising {self.path.name} failed ({exc})") from None
@@ -108,11 +108,12 @@ class MeInstance(FmuInstance):
                            startTime=start_time, maxStep=max_step, relativeTolerance=self.relative_tolerance,
                            **args)
 
-    def _iterate_events(self, t: float, initial: bool = False) -> None:
-        """Event mode at t: iterate the discrete states until they settle, then continuous time."""
-        if not initial:
+    def _iterate_events(self, t: float, kind: str = "") -> None:
+        """Event mode at t (``kind``: time, state, step; none at initialisation): iterate the
+        discrete states until they settle, then continuous time."""
+        if kind:
             self.fmu.enterEventMode()
-            self.events += 1
+            self.events.append((t, kind))
         update = self.fmu.updateDiscreteStates if self.fmi3 else self.fmu.newDiscreteStates
         needed, terminate = True, False
         while needed and not terminate:
@@ -161,7 +162,7 @@ class MeInstance(FmuInstance):
                                             "(completedIntegratorStep)", now)
                 time_event = self._next_event is not None and abs(now - self._next_event) <= eps
                 if state_event or time_event or step_event:
-                    self._iterate_events(now)
+                    self._iterate_events(now, "state" if state_event else "time" if time_event else "step")
                     self.solver.reset(now)
         except FMICallException as exc:
             raise FmuError(f"node {self.node!r}: {self.path.name}: integrating from t={t:g} s by {h:g} s failed "

@@ -49,7 +49,8 @@ def test_fmu_overhead_benchmark_runs_every_measurement():
     assert res.returncode == 0, res.stderr
     figures = json.loads(res.stdout.splitlines()[-1])
     assert set(figures) == {"python_node_step_us", "fmu_node_step_us", "python_node_cosim_steps_per_s",
-                            "fmu_node_cosim_steps_per_s", "bridge_fmu_cosim_steps_per_s", "zenoh_floor_steps_per_s"}
+                            "fmu_node_cosim_steps_per_s", "bridge_fmu_cosim_steps_per_s", "zenoh_floor_steps_per_s",
+                            "me_node_step_us", "fmpy_me_step_us"}
     assert all(v > 0 for v in figures.values())
     # pythonfmu through fmpy does more per step than a plain method call, whatever the machine.
     assert figures["fmu_node_step_us"] > figures["python_node_step_us"]

@@ -3,11 +3,9 @@ step events inside a macro step, and matches FMPy's own simulation of the same F
 
 from __future__ import annotations
 
+import json
 import math
 import shutil
-import subprocess
-import uuid
-import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -17,68 +15,15 @@ from fmpy import simulate_fmu
 from clients.fmu_node import FmuNode
 from clients.node import NodeContext
 from fmu_bridge.config import load_project
-from tests.helpers import REPO, column, hycosim, meta, read_rows, run_project, write_project
-
-FMI_HEADERS = Path(__import__("fmpy").__file__).parent / "c-code"
-
-_VARIABLES = """
-  <ModelVariables>
-    <ScalarVariable name="h" valueReference="0" causality="output" variability="continuous" initial="exact">
-      <Real start="1"/></ScalarVariable>
-    <ScalarVariable name="der(h)" valueReference="1" causality="local" variability="continuous">
-      <Real derivative="1"/></ScalarVariable>
-    <ScalarVariable name="v" valueReference="2" causality="output" variability="continuous" initial="exact">
-      <Real start="0"/></ScalarVariable>
-    <ScalarVariable name="der(v)" valueReference="3" causality="local" variability="continuous">
-      <Real derivative="3"/></ScalarVariable>
-    <ScalarVariable name="g" valueReference="4" causality="parameter" variability="fixed" initial="exact">
-      <Real start="9.81"/></ScalarVariable>
-    <ScalarVariable name="e" valueReference="5" causality="parameter" variability="tunable" initial="exact">
-      <Real start="0.7"/></ScalarVariable>
-    <ScalarVariable name="a" valueReference="6" causality="input" variability="continuous">
-      <Real start="0"/></ScalarVariable>
-    <ScalarVariable name="kick_at" valueReference="7" causality="parameter" variability="fixed" initial="exact">
-      <Real start="-1"/></ScalarVariable>
-    <ScalarVariable name="kick" valueReference="8" causality="parameter" variability="fixed" initial="exact">
-      <Real start="0"/></ScalarVariable>
-    <ScalarVariable name="steps" valueReference="9" causality="local" variability="continuous" initial="exact">
-      <Real start="0"/></ScalarVariable>
-    <ScalarVariable name="bounces" valueReference="0" causality="output" variability="discrete" initial="exact">
-      <Integer start="0"/></ScalarVariable>
-    <ScalarVariable name="max_bounces" valueReference="1" causality="parameter" variability="fixed" initial="exact">
-      <Integer start="1000000"/></ScalarVariable>
-  </ModelVariables>
-  <ModelStructure>
-    <Outputs><Unknown index="1"/><Unknown index="3"/><Unknown index="11"/></Outputs>
-    <Derivatives><Unknown index="2"/><Unknown index="4"/></Derivatives>
-  </ModelStructure>
-"""
-_CAPS = 'modelIdentifier="ball" canGetAndSetFMUstate="true" canSerializeFMUstate="true"'
-_ME = f'<ModelExchange {_CAPS} completedIntegratorStepNotNeeded="false"/>'
-_CS = f'<CoSimulation {_CAPS} canHandleVariableCommunicationStepSize="true"/>'
-
-
-def _fmu(out: Path, so: Path, name: str, interfaces: str) -> Path:
-    xml = (f'<?xml version="1.0" encoding="UTF-8"?>\n<fmiModelDescription fmiVersion="2.0" modelName="Ball" '
-           f'guid="{{{uuid.uuid4()}}}" numberOfEventIndicators="1">\n  {interfaces}\n{_VARIABLES}'
-           '</fmiModelDescription>\n')
-    path = out / f"{name}.fmu"
-    with zipfile.ZipFile(path, "w") as z:
-        z.writestr("modelDescription.xml", xml)
-        z.write(so, "binaries/linux64/ball.so")
-    return path
+from tests.helpers import column, hycosim, meta, read_rows, run_project, write_project
+from tests.me_fmus import build_me_fmus
 
 
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory) -> dict[str, Path]:
     if shutil.which("gcc") is None:
         pytest.skip("needs gcc")
-    out = tmp_path_factory.mktemp("me")
-    so = out / "ball.so"
-    subprocess.run(["gcc", "-shared", "-fPIC", "-O1", "-Wall", "-Werror", "-Wno-unused-parameter",
-                    f"-I{FMI_HEADERS}", "-o", str(so), str(REPO / "tests" / "c" / "ball_me2.c")],
-                   check=True, capture_output=True)
-    return {"me": _fmu(out, so, "BallME", _ME), "both": _fmu(out, so, "BallBoth", _ME + "\n  " + _CS)}
+    return build_me_fmus(tmp_path_factory.mktemp("me"))
 
 
 def _ball(fmu: Path, **entry) -> dict:
@@ -87,18 +32,32 @@ def _ball(fmu: Path, **entry) -> dict:
     return node
 
 
-def test_a_model_exchange_fmu_runs_as_fmpy_simulates_it(tmp_path, fmus):
+@pytest.mark.parametrize("fmi", ["2.0", "3.0"])
+def test_a_model_exchange_fmu_runs_as_fmpy_simulates_it(tmp_path, fmus, fmi):
     """Two bounces in 1.5 s: CVode locates the state events inside the macro steps, as in FMPy."""
-    cfg = write_project(tmp_path / "p.json", [_ball(fmus["me"])], cosim={"stepSize": 0.01, "stopTime": 1.5})
-    assert hycosim("validate", str(cfg)).returncode == 0
-    rows = read_rows(run_project(cfg, tmp_path / "runs"))
-    ref = simulate_fmu(str(fmus["me"]), fmi_type="ModelExchange", solver="CVode", stop_time=1.5,
+    fmu = fmus["me" if fmi == "2.0" else "me3"]
+    cfg = write_project(tmp_path / "p.json", [_ball(fmu)], cosim={"stepSize": 0.01, "stopTime": 1.5})
+    res = hycosim("validate", str(cfg))
+    assert res.returncode == 0, res.stderr
+    run = run_project(cfg, tmp_path / "runs")
+    rows = read_rows(run)
+    ref = simulate_fmu(str(fmu), fmi_type="ModelExchange", solver="CVode", stop_time=1.5,
                        output_interval=0.01, output=["h", "v", "bounces"], record_events=False)
     assert len(rows) == len(ref) == 151
     assert np.allclose(column(rows, "ball.h"), ref["h"], rtol=1e-5, atol=1e-6)
     assert np.allclose(column(rows, "ball.v"), ref["v"], rtol=1e-5, atol=1e-5)
     assert column(rows, "ball.bounces") == list(ref["bounces"])
     assert column(rows, "ball.bounces")[-1] == 2
+    # Impact times (the node logs each event inside a step) against the events FMPy records.
+    events = simulate_fmu(str(fmu), fmi_type="ModelExchange", solver="CVode", stop_time=1.5, output_interval=0.01,
+                          output=["bounces"], record_events=True)
+    theirs = [float(events["time"][i]) for i in range(1, len(events)) if events["bounces"][i] > events["bounces"][i - 1]]
+    log = [json.loads(line) for line in (run / "node-ball.log.jsonl").read_text().splitlines()]
+    ours = [e["t"] for e in log if e.get("event") == "fmu event" and e["kind"] == "state"]
+    assert len(ours) == len(theirs) == 2
+    assert max(abs(a - b) for a, b in zip(ours, theirs)) < 1e-6
+    if fmi == "3.0":
+        return
     # Euler: one step per macro step, as FMPy's Euler takes one per output interval; with maxStep
     # the node takes several (1 ms: h(0.01) = 1 - g·(1 ms)²·(0 + 1 + … + 9)).
     cfg = write_project(tmp_path / "e.json", [_ball(fmus["me"], solver="Euler")], cosim={"stepSize": 0.01, "stopTime": 1.5})
@@ -172,15 +131,17 @@ def test_an_fmu_with_both_interfaces_runs_as_co_simulation_unless_told(tmp_path,
         _ball(fmus["both"], interface="CoSimulation", relativeTolerance=1e-6))
 
 
-def test_a_model_exchange_node_rolls_back_and_continues_from_its_serialised_state(tmp_path, fmus):
+@pytest.mark.parametrize("fmi", ["2.0", "3.0"])
+def test_a_model_exchange_node_rolls_back_and_continues_from_its_serialised_state(tmp_path, fmus, fmi):
     """Get/set and serialised state carry the integrator's start and the announced time event:
     a step retried after a rollback, and a new instance restored from bytes, go on identically."""
-    cfg = write_project(tmp_path / "p.json", [_ball(fmus["me"], parameters={"kick_at": 0.3, "kick": 1.0})],
+    fmu = fmus["me" if fmi == "2.0" else "me3"]
+    cfg = write_project(tmp_path / "p.json", [_ball(fmu, parameters={"kick_at": 0.3, "kick": 1.0})],
                         cosim={"stepSize": 0.05, "stopTime": 2.0})
     spec = load_project(cfg).project.node("ball")
 
     def made() -> FmuNode:
-        node = FmuNode(spec, fmus["me"])
+        node = FmuNode(spec, fmu)
         node.setup(NodeContext("ball", 1, [], list(spec.output), dict(spec.parameters), 0.05, 0.0, stop_time=2.0))
         return node
 
@@ -203,3 +164,17 @@ def test_a_model_exchange_node_rolls_back_and_continues_from_its_serialised_stat
     finally:
         a.teardown()
         b.teardown()
+
+
+def test_a_stiff_model_exchange_fmu_completes_with_cvode(tmp_path, fmus):
+    """Van der Pol at mu = 1000 over more than a period (about 1614 s): BDF takes it in stride."""
+    cfg = write_project(tmp_path / "p.json", [{"nodeName": "vdp", "UID": 1, "fmu": str(fmus["vdp"]),
+                                               "output": ["x0", "x1"]}],
+                        cosim={"stepSize": 10.0, "stopTime": 2000.0})
+    rows = read_rows(run_project(cfg, tmp_path / "runs"))
+    x0 = column(rows, "vdp.x0")
+    assert len(x0) == 201 and max(map(abs, x0)) < 2.1
+    assert min(x0) < -1.9 and max(x0[100:]) > 1.9  # swung over to -2 and back to +2: a full period
+    ref = simulate_fmu(str(fmus["vdp"]), fmi_type="ModelExchange", stop_time=2000.0, output_interval=10.0,
+                       output=["x0"], record_events=False)
+    assert np.allclose(x0, ref["x0"], atol=1e-3)

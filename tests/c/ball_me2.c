@@ -1,42 +1,11 @@
-/* A bouncing ball as an FMI 2.0 FMU for the Model Exchange tests, with a co-simulation
- * interface too (its own explicit Euler at 1 ms), so one file tests both and the choice.
- *
- * States h (vr 0, der vr 1) and v (vr 2, der vr 3): der(h) = v, der(v) = a - g.
- * Parameters g (vr 4), e (vr 5, restitution), kick_at (vr 7), kick (vr 8); input a (vr 6).
- * Event indicator h: when the ball reaches the floor (a state event), v = -e*v and
- * bounces (Integer vr 0) counts; once bounces reaches max_bounces (Integer vr 1) the FMU
- * asks to terminate. At t = kick_at (a time event) v += kick.
- * completedIntegratorStep is needed (it only counts calls, vr 9). Its state can be got,
- * set and serialised (canGetAndSetFMUstate, canSerializeFMUstate): a struct copied whole.
+/* The bouncing ball (ball_model.h) as an FMI 2.0 FMU for the Model Exchange tests, with a
+ * co-simulation interface too (its own explicit Euler at 1 ms), so one file tests both and the
+ * choice. Integers: bounces (vr 0), max_bounces (vr 1). completedIntegratorStep is needed (it
+ * counts its calls). Its state can be got, set and serialised: the struct, copied whole.
  */
-#include <float.h>
-#include <stdlib.h>
 #include <string.h>
+#include "ball_model.h"
 #include "fmi2Functions.h"
-
-typedef struct {
-    double time, h, v, g, e, a, kick_at, kick, steps;
-    int bounces, max_bounces, kicked, terminated;
-} Ball;
-
-static void derivatives(const Ball *b, double *dh, double *dv) {
-    *dh = b->v;
-    *dv = b->a - b->g;
-}
-
-/* Event iteration: what fmi2NewDiscreteStates and the CS doStep both do at an event. */
-static void update(Ball *b) {
-    if (b->h <= 0 && b->v < 0) {
-        b->h = DBL_MIN;  /* above the floor: the indicator does not start the next interval at 0 */
-        b->v = -b->e * b->v;
-        b->bounces++;
-        if (b->bounces >= b->max_bounces) b->terminated = 1;
-    }
-    if (!b->kicked && b->kick_at >= 0 && b->time >= b->kick_at - 1e-12) {
-        b->v += b->kick;
-        b->kicked = 1;
-    }
-}
 
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
 const char *fmi2GetVersion(void) { return fmi2Version; }
@@ -44,10 +13,7 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const 
 
 fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, fmi2String res,
                               const fmi2CallbackFunctions *cb, fmi2Boolean visible, fmi2Boolean logging) {
-    Ball *b = calloc(1, sizeof(Ball));
-    if (!b) return NULL;
-    b->h = 1.0; b->g = 9.81; b->e = 0.7; b->kick_at = -1; b->max_bounces = 1000000;
-    return b;
+    return ball_new();
 }
 void fmi2FreeInstance(fmi2Component c) { free(c); }
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2Real tol, fmi2Real t0, fmi2Boolean stopDef,
@@ -60,29 +26,10 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) { return fmi2OK; }
 fmi2Status fmi2Terminate(fmi2Component c) { return fmi2OK; }
 fmi2Status fmi2Reset(fmi2Component c) { return fmi2OK; }
 
-static double *real_at(Ball *b, fmi2ValueReference vr, double *scratch) {
-    switch (vr) {
-    case 0: return &b->h;
-    case 2: return &b->v;
-    case 4: return &b->g;
-    case 5: return &b->e;
-    case 6: return &b->a;
-    case 7: return &b->kick_at;
-    case 8: return &b->kick;
-    case 9: return &b->steps;
-    case 1: case 3: {
-        double dh, dv;
-        derivatives(b, &dh, &dv);
-        *scratch = vr == 1 ? dh : dv;
-        return scratch;
-    }
-    default: return NULL;
-    }
-}
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]) {
     double scratch;
     for (size_t i = 0; i < n; i++) {
-        double *p = real_at(c, vr[i], &scratch);
+        double *p = ball_real(c, vr[i], &scratch);
         if (!p) return fmi2Error;
         v[i] = *p;
     }
@@ -91,8 +38,8 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real v[]) {
     double scratch;
     for (size_t i = 0; i < n; i++) {
-        if (vr[i] == 1 || vr[i] == 3 || vr[i] == 9) return fmi2Error;
-        double *p = real_at(c, vr[i], &scratch);
+        if (!ball_settable(vr[i])) return fmi2Error;
+        double *p = ball_real(c, vr[i], &scratch);
         if (!p) return fmi2Error;
         *p = v[i];
     }
@@ -150,7 +97,7 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
 fmi2Status fmi2EnterEventMode(fmi2Component c) { return fmi2OK; }
 fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *info) {
     Ball *b = c;
-    update(b);
+    ball_update(b);
     info->newDiscreteStatesNeeded = fmi2False;
     info->terminateSimulation = b->terminated;
     info->nominalsOfContinuousStatesChanged = fmi2False;
@@ -176,12 +123,12 @@ fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t n
 }
 fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real dx[], size_t nx) {
     if (nx != 2) return fmi2Error;
-    derivatives(c, &dx[0], &dx[1]);
+    ball_derivatives(c, &dx[0], &dx[1]);
     return fmi2OK;
 }
 fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real z[], size_t nz) {
     if (nz != 1) return fmi2Error;
-    z[0] = ((Ball *)c)->h;
+    z[0] = ball_indicator(c);
     return fmi2OK;
 }
 fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx) {
@@ -206,11 +153,11 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
     double end = t + h;
     while (b->time < end - 1e-12) {
         double dt = end - b->time < 1e-3 ? end - b->time : 1e-3, dh, dv;
-        derivatives(b, &dh, &dv);
+        ball_derivatives(b, &dh, &dv);
         b->h += dt * dh;
         b->v += dt * dv;
         b->time += dt;
-        update(b);
+        ball_update(b);
         if (b->terminated) return fmi2Discard;
     }
     return fmi2OK;
