@@ -146,6 +146,10 @@ class Link(_Strict):
     pairs: list[tuple[str, str]] | None = None
     activeIn: list[str] | None = None
     extrapolation: Literal["hold", "linear"] = "hold"
+    # A linear transformation on the way, input = factor·output + offset (SSP's
+    # LinearTransformation); Real inputs only.
+    factor: float | None = Field(default=None, allow_inf_nan=False)
+    offset: float | None = Field(default=None, allow_inf_nan=False)
     description: str | None = None
 
 
@@ -286,6 +290,8 @@ class Route:
     dst_port: str
     active_in: frozenset[str] | None  # None: active in every mode
     extrapolation: str
+    # (factor, offset) of a linear transformation; None: the value as it is.
+    transform: tuple[float, float] | None = None
 
     def active(self, mode: str) -> bool:
         return self.active_in is None or mode in self.active_in
@@ -423,7 +429,14 @@ def _resolve_routes(project: Project, issues: list[Issue]) -> list[Route]:
             if link.extrapolation == "linear" and st is not PortType.REAL:
                 issues.append(Issue(f"{where}.extrapolation", f"linear extrapolation of {st.value} port {sn}.{sp}",
                                     "use 'hold' for non-Real ports"))
-            routes.append(Route(i, sn, sp, dn, dp, active, link.extrapolation))
+            transform = None
+            if link.factor is not None or link.offset is not None:
+                transform = (1.0 if link.factor is None else link.factor, 0.0 if link.offset is None else link.offset)
+                if dt is not PortType.REAL:
+                    issues.append(Issue(f"{where}.factor" if link.factor is not None else f"{where}.offset",
+                                        f"a linear transformation into {dt.value} input {dn}.{dp}",
+                                        "factor and offset apply to links into Real inputs"))
+            routes.append(Route(i, sn, sp, dn, dp, active, link.extrapolation, transform))
     # One writer per input per mode: two active feeders would make the value depend on order.
     for mode in sorted(modes):
         feeders: dict[tuple[str, str], int] = {}

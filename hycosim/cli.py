@@ -18,6 +18,7 @@ from typing import Annotated, Optional
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from fmu_bridge.config import ConfigError, LoadedProject, load_project
@@ -38,6 +39,46 @@ def _load(path: Path) -> LoadedProject:
         for issue in exc.issues:
             err.print(f"  {exc.source}: {issue.render()}", highlight=False, markup=False)
         raise typer.Exit(2) from None
+
+
+# Beside a package, the parts of a project SSP has no word for (serverIP, events, asynchronous
+# nodes, coSimulation keys): `run` and `validate` of system.ssp read system.hycosim.json.
+SSP_SIDE_SUFFIX = ".hycosim.json"
+
+
+def _from_ssp(package: Path, project_file: Path, side: Path | None = None, step: float | None = None,
+              stop: float | None = None) -> Path:
+    """Import the SSP package into ``project_file`` (its FMUs in a folder beside it); exit 2 with
+    what is wrong."""
+    from fmu_bridge.ssp import SspError, project_from_ssp
+
+    side = side or (package.with_name(package.stem + SSP_SIDE_SUFFIX) if
+                    package.with_name(package.stem + SSP_SIDE_SUFFIX).is_file() else None)
+    try:
+        extra = json.loads(side.read_text()) if side is not None else None
+        if extra is not None and type(extra) is not dict:
+            raise ValueError("it holds no JSON object")
+    except (OSError, ValueError) as exc:
+        err.print(f"[red]error:[/red] {side}: cannot read the side file ({exc})", highlight=False)
+        raise typer.Exit(2) from None
+    try:
+        doc = project_from_ssp(package, project_file.parent / f"{project_file.stem}-fmus", side=extra, step=step,
+                               stop=stop)
+    except SspError as exc:
+        err.print(f"[red]error:[/red] {escape(str(exc))}", highlight=False)
+        raise typer.Exit(2) from None
+    project_file.write_text(json.dumps(doc, indent=1))
+    return project_file
+
+
+def _project_file(file: Path) -> Path:
+    """The project file to use for FILE: itself, or for an SSP package the project imported from
+    it (into a hidden folder beside it, remade each time)."""
+    if file.suffix.lower() != ".ssp":
+        return file
+    folder = file.parent / f".{file.name}.d"
+    folder.mkdir(exist_ok=True)
+    return _from_ssp(file, folder / "project.json")
 
 
 def _print_table(table: Table) -> None:
@@ -70,8 +111,8 @@ def validate(
     models: Annotated[bool, typer.Option(help="also check that each node's model or FMU exists and takes "
                                               "the node's ports and parameters (imports the models)")] = True,
 ) -> None:
-    """Check a project JSON: print OK, or every error with its JSON path and a hint."""
-    loaded = _load(file)
+    """Check a project JSON (or an SSP package): print OK, or every error with its JSON path and a hint."""
+    loaded = _load(_project_file(file))
     p = loaded.project
     if models:
         from clients.loader import NodeLoadError, check_node
@@ -157,10 +198,11 @@ def run(
     resume: Annotated[Optional[Path], typer.Option(help="go on with the run in this directory (its server died) "
                                                        "from its last checkpoint")] = None,
 ) -> None:
-    """Run the server and every node as local processes on loopback."""
+    """Run the server and every node as local processes on loopback (FILE: a project JSON or an SSP package)."""
     from hycosim.embedded import run_embedded
     from server.report import summarise
 
+    file = _project_file(file)
     loaded = _load(file)
     listen = _endpoint("--listen", listen) if listen else None
     if resume is not None and not (resume / "meta.json").is_file():
@@ -324,6 +366,42 @@ def _is_status(answer: object) -> bool:
             and type(answer.get("step")) is int and type(answer.get("t")) in number
             and all(isinstance(answer.get(k), list) and all(isinstance(n, str) for n in answer[k])
                     for k in ("attached", "expected")))
+
+
+@app.command("import")
+def import_ssp(
+    package: Path,
+    output: Annotated[Path, typer.Option("-o", "--output", help="the project JSON to write (its FMUs go in a "
+                                                                 "folder beside it)")] = Path("project.json"),
+    side: Annotated[Optional[Path], typer.Option(help="JSON with what SSP has no word for: serverIP, events, "
+                                                      "asynchronous nodes, coSimulation keys")] = None,
+    step: Annotated[Optional[float], typer.Option(min=0.0, help="the macro step, when the package gives none")] = None,
+    stop: Annotated[Optional[float], typer.Option(help="the stop time, when the package gives none")] = None,
+) -> None:
+    """Turn an SSP package into a project JSON to edit and keep: components become nodes,
+    connections links, parameter bindings parameters, the default experiment coSimulation."""
+    written = _from_ssp(package, output, side=side, step=step, stop=stop)
+    loaded = _load(written)
+    out.print(f"{written}: project {loaded.project.projectName!r}, {len(loaded.project.nodeLists)} nodes, "
+              f"{len(loaded.routes)} routes (FMUs in {written.parent / (written.stem + '-fmus')})", highlight=False)
+
+
+@app.command("export")
+def export_ssp(
+    file: Path,
+    output: Annotated[Path, typer.Option("-o", "--output", help="the .ssp package to write")] = Path("system.ssp"),
+) -> None:
+    """Write a project whose nodes are all FMUs as an SSP 1.0 package (FMPy's simulate_ssp reads it)."""
+    from fmu_bridge.ssp import SspError, write_ssp
+
+    loaded = _load(file)
+    try:
+        written = write_ssp(loaded, output)
+    except SspError as exc:
+        err.print(f"[red]error:[/red] {escape(str(exc))}", highlight=False)
+        raise typer.Exit(2) from None
+    out.print(f"{written}: {len(loaded.project.nodeLists)} components, {len(loaded.routes)} connections",
+              highlight=False)
 
 
 fmu_app = typer.Typer(no_args_is_help=True, help="Build bridge FMUs from a project; inspect FMUs.")

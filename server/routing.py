@@ -25,6 +25,11 @@ class _Hop:
     label: str  # "dst_node.dst_port", for ages
 
 
+def _linear(factor: float, offset: float) -> Callable[[Any], float]:
+    """A link's linear transformation: input = factor·output + offset."""
+    return lambda value: factor * value + offset
+
+
 class OutputView(Mapping[tuple[str, str], Any]):
     """Read-only view of the outputs at a macro-step point, keyed (node, port), for guards."""
 
@@ -62,7 +67,9 @@ class Router:
                 dst_port = dst.port(r.dst_port)
                 src_port = src.port(r.src_port)
                 widen = None
-                if dst_port.type is PortType.REAL and src_port.type is not PortType.REAL:
+                if r.transform is not None:
+                    widen = _linear(*r.transform)
+                elif dst_port.type is PortType.REAL and src_port.type is not PortType.REAL:
                     widen = float
                 elif dst_port.type is PortType.INTEGER and src_port.type is PortType.BOOLEAN:
                     widen = int
