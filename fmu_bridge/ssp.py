@@ -61,6 +61,7 @@ class Signal:
     dst: tuple[str, str]
     factor: float = 1.0
     offset: float = 0.0
+    units_as_they_are: bool = False  # a connection on the way says suppressUnitConversion
 
 
 @dataclass
@@ -104,9 +105,10 @@ def read_ssp(path: Path) -> SspSystem:
         raise SspError(f"{path}: {SSD} is not XML ({exc})") from None
     problems: list[str] = []
     components: list[Component] = []
-    edges: list[tuple[_Connector, _Connector, float, float]] = []  # start → end, y = factor·x + offset
+    edges: list[tuple[_Connector, _Connector, float, float, bool]] = []  # start → end, y = factor·x + offset
     kinds: dict[_Connector, str] = {}  # a component's connector → its kind
     _walk(ssd.system, root.find("ssd:System", NS), "", names, components, edges, kinds, problems)
+    units = _units(root.find("ssd:System", NS), "")
     experiment = root.find("ssd:DefaultExperiment", NS)
     start = _number(experiment, "startTime", problems, "DefaultExperiment") if experiment is not None else None
     stop = _number(experiment, "stopTime", problems, "DefaultExperiment") if experiment is not None else None
@@ -116,9 +118,27 @@ def read_ssp(path: Path) -> SspSystem:
     if ours is not None:
         step = _number(ours, "stepSize", problems, f"DefaultExperiment/Annotations/Annotation[{ANNOTATION}]")
     signals = _signals(edges, kinds, problems)
+    for s in signals:
+        if units.get(s.src) and units.get(s.dst) and units[s.src] != units[s.dst] and not s.units_as_they_are:
+            problems.append(f"connection {_show(s.src)} → {_show(s.dst)}: a unit conversion from "
+                            f"{units[s.src]} to {units[s.dst]} (hycosim converts no units: give both ends one unit, or "
+                            'a LinearTransformation that converts and suppressUnitConversion="true")')
     if problems:
         raise SspError(f"{path}: {len(problems)} thing(s) hycosim cannot represent:\n  " + "\n  ".join(problems))
     return SspSystem(ssd.name or root.get("name") or path.stem, components, signals, start, stop, step)
+
+
+def _units(system: Any, prefix: str) -> dict[_Connector, str]:
+    """The unit of every component connector that names one (``<ssc:Real unit=...>``), by connector."""
+    found = {}
+    for comp in system.findall("ssd:Elements/ssd:Component", NS):
+        for c in comp.findall("ssd:Connectors/ssd:Connector", NS):
+            real = c.find("ssc:Real", NS)
+            if real is not None and real.get("unit"):
+                found[(f"{prefix}{comp.get('name')}", c.get("name"))] = real.get("unit")
+    for sub in system.findall("ssd:Elements/ssd:System", NS):
+        found.update(_units(sub, f"{prefix}{sub.get('name')}."))
+    return found
 
 
 def _number(element: Any, name: str, problems: list[str], where: str) -> float | None:
@@ -137,7 +157,7 @@ _Connector = tuple[str, str]
 
 
 def _walk(system: Any, xml: Any, prefix: str, names: set[str], components: list[Component],
-          edges: list[tuple[_Connector, _Connector, float, float]], kinds: dict[_Connector, str],
+          edges: list[tuple[_Connector, _Connector, float, float, bool]], kinds: dict[_Connector, str],
           problems: list[str]) -> None:
     """Collect the components and connections of ``system`` (FMPy's object, ``xml`` its element) and below."""
     from fmpy.ssp.ssd import Component as FmpyComponent, SignalDictionaryReference, System as FmpySystem
@@ -180,12 +200,11 @@ def _walk(system: Any, xml: Any, prefix: str, names: set[str], components: list[
                       "EnumerationMappingTransformation"):
             if c.find(f"ssc:{other}", NS) is not None:
                 problems.append(f"{label}: {other} (hycosim transforms Real signals linearly only)")
-        if c.get("suppressUnitConversion") is not None:
-            problems.append(f"{label}: suppressUnitConversion (hycosim converts no units)")
         own = here.rstrip(".")
         start = f"{here}{c.get('startElement')}" if c.get("startElement") else own
         end = f"{here}{c.get('endElement')}" if c.get("endElement") else own
-        edges.append(((start, c.get("startConnector")), (end, c.get("endConnector")), factor, offset))
+        edges.append(((start, c.get("startConnector")), (end, c.get("endConnector")), factor, offset,
+                      c.get("suppressUnitConversion") in ("true", "1")))
 
 
 def _component(element: Any, path: str, names: set[str], kinds: dict[_Connector, str], problems: list[str],
@@ -228,13 +247,13 @@ def _value(kind: str | None, text: str | None) -> Any:
     raise ValueError(f"a {kind} parameter (hycosim sets Real, Integer, Boolean, String and Enumeration ones)")
 
 
-def _signals(edges: list[tuple[_Connector, _Connector, float, float]], kinds: dict[_Connector, str],
+def _signals(edges: list[tuple[_Connector, _Connector, float, float, bool]], kinds: dict[_Connector, str],
              problems: list[str]) -> list[Signal]:
     """Each component input fed through the connections, followed back to the component output
     that writes it through any system connectors between, transformations composed."""
-    feeding: dict[_Connector, list[tuple[_Connector, float, float]]] = {}
-    for start, end, factor, offset in edges:
-        feeding.setdefault(end, []).append((start, factor, offset))
+    feeding: dict[_Connector, list[tuple[_Connector, float, float, bool]]] = {}
+    for start, end, factor, offset, plain in edges:
+        feeding.setdefault(end, []).append((start, factor, offset, plain))
     signals = []
     for end, kind in kinds.items():
         if kind not in ("input", "parameter", "inout"):
@@ -247,19 +266,19 @@ def _signals(edges: list[tuple[_Connector, _Connector, float, float]], kinds: di
                             "(hycosim routes outputs to inputs)")
             continue
         # end = factor·(the value at `at`) + offset, walking back one connection at a time.
-        at, factor, offset, seen = end, 1.0, 0.0, {end}
+        at, factor, offset, plain, seen = end, 1.0, 0.0, False, {end}
         while True:
             sources = feeding.get(at, [])
             if len(sources) != 1:
                 problems.append(f"connector {_show(end)}: {_show(at)} is fed by {len(sources)} connections")
                 break
-            at, f, o = sources[0]
-            factor, offset = factor * f, factor * o + offset
+            at, f, o, p = sources[0]
+            factor, offset, plain = factor * f, factor * o + offset, plain or p
             if at in kinds:  # a component's connector: the signal's source
                 if kinds[at] not in ("output", "calculatedParameter", "inout"):
                     problems.append(f"connector {_show(end)}: fed by {_show(at)}, a {kinds[at]} connector")
                 else:
-                    signals.append(Signal(at, end, factor, offset))
+                    signals.append(Signal(at, end, factor, offset, plain))
                 break
             if at in seen:
                 problems.append(f"connector {_show(end)}: its connections form a loop through {_show(at)}")

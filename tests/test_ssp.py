@@ -162,7 +162,7 @@ def test_import_export_round_trip_and_fmpy_reads_the_package(tmp_path, gain):
 
 
 @pytest.mark.parametrize("case", ["damaged", "schema", "missing fmu", "unknown connector", "mapping transformation",
-                                  "no step"])
+                                  "units", "no step"])
 def test_a_bad_package_is_named_with_its_path_and_nothing_starts(tmp_path, gain, case):
     ssd, fmu, expected = _SSD, True, ""
     if case == "schema":
@@ -179,6 +179,12 @@ def test_a_bad_package_is_named_with_its_path_and_nothing_starts(tmp_path, gain,
                            '<ssc:BooleanMappingTransformation><ssc:MapEntry source="true" target="false"/>'
                            '</ssc:BooleanMappingTransformation>')
         expected = "Connection[Sub.out → g1.u]: BooleanMappingTransformation"
+    elif case == "units":
+        ssd = _SSD.replace('<ssd:Connector name="y" kind="output"><ssc:Real/>',
+                           '<ssd:Connector name="y" kind="output"><ssc:Real unit="mm"/>', 1)
+        ssd = ssd.replace('<ssd:Connector name="u" kind="input"><ssc:Real/>',
+                          '<ssd:Connector name="u" kind="input"><ssc:Real unit="m"/>')
+        expected = "connection g1.y → g2.u: a unit conversion from mm to m"
     elif case == "no step":
         expected = "no stepSize: the package has no macro step (SSP 1.0 has none); give --step"
     package = tmp_path / "bad.ssp"
