@@ -227,6 +227,8 @@ class Security(_Strict):
 
 
 class Project(_Strict):
+    # The JSON Schema an editor validates and completes the file against (hycosim schema); not read.
+    schema_ref: str | None = Field(default=None, alias="$schema")
     projectName: str = Field(default="project", pattern=r"^[A-Za-z0-9_\-]+$")
     serverIP: str = "127.0.0.1"
     # The TCP gateway for bridge FMUs (HOST:PORT); default: serverIP's host, port + 1.
@@ -263,6 +265,20 @@ class Project(_Strict):
     def polls_before_blocking(self, cpus: int | None) -> bool:
         """Whether a hycosim process on a machine with ``cpus`` cores polls before it blocks."""
         return polls_before_blocking(self.coSimulation.waitStrategy, len(self.nodeLists) + 1, cpus)
+
+
+def project_json_schema() -> dict[str, Any]:
+    """The JSON Schema (draft 2020-12) of the project file, from the models above: what ``hycosim
+    schema`` writes and project files may name with ``"$schema"``. A port may also be given as
+    its bare name, which the models take before they check (``_as_port``)."""
+    schema = Project.model_json_schema(by_alias=True)
+    schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
+    schema["title"] = "hycosim project"
+    port_name = Port.model_fields["name"].metadata[0].pattern
+    for key in ("input", "output"):
+        schema["$defs"]["Node"]["properties"][key]["items"] = {
+            "anyOf": [{"$ref": "#/$defs/Port"}, {"type": "string", "pattern": port_name}]}
+    return schema
 
 
 def polls_before_blocking(strategy: str, processes: int, cpus: int | None) -> bool:

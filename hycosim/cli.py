@@ -368,6 +368,26 @@ def _is_status(answer: object) -> bool:
                     for k in ("attached", "expected")))
 
 
+# The schema as shipped: beside this module, and named by the configs in the repository.
+SCHEMA_FILE = Path(__file__).resolve().parent / "project.schema.json"
+
+
+@app.command()
+def schema(
+    output: Annotated[Optional[Path], typer.Option("-o", "--output", help="write it here (default: stdout)")] = None,
+) -> None:
+    """The JSON Schema of the project file: name it in a project with "$schema" and an editor
+    checks and completes the file as you type."""
+    from fmu_bridge.config import project_json_schema
+
+    text = json.dumps(project_json_schema(), indent=1) + "\n"
+    if output is None:
+        out.print(text, highlight=False, markup=False, end="")
+        return
+    output.write_text(text)
+    out.print(f"{output}: the JSON Schema of hycosim's project file (a copy ships as {SCHEMA_FILE})", highlight=False)
+
+
 @app.command("import")
 def import_ssp(
     package: Path,
