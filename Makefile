@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup run test test-long bench fmus trials train clean
+.PHONY: setup run test test-long bench fmus trials train docs clean
 
 setup: $(STAMP)
 
@@ -44,10 +44,15 @@ bench: $(STAMP)
 	$(PY) benchmarks/scene_fmus.py
 	$(PY) benchmarks/memory.py
 	$(PY) benchmarks/fuzz.py
+	$(PY) benchmarks/recovery.py
+
+# The manual as a site in site/ (make test builds it too, strictly, and runs its examples).
+docs: $(STAMP)
+	$(PY) -m mkdocs build --strict -d site
 
 # The rod and robot-scene FMUs that configs/grasp-fmu.json uses.
 fmus: $(STAMP)
 	$(VENV)/bin/hycosim scene fmus -o build/fmus
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build site *.egg-info

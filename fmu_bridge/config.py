@@ -381,7 +381,7 @@ def _pydantic_issues(err: ValidationError) -> list[Issue]:
         hint = ""
         if e["type"] == "extra_forbidden":
             msg = "unknown key"
-            hint = "check the spelling; keys are case-sensitive camelCase as in the README"
+            hint = "check the spelling; keys are case-sensitive camelCase as in docs/project-file.md"
         elif e["type"] == "missing":
             hint = "this key is required"
         issues.append(Issue(path or "(top level)", msg, hint))

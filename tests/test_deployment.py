@@ -243,7 +243,7 @@ def _openssl(*args: str, cwd: Path) -> None:
 
 
 def _make_ca(folder: Path, name: str) -> None:
-    """A CA and a server certificate for 127.0.0.1 signed by it, made as the README shows."""
+    """A CA and a server certificate for 127.0.0.1 signed by it, made as docs/deployment.md shows."""
     folder.mkdir()
     _openssl("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "ca.key", "-out", "ca.pem", "-days", "30",
              "-subj", f"/CN={name}", cwd=folder)

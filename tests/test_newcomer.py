@@ -1,4 +1,4 @@
-"""What a new user meets first: the paper's own JSON, the README's node example, `fmu inspect` on a pipe."""
+"""What a new user meets first: the paper's own JSON, the manual's node example, `fmu inspect` on a pipe."""
 
 from __future__ import annotations
 
@@ -32,18 +32,17 @@ def test_the_papers_json_validates_and_names_the_nodes_that_wait_for_bridge_fmus
     assert "2 node(s) wait for a bridge FMU in some tool: adams, process_simulate" in res.stdout
 
 
-def _readme_blocks(after: str) -> dict[str, str]:
-    """The first python and json code blocks of the README after the heading ``after``."""
-    text = (REPO / "README.md").read_text()
-    section = text[text.index(after):]
+def _doc_blocks(page: str) -> dict[str, str]:
+    """The first python and json code blocks of a page of the manual (docs/)."""
+    section = (REPO / "docs" / page).read_text()
     blocks = {}
     for lang, body in re.findall(r"```(\w+)\n(.*?)```", section, flags=re.S):
         blocks.setdefault(lang, body)
     return blocks
 
 
-def test_the_readmes_node_example_runs_verbatim_from_a_fresh_folder(tmp_path):
-    blocks = _readme_blocks("## Writing a node")
+def test_the_manuals_node_example_runs_verbatim_from_a_fresh_folder(tmp_path):
+    blocks = _doc_blocks("nodes.md")
     (tmp_path / "mypackage").mkdir()
     (tmp_path / "mypackage" / "heater.py").write_text(blocks["python"])
     (tmp_path / "heater.json").write_text(blocks["json"])
@@ -56,7 +55,7 @@ def test_the_readmes_node_example_runs_verbatim_from_a_fresh_folder(tmp_path):
 
 
 def test_a_model_file_beside_the_project_loads_by_path_and_a_broken_one_is_named(tmp_path):
-    blocks = _readme_blocks("## Writing a node")
+    blocks = _doc_blocks("nodes.md")
     (tmp_path / "models").mkdir()
     (tmp_path / "models" / "heater.py").write_text(blocks["python"])
     doc = json.loads(blocks["json"])
