@@ -36,7 +36,7 @@ REPO = HERE.parent
 sys.path.insert(0, str(REPO))
 
 from fmu_bridge.bridge_fmu import build_bridge_fmu  # noqa: E402
-from fmu_bridge.config import load_project, parse_project  # noqa: E402
+from core.config import load_project, parse_project  # noqa: E402
 from fmu_bridge.model_fmu import build_model_fmu  # noqa: E402
 
 from _procs import free_port, run, start, stop_all  # noqa: E402

@@ -9,7 +9,7 @@ from typing import Any
 
 import structlog
 
-from fmu_bridge.config import Node as NodeSpec
+from core.config import Node as NodeSpec
 from fmu_bridge.fmu_loader import FmuError, FmuInstance, FmuTerminated, open_fmu
 
 from clients.node import Node, NodeContext, NodeModelError, SimulationEnded

@@ -15,9 +15,9 @@ import sys
 from collections.abc import Iterable
 from pathlib import Path
 
-from fmu_bridge.config import CoSimulation
-from fmu_bridge.config import Node as NodeSpec
-from fmu_bridge.hints import did_you_mean
+from core.config import CoSimulation
+from core.config import Node as NodeSpec
+from core.hints import did_you_mean
 
 from clients.node import AsyncSource, Node
 
@@ -114,7 +114,7 @@ def _check_names(spec: NodeSpec, kind: str, given: Iterable[str], declared: froz
 
 
 def _player(spec: NodeSpec, project_dir: Path, cosim: CoSimulation) -> Node | AsyncSource:
-    from fmu_bridge.recordings import RecordingError
+    from core.recordings import RecordingError
 
     from clients.replay import player
 

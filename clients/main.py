@@ -7,11 +7,11 @@ import threading
 from pathlib import Path
 from typing import Any
 
-from fmu_bridge import logs, signals
-from fmu_bridge.config import LoadedProject, server_endpoint
-from fmu_bridge.endpoints import EndpointError, parse_endpoint
-from fmu_bridge.security import SecurityError, node_password
-from fmu_bridge.session import ConnectError
+from core import logs, signals
+from core.config import LoadedProject, server_endpoint
+from core.endpoints import EndpointError, parse_endpoint
+from core.security import SecurityError, node_password
+from core.session import ConnectError
 
 from clients.loader import NodeLoadError, load_node
 from clients.node import NodeModelError

@@ -30,7 +30,7 @@ from typing import Any, ClassVar
 
 import msgpack
 
-from fmu_bridge.config import Port
+from core.config import Port
 
 
 @dataclass

@@ -17,9 +17,9 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from fmu_bridge.config import CoSimulation
-from fmu_bridge.config import Node as NodeSpec
-from fmu_bridge.recordings import Recording, Sample
+from core.config import CoSimulation
+from core.config import Node as NodeSpec
+from core.recordings import Recording, Sample
 
 from clients.node import AsyncSource, Node, NodeContext, SimulationEnded, pack_state, unpack_state
 

@@ -18,14 +18,14 @@ from typing import Any
 import structlog
 import zenoh
 
-from fmu_bridge import frames, signals
-from fmu_bridge.config import WIRE_TYPES, LoadedProject, PortType
-from fmu_bridge.drops import DropLog
-from fmu_bridge.inbox import LOCAL, Inbox
-from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
-from fmu_bridge.security import client_tls
-from fmu_bridge.session import ConnectError, FramePublisher, FrameTooLarge, client_config, open_session, token_held
-from fmu_bridge.sim_clock import RealTimeClock
+from core import frames, signals
+from core.config import WIRE_TYPES, LoadedProject, PortType
+from core.drops import DropLog
+from core.inbox import LOCAL, Inbox
+from core.keys import SERVER_TOKEN, ProjectKeys
+from core.security import client_tls
+from core.session import ConnectError, FramePublisher, FrameTooLarge, client_config, open_session, token_held
+from core.sim_clock import RealTimeClock
 
 from clients.node import AsyncSource, Node, NodeContext, NodeModelError, SimulationEnded
 from clients.replay import SamplePlayer

@@ -1,3 +1,4 @@
-"""The shared wire of hycosim: project config, frames, Zenoh keys and sessions, FMUs."""
+"""FMUs for hycosim: loading (co-simulation and Model Exchange), model and bridge FMU building,
+the bridge FMUs' gateway protocol, SSP packages. The shared core is in ``core``."""
 
 __version__ = "0.1.0"

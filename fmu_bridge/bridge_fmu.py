@@ -25,7 +25,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
-from fmu_bridge.config import LoadedProject, Node, PortType, gateway_endpoint
+from core.config import LoadedProject, Node, PortType, gateway_endpoint
 
 TEMPLATE = Path(__file__).with_name("templates") / "bridge_fmu.c"
 _TYPE_CODE = {PortType.REAL: "R", PortType.INTEGER: "I", PortType.BOOLEAN: "B"}

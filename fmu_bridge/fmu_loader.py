@@ -22,8 +22,8 @@ from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.model_description import ModelDescription, ScalarVariable
 
-from fmu_bridge.config import Node, PortType
-from fmu_bridge.hints import did_you_mean
+from core.config import Node, PortType
+from core.hints import did_you_mean
 
 # FMI 2 type names and their FMI 3 counterparts, per port type.
 _COMPATIBLE = {

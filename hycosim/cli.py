@@ -21,9 +21,9 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from fmu_bridge.config import ConfigError, LoadedProject, load_project
-from fmu_bridge.endpoints import GATEWAY_PORT, EndpointError, parse_address, parse_endpoint
-from fmu_bridge.signals import ignore_stops
+from core.config import ConfigError, LoadedProject, load_project
+from core.endpoints import GATEWAY_PORT, EndpointError, parse_address, parse_endpoint
+from core.signals import ignore_stops
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="hycosim: hybrid time/event co-simulation on FMI, relayed over Zenoh.")
@@ -313,9 +313,9 @@ def status(
     tls_ca: Annotated[Optional[Path], typer.Option(help="CA certificate (PEM) for a tls/ endpoint")] = None,
 ) -> None:
     """Ask a running server who is attached."""
-    from fmu_bridge.keys import ProjectKeys
-    from fmu_bridge.security import SecurityError, ca_settings
-    from fmu_bridge.session import ConnectError, client_config, open_session
+    from core.keys import ProjectKeys
+    from core.security import SecurityError, ca_settings
+    from core.session import ConnectError, client_config, open_session
 
     endpoint = _endpoint("endpoint", endpoint)
     if endpoint.startswith("tls/") and tls_ca is None:
@@ -378,7 +378,7 @@ def schema(
 ) -> None:
     """The JSON Schema of the project file: name it in a project with "$schema" and an editor
     checks and completes the file as you type."""
-    from fmu_bridge.config import project_json_schema
+    from core.config import project_json_schema
 
     text = json.dumps(project_json_schema(), indent=1) + "\n"
     if output is None:
@@ -897,8 +897,8 @@ def main() -> None:
     import faulthandler
     import sys
 
-    from fmu_bridge.session import prefer_shared_runtime
-    from fmu_bridge.signals import raise_on_stop
+    from core.session import prefer_shared_runtime
+    from core.signals import raise_on_stop
 
     # A model that crashes in native code (an FMU's binary, an extension) kills the process
     # without a word from Python; the fault handler at least prints the stack it was at.

@@ -22,8 +22,8 @@ from pathlib import Path
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-from fmu_bridge import signals
-from fmu_bridge.config import LoadedProject
+from core import signals
+from core.config import LoadedProject
 from clients.main import FAILED_ELSEWHERE
 from server.relay import run_dir_for
 

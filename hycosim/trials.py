@@ -27,7 +27,7 @@ from clients.krl.controller import EmulatedController, parse_ack, stream_program
 from clients.krl.eki import EkiConfig
 from clients.krl.export import export
 from clients.rod.model import RodParams
-from fmu_bridge.config import parse_project
+from core.config import parse_project
 
 PAPER = {30: (3.2, 14.8, 95), 40: (3.8, 15.6, 95), 50: (5.0, 15.4, 90), 60: (5.8, 16.6, 80)}
 REPO = Path(__file__).resolve().parents[1]
@@ -244,7 +244,7 @@ def run_trials(angles: list[float], trials: int, out: Path, correction: bool = T
     """Every trial, in order; one that fails to run is recorded as not grasped, with its error,
     and the others go on. ``trials.csv`` is rewritten after each trial. Ctrl-C stops them:
     TrialsInterrupted carries the finished ones (the interrupted trial is not counted)."""
-    from fmu_bridge import logs
+    from core import logs
 
     out.mkdir(parents=True, exist_ok=True)
     logs.configure(out / "trials.log.jsonl")

@@ -20,8 +20,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-from fmu_bridge.config import FREE_MODE, Event, EventGuards
-from fmu_bridge.guards import Guard
+from core.config import FREE_MODE, Event, EventGuards
+from core.guards import Guard
 
 
 class GuardEvaluationError(RuntimeError):

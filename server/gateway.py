@@ -22,11 +22,11 @@ from typing import Callable
 import structlog
 import zenoh
 
-from fmu_bridge import frames
+from core import frames
 from fmu_bridge import gateway_protocol as gp
-from fmu_bridge.config import WIRE_TYPES, Node, PortType
-from fmu_bridge.keys import ProjectKeys
-from fmu_bridge.session import token_held
+from core.config import WIRE_TYPES, Node, PortType
+from core.keys import ProjectKeys
+from core.session import token_held
 
 def _to_int(v: float) -> int:
     # NaN and infinities have no integer: a ValueError the reader drops the frame for.

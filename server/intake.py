@@ -2,7 +2,7 @@
 
 Anything malformed (random bytes, wrong types, unknown ports, a step already past, a
 sender whose UID does not own the key it wrote on) is dropped, counted by reason and
-logged (boundedly: fmu_bridge.drops); the run goes on. Nothing a payload holds can raise
+logged (boundedly: core.drops); the run goes on. Nothing a payload holds can raise
 anything but :class:`Dropped` here.
 
 A value that is NaN or infinite is no malformed frame (a diverging model gives one), so it
@@ -17,9 +17,9 @@ from collections import Counter
 
 import structlog
 
-from fmu_bridge import frames
-from fmu_bridge.config import WIRE_TYPES, Node
-from fmu_bridge.drops import DropLog
+from core import frames
+from core.config import WIRE_TYPES, Node
+from core.drops import DropLog
 
 
 class Dropped(Exception):

@@ -13,11 +13,11 @@ from typing import Any
 
 import structlog
 
-from fmu_bridge import logs, signals
-from fmu_bridge.config import LoadedProject, gateway_address, server_endpoint
-from fmu_bridge.endpoints import GATEWAY_PORT, EndpointError, parse_address, parse_endpoint
-from fmu_bridge.security import router_security
-from fmu_bridge.session import open_session, router_config
+from core import logs, signals
+from core.config import LoadedProject, gateway_address, server_endpoint
+from core.endpoints import GATEWAY_PORT, EndpointError, parse_address, parse_endpoint
+from core.security import router_security
+from core.session import open_session, router_config
 
 from server import checkpoints
 from server.coordinator import GuardEvaluationError

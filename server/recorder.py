@@ -23,8 +23,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from fmu_bridge.config import LoadedProject, PortType
-from fmu_bridge.recordings import SAMPLES_FILE, encode_sample
+from core.config import LoadedProject, PortType
+from core.recordings import SAMPLES_FILE, encode_sample
 
 
 FLUSH_EVERY_S = 0.1

@@ -24,12 +24,12 @@ from typing import Any, Callable
 import structlog
 import zenoh
 
-from fmu_bridge import frames, signals
-from fmu_bridge.config import FREE_MODE, LoadedProject
-from fmu_bridge.inbox import LOCAL, Inbox
-from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
-from fmu_bridge.session import FramePublisher, FrameTooLarge
-from fmu_bridge.sim_clock import RealTimeClock
+from core import frames, signals
+from core.config import FREE_MODE, LoadedProject
+from core.inbox import LOCAL, Inbox
+from core.keys import SERVER_TOKEN, ProjectKeys
+from core.session import FramePublisher, FrameTooLarge
+from core.sim_clock import RealTimeClock
 
 from server import checkpoints
 from server.async_sources import SampleHistory

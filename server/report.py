@@ -18,7 +18,7 @@ from typing import Any, Iterator
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from fmu_bridge.run_files import RunFileError, iter_csv_rows, read_jsonl
+from core.run_files import RunFileError, iter_csv_rows, read_jsonl
 
 
 class RunDirError(RuntimeError):

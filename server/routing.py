@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Callable, Iterator, Mapping
 
-from fmu_bridge.config import LoadedProject, PortType
+from core.config import LoadedProject, PortType
 
 from server.async_sources import SampleHistory
 

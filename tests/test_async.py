@@ -32,8 +32,8 @@ def test_sample_history_hold_and_linear():
 def test_a_sample_stamped_at_no_finite_time_is_dropped_before_it_can_freeze_its_source():
     import pytest
 
-    from fmu_bridge import frames
-    from fmu_bridge.config import Node
+    from core import frames
+    from core.config import Node
     from server.intake import Dropped, Intake
 
     camera = Node.model_validate({"nodeName": "camera", "UID": 3, "async": True, "model": "ramp_source",
@@ -88,7 +88,7 @@ def test_real_time_pacing_keeps_its_pace_when_the_wall_clock_is_stepped(monkeypa
     server slept until the wall clock caught up; its nodes gave up first)."""
     import time
 
-    from fmu_bridge.sim_clock import RealTimeClock
+    from core.sim_clock import RealTimeClock
 
     clock = RealTimeClock(10.0, time.time() - 1.0, 2.0)  # started a second ago, at half speed
     assert abs(clock.now() - 10.5) < 0.05 and abs(clock.seconds_until(11.0) - 1.0) < 0.05

@@ -17,7 +17,7 @@ from fmpy.validation import validate_fmu
 
 from fmu_bridge import gateway_protocol as gp
 from fmu_bridge.bridge_fmu import BridgeBuildError, build_bridge_fmu
-from fmu_bridge.config import load_project
+from core.config import load_project
 from tests.helpers import REPO, column, env, hycosim, meta, read_rows, reap, spawn, write_project
 
 FMI_HEADERS = Path(__import__("fmpy").__file__).parent / "c-code"
@@ -262,9 +262,9 @@ def test_gateway_drops_forged_releases_and_passes_only_the_servers(tmp_path):
     Python node beside it); it is counted, and the FMU sees exactly the server's steps."""
     import zenoh
 
-    from fmu_bridge import frames
-    from fmu_bridge.keys import ProjectKeys
-    from fmu_bridge.session import client_config
+    from core import frames
+    from core.keys import ProjectKeys
+    from core.session import client_config
 
     cfg = _project(tmp_path, stop=0.5)
     server, clock = _start(cfg, tmp_path / "run")

@@ -61,7 +61,7 @@ def test_logs_are_json_for_collectors_and_text_on_a_terminal(tmp_path):
 
     from tests.helpers import env
 
-    script = ("import structlog; from fmu_bridge import logs; logs.configure(); "
+    script = ("import structlog; from core import logs; logs.configure(); "
               "structlog.get_logger('x').info('server seen', node='rod', step=3)")
     piped = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env(), timeout=60)
     record = json.loads(piped.stderr)
@@ -85,8 +85,8 @@ def test_status_ignores_answers_that_are_not_a_hycosim_servers(tmp_path):
     """Anyone on the network may answer on the status key; a stranger's answer is no server."""
     import zenoh
 
-    from fmu_bridge.keys import ProjectKeys
-    from fmu_bridge.session import router_config
+    from core.keys import ProjectKeys
+    from core.session import router_config
     from tests.helpers import free_endpoint
 
     endpoint = free_endpoint()

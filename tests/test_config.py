@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from fmu_bridge.config import (ConfigError, gateway_address, load_project, parse_project, polls_before_blocking,
+from core.config import (ConfigError, gateway_address, load_project, parse_project, polls_before_blocking,
                                server_endpoint)
-from fmu_bridge.endpoints import Address, EndpointError, parse_address, parse_endpoint
-from fmu_bridge.session import zenoh_message
+from core.endpoints import Address, EndpointError, parse_address, parse_endpoint
+from core.session import zenoh_message
 from tests.helpers import REPO, hycosim, write_project
 
 GOOD = {

@@ -98,7 +98,7 @@ def test_every_shipped_model_gives_exactly_the_outputs_it_declares(tmp_path):
     must be the model's real outputs, not a list that drifted from its code."""
     from clients.loader import REFERENCE_MODELS, model_class
     from clients.node import AsyncSource, NodeContext
-    from fmu_bridge.config import Node as NodeSpec
+    from core.config import Node as NodeSpec
 
     grasp = _grasp_parameters()
     for name in REFERENCE_MODELS:

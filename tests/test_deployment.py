@@ -14,9 +14,9 @@ import yaml
 import zenoh
 
 from clients.scene_fmus import build_scene_fmus
-from fmu_bridge import frames
-from fmu_bridge.keys import ProjectKeys
-from fmu_bridge.session import client_config
+from core import frames
+from core.keys import ProjectKeys
+from core.session import client_config
 from tests.helpers import REPO, env, free_endpoint, hycosim, meta, read_rows, reap, spawn, wait_for, write_project
 from tests.netns import hosts, netns_available
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from jsonschema import Draft202012Validator
 
-from fmu_bridge.config import project_json_schema
+from core.config import project_json_schema
 from tests.helpers import REPO
 
 DOCS = REPO / "docs"

@@ -62,8 +62,8 @@ def test_catch_and_release_of_a_falling_ball(tmp_path):
 
 
 def _coordinator(*events: dict):
-    from fmu_bridge.config import Event, EventGuards
-    from fmu_bridge.guards import Guard
+    from core.config import Event, EventGuards
+    from core.guards import Guard
     from server.coordinator import Coordinator
 
     parsed = [Event(**e) for e in events]

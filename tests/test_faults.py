@@ -12,9 +12,9 @@ import msgpack
 import pytest
 import zenoh
 
-from fmu_bridge import frames
-from fmu_bridge.keys import ProjectKeys
-from fmu_bridge.session import client_config
+from core import frames
+from core.keys import ProjectKeys
+from core.session import client_config
 from tests.helpers import hycosim, meta, read_rows, reap, spawn, wait_for, write_project
 
 

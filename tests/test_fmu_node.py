@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from fmu_bridge.config import load_project
+from core.config import load_project
 from fmu_bridge.fmu_loader import FmuError, FmuInstance, open_fmu
 from fmu_bridge.model_fmu import ModelFmuError, build_model_fmu
 from tests.helpers import REPO, column, hycosim, meta, read_rows, run_project, write_project

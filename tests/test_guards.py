@@ -2,7 +2,7 @@ from __future__ import annotations
 
 import pytest
 
-from fmu_bridge.guards import Guard, GuardError
+from core.guards import Guard, GuardError
 
 
 def test_guard_evaluates_comparisons_logic_and_functions():

@@ -8,8 +8,8 @@ import time
 import pytest
 import zenoh
 
-from fmu_bridge.inbox import LOCAL, Inbox
-from fmu_bridge.session import FramePublisher, client_config, open_session, router_config
+from core.inbox import LOCAL, Inbox
+from core.session import FramePublisher, client_config, open_session, router_config
 from tests.helpers import free_endpoint
 
 

@@ -14,7 +14,7 @@ from fmpy import simulate_fmu
 
 from clients.fmu_node import FmuNode
 from clients.node import NodeContext
-from fmu_bridge.config import load_project
+from core.config import load_project
 from tests.helpers import column, hycosim, meta, read_rows, run_project, write_project
 from tests.me_fmus import build_me_fmus
 

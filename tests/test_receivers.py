@@ -18,10 +18,10 @@ import structlog
 from hypothesis import given
 from hypothesis import strategies as st
 
-from fmu_bridge import frames
+from core import frames
 from fmu_bridge import gateway_protocol as gp
-from fmu_bridge.config import WIRE_TYPES, load_project
-from fmu_bridge.drops import DropLog
+from core.config import WIRE_TYPES, load_project
+from core.drops import DropLog
 from server.gateway import _Connection, translate_release
 from server.intake import Dropped, Intake
 from server.recorder import Recorder
@@ -215,7 +215,7 @@ def test_the_drop_log_keeps_exact_counts_and_a_bounded_log():
 
 
 def test_a_logged_exception_carries_its_traceback_in_the_json_line(tmp_path):
-    from fmu_bridge import logs
+    from core import logs
 
     path = tmp_path / "x.log.jsonl"
     logs.configure(path)

@@ -13,7 +13,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fmu_bridge import frames
+from core import frames
 from server import checkpoints
 from tests.helpers import REPO, hycosim, meta, run_killing, run_project, write_project
 
@@ -162,7 +162,7 @@ def test_a_scenario_node_goes_on_in_another_process_from_its_state(model):
 
 def test_the_scene_fmus_serialise_their_whole_state(tmp_path):
     from clients.scene_fmus import ensure_scene_fmus
-    from fmu_bridge.config import load_project
+    from core.config import load_project
     from clients.loader import load_node
 
     ensure_scene_fmus(REPO / "build" / "fmus")
@@ -241,7 +241,7 @@ def test_a_checkpoint_folder_is_read_whole_or_refused_with_its_name(tmp_path, fo
 @settings(suppress_health_check=[HealthCheck.function_scoped_fixture], max_examples=40)
 @given(st.text(max_size=40) | _json_values.map(json.dumps))
 def test_a_resume_reads_any_meta_json_without_a_traceback(tmp_path, meta_text):
-    from fmu_bridge.config import load_project
+    from core.config import load_project
     from server.main import _resume_plan
 
     cfg = _project(tmp_path)

@@ -13,8 +13,8 @@ from hypothesis import strategies as st
 
 from clients.loader import NodeLoadError, check_node
 from clients.replay import SamplePlayer
-from fmu_bridge.config import CoSimulation, Node
-from fmu_bridge.recordings import Recording, RecordingError, Sample, encode_sample
+from core.config import CoSimulation, Node
+from core.recordings import Recording, RecordingError, Sample, encode_sample
 from clients.scene_fmus import build_scene_fmus
 from tests.helpers import REPO, hycosim, meta, read_rows, run_killing, run_project
 

@@ -71,7 +71,7 @@ def test_real_time_pacing_follows_the_wall_clock(tmp_path):
 
 
 def test_a_run_cut_off_mid_write_still_reports_and_plots_what_it_finished(tmp_path):
-    from fmu_bridge.run_files import read_csv_rows
+    from core.run_files import read_csv_rows
 
     cfg = write_project(tmp_path / "p.json", [
         {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},

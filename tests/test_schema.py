@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from jsonschema import Draft202012Validator
 
-from fmu_bridge.config import project_json_schema
+from core.config import project_json_schema
 from hycosim.cli import SCHEMA_FILE
 from tests.helpers import REPO, hycosim
 

@@ -243,7 +243,7 @@ def test_any_package_is_read_whole_or_refused_by_name(tmp_path_factory, gain, ss
         assert str(package) in str(exc)
         return
     # What is read is a project hycosim loads (or names what is wrong with it, as any file).
-    from fmu_bridge.config import ConfigError, parse_project
+    from core.config import ConfigError, parse_project
 
     try:
         parse_project(doc)
@@ -252,7 +252,7 @@ def test_any_package_is_read_whole_or_refused_by_name(tmp_path_factory, gain, ss
 
 
 def test_a_linear_transformation_goes_only_into_real_inputs():
-    from fmu_bridge.config import ConfigError, parse_project
+    from core.config import ConfigError, parse_project
 
     doc = {"nodeNum": 2, "nodeLists": [
         {"nodeName": "a", "UID": 1, "model": "ramp", "output": ["y", {"name": "c", "type": "Integer"}]},

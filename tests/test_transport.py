@@ -7,7 +7,7 @@ import json
 import os
 import subprocess
 
-from fmu_bridge.session import SHARED_RUNTIME
+from core.session import SHARED_RUNTIME
 from tests.helpers import HYCOSIM, REPO, hycosim, meta, read_rows, run_project, write_project
 
 LIMIT = 32 * 1024

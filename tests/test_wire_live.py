@@ -18,11 +18,11 @@ import msgpack
 import pytest
 import zenoh
 
-from fmu_bridge import frames
-from fmu_bridge.config import load_project
-from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
-from fmu_bridge.security import router_security
-from fmu_bridge.session import ConnectError, client_config, open_session, router_config
+from core import frames
+from core.config import load_project
+from core.keys import SERVER_TOKEN, ProjectKeys
+from core.security import router_security
+from core.session import ConnectError, client_config, open_session, router_config
 from tests.helpers import HYCOSIM, env, free_endpoint, meta, read_rows, REPO, wait_for, write_project
 from tests.wire_strategies import examples, forgeable, gateway_streams, payloads, send_to_gateway
 

@@ -14,7 +14,7 @@ import struct
 import msgpack
 from hypothesis import strategies as st
 
-from fmu_bridge import frames
+from core import frames
 from fmu_bridge import gateway_protocol as gp
 
 NAMES = ["a", "g", "clock", "src", "s", "_server", "_local", "nobody", ""]

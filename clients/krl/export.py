@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from fmu_bridge.run_files import MissingColumns, RunFileError, iter_csv_rows
+from core.run_files import MissingColumns, RunFileError, iter_csv_rows
 
 from clients.krl.eki import EkiConfig, frame, krl_program
 from clients.robot import kr6

@@ -20,8 +20,8 @@ from typing import Any, Literal, NamedTuple
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from fmu_bridge.endpoints import GATEWAY_PORT, SERVER_PORT, Address, EndpointError, gateway_beside, parse_address, parse_endpoint
-from fmu_bridge.guards import Guard, GuardError
+from core.endpoints import GATEWAY_PORT, SERVER_PORT, Address, EndpointError, gateway_beside, parse_address, parse_endpoint
+from core.guards import Guard, GuardError
 
 FREE_MODE = "free"
 
@@ -176,11 +176,11 @@ class CoSimulation(_Strict):
     linkGrace: float = Field(default=0.0, ge=0)
     # Zenoh's low-latency unicast transport: about 1.5x the macro steps/s of the standard one
     # on loopback, but it cannot fragment, so every frame must stay within
-    # fmu_bridge.session.LOW_LATENCY_MAX_FRAME bytes. false: standard transport, any size.
+    # core.session.LOW_LATENCY_MAX_FRAME bytes. false: standard transport, any size.
     lowLatency: bool = True
     # How the server and each node wait for their next frame. "block": sleep in Zenoh's
     # channel until it comes. "yield": poll it first, yielding the CPU between polls
-    # (fmu_bridge.inbox): faster when frames come quickly, slower when many more processes
+    # (core.inbox): faster when frames come quickly, slower when many more processes
     # than cores compete. "auto": "yield" for up to 2 processes per core and one more (the
     # server and the project's nodes), else "block".
     waitStrategy: Literal["auto", "block", "yield"] = "auto"

@@ -22,8 +22,8 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from fmu_bridge.config import CoSimulation, Node, PortType, Project
-from fmu_bridge.run_files import RunFileError, finished_lines, iter_csv_rows
+from core.config import CoSimulation, Node, PortType, Project
+from core.run_files import RunFileError, finished_lines, iter_csv_rows
 
 SAMPLES_FILE = "samples.jsonl"
 VALUES_FILE = "values.csv"

@@ -15,8 +15,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from fmu_bridge.config import LoadedProject
-from fmu_bridge.keys import SERVER_TOKEN, ProjectKeys
+from core.config import LoadedProject
+from core.keys import SERVER_TOKEN, ProjectKeys
 
 SERVER_USER = "server"
 PASSWORD_ENV = "HYCOSIM_PASSWORD"

@@ -96,7 +96,7 @@ def router_config(listen: str, *, lease_ms: int = 1000, security: dict | None = 
 
     Multicast scouting is off so that nothing beyond the named endpoint is reached; a
     short lease lets nodes notice a cut link within about a second. ``security`` adds
-    ``transport/auth/usrpwd``, ``access_control`` and TLS blocks (see fmu_bridge.security).
+    ``transport/auth/usrpwd``, ``access_control`` and TLS blocks (see core.security).
     ``low_latency`` offers Zenoh's low-latency transport (frames up to
     LOW_LATENCY_MAX_FRAME bytes).
     """
@@ -119,7 +119,7 @@ def client_config(connect: str, *, timeout_s: float = 10.0, lease_ms: int = 1000
     A short link lease lets the server notice a frozen node within about a second.
     ``user``/``password`` authenticate the node to a server that requires it.
     ``low_latency`` as in :func:`router_config`. ``tls`` adds ``transport/link/tls``
-    settings (see fmu_bridge.security.client_tls) for a ``tls/`` endpoint.
+    settings (see core.security.client_tls) for a ``tls/`` endpoint.
     """
     settings: dict[str, object] = {
         "mode": "client",
