@@ -32,7 +32,7 @@ train: $(STAMP)
 	$(VENV)/bin/hycosim train -o runs/train
 
 test: $(STAMP)
-	$(PY) -m pytest -q -p no:cacheprovider
+	$(PY) -m pytest -q -p no:cacheprovider --durations=25
 
 test-long: $(STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider -m long

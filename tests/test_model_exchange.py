@@ -14,7 +14,7 @@ from fmpy import simulate_fmu
 
 from clients.fmu_node import FmuNode
 from clients.node import NodeContext
-from core.config import load_project
+from core.config import Node, load_project
 from tests.helpers import column, hycosim, meta, read_rows, run_project, write_project
 from tests.me_fmus import build_me_fmus
 
@@ -24,6 +24,22 @@ def fmus(tmp_path_factory) -> dict[str, Path]:
     if shutil.which("gcc") is None:
         pytest.skip("needs gcc")
     return build_me_fmus(tmp_path_factory.mktemp("me"))
+
+
+def _simulate(fmu: Path, entry: dict, h: float, stop: float) -> list[dict]:
+    """The node's outputs at every point, stepped in this process (no co-simulation around it)."""
+    spec = Node.model_validate(entry)
+    node = FmuNode(spec, fmu)
+    node.setup(NodeContext(spec.nodeName, spec.UID, list(spec.input), list(spec.output), dict(spec.parameters), h,
+                           0.0, stop_time=stop))
+    try:
+        points = [node.outputs()]
+        for k in range(round(stop / h)):
+            node.step(k * h, h, {})
+            points.append(node.outputs())
+        return points
+    finally:
+        node.teardown()
 
 
 def _ball(fmu: Path, **entry) -> dict:
@@ -60,15 +76,12 @@ def test_a_model_exchange_fmu_runs_as_fmpy_simulates_it(tmp_path, fmus, fmi):
         return
     # Euler: one step per macro step, as FMPy's Euler takes one per output interval; with maxStep
     # the node takes several (1 ms: h(0.01) = 1 - g·(1 ms)²·(0 + 1 + … + 9)).
-    cfg = write_project(tmp_path / "e.json", [_ball(fmus["me"], solver="Euler")], cosim={"stepSize": 0.01, "stopTime": 1.5})
-    rows = read_rows(run_project(cfg, tmp_path / "runs-euler"))
+    points = _simulate(fmus["me"], _ball(fmus["me"], solver="Euler"), 0.01, 1.5)
     ref = simulate_fmu(str(fmus["me"]), fmi_type="ModelExchange", solver="Euler", step_size=0.01, stop_time=1.5,
                        output_interval=0.01, output=["h", "v"], record_events=False)
-    assert np.allclose(column(rows, "ball.h"), ref["h"], rtol=1e-12, atol=1e-12)
-    cfg = write_project(tmp_path / "m.json", [_ball(fmus["me"], solver="Euler", maxStep=0.001)],
-                        cosim={"stepSize": 0.01, "stopTime": 0.02})
-    rows = read_rows(run_project(cfg, tmp_path / "runs-max"))
-    assert float(rows[1]["ball.h"]) == pytest.approx(1 - 9.81 * 1e-6 * 45, abs=1e-12)
+    assert np.allclose([p["h"] for p in points], ref["h"], rtol=1e-12, atol=1e-12)
+    points = _simulate(fmus["me"], _ball(fmus["me"], solver="Euler", maxStep=0.001), 0.01, 0.02)
+    assert points[1]["h"] == pytest.approx(1 - 9.81 * 1e-6 * 45, abs=1e-12)
 
 
 def test_inputs_time_events_and_termination_inside_a_macro_step(tmp_path, fmus):
@@ -100,15 +113,13 @@ def test_inputs_time_events_and_termination_inside_a_macro_step(tmp_path, fmus):
 
 def test_an_fmu_with_both_interfaces_runs_as_co_simulation_unless_told(tmp_path, fmus):
     cosim = {"stepSize": 0.01, "stopTime": 1.0}
-    cs = read_rows(run_project(write_project(tmp_path / "cs.json", [_ball(fmus["both"])], cosim=cosim),
-                               tmp_path / "cs"))
-    me = read_rows(run_project(write_project(tmp_path / "me.json", [_ball(fmus["both"], interface="ModelExchange")],
-                                             cosim=cosim), tmp_path / "me"))
+    cs = [p["h"] for p in _simulate(fmus["both"], _ball(fmus["both"]), 0.01, 1.0)]
+    me = [p["h"] for p in _simulate(fmus["both"], _ball(fmus["both"], interface="ModelExchange"), 0.01, 1.0)]
     ref = simulate_fmu(str(fmus["both"]), fmi_type="ModelExchange", stop_time=1.0, output_interval=0.01, output=["h"],
                        record_events=False)
-    assert np.allclose(column(me, "ball.h"), ref["h"], rtol=1e-5, atol=1e-6)
+    assert np.allclose(me, ref["h"], rtol=1e-5, atol=1e-6)
     # The co-simulation interface's own Euler bounces at another time: a visible difference.
-    assert max(abs(a - b) for a, b in zip(column(cs, "ball.h"), column(me, "ball.h"))) > 1e-3
+    assert max(abs(a - b) for a, b in zip(cs, me)) > 1e-3
 
     shown = hycosim("fmu", "inspect", str(fmus["both"]))
     assert shown.returncode == 0, shown.stderr
@@ -168,11 +179,8 @@ def test_a_model_exchange_node_rolls_back_and_continues_from_its_serialised_stat
 
 def test_a_stiff_model_exchange_fmu_completes_with_cvode(tmp_path, fmus):
     """Van der Pol at mu = 1000 over more than a period (about 1614 s): BDF takes it in stride."""
-    cfg = write_project(tmp_path / "p.json", [{"nodeName": "vdp", "UID": 1, "fmu": str(fmus["vdp"]),
-                                               "output": ["x0", "x1"]}],
-                        cosim={"stepSize": 10.0, "stopTime": 2000.0})
-    rows = read_rows(run_project(cfg, tmp_path / "runs"))
-    x0 = column(rows, "vdp.x0")
+    x0 = [p["x0"] for p in _simulate(fmus["vdp"], {"nodeName": "vdp", "UID": 1, "fmu": str(fmus["vdp"]),
+                                                   "output": ["x0", "x1"]}, 10.0, 2000.0)]
     assert len(x0) == 201 and max(map(abs, x0)) < 2.1
     assert min(x0) < -1.9 and max(x0[100:]) > 1.9  # swung over to -2 and back to +2: a full period
     ref = simulate_fmu(str(fmus["vdp"]), fmi_type="ModelExchange", stop_time=2000.0, output_interval=10.0,

@@ -195,8 +195,11 @@ def test_a_bad_package_is_named_with_its_path_and_nothing_starts(tmp_path, gain,
         _package(package, gain, ssd=ssd, fmu=fmu)
     if case != "no step":
         (tmp_path / "bad.hycosim.json").write_text(json.dumps({"coSimulation": {"stepSize": 0.1}}))
-    for command in (["validate", str(package)], ["run", str(package), "--runs-dir", str(tmp_path / "runs")],
-                    ["import", str(package), "-o", str(tmp_path / "p.json")]):
+    commands = [["validate", str(package)]]
+    if case == "missing fmu":  # the three commands read a package the same way: each says so once
+        commands += [["run", str(package), "--runs-dir", str(tmp_path / "runs")],
+                     ["import", str(package), "-o", str(tmp_path / "p.json")]]
+    for command in commands:
         res = hycosim(*command)
         assert res.returncode == 2, (command, res.stderr)
         assert expected in res.stderr.replace("\n", " "), (command, res.stderr)
