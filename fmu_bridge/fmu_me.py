@@ -75,6 +75,7 @@ class MeInstance(FmuInstance):
     # --- lifecycle ------------------------------------------------------------------
 
     def initialize(self, start_time: float) -> None:
+        """Set parameters and start values, initialise, settle the initial event, make the solver."""
         self.time = start_time
         try:
             if not self.fmi3:
@@ -127,6 +128,7 @@ class MeInstance(FmuInstance):
     # --- a macro step -----------------------------------------------------------------
 
     def set_inputs(self, values: dict[str, Any]) -> None:
+        """Set the inputs that changed (held over the step); the solver starts afresh if any did."""
         changed = {m.port: values[m.port] for m in self.inputs
                    if m.port in values and (m.port not in self._held or self._held[m.port] != values[m.port])}
         if changed:
@@ -135,6 +137,7 @@ class MeInstance(FmuInstance):
             self._restart = True
 
     def set_driven(self, driven: bool) -> None:
+        """Set the FMU's driven flag (drivenVariable): a discontinuity, as an input change is."""
         super().set_driven(driven)
         self._restart = self._restart or self.driven_variable is not None
 
@@ -177,10 +180,12 @@ class MeInstance(FmuInstance):
     # --- state: the FMU's, and the time event it has announced ---------------------------
 
     def get_state(self) -> Any:
+        """The FMU's state, its time, the time event it announced and the inputs it holds."""
         self._restart = True
         return (*super().get_state(), self._next_event, dict(self._held))
 
     def set_state(self, state: Any) -> None:
+        """Back to what :meth:`get_state` gave; the solver starts afresh from there."""
         handle, self.time, self._next_event, held = state
         super().set_state((handle, self.time))
         self._held = dict(held)
@@ -193,6 +198,7 @@ class MeInstance(FmuInstance):
         return struct.pack("<d", upcoming) + super().serialize_state()
 
     def deserialize_state(self, data: bytes) -> None:
+        """Set what :meth:`serialize_state` gave (in any process); the solver starts afresh."""
         if len(data) < 8:
             raise FmuError(f"node {self.node!r}: {self.path.name}: a serialized state of {len(data)} bytes")
         (upcoming,) = struct.unpack_from("<d", data)
@@ -202,6 +208,7 @@ class MeInstance(FmuInstance):
         self._restart = True
 
     def close(self) -> None:
+        """Free the solver, then the FMU (as for co-simulation)."""
         self.solver = None  # frees CVode's memory before the FMU goes
         super().close()
 
