@@ -315,9 +315,15 @@ def project_from_ssp(path: Path, fmu_dir: Path, *, side: dict[str, Any] | None =
     nodes: list[dict[str, Any]] = []
     port_of: dict[tuple[str, str], str] = {}
     fed = {s.dst for s in system.signals}
+    # One file per FMU in the package: a component that shares another's source shares its file;
+    # two sources of one name in different folders get their folders in the name.
+    names: dict[str, str] = {}
+    for source in dict.fromkeys(c.source for c in system.components):
+        name = Path(source).name
+        names[source] = name if name not in names.values() else source.replace("/", "_")
     with zipfile.ZipFile(path) as z:
         for uid, comp in enumerate(system.components, start=1):
-            staged = staging / Path(comp.source).name
+            staged = staging / names[comp.source]
             staged.write_bytes(z.read(comp.source))
             try:
                 variables = {v.name: v for v in describe(staged).modelVariables}

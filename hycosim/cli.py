@@ -67,7 +67,11 @@ def _from_ssp(package: Path, project_file: Path, side: Path | None = None, step:
     except SspError as exc:
         err.print(f"[red]error:[/red] {escape(str(exc))}", highlight=False)
         raise typer.Exit(2) from None
-    project_file.write_text(json.dumps(doc, indent=1))
+    try:
+        project_file.write_text(json.dumps(doc, indent=1))
+    except OSError as exc:
+        err.print(f"[red]error:[/red] {escape(str(project_file))}: cannot write ({exc.strerror or exc})", highlight=False)
+        raise typer.Exit(2) from None
     return project_file
 
 
@@ -77,7 +81,13 @@ def _project_file(file: Path) -> Path:
     if file.suffix.lower() != ".ssp":
         return file
     folder = file.parent / f".{file.name}.d"
-    folder.mkdir(exist_ok=True)
+    try:
+        folder.mkdir(exist_ok=True)
+    except OSError as exc:
+        err.print(f"[red]error:[/red] {escape(str(folder))}: cannot make the folder the package is imported into "
+                  f"({exc.strerror or exc}); import it elsewhere with: hycosim import {escape(str(file))} -o DIR/project.json",
+                  highlight=False)
+        raise typer.Exit(2) from None
     return _from_ssp(file, folder / "project.json")
 
 

@@ -268,3 +268,18 @@ def test_a_linear_transformation_goes_only_into_real_inputs():
     assert [i.render() for i in info.value.issues] == [
         "linkLists[1].offset: a linear transformation into Integer input b.n (hint: factor and offset apply to links "
         "into Real inputs)"]
+
+
+def test_two_fmus_of_one_name_in_different_folders_stay_two(tmp_path, gain):
+    other = build_model_fmu(REPO / "tests" / "models" / "gain_model3.py", tmp_path / "fmi3", fmi_version="3.0")
+    ssd = _SSD.replace('name="g2" source="resources/GainModel.fmu"', 'name="g2" source="resources/v3/GainModel.fmu"')
+    package = _package(tmp_path / "two.ssp", gain, ssd=ssd)
+    with zipfile.ZipFile(package, "a") as z:
+        z.write(other, "resources/v3/GainModel.fmu")
+    from fmu_bridge.ssp import project_from_ssp
+
+    doc = project_from_ssp(package, tmp_path / "fmus", step=0.1)
+    fmus = {n["nodeName"]: n["fmu"] for n in doc["nodeLists"]}
+    assert fmus["g1"] == fmus["Sub_g3"] == "fmus/GainModel.fmu" and fmus["g2"] == "fmus/resources_v3_GainModel.fmu"
+    assert (tmp_path / fmus["g2"]).read_bytes() == other.read_bytes()
+    assert (tmp_path / fmus["g1"]).read_bytes() == gain.read_bytes()
