@@ -95,19 +95,25 @@ def killer(cfg: Path, runs: Path, names: list[str], kills: int, span: float, rng
     while time.monotonic() < deadline and not any((p / "checkpoints").is_dir() for p in set(runs.iterdir()) - before):
         time.sleep(0.1)
     run = next(iter(set(runs.iterdir()) - before), None)
+    landed = 0  # kills that found a process: each is one restore
     for i in range(kills):
         time.sleep(span / kills * rng.uniform(0.6, 1.4))
         name = rng.choice(names)
+        killed = len(log)
         for pid in pids(f"hycosim node {name} {cfg}"):
             try:
                 os.kill(pid, signal.SIGKILL)
                 log.append((time.time(), name, pid))
             except ProcessLookupError:
                 pass
-        # One kill, one restore: the next waits until the run is back (meta.json lists it).
+        if len(log) == killed:
+            continue  # the run is over (a short one): nothing to wait for
+        landed += 1
+        # One kill, one restore: the next waits until the run is back (meta.json lists it), or over.
         while run is not None and time.monotonic() < deadline + 60 * (i + 1):
             try:
-                if len(json.loads((run / "meta.json").read_text()).get("recoveries", [])) > i:
+                meta = json.loads((run / "meta.json").read_text())
+                if len(meta.get("recoveries", [])) >= landed or meta.get("status") != "running":
                     break
             except (OSError, ValueError):
                 pass
