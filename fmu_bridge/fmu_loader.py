@@ -333,18 +333,23 @@ class FmuInstance:
 
     # --- lifecycle ------------------------------------------------------------------
 
-    def initialize(self, start_time: float) -> None:
+    def _initialize(self, start_time: float) -> None:
+        """Set parameters and input start values, then through initialisation mode (both interfaces)."""
         self.time = start_time
+        if not self.fmi3:
+            self.fmu.setupExperiment(startTime=start_time)
+        for name, value in {**self._starts, **self._parameters}.items():
+            self.set_variable(name, value)
+        if self.fmi3:
+            self.fmu.enterInitializationMode(startTime=start_time)
+        else:
+            self.fmu.enterInitializationMode()
+        self.fmu.exitInitializationMode()
+
+    def initialize(self, start_time: float) -> None:
+        """Initialise the FMU at ``start_time`` (FMI 3 with event mode: settle its first event)."""
         try:
-            if not self.fmi3:
-                self.fmu.setupExperiment(startTime=start_time)
-            for name, value in {**self._starts, **self._parameters}.items():
-                self.set_variable(name, value)
-            if self.fmi3:
-                self.fmu.enterInitializationMode(startTime=start_time)
-            else:
-                self.fmu.enterInitializationMode()
-            self.fmu.exitInitializationMode()
+            self._initialize(start_time)
             if self.event_mode:
                 self._handle_events()
         except FMICallException as exc:

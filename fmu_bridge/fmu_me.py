@@ -76,17 +76,8 @@ class MeInstance(FmuInstance):
 
     def initialize(self, start_time: float) -> None:
         """Set parameters and start values, initialise, settle the initial event, make the solver."""
-        self.time = start_time
         try:
-            if not self.fmi3:
-                self.fmu.setupExperiment(startTime=start_time)
-            for name, value in {**self._starts, **self._parameters}.items():
-                self.set_variable(name, value)
-            if self.fmi3:
-                self.fmu.enterInitializationMode(startTime=start_time)
-            else:
-                self.fmu.enterInitializationMode()
-            self.fmu.exitInitializationMode()
+            self._initialize(start_time)
             self._iterate_events(start_time)
             self.solver = self._make_solver(start_time)
         except FMICallException as exc:
