@@ -9,12 +9,14 @@ failed (timeout, lost node, server gone), 4 an internal error or an invalid FMU 
 from __future__ import annotations
 
 import json
+import os
 import signal
+import sys
 import time
 from dataclasses import asdict
 from functools import partial
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, NoReturn, Optional
 
 import typer
 from rich.console import Console
@@ -97,6 +99,24 @@ def _print_table(table: Table) -> None:
     (out if out.is_terminal else Console(width=100_000)).print(table)
 
 
+def _end_process(code: int) -> NoReturn:
+    """End a node or server process with its outcome, now that it is said and recorded.
+
+    Without the interpreter's finalisation and the C exit handlers: there the native libraries
+    the process loaded (an FMU's binary, MuJoCo, Zenoh's runtime) tear themselves down, after
+    the run is over, and one such teardown aborted a rod node that had finished cleanly (glibc:
+    "corrupted double-linked list", past the point where Python's fault handler is off), which
+    its launcher rightly took for a crash. Nothing is left for them to do: the session, the
+    FMU and the record files are closed, and log files are line-buffered.
+    """
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(code)
+
+
 def _say_outcome(console: Console, text: str) -> None:
     """Print a process's last word. Its stderr may be a file on a disk that just filled up
     (a launched node's): the exit status still tells the outcome, so a failed print is let go."""
@@ -176,7 +196,7 @@ def server(
         _say_outcome(err, f"[red]error:[/red] {message}" + (f"\n  results so far: {rdir}" if rdir else ""))
     elif not progress_jsonl:
         _say_outcome(out, f"{message}; results in {rdir}")
-    raise typer.Exit(code)
+    _end_process(code)
 
 
 @app.command()
@@ -194,7 +214,7 @@ def node(
     loaded = _load(file)
     code, message = run_node(loaded, name, connect, log_file, password_file)
     _say_outcome(err if code else out, ("[red]error:[/red] " if code else "") + message)
-    raise typer.Exit(code)
+    _end_process(code)
 
 
 @app.command()
@@ -905,7 +925,6 @@ def _join_multi_value_options(argv: list[str]) -> list[str]:
 def main() -> None:
     """Console entry point."""
     import faulthandler
-    import sys
 
     from core.session import prefer_shared_runtime
     from core.signals import raise_on_stop

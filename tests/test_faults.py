@@ -480,3 +480,17 @@ def test_nan_outputs_are_routed_and_recorded_and_the_first_on_each_port_is_repor
     report = hycosim("report", str(run_dir))
     assert report.returncode == 0 and expected in report.stdout
     assert hycosim("plot", str(run_dir), "-o", str(tmp_path / "p.png")).returncode == 0
+
+
+def test_a_node_whose_native_teardown_aborts_at_exit_still_ends_with_its_outcome(tmp_path):
+    """A node process is judged by its run, not by libraries tearing down after it: a model
+    whose library aborts at exit (as one FMU's teardown once did) leaves a completed run."""
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "late", "UID": 2, "model": "tests.models.exit_abort_model:AbortsAtExit", "output": ["y"]},
+    ], cosim={"stepSize": 0.01, "stopTime": 0.2})
+    res = hycosim("run", str(cfg), "--runs-dir", str(tmp_path / "runs"), "--no-progress", timeout=90)
+    assert res.returncode == 0, res.stderr
+    run_dir = next((tmp_path / "runs").iterdir())
+    assert meta(run_dir)["status"] == "completed" and len(read_rows(run_dir)) == 21
+    assert "node 'late' finished after 20 steps" in (run_dir / "node-late.stderr.txt").read_text()
