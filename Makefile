@@ -45,6 +45,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/memory.py
 	$(PY) benchmarks/fuzz.py
 	$(PY) benchmarks/recovery.py
+	$(PY) benchmarks/accuracy.py
 
 # The manual as a site in site/ (make test builds it too, strictly, and runs its examples).
 docs: $(STAMP)

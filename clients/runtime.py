@@ -20,6 +20,7 @@ import zenoh
 
 from core import frames, signals
 from core.config import WIRE_TYPES, LoadedProject, PortType
+from core.coupling import rate_of
 from core.drops import DropLog
 from core.inbox import LOCAL, Inbox
 from core.keys import SERVER_TOKEN, ProjectKeys
@@ -63,6 +64,8 @@ class NodeRuntime:
         self._in_types = tuple(WIRE_TYPES[p.type] for p in self.spec.input)
         # Releases carry inputs for the stepping nodes; an asynchronous source only reads their time.
         self._release_for = None if self.spec.asynchronous else node_name
+        # Multi-rate: this node steps over this many base steps, at every such base point.
+        self._rate = rate_of(self.spec.stepSize, self.cosim.stepSize) or 1
         self._log = structlog.get_logger("node").bind(node=node_name)
         self.drops = DropLog(self._log)
         self.steps = 0
@@ -248,6 +251,8 @@ class NodeRuntime:
         kind = frame.kind
         if local:
             return frame  # liveliness news from this process's own subscriber
+        if kind == frames.STEP and self._release_for is not None and self._release_for not in frame.fields[4]:
+            return None  # a release of other nodes (this one is not due, or not yet in Gauss-Seidel order)
         if kind in (frames.START, frames.STEP):
             return frames.check_release(frame, self._release_for, self._in_types)
         if kind == frames.REPLAY:
@@ -417,7 +422,7 @@ class NodeRuntime:
                     self._log.info("outputs re-sent", step=done + 1)
                     continue
             if frame.kind == frames.CHECKPOINT:
-                if frame.fields[0] == done + 1:
+                if frame.fields[0] == done + self._rate:  # at the end of this node's last step
                     pending_state = self._checkpoint_state(impl, frame.fields[0])
                 continue
             if frame.kind == frames.RESTORE:
@@ -448,6 +453,8 @@ class NodeRuntime:
                 mode, driven = new_mode, now_driven
                 impl.set_mode(mode, driven)
                 self._log.info("mode", step=k, mode=mode, driven=driven)
+            if self._rate > 1:  # its own step, the last one cut at stopTime as the base's is
+                h = min(self._rate * self.cosim.stepSize, self.cosim.stopTime - t)
             out = self._step_model(impl, k, t, h, dict(zip(self._in_names, inputs[self.name])))
             if out is None:
                 return

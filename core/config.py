@@ -109,6 +109,9 @@ class Node(_Strict):
     # A run directory (relative to the project JSON): the node plays back what this node
     # recorded there instead of running its model or FMU (kept in the entry, to go back to).
     replay: str | None = Field(default=None, min_length=1)
+    # Multi-rate coupling: this node steps every stepSize seconds, an integer multiple of
+    # coSimulation.stepSize (the base); its outputs hold between its steps. None: the base.
+    stepSize: float | None = Field(default=None, gt=0, allow_inf_nan=False)
 
     @field_validator("input", "output", mode="before")
     @classmethod
@@ -184,6 +187,13 @@ class CoSimulation(_Strict):
     # than cores compete. "auto": "yield" for up to 2 processes per core and one more (the
     # server and the project's nodes), else "block".
     waitStrategy: Literal["auto", "block", "yield"] = "auto"
+    # The master algorithm. "jacobi": every node due at a macro-step point steps at once on the
+    # outputs at that point (the paper's scheme). "gauss-seidel": within a macro step the nodes
+    # step one after the other in ``order``, each on the outputs its predecessors have already
+    # advanced. ``order`` (Gauss-Seidel only): every stepping node once; default: derived from
+    # the links, a node after the nodes it reads from (a cycle of links must be broken here).
+    coupling: Literal["jacobi", "gauss-seidel"] = "jacobi"
+    order: list[str] | None = None
 
     def real_time_factor(self) -> float | None:
         if self.realTime is False:
@@ -596,6 +606,9 @@ def check_semantics(project: Project) -> tuple[list[Route], dict[str, EventGuard
         if len(compiled) == len(given):
             guards[e.name] = EventGuards(**compiled)
     routes = _resolve_routes(project, issues)
+    from core.coupling import coupling_issues  # it reads Project and Route, defined here
+
+    issues.extend(coupling_issues(project, routes))
     return routes, guards, issues
 
 

@@ -283,12 +283,15 @@ def report(
     _print_summary(s)
     if s.reason:
         out.print(f"reason: {s.reason}", highlight=False)
+    if s.coupling:
+        out.print(f"coupling: {s.coupling}", highlight=False)
     table = Table(title="who held the barrier")
-    for col in ("node", "share of waiting", "steps held", "mean arrival (ms)"):
+    for col in ("node", "steps taken", "share of waiting", "steps held", "mean arrival (ms)"):
         table.add_column(col)
     for node in sorted(set(s.holder_share) | set(s.mean_arrival_ms)):
         share = s.holder_share.get(node)
-        table.add_row(node, "-" if share is None else f"{100 * share:.1f} %", str(s.holder_steps.get(node, 0)),
+        table.add_row(node, str(s.node_steps.get(node, "-")), "-" if share is None else f"{100 * share:.1f} %",
+                      str(s.holder_steps.get(node, 0)),
                       f"{s.mean_arrival_ms.get(node, float('nan')):.3f}")
     out.print(table)
     slow = Table(title="slowest steps")

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from core.config import LoadedProject, PortType
+from core.coupling import plan
 from core.recordings import SAMPLES_FILE, encode_sample
 
 
@@ -130,6 +131,8 @@ class Recorder:
         self._plain_out = {n.nodeName: all(p.type in plain for p in n.output) for n in project.nodeLists}
         self._plain_in = {n.nodeName: all(p.type in plain for p in n.input) for n in project.nodeLists}
         self._stepping = [n.nodeName for n in project.stepping_nodes()]
+        # A multi-rate run says at each point which nodes started a step there.
+        self._marks_steps = plan(project, loaded.routes).multirate
         self._async_labels = [f"{r.dst_node}.{r.dst_port}" for r in loaded.routes
                               if project.node(r.src_node).asynchronous]
         at = resume_at or {}
@@ -145,7 +148,8 @@ class Recorder:
         if resume_at is None:
             out_cols = [f"{n.nodeName}.{p.name}" for n in project.nodeLists for p in n.output]
             in_cols = [f"{n.nodeName}.{p.name}" for n in project.nodeLists for p in n.input]
-            self._values.writerow(["step", "t", "mode", *out_cols, *in_cols])
+            self._values.writerow(["step", "t", "mode", *(["stepped"] if self._marks_steps else []),
+                                   *out_cols, *in_cols])
             self._timing.writerow(["step", "t", "wait_s", "holder", "lateness_s",
                                    *(f"arrival_s:{n}" for n in self._stepping),
                                    *(f"age_s:{label}" for label in self._async_labels)])
@@ -159,8 +163,11 @@ class Recorder:
         self._files = {"values.csv": self._values_file, "timing.csv": self._timing_file,
                        "events.jsonl": self._events_file, SAMPLES_FILE: self._samples_file}
 
-    def row(self, step: int, t: float, mode: str, outputs: dict[str, list[Any]], inputs: dict[str, list[Any]]) -> None:
+    def row(self, step: int, t: float, mode: str, outputs: dict[str, list[Any]], inputs: dict[str, list[Any]],
+            stepped: list[str] | None = None) -> None:
         cells: list[Any] = [step, repr(t), mode]
+        if self._marks_steps:
+            cells.append(" ".join(stepped or ()))
         for n in self._nodes:
             cells.extend(outputs[n] if self._plain_out[n] else map(_cell, outputs[n]))
         for n in self._nodes:

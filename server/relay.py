@@ -26,6 +26,7 @@ import zenoh
 
 from core import frames, signals
 from core.config import FREE_MODE, LoadedProject
+from core.coupling import plan
 from core.inbox import LOCAL, Inbox
 from core.keys import SERVER_TOKEN, ProjectKeys
 from core.session import FramePublisher, FrameTooLarge
@@ -97,9 +98,21 @@ class Relay:
         self.router = Router(loaded)
         self.intake = Intake(self.project.nodeLists)
         self.stepping = [n.nodeName for n in self.project.stepping_nodes()]
+        self.coupling = plan(self.project, loaded.routes)
+        # Each stepping node's outstanding step: the label its outputs carry (the step's release
+        # point + 1), the point they are gathered at (later for a multi-rate node), and when it
+        # was released. Outputs that come before their point wait in _early.
+        self._label: dict[str, int] = {n: 0 for n in self.stepping}
+        self._due_at: dict[str, int] = {n: 0 for n in self.stepping}
+        self._released_at: dict[str, float] = {}
+        self._early: dict[str, frames.Frame] = {}
+        self._last_release_of: dict[str, bytes] = {}  # node → the last release that named it
+        self._used_inputs: dict[str, list[Any]] = {}  # Gauss-Seidel: the inputs each node stepped on
+        self._last_point = math.inf  # the index of the point at stopTime, on a grid from startTime
         # Asynchronous nodes played from a recording take part in the barrier: each point waits
         # for the samples the recorded run had by then, so that a replay gives the same values.
         self.paced = [n.nodeName for n in self.project.paced_nodes()]
+        self._everyone = [*self.stepping, *self.paced]  # who is gathered at every point of a single-rate run
         self._names = {n.nodeName for n in self.project.nodeLists}
         self.histories = {n.nodeName: SampleHistory([p.start_value() for p in n.output])
                           for n in self.project.async_nodes()}
@@ -273,7 +286,7 @@ class Relay:
                     # An asynchronous source that restarted needs the run's START (its clock);
                     # the others, a played one included, the last release.
                     last = (self._start_frame if self.project.node(node).asynchronous and node not in self.paced
-                            else self._last_release)
+                            else self._last_release_of.get(node, self._last_release))
                     if last is not None:
                         try:
                             self.release.put(frames.encode(frames.REPLAY, node, last))
@@ -435,6 +448,7 @@ class Relay:
                     self._start_frame = frames.encode(frames.START, start[0], cp.server["t"], *start[2:])
                     self.release.put(self._start_frame)
                 released = time.perf_counter()
+                self._expect_all(cp.step, released)
                 arrivals = self._collect(cp.step, released)
                 wait = time.perf_counter() - released
             except _Recover as again:  # another process restarted meanwhile: once more
@@ -518,11 +532,34 @@ class Relay:
     def _time(self, step: int) -> float:
         return self.cosim.startTime + max(step, 0) * self.cosim.stepSize
 
-    def _collect(self, step: int, released_at: float) -> dict[str, float]:
-        """Gather every stepping node's outputs for ``step`` (and a played source's word that its
-        samples for ``step`` are sent); return arrival offsets (s)."""
-        pending = set(self.stepping) | set(self.paced)
+    def _expect_all(self, step: int, released_at: float) -> None:
+        """Every stepping node owes its outputs at ``step`` (the START, a restore)."""
+        for node in self.stepping:
+            self._label[node] = self._due_at[node] = step
+            self._released_at[node] = released_at
+        self._early.clear()
+
+    def _collect(self, step: int, released_at: float, nodes: set[str] | None = None) -> dict[str, float]:
+        """Gather the outputs due at point ``step`` (every stepping node's whose step ends there,
+        or just ``nodes``'), and a played source's word that its samples for ``step`` are sent;
+        return arrival offsets (s), each from its node's release."""
+        if nodes is not None:
+            pending = set(nodes) | set(self.paced)
+        elif self.coupling.multirate:
+            pending = {n for n, at in self._due_at.items() if at == step} | set(self.paced)
+        else:
+            pending = set(self._everyone)
         arrivals: dict[str, float] = {}
+
+        def take(node: str, frame: frames.Frame) -> None:
+            pending.discard(node)
+            if node not in self.histories:  # a played source's values are its samples'
+                self.outputs[node] = frame.fields[3]
+            arrivals[node] = time.perf_counter() - self._released_at.get(node, released_at)
+
+        if self._early:
+            for node in sorted(pending & set(self._early)):
+                take(node, self._early.pop(node))
         deadline = time.monotonic() + self.cosim.stepTimeout
         grace = self._grace()
         while pending:
@@ -547,22 +584,22 @@ class Relay:
                 continue
             node, frame = got
             frame_step = frame.fields[1]
-            if frame.kind == frames.END and frame_step == step + 1 and not frame.fields[3]:
+            label = step if node in self.paced else self._label.get(node, step)
+            if frame.kind == frames.END and frame_step == label + 1 and not frame.fields[3]:
                 # A node stopped (SIGTERM) while waiting for a release: it names the next step.
                 self._on_end(node, step, frame)
-            if frame_step != step:
-                reason = "step already past" if frame_step < step else "wrong step"
+            if frame_step != label:
+                reason = "step already past" if frame_step < label else "wrong step"
                 self.intake.drop(reason, f"{node} sent step {frame_step} while collecting {step}", step, node)
                 continue
             if frame.kind == frames.END:
                 self._on_end(node, step, frame)
-            if node not in pending:
-                self.intake.drop("duplicate", f"{node} sent step {step} twice", step, node)
-                continue
-            pending.discard(node)
-            if node not in self.histories:  # a played source's values are its samples'
-                self.outputs[node] = frame.fields[3]
-            arrivals[node] = time.perf_counter() - released_at
+            if node in pending:
+                take(node, frame)
+            elif node in self.paced or node in self._early or self._due_at.get(node, step) <= step:
+                self.intake.drop("duplicate", f"{node} sent step {frame_step} twice", step, node)
+            else:  # a slower node's outputs, for a later point
+                self._early[node] = frame
         return arrivals
 
     def _on_end(self, node: str, step: int, frame: frames.Frame) -> None:
@@ -593,23 +630,56 @@ class Relay:
 
     def _release(self, k: int, t: float, h: float, mode: str,
                  meanwhile: Callable[[], None] | None = None) -> tuple[dict[str, float], float]:
-        """Release step k (t → t+h) and gather the outputs at t+h; return arrivals and wait.
+        """Release step k (t → t+h) and gather the outputs due at t+h; return arrivals and wait.
 
-        ``meanwhile`` runs after the release is sent, while the nodes integrate: work there
-        (recording the point) is off the barrier's critical path.
+        Jacobi: one release for every node due at k, on the inputs routed at t. Gauss-Seidel:
+        one release per node in order, each on inputs routed again from its predecessors'
+        outputs at t+h. ``meanwhile`` runs once the (first) release is sent, while the nodes
+        integrate: work there (recording the point) is off the barrier's critical path.
         """
-        inputs = {n: self.router.inputs[n] for n in self.stepping}
         released_at = time.perf_counter()
+        if self.coupling.scheme == "gauss-seidel":
+            return self._release_in_order(k, t, h, mode, released_at, meanwhile)
+        due = self.coupling.due(k) if self.coupling.multirate else self.stepping
+        try:
+            self._put_release(k, t, h, mode, due, released_at)
+        finally:
+            if meanwhile is not None:
+                meanwhile()  # a release that could not be sent still leaves its point recorded
+        arrivals = self._collect(k + 1, released_at)
+        return arrivals, time.perf_counter() - released_at
+
+    def _put_release(self, k: int, t: float, h: float, mode: str, nodes: list[str], released_at: float) -> None:
+        """Send the release of step k to ``nodes``: each owes its outputs, labelled k + 1, at the
+        end of its own step (k + its rate, or the last point)."""
+        inputs = {n: self.router.inputs[n] for n in nodes}
         self._last_release = frames.encode(frames.STEP, k, t, h, mode, inputs, self.coordinator.driven_nodes())
         try:
             self.release.put(self._last_release)
         except FrameTooLarge as exc:
             raise RunError(f"the release of step {k} (t={t:g} s) is {exc}; largest inputs, by node: "
                            f"{frames.largest_values(inputs.items())}") from None
+        for n in nodes:
+            self._label[n] = k + 1
+            m = self.coupling.rates[n]
+            self._due_at[n] = k + 1 if m == 1 else min(k + m, self._last_point)
+            self._released_at[n] = released_at
+            self._last_release_of[n] = self._last_release
+
+    def _release_in_order(self, k: int, t: float, h: float, mode: str, released_at: float,
+                          meanwhile: Callable[[], None] | None) -> tuple[dict[str, float], float]:
+        """Gauss-Seidel: release the nodes one after the other, each on its predecessors' new outputs."""
+        arrivals: dict[str, float] = {}
+        try:
+            for i, node in enumerate(self.coupling.order):
+                if i > 0:
+                    self.router.route(mode, t, self.outputs, self.histories)
+                self._used_inputs[node] = list(self.router.inputs[node])
+                self._put_release(k, t, h, mode, [node], time.perf_counter())
+                arrivals.update(self._collect(k + 1, released_at, {node}))
         finally:
             if meanwhile is not None:
-                meanwhile()  # a release that could not be sent still leaves its point recorded
-        arrivals = self._collect(k + 1, released_at)
+                meanwhile()
         return arrivals, time.perf_counter() - released_at
 
     def _localise(self, k: int, t: float, h: float, mode: str, watched_at_start: bool,
@@ -671,16 +741,21 @@ class Relay:
             clock = RealTimeClock(cosim.startTime, wall0, rt) if rt is not None else None
             if self.gateway is not None:
                 self.gateway.run_started()
+            self._expect_all(0, released_at)
             arrivals = self._collect(0, released_at)
             wait = time.perf_counter() - released_at
         localise = self._localisation_plan()
+        self.recorder.meta["coupling"] = self.coupling.describe()
         self._checkpoints = self._checkpoint_plan()
         end = cosim.stopTime - 1e-9 * H
+        self._last_point = math.ceil((cosim.stopTime - cosim.startTime) / H - 1e-9)
+        in_order = self.coupling.scheme == "gauss-seidel"
         perf0 = time.perf_counter()
         k0 = k
         last_progress = 0.0
         while True:
-            if self._checkpoints and next_checkpoint - 1e-9 * H <= t < end:
+            # A multi-rate run's checkpoints wait for a point where no node is inside its step.
+            if self._checkpoints and next_checkpoint - 1e-9 * H <= t < end and k % self.coupling.period == 0:
                 self._take_checkpoint(k, t, origin, j, localised)
                 next_checkpoint = self._next_checkpoint(t)
             for node, history in self.histories.items():
@@ -714,9 +789,15 @@ class Relay:
                 self.progress.steps_per_s = (k - k0) / (now - perf0) if now > perf0 else 0.0
                 self._on_progress(self.progress)
 
+            # Gauss-Seidel replaces outputs while it releases: point k's are kept for its record.
+            at_k = {n: list(v) for n, v in self.outputs.items()} if in_order else self.outputs
+            self._used_inputs = {}
+            stepped = self.coupling.due(k) if self.coupling.multirate and t < end else None
+
             def record() -> None:
                 # Point k as it is now: called before the next collect replaces outputs and arrivals.
-                self.recorder.row(k, t, mode, self.outputs, self.router.inputs)
+                inputs = {**self.router.inputs, **self._used_inputs} if self._used_inputs else self.router.inputs
+                self.recorder.row(k, t, mode, at_k, inputs, stepped)
                 self.recorder.timing(k, t, wait, holder, lateness, arrivals, ages)
 
             if t >= end or self._stop_requested.is_set():

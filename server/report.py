@@ -45,6 +45,8 @@ class RunSummary:
     wait_strategy: str = ""
     server_waits: dict[str, int] = field(default_factory=dict)
     ended_by: dict[str, Any] | None = None  # a node whose model ended the run: node, step, t, message
+    coupling: str = ""  # the master algorithm (Jacobi or Gauss-Seidel, node rates)
+    node_steps: dict[str, int] = field(default_factory=dict)  # steps each stepping node took (a slow node fewer)
 
 
 class EndedBy(BaseModel):
@@ -68,6 +70,7 @@ class RunMeta(BaseModel):
     non_finite: dict[str, dict[str, int | float]] = Field(default_factory=dict)
     server_waits: dict[str, int] = Field(default_factory=dict)
     ended_by: EndedBy | None = None
+    coupling: str = ""
 
 
 class ModeSwitchRecord(BaseModel):
@@ -192,6 +195,7 @@ def summarise(run_dir: Path, slowest: int = 5) -> RunSummary:
         dropped_frames=meta.dropped_frames, non_finite=meta.non_finite, async_age_ms={k: 1000 * age_sum[k] / age_n[k] for k in age_sum},
         wait_strategy=meta.waitStrategy, server_waits=meta.server_waits,
         ended_by=meta.ended_by.model_dump() if meta.ended_by else None,
+        coupling=meta.coupling, node_steps=dict(sorted(arrival_n.items())),
     )
 
 

@@ -138,3 +138,17 @@ def test_recovery_benchmark_reports_identical_records_at_a_small_scale():
     assert r["server_kills"] == {"resumes": 1, "identical": True, "rows": 1001}
     assert r["checkpoint_cost"]["ratio"] > 0
     assert "replay" not in r  # tests/test_replay.py runs the replayed trial
+
+
+def test_accuracy_benchmark_compares_the_couplings_with_the_exact_solution_and_counts_messages():
+    res = subprocess.run([sys.executable, "benchmarks/accuracy.py", "--stop", "0.5", "--h", "0.01", "--mr-stop",
+                          "0.3", "--json"], capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
+    assert res.returncode == 0, res.stderr
+    r = json.loads(res.stdout)
+    by = {row["coupling"]: row for row in r["oscillator"]}
+    assert set(by) == {"jacobi", "gauss-seidel"} and all(row["macro_steps"] == 50 for row in by.values())
+    assert 0 < by["gauss-seidel"]["error_x1"] < by["jacobi"]["error_x1"] < 0.2  # x1 swings ±0.1 m
+    assert r["gs_over_jacobi_error"]["0.01"] == by["gauss-seidel"]["error_x1"] / by["jacobi"]["error_x1"]
+    m = r["multirate"]
+    assert m["single_rate"]["releases"] == m["multi_rate"]["releases"] == 300
+    assert m["multi_rate"]["messages"] < m["single_rate"]["messages"] and m["fast_node_identical"]

@@ -1,0 +1,168 @@
+"""How a project's stepping nodes are coupled: each node's rate, and the Gauss-Seidel order.
+
+Jacobi (the default, the paper's scheme): every node due at a macro-step point steps at once,
+on inputs routed from the outputs at that point. Gauss-Seidel: within a macro step the nodes
+step one after the other, each on inputs routed from the outputs its predecessors have
+already advanced to the step's end; a node comes after the nodes it reads from.
+
+Multi-rate: a node whose entry gives ``stepSize``, an integer multiple m of the base
+``coSimulation.stepSize``, steps at every m-th base point (from startTime) over m base steps
+(the last one cut at stopTime); its outputs hold between its steps, and its inputs are those
+routed at its step's start.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from core.config import Issue, Project, Route
+
+# How far node stepSize / base stepSize may be from an integer (relative): decimal step
+# sizes (0.1 / 0.01) are not exact in binary.
+RATIO_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class CouplingPlan:
+    """The coupling of one project's stepping nodes (asynchronous sources take no part)."""
+
+    scheme: str  # "jacobi" or "gauss-seidel"
+    rates: dict[str, int]  # node → its step as a multiple of the base step
+    order: tuple[str, ...]  # Gauss-Seidel: the order nodes step in; Jacobi: the file's order
+    multirate: bool = False  # some node steps slower than the base (read at every step: a plain field)
+
+    @property
+    def period(self) -> int:
+        """Base steps between points where every node is due (checkpoints are taken there)."""
+        return math.lcm(*self.rates.values()) if self.rates else 1
+
+    def due(self, k: int) -> list[str]:
+        """The nodes that start a step at base point k, in order."""
+        return [n for n in self.order if k % self.rates[n] == 0]
+
+    def describe(self) -> str:
+        """One line for meta.json and the report."""
+        text = "Gauss-Seidel, order " + " → ".join(self.order) if self.scheme == "gauss-seidel" else "Jacobi"
+        slow = {n: m for n, m in self.rates.items() if m > 1}
+        if slow:
+            text += "; multi-rate: " + ", ".join(f"{n} every {m} base steps" for n, m in slow.items())
+        return text
+
+
+def rate_of(step: float | None, base: float) -> int | None:
+    """A node's stepSize as a multiple of the base step; None when it is not an integer multiple."""
+    if step is None:
+        return 1
+    ratio = step / base
+    m = round(ratio)
+    if m < 1 or abs(ratio - m) > RATIO_TOLERANCE * max(ratio, 1.0):
+        return None
+    return m
+
+
+def _reads_from(project: Project, routes: list[Route]) -> dict[str, set[str]]:
+    """Stepping node → the stepping nodes it reads from over links active in any mode."""
+    stepping = {n.nodeName for n in project.stepping_nodes()}
+    reads: dict[str, set[str]] = {n: set() for n in stepping}
+    for r in routes:
+        if r.src_node in stepping and r.dst_node in stepping and r.src_node != r.dst_node:
+            reads[r.dst_node].add(r.src_node)
+    return reads
+
+
+def derived_order(project: Project, routes: list[Route]) -> tuple[list[str], list[str]]:
+    """The Gauss-Seidel order the links give: (order, nodes on a cycle that leaves no order).
+
+    Among nodes free to go next, the one listed first in the file goes first, so the order is
+    the same on every host.
+    """
+    reads = _reads_from(project, routes)
+    left = [n.nodeName for n in project.stepping_nodes()]
+    order: list[str] = []
+    while left:
+        ready = next((n for n in left if not (reads[n] - set(order))), None)
+        if ready is None:
+            return order, left
+        order.append(ready)
+        left.remove(ready)
+    return order, []
+
+
+def plan(project: Project, routes: list[Route]) -> CouplingPlan:
+    """The coupling of a valid project (:func:`coupling_issues` found nothing)."""
+    cosim = project.coSimulation
+    rates = {n.nodeName: rate_of(n.stepSize, cosim.stepSize) or 1 for n in project.stepping_nodes()}
+    if cosim.coupling == "gauss-seidel":
+        order = tuple(cosim.order) if cosim.order else tuple(derived_order(project, routes)[0])
+    else:
+        order = tuple(rates)
+    return CouplingPlan(cosim.coupling, rates, order, any(m > 1 for m in rates.values()))
+
+
+def _slower(nodes: list[str]) -> str:
+    return f"{', '.join(nodes)} {'steps' if len(nodes) == 1 else 'step'} slower than the base"
+
+
+def coupling_issues(project: Project, routes: list[Route]) -> list[Issue]:
+    """Every problem with the nodes' step sizes and the coupling's order, by JSON path."""
+    issues: list[Issue] = []
+    cosim = project.coSimulation
+    multirate: list[str] = []
+    for i, n in enumerate(project.nodeLists):
+        if n.stepSize is None:
+            continue
+        where = f"nodeLists[{i}].stepSize"
+        if n.asynchronous:
+            issues.append(Issue(where, f"asynchronous node {n.nodeName!r} does not step",
+                                "its samples come at their own times ('rate')"))
+            continue
+        m = rate_of(n.stepSize, cosim.stepSize)
+        if m is None:
+            issues.append(Issue(where, f"node {n.nodeName!r} steps {n.stepSize:g} s, which is not an integer "
+                                f"multiple of coSimulation.stepSize {cosim.stepSize:g} s",
+                                "a multiple of the base step (e.g. "
+                                f"{max(1, round(n.stepSize / cosim.stepSize)) * cosim.stepSize:g})"))
+        elif m > 1:
+            multirate.append(n.nodeName)
+    if multirate and cosim.eventTolerance is not None:
+        issues.append(Issue("coSimulation.eventTolerance", f"locating events by rollback works with single-rate "
+                            f"nodes only; {_slower(multirate)}",
+                            "leave eventTolerance out (crossings are then located to within one base step)"))
+    stepping = [n.nodeName for n in project.stepping_nodes()]
+    if cosim.order is not None and cosim.coupling != "gauss-seidel":
+        issues.append(Issue("coSimulation.order", "an order is for Gauss-Seidel coupling, and this project's "
+                            "is Jacobi", '"coupling": "gauss-seidel", or leave order out'))
+    if cosim.coupling != "gauss-seidel":
+        return issues
+    if multirate:
+        issues.append(Issue("coSimulation.coupling", f"Gauss-Seidel coupling works with single-rate nodes only; "
+                            f"{_slower(multirate)}", "Jacobi coupling, or one rate"))
+    if cosim.eventTolerance is not None:
+        issues.append(Issue("coSimulation.eventTolerance", "locating events by rollback works with Jacobi "
+                            "coupling only", "leave eventTolerance out, or use Jacobi coupling"))
+    played = [n.nodeName for n in project.paced_nodes()]
+    if played:
+        issues.append(Issue("coSimulation.coupling", f"Gauss-Seidel coupling cannot pace a played recording "
+                            f"({', '.join(played)})", "Jacobi coupling to replay asynchronous sources"))
+    if cosim.order is not None:
+        known = set(stepping)
+        unknown = [n for n in cosim.order if n not in known]
+        for name in unknown:
+            hint = ("it is an asynchronous source: those do not step" if name in {n.nodeName for n in project.nodeLists}
+                    else f"stepping nodes are {', '.join(stepping)}")
+            issues.append(Issue("coSimulation.order", f"names {name!r}, which is not a stepping node", hint))
+        twice = sorted({n for n in cosim.order if cosim.order.count(n) > 1})
+        if twice:
+            issues.append(Issue("coSimulation.order", f"names {', '.join(twice)} more than once", "each node once"))
+        missing = [n for n in stepping if n not in cosim.order]
+        if missing:
+            issues.append(Issue("coSimulation.order", f"leaves out {', '.join(missing)}",
+                                "every stepping node once, in the order they step"))
+        return issues
+    _, cycle = derived_order(project, routes)
+    if cycle:
+        issues.append(Issue("coSimulation.order", f"the links make a cycle among {', '.join(cycle)}, so they give "
+                            "no order to step in", "give coSimulation.order: a node listed before a node it reads "
+                            "from reads that node's outputs at the step's start"))
+    return issues

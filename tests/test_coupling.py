@@ -1,0 +1,163 @@
+"""Master algorithms: multi-rate nodes and Gauss-Seidel coupling, end to end over Zenoh."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from core.config import ConfigError, parse_project
+from core.coupling import plan
+from tests.helpers import column, hycosim, meta, read_rows, run_killing, run_project, write_project
+
+
+def _rates(tmp_path: Path, **cosim) -> Path:
+    """A ramp at the base rate feeding a gain every 10 base steps, which feeds one every 50."""
+    return write_project(tmp_path / "mr.json", [
+        {"nodeName": "fast", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "mid", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"], "stepSize": 0.1},
+        {"nodeName": "slow", "UID": 3, "model": "gain", "input": ["u"], "output": ["y"], "stepSize": 0.5},
+    ], [{"from": "fast.y", "to": "mid.u"}, {"from": "mid.y", "to": "slow.u"}],
+        cosim={"stepSize": 0.01, "stopTime": 1.05, **cosim})
+
+
+def test_a_multi_rate_node_steps_at_its_multiples_holds_its_outputs_and_reads_inputs_at_its_step_start(tmp_path):
+    run = run_project(_rates(tmp_path), tmp_path / "runs")
+    rows = read_rows(run)
+    assert len(rows) == 106
+    stepped = [r["stepped"].split() for r in rows]
+    assert stepped[0] == ["fast", "mid", "slow"] and stepped[10] == ["fast", "mid"] and stepped[11] == ["fast"]
+    assert stepped[50] == ["fast", "mid", "slow"] and stepped[-1] == []  # nothing steps from stopTime
+    mid, slow = column(rows, "mid.y"), column(rows, "slow.y")
+    u_mid, u_slow = column(rows, "mid.u"), column(rows, "slow.u")
+    for k in range(10, 105):
+        # Held from the last step that ended by point k, which read its input where it began.
+        assert mid[k] == pytest.approx(u_mid[10 * (k // 10) - 10]), k
+    assert slow[:100] == [0.0] * 100 and slow[100:105] == [pytest.approx(u_slow[50])] * 5
+    # The last steps, cut at stopTime, end there.
+    assert mid[105] == pytest.approx(u_mid[100]) and slow[105] == pytest.approx(u_slow[100])
+    assert u_slow[50] == pytest.approx(mid[50]) != 0.0
+    m = meta(run)
+    assert m["coupling"] == "Jacobi; multi-rate: mid every 10 base steps, slow every 50 base steps"
+    report = json.loads(hycosim("report", str(run), "--json").stdout)
+    assert report["node_steps"] == {"fast": 105, "mid": 11, "slow": 3}
+    assert hycosim("report", str(run)).stdout.count("multi-rate: mid every 10 base steps") == 1
+
+
+def _chain(tmp_path: Path, coupling: str, order: list[str] | None = None) -> Path:
+    cosim = {"stepSize": 0.1, "stopTime": 1.0, "coupling": coupling}
+    if order:
+        cosim["order"] = order
+    # Listed out of order: Gauss-Seidel derives a → b → c from the links.
+    return write_project(tmp_path / f"{coupling}.json", [
+        {"nodeName": "c", "UID": 3, "model": "gain", "input": ["u"], "output": ["y"]},
+        {"nodeName": "a", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "b", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+    ], [{"from": "a.y", "to": "b.u"}, {"from": "b.y", "to": "c.u"}], cosim=cosim)
+
+
+def test_gauss_seidel_steps_each_node_on_its_predecessors_new_outputs(tmp_path):
+    jacobi = read_rows(run_project(_chain(tmp_path, "jacobi"), tmp_path / "j"))
+    gs_run = run_project(_chain(tmp_path, "gauss-seidel"), tmp_path / "gs")
+    gs = read_rows(gs_run)
+    a = column(gs, "a.y")
+    # Jacobi: each link delays by one macro step; Gauss-Seidel: none along the order.
+    assert column(jacobi, "c.y")[2:] == pytest.approx(column(jacobi, "a.y")[:-2])
+    assert column(gs, "c.y") == pytest.approx(a) and column(gs, "b.y") == pytest.approx(a)
+    # Each row's inputs are those the nodes stepped on from that point (the last row's: routed there).
+    assert column(gs, "b.u")[:-1] == pytest.approx(a[1:]) and column(gs, "c.u")[:-1] == pytest.approx(a[1:])
+    assert meta(gs_run)["coupling"] == "Gauss-Seidel, order a → b → c"
+
+
+def test_gauss_seidel_on_a_cycle_follows_the_given_order(tmp_path):
+    """x and y read each other: the order breaks the cycle, y reads x's new outputs, x y's old."""
+    nodes = [{"nodeName": n, "UID": i, "model": "gain", "parameters": {"k": 0.5}, "input": ["u"], "output": ["y"]}
+             for i, n in enumerate(("x", "y"), 1)]
+    nodes.append({"nodeName": "src", "UID": 3, "model": "ramp", "output": ["y", "v"]})
+    links = [{"from": "y.y", "to": "x.u"}, {"from": "x.y", "to": "y.u"}]
+    cosim = {"stepSize": 0.1, "stopTime": 0.5, "coupling": "gauss-seidel"}
+    cfg = write_project(tmp_path / "cycle.json", nodes, links, cosim=cosim)
+    res = hycosim("validate", str(cfg))
+    assert res.returncode == 2
+    assert "coSimulation.order: the links make a cycle among x, y" in res.stderr
+    cfg = write_project(tmp_path / "cycle.json", nodes, links, cosim={**cosim, "order": ["y", "x", "src"]})
+    rows = read_rows(run_project(cfg, tmp_path / "runs"))
+    x, y = column(rows, "x.y"), column(rows, "y.y")
+    for k in range(len(rows) - 1):
+        assert float(rows[k]["y.u"]) == pytest.approx(x[k])  # y first: x's output at the step's start
+        assert float(rows[k]["x.u"]) == pytest.approx(y[k + 1])  # then x, on y's new output
+
+
+@pytest.mark.parametrize("cosim, nodes_extra, expected", [
+    ({}, {"stepSize": 0.015}, "nodeLists[1].stepSize: node 'b' steps 0.015 s, which is not an integer multiple "
+                              "of coSimulation.stepSize 0.01 s"),
+    ({"eventTolerance": 0.001}, {"stepSize": 0.02}, "coSimulation.eventTolerance: locating events by rollback "
+                                                    "works with single-rate nodes only; b steps slower"),
+    ({"order": ["a", "b"]}, {}, "coSimulation.order: an order is for Gauss-Seidel coupling"),
+    ({"coupling": "gauss-seidel", "order": ["a", "z"]}, {}, "coSimulation.order: names 'z', which is not a "
+                                                             "stepping node"),
+    ({"coupling": "gauss-seidel", "order": ["a"]}, {}, "coSimulation.order: leaves out b"),
+    ({"coupling": "gauss-seidel", "order": ["a", "b", "a"]}, {}, "coSimulation.order: names a more than once"),
+    ({"coupling": "gauss-seidel"}, {"stepSize": 0.02}, "coSimulation.coupling: Gauss-Seidel coupling works with "
+                                                       "single-rate nodes only; b"),
+    ({"coupling": "gauss-seidel", "eventTolerance": 0.001}, {}, "coSimulation.eventTolerance: locating events "
+                                                                "by rollback works with Jacobi coupling only"),
+    ({"coupling": "gauss-jordan"}, {}, "coSimulation.coupling"),
+    ({}, {"stepSize": -0.02}, "nodeLists[1].stepSize"),
+])
+def test_bad_coupling_settings_are_named_by_validate(tmp_path, cosim, nodes_extra, expected):
+    cfg = write_project(tmp_path / "bad.json", [
+        {"nodeName": "a", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "b", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"], **nodes_extra},
+    ], [{"from": "a.y", "to": "b.u"}], cosim={"stepSize": 0.01, "stopTime": 0.1, **cosim})
+    res = hycosim("validate", str(cfg))
+    assert res.returncode == 2 and expected in res.stderr, res.stderr
+    assert "Traceback" not in res.stderr
+
+
+def test_an_asynchronous_source_has_no_step_size_and_decimal_multiples_are_accepted():
+    doc = {"nodeNum": 2, "nodeLists": [
+        {"nodeName": "cam", "UID": 1, "model": "camera", "async": True, "rate": 30, "stepSize": 0.1, "output": ["a"]},
+        {"nodeName": "b", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"], "stepSize": 0.3}],
+        "coSimulation": {"stepSize": 0.1}}
+    with pytest.raises(ConfigError) as info:
+        parse_project(doc)
+    assert "nodeLists[0].stepSize: asynchronous node 'cam' does not step" in str(info.value)
+    del doc["nodeLists"][0]["stepSize"]
+    loaded = parse_project(doc)  # 0.3 / 0.1 is 2.9999999999999996 in floats: still a multiple of 3
+    assert plan(loaded.project, loaded.routes).rates == {"b": 3}
+
+
+def _recovering(tmp_path: Path, **extra) -> Path:
+    nodes = [
+        {"nodeName": "rod", "UID": 1, "model": "clients.rod.node:RodNode", "parameters": {"initial_angle_deg": 35},
+         "output": ["angle", "omega"]},
+        {"nodeName": "g1", "UID": 2, "model": "gain", "parameters": {"k": 2.0}, "input": ["u"], "output": ["y"]},
+        {"nodeName": "g2", "UID": 3, "model": "gain", "parameters": {"k": 0.5, "work_s": 0.003}, "input": ["u"],
+         "output": ["y"]},
+    ]
+    for node in nodes:
+        node.update(extra.pop(node["nodeName"], {}))
+    cosim = {"stepSize": 0.01, "stopTime": 4.0, "attachTimeout": 20.0, "checkpointEvery": 0.5, **extra}
+    links = [{"from": "rod.angle", "to": "g1.u"}, {"from": "g1.y", "to": "g2.u"}]
+    return write_project(tmp_path / "p.json", nodes, links, cosim=cosim, name="rec")
+
+
+@pytest.mark.parametrize("setting, victim", [
+    ({"g2": {"stepSize": 0.07}}, "node g2"),  # checkpoints at 0.7 s steps: every 7th base point at most
+    ({"coupling": "gauss-seidel"}, "node g1"),
+])
+def test_checkpoints_restore_multi_rate_and_gauss_seidel_runs_to_what_they_record_unkilled(tmp_path, setting, victim):
+    (tmp_path / "ref").mkdir()
+    reference = (run_project(_recovering(tmp_path / "ref", **setting), tmp_path / "ref" / "runs")
+                 / "values.csv").read_bytes()
+    killed = _recovering(tmp_path, **setting)
+    code, err = run_killing(killed, tmp_path / "runs", [(victim, 180)])
+    assert code == 0, err
+    run = next((tmp_path / "runs").iterdir())
+    assert (run / "values.csv").read_bytes() == reference
+    m = meta(run)
+    assert [(r["node"], r["cause"]) for r in m["recoveries"]] == [(victim.split()[1], "restarted")]
+    period = 7 if "g2" in setting else 1
+    assert all(r["restored"] % period == 0 for r in m["recoveries"])
