@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import subprocess
 import sys
 import tempfile
 import time
@@ -29,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _procs import free_port
+from _procs import free_port, run
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
@@ -41,16 +40,16 @@ X10 = 0.1
 
 def _run(cfg: Path, runs: Path, timeout: float = 600) -> tuple[Path, float]:
     began = time.perf_counter()
-    res = subprocess.run([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", str(runs), "--no-progress"],
-                         cwd=REPO, capture_output=True, text=True, timeout=timeout)
+    res = run([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", str(runs), "--no-progress"],
+              timeout, cwd=REPO)
     wall = time.perf_counter() - began
     if res.returncode:
         raise SystemExit(f"{cfg}: run failed ({res.returncode}): {res.stderr.strip()[-800:]}")
     return max(runs.iterdir(), key=lambda p: p.stat().st_mtime), wall
 
 
-def _columns(run: Path) -> dict[str, np.ndarray]:
-    with open(run / "values.csv", newline="") as f:
+def _columns(run_dir: Path) -> dict[str, np.ndarray]:
+    with open(run_dir / "values.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     return {key: np.array([float(r[key]) for r in rows]) for key in rows[0] if key not in ("mode", "stepped")}
 
@@ -91,8 +90,8 @@ def accuracy(dir_: Path, steps: list[float], stop: float) -> list[dict]:
     rows = []
     for h in steps:
         for coupling in ("jacobi", "gauss-seidel"):
-            run, wall = _run(oscillator(dir_, coupling, h, stop), dir_ / f"runs-{coupling}-{h:g}")
-            c = _columns(run)
+            run_dir, wall = _run(oscillator(dir_, coupling, h, stop), dir_ / f"runs-{coupling}-{h:g}")
+            c = _columns(run_dir)
             ref = reference(c["t"])
             e = energy(c["m1.x"], c["m1.v"], c["m2.x"], c["m2.v"])
             rows.append({"coupling": coupling, "H": h, "macro_steps": len(c["t"]) - 1, "wall_s": round(wall, 2),
@@ -120,9 +119,9 @@ def multirate(dir_: Path, stop: float) -> dict:
     out = {}
     fast = {}
     for rates in (False, True):
-        run, wall = _run(chain(dir_, stop, rates), dir_ / f"runs-chain-{rates}")
-        meta = json.loads((run / "meta.json").read_text())
-        c = _columns(run)
+        run_dir, wall = _run(chain(dir_, stop, rates), dir_ / f"runs-chain-{rates}")
+        meta = json.loads((run_dir / "meta.json").read_text())
+        c = _columns(run_dir)
         points = len(c["t"])
         releases = points - 1  # one release per base point before stopTime (the START aside)
         received = sum(meta["server_waits"].values())

@@ -20,7 +20,6 @@ import zenoh
 
 from core import frames, signals
 from core.config import WIRE_TYPES, LoadedProject, PortType
-from core.coupling import rate_of
 from core.drops import DropLog
 from core.inbox import LOCAL, Inbox
 from core.keys import SERVER_TOKEN, ProjectKeys
@@ -65,7 +64,7 @@ class NodeRuntime:
         # Releases carry inputs for the stepping nodes; an asynchronous source only reads their time.
         self._release_for = None if self.spec.asynchronous else node_name
         # Multi-rate: this node steps over this many base steps, at every such base point.
-        self._rate = rate_of(self.spec.stepSize, self.cosim.stepSize) or 1
+        self._rate = loaded.coupling.rates.get(node_name, 1)
         self._log = structlog.get_logger("node").bind(node=node_name)
         self.drops = DropLog(self._log)
         self.steps = 0

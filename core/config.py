@@ -14,14 +14,18 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import dataclass, field
+from functools import cached_property
 from enum import Enum
 from pathlib import Path
-from typing import Any, Literal, NamedTuple
+from typing import TYPE_CHECKING, Any, Literal, NamedTuple
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from core.endpoints import GATEWAY_PORT, SERVER_PORT, Address, EndpointError, gateway_beside, parse_address, parse_endpoint
 from core.guards import Guard, GuardError
+
+if TYPE_CHECKING:
+    from core.coupling import CouplingPlan
 
 FREE_MODE = "free"
 
@@ -365,6 +369,13 @@ class LoadedProject:
     @property
     def name(self) -> str:
         return self.project.projectName
+
+    @cached_property
+    def coupling(self) -> CouplingPlan:
+        """How the stepping nodes are coupled: their rates and, for Gauss-Seidel, their order."""
+        from core.coupling import plan  # it reads Project and Route, defined here
+
+        return plan(self.project, self.routes)
 
     def resolve(self, relative: str) -> Path:
         """Resolve a path written in the project file against the file's folder."""

@@ -55,8 +55,10 @@ def rate_of(step: float | None, base: float) -> int | None:
     if step is None:
         return 1
     ratio = step / base
+    if not math.isfinite(ratio) or ratio < 0.5:  # 1e300 / 1e-10 overflows to infinity
+        return None
     m = round(ratio)
-    if m < 1 or abs(ratio - m) > RATIO_TOLERANCE * max(ratio, 1.0):
+    if abs(ratio - m) > RATIO_TOLERANCE * ratio:
         return None
     return m
 
@@ -72,7 +74,7 @@ def _reads_from(project: Project, routes: list[Route]) -> dict[str, set[str]]:
 
 
 def derived_order(project: Project, routes: list[Route]) -> tuple[list[str], list[str]]:
-    """The Gauss-Seidel order the links give: (order, nodes on a cycle that leaves no order).
+    """The Gauss-Seidel order the links give: (order, the nodes on cycles, which leave no order).
 
     Among nodes free to go next, the one listed first in the file goes first, so the order is
     the same on every host.
@@ -83,10 +85,24 @@ def derived_order(project: Project, routes: list[Route]) -> tuple[list[str], lis
     while left:
         ready = next((n for n in left if not (reads[n] - set(order))), None)
         if ready is None:
-            return order, left
+            return order, [n for n in left if _on_cycle(n, reads, set(left))]
         order.append(ready)
         left.remove(ready)
     return order, []
+
+
+def _on_cycle(node: str, reads: dict[str, set[str]], among: set[str]) -> bool:
+    """Whether ``node`` reads, through links among ``among``, from itself."""
+    seen: set[str] = set()
+    todo = [n for n in reads[node] if n in among]
+    while todo:
+        n = todo.pop()
+        if n == node:
+            return True
+        if n not in seen:
+            seen.add(n)
+            todo.extend(m for m in reads[n] if m in among)
+    return False
 
 
 def plan(project: Project, routes: list[Route]) -> CouplingPlan:
@@ -119,10 +135,11 @@ def coupling_issues(project: Project, routes: list[Route]) -> list[Issue]:
             continue
         m = rate_of(n.stepSize, cosim.stepSize)
         if m is None:
+            near = n.stepSize / cosim.stepSize
+            example = f" (e.g. {max(1, round(near)) * cosim.stepSize:g})" if math.isfinite(near) else ""
             issues.append(Issue(where, f"node {n.nodeName!r} steps {n.stepSize:g} s, which is not an integer "
                                 f"multiple of coSimulation.stepSize {cosim.stepSize:g} s",
-                                "a multiple of the base step (e.g. "
-                                f"{max(1, round(n.stepSize / cosim.stepSize)) * cosim.stepSize:g})"))
+                                f"a multiple of the base step{example}"))
         elif m > 1:
             multirate.append(n.nodeName)
     if multirate and cosim.eventTolerance is not None:

@@ -24,7 +24,6 @@ from pathlib import Path
 from typing import Any
 
 from core.config import LoadedProject, PortType
-from core.coupling import plan
 from core.recordings import SAMPLES_FILE, encode_sample
 
 
@@ -132,7 +131,7 @@ class Recorder:
         self._plain_in = {n.nodeName: all(p.type in plain for p in n.input) for n in project.nodeLists}
         self._stepping = [n.nodeName for n in project.stepping_nodes()]
         # A multi-rate run says at each point which nodes started a step there.
-        self._marks_steps = plan(project, loaded.routes).multirate
+        self._marks_steps = loaded.coupling.multirate
         self._async_labels = [f"{r.dst_node}.{r.dst_port}" for r in loaded.routes
                               if project.node(r.src_node).asynchronous]
         at = resume_at or {}

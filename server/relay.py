@@ -26,7 +26,6 @@ import zenoh
 
 from core import frames, signals
 from core.config import FREE_MODE, LoadedProject
-from core.coupling import plan
 from core.inbox import LOCAL, Inbox
 from core.keys import SERVER_TOKEN, ProjectKeys
 from core.session import FramePublisher, FrameTooLarge
@@ -98,7 +97,7 @@ class Relay:
         self.router = Router(loaded)
         self.intake = Intake(self.project.nodeLists)
         self.stepping = [n.nodeName for n in self.project.stepping_nodes()]
-        self.coupling = plan(self.project, loaded.routes)
+        self.coupling = loaded.coupling
         # Each stepping node's outstanding step: the label its outputs carry (the step's release
         # point + 1), the point they are gathered at (later for a multi-rate node), and when it
         # was released. Outputs that come before their point wait in _early.
@@ -107,7 +106,6 @@ class Relay:
         self._released_at: dict[str, float] = {}
         self._early: dict[str, frames.Frame] = {}
         self._last_release_of: dict[str, bytes] = {}  # node → the last release that named it
-        self._used_inputs: dict[str, list[Any]] = {}  # Gauss-Seidel: the inputs each node stepped on
         self._last_point = math.inf  # the index of the point at stopTime, on a grid from startTime
         # Asynchronous nodes played from a recording take part in the barrier: each point waits
         # for the samples the recorded run had by then, so that a replay gives the same values.
@@ -668,13 +666,14 @@ class Relay:
 
     def _release_in_order(self, k: int, t: float, h: float, mode: str, released_at: float,
                           meanwhile: Callable[[], None] | None) -> tuple[dict[str, float], float]:
-        """Gauss-Seidel: release the nodes one after the other, each on its predecessors' new outputs."""
+        """Gauss-Seidel: release the nodes one after the other, each on its predecessors' new outputs.
+        Each node's inputs are routed again just before its release, and so are, once all are
+        released, the inputs every node stepped on."""
         arrivals: dict[str, float] = {}
         try:
             for i, node in enumerate(self.coupling.order):
                 if i > 0:
-                    self.router.route(mode, t, self.outputs, self.histories)
-                self._used_inputs[node] = list(self.router.inputs[node])
+                    self.router.route_into(node, mode, self.outputs)
                 self._put_release(k, t, h, mode, [node], time.perf_counter())
                 arrivals.update(self._collect(k + 1, released_at, {node}))
         finally:
@@ -791,13 +790,11 @@ class Relay:
 
             # Gauss-Seidel replaces outputs while it releases: point k's are kept for its record.
             at_k = {n: list(v) for n, v in self.outputs.items()} if in_order else self.outputs
-            self._used_inputs = {}
             stepped = self.coupling.due(k) if self.coupling.multirate and t < end else None
 
             def record() -> None:
                 # Point k as it is now: called before the next collect replaces outputs and arrivals.
-                inputs = {**self.router.inputs, **self._used_inputs} if self._used_inputs else self.router.inputs
-                self.recorder.row(k, t, mode, at_k, inputs, stepped)
+                self.recorder.row(k, t, mode, at_k, self.router.inputs, stepped)
                 self.recorder.timing(k, t, wait, holder, lateness, arrivals, ages)
 
             if t >= end or self._stop_requested.is_set():

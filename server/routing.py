@@ -77,6 +77,9 @@ class Router:
                                  src.output_names().index(r.src_port), r.extrapolation, widen,
                                  f"{r.dst_node}.{r.dst_port}"))
             self._plans[mode] = hops
+        # The same hops by destination node, for Gauss-Seidel's routing into one node at a time.
+        self._into = {mode: {n.nodeName: [h for h in hops if h.dst_node == n.nodeName] for n in project.nodeLists}
+                      for mode, hops in self._plans.items()}
 
     def route(self, mode: str, t: float, outputs: Mapping[str, list[Any]],
               histories: Mapping[str, SampleHistory]) -> dict[str, float | None]:
@@ -91,3 +94,12 @@ class Router:
                 value = outputs[hop.src_node][hop.src_index]
             inputs[hop.dst_node][hop.dst_index] = value if hop.convert is None else hop.convert(value)
         return ages
+
+    def route_into(self, node: str, mode: str, outputs: Mapping[str, list[Any]]) -> None:
+        """Update ``self.inputs[node]`` alone from stepping nodes' outputs (Gauss-Seidel, within a
+        step: its asynchronous inputs stay as :meth:`route` brought them to the step's start)."""
+        inputs = self.inputs[node]
+        for hop in self._into[mode][node]:
+            if hop.src_node not in self._async:
+                value = outputs[hop.src_node][hop.src_index]
+                inputs[hop.dst_index] = value if hop.convert is None else hop.convert(value)

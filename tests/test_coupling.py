@@ -5,10 +5,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import math
+
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from core.config import ConfigError, parse_project
-from core.coupling import plan
 from tests.helpers import column, hycosim, meta, read_rows, run_killing, run_project, write_project
 
 
@@ -126,7 +129,57 @@ def test_an_asynchronous_source_has_no_step_size_and_decimal_multiples_are_accep
     assert "nodeLists[0].stepSize: asynchronous node 'cam' does not step" in str(info.value)
     del doc["nodeLists"][0]["stepSize"]
     loaded = parse_project(doc)  # 0.3 / 0.1 is 2.9999999999999996 in floats: still a multiple of 3
-    assert plan(loaded.project, loaded.routes).rates == {"b": 3}
+    assert loaded.coupling.rates == {"b": 3}
+
+
+_NAMES = ["a", "b", "c", "cam", "z"]
+_STEPS = st.none() | st.floats(allow_nan=False, allow_infinity=False) | st.sampled_from([0.01, 0.02, 0.3, 1e308])
+
+
+@st.composite
+def _coupled_projects(draw) -> dict:
+    """Project files whose coupling keys are anything JSON can hold, mostly near the valid ones."""
+    nodes = [{"nodeName": n, "UID": i, "model": "gain", "input": ["u"], "output": ["y"]}
+             for i, n in enumerate(["a", "b", "c"], 1)]
+    nodes.append({"nodeName": "cam", "UID": 4, "model": "camera", "async": True, "rate": 30, "output": ["y"]})
+    for node in nodes:
+        step = draw(_STEPS)
+        if step is not None:
+            node["stepSize"] = step
+    links = draw(st.lists(st.tuples(st.sampled_from(["a", "b", "c", "cam"]), st.sampled_from(["a", "b", "c"])),
+                          max_size=4, unique_by=lambda pair: pair[1]))
+    cosim = {"stepSize": draw(st.sampled_from([0.01, 0.1, 1e-10])), "stopTime": 1.0}
+    if draw(st.booleans()):
+        cosim["coupling"] = draw(st.sampled_from(["jacobi", "gauss-seidel"]) | st.text(max_size=5) | st.integers())
+    if draw(st.booleans()):
+        cosim["order"] = draw(st.lists(st.sampled_from(_NAMES), max_size=5) | st.integers() | st.text(max_size=3))
+    if draw(st.booleans()):
+        cosim["eventTolerance"] = 0.001
+    return {"nodeNum": 4, "nodeLists": nodes, "linkNum": len(links),
+            "linkLists": [{"from": f"{src}.y", "to": f"{dst}.u"} for src, dst in links], "coSimulation": cosim}
+
+
+@given(_coupled_projects())
+def test_coupling_keys_give_a_plan_or_errors_that_name_them(doc):
+    try:
+        loaded = parse_project(doc, "p.json")
+    except ConfigError as exc:
+        assert exc.issues and all(i.path for i in exc.issues)
+        return
+    c, base = loaded.coupling, doc["coSimulation"]["stepSize"]
+    assert sorted(c.rates) == ["a", "b", "c"] and sorted(c.order) == ["a", "b", "c"]
+    for node in doc["nodeLists"][:3]:
+        m = c.rates[node["nodeName"]]
+        assert type(m) is int and m >= 1
+        assert math.isclose(m * base, node.get("stepSize", base), rel_tol=1e-8)
+    if c.scheme == "gauss-seidel":
+        assert not c.multirate
+        placed = {n: i for i, n in enumerate(c.order)}
+        if "order" not in doc["coSimulation"]:  # derived: a node after the nodes it reads from
+            for link in doc["linkLists"]:
+                src, dst = link["from"].split(".")[0], link["to"].split(".")[0]
+                if src != "cam" and src != dst:
+                    assert placed[src] < placed[dst]
 
 
 def _recovering(tmp_path: Path, **extra) -> Path:
