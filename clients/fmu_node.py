@@ -51,6 +51,10 @@ class FmuNode(Node):
     def can_rollback(self) -> bool:
         return bool(self.fmu and self.fmu.can_rollback)
 
+    @property
+    def can_vary_step(self) -> bool:
+        return bool(self.fmu and self.fmu.variable_step)
+
     def outputs(self) -> dict[str, Any]:
         with _node_errors():
             return self.fmu.get_outputs()

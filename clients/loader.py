@@ -164,6 +164,50 @@ def why_no_checkpoint(spec: NodeSpec, project_dir: Path) -> str | None:
     return "a bridge FMU cannot serialise the state of the tool it runs in"
 
 
+def why_no_retake(spec: NodeSpec, project_dir: Path, variable: bool) -> str | None:
+    """Why the node cannot take a step again after a rollback (shorter, with ``variable``), or
+    None if it can or its bridge FMU's tool will say when it attaches. The node must load."""
+    if spec.asynchronous or not (spec.fmu or spec.model or spec.replay):
+        return None
+    if spec.fmu:
+        from fmu_bridge.fmu_loader import check_fmu
+
+        mapping = check_fmu(_fmu_path(spec, project_dir), spec)
+        if not getattr(mapping.capabilities, "canGetAndSetFMUstate", False):
+            return "its FMU does not declare canGetAndSetFMUstate"
+        if variable and not mapping.variable_step:
+            return "its FMU does not declare canHandleVariableCommunicationStepSize"
+        return None
+    if spec.replay:
+        return None  # a player's state is its time
+    cls = model_class(spec, project_dir)
+    if cls.get_state is Node.get_state:
+        return f"its model {cls.__name__} has no get_state/set_state"
+    if variable:
+        try:
+            fixed = not cls().can_vary_step  # a model says so before its setup
+        except Exception as exc:  # the user's constructor may fail in any way; the run will say how
+            return f"its model {cls.__name__} cannot be made ({type(exc).__name__}: {exc})"
+        if fixed:
+            return f"its model {cls.__name__} takes steps of one length only (can_vary_step)"
+    return None
+
+
+def feedthrough_of(spec: NodeSpec, project_dir: Path) -> dict[str, set[str]]:
+    """Each output port of the node → the input ports it depends on directly (an FMU's model
+    structure, a Python model's FEEDTHROUGH); empty for a node that does not say (a bridge FMU,
+    a recording, an asynchronous source). The node must load."""
+    if spec.fmu:
+        from fmu_bridge.fmu_loader import check_fmu
+
+        return check_fmu(_fmu_path(spec, project_dir), spec).feedthrough()
+    if spec.model and not spec.asynchronous:
+        declared = model_class(spec, project_dir).FEEDTHROUGH or {}
+        inputs = set(spec.input_names())
+        return {out: set(ins) & inputs for out, ins in declared.items() if out in spec.output_names()}
+    return {}
+
+
 def load_node(spec: NodeSpec, project_dir: Path, cosim: CoSimulation | None = None) -> Node | AsyncSource:
     """Instantiate the implementation named by the node's ``model`` or ``fmu``, or the player
     of the recording its ``replay`` names."""

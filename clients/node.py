@@ -9,7 +9,7 @@ A stepping node is advanced by the runtime once per macro step::
     teardown()                      once, at the end (also after a failure)
 
 A node that can save and restore its state (``can_rollback``) lets the coordinator retry a
-step (event localisation); one whose state survives its process as bytes (``can_serialize``)
+step (event localisation, iterative coupling, the error-controlled step); one whose state survives its process as bytes (``can_serialize``)
 takes part in checkpoints, so that a run goes on after a crash: a Python node's
 ``get_state`` returns bytes (:func:`pack_state` of plain lists and numbers) for both.
 
@@ -82,6 +82,10 @@ class Node(ABC):
     # file, would keep its default for the whole run). None: not declared.
     INPUTS: ClassVar[frozenset[str] | None] = None
     OUTPUTS: ClassVar[frozenset[str] | None] = None
+    # The outputs that depend on inputs directly, with no state between (y = k·u), each with the
+    # inputs it reads: a cycle of links through such ports is an algebraic loop, which
+    # ``hycosim validate`` names. None: no output does.
+    FEEDTHROUGH: ClassVar[dict[str, frozenset[str]] | None] = None
 
     def setup(self, ctx: NodeContext) -> None:
         """Prepare the model; called once before the node attaches."""
@@ -105,6 +109,12 @@ class Node(ABC):
     @property
     def can_rollback(self) -> bool:
         return False
+
+    # Variable steps, for the error-controlled macro step (and event localisation): a node whose
+    # step assumes one fixed h returns False, and the run keeps fixed steps.
+    @property
+    def can_vary_step(self) -> bool:
+        return True
 
     def get_state(self) -> Any:
         """A snapshot of everything the node's step reads (called before a step that may be

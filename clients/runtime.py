@@ -490,9 +490,11 @@ class NodeRuntime:
             return None
 
     def _hello(self, rollback: bool, restart: bool = False) -> bytes:
-        serialize = isinstance(self.impl, Node) and self.impl.can_serialize
-        return frames.encode(frames.HELLO, self.spec.UID, {"rollback": rollback, "serialize": serialize,
-                                                           "restart": restart, "ports": self.spec.wire_ports()})
+        stepping = isinstance(self.impl, Node)
+        return frames.encode(frames.HELLO, self.spec.UID, {
+            "rollback": rollback, "serialize": stepping and self.impl.can_serialize,
+            "variableStep": stepping and self.impl.can_vary_step, "restart": restart,
+            "ports": self.spec.wire_ports()})
 
     def _on_stop(self, frame: frames.Frame) -> None:
         """The server's STOP: the end of the run, or of a failed one, which is this node's failure too."""

@@ -160,6 +160,31 @@ class Link(_Strict):
     description: str | None = None
 
 
+class Iterate(_Strict):
+    """Iterative coupling: each macro step is repeated, every node rolled back, until the inputs
+    routed from the step's end stop changing (each within ``tolerance``·max(1, |value|))."""
+
+    model_config = ConfigDict(allow_inf_nan=False)
+    # Takes of one step at most (the first included); a step still changing then is reported
+    # with its worst port, and the run goes on with it ("continue") or ends ("stop").
+    maxIterations: int = Field(default=10, ge=2, le=1000)
+    tolerance: float = Field(gt=0)
+    # Each retry steps on old + relaxation·(new − old): below 1 it damps a loop that overshoots.
+    relaxation: float = Field(default=1.0, gt=0, le=1)
+    onFailure: Literal["continue", "stop"] = "continue"
+
+
+class StepControl(_Strict):
+    """Error-controlled macro step: a step whose coupled inputs changed by more than
+    ``tolerance``·max(1, |value|) over it is rolled back and taken again shorter; steps grow
+    while the change stays below. coSimulation.stepSize is the first step tried."""
+
+    model_config = ConfigDict(allow_inf_nan=False)
+    tolerance: float = Field(gt=0)
+    minStep: float = Field(gt=0)
+    maxStep: float = Field(gt=0)
+
+
 class CoSimulation(_Strict):
     # Infinity or NaN in a time would make a run endless or its comparisons meaningless.
     model_config = ConfigDict(allow_inf_nan=False)
@@ -198,6 +223,11 @@ class CoSimulation(_Strict):
     # the links, a node after the nodes it reads from (a cycle of links must be broken here).
     coupling: Literal["jacobi", "gauss-seidel"] = "jacobi"
     order: list[str] | None = None
+    # Iterative coupling (Jacobi, every stepping node able to roll back): see Iterate.
+    iterate: Iterate | None = None
+    # An error-controlled macro step (Jacobi, every stepping node able to roll back and to take
+    # steps of any length): see StepControl. None: fixed macro steps of stepSize.
+    stepControl: StepControl | None = None
 
     def real_time_factor(self) -> float | None:
         if self.realTime is False:

@@ -120,6 +120,37 @@ def _slower(nodes: list[str]) -> str:
     return f"{', '.join(nodes)} {'steps' if len(nodes) == 1 else 'step'} slower than the base"
 
 
+def _retry_issues(project: Project, multirate: list[str]) -> list[Issue]:
+    """What iterative coupling and the error-controlled step, which both take steps again after
+    a rollback, do not work with."""
+    cosim = project.coSimulation
+    issues: list[Issue] = []
+    control = cosim.stepControl
+    if control is not None and control.minStep > control.maxStep:
+        issues.append(Issue("coSimulation.stepControl", f"minStep {control.minStep:g} s is above maxStep "
+                            f"{control.maxStep:g} s", "minStep ≤ stepSize ≤ maxStep"))
+    if cosim.iterate is not None and control is not None:
+        issues.append(Issue("coSimulation.stepControl", "iterative coupling and an error-controlled step cannot be "
+                            "combined yet", "leave out one of coSimulation.iterate and coSimulation.stepControl"))
+    for key, what in (("iterate", "iterative coupling"), ("stepControl", "an error-controlled step")):
+        if getattr(cosim, key) is None:
+            continue
+        where = f"coSimulation.{key}"
+        if cosim.coupling != "jacobi":
+            issues.append(Issue(where, f"{what} works with Jacobi coupling only", '"coupling": "jacobi"'))
+        if multirate:
+            issues.append(Issue(where, f"{what} works with single-rate nodes only; {_slower(multirate)}",
+                                "leave out the nodes' stepSize"))
+        if cosim.eventTolerance is not None:
+            issues.append(Issue(where, f"{what} and locating events by rollback cannot be combined",
+                                "leave out coSimulation.eventTolerance"))
+        played = [n.nodeName for n in project.paced_nodes()]
+        if played:
+            issues.append(Issue(where, f"{what} cannot take steps of a played recording again "
+                                f"({', '.join(played)})", f"leave out coSimulation.{key} to replay it"))
+    return issues
+
+
 def coupling_issues(project: Project, routes: list[Route]) -> list[Issue]:
     """Every problem with the nodes' step sizes and the coupling's order, by JSON path."""
     issues: list[Issue] = []
@@ -146,6 +177,7 @@ def coupling_issues(project: Project, routes: list[Route]) -> list[Issue]:
         issues.append(Issue("coSimulation.eventTolerance", f"locating events by rollback works with single-rate "
                             f"nodes only; {_slower(multirate)}",
                             "leave eventTolerance out (crossings are then located to within one base step)"))
+    issues.extend(_retry_issues(project, multirate))
     stepping = [n.nodeName for n in project.stepping_nodes()]
     if cosim.order is not None and cosim.coupling != "gauss-seidel":
         issues.append(Issue("coSimulation.order", "an order is for Gauss-Seidel coupling, and this project's "
@@ -183,3 +215,47 @@ def coupling_issues(project: Project, routes: list[Route]) -> list[Issue]:
                             "no order to step in", "give coSimulation.order: a node listed before a node it reads "
                             "from reads that node's outputs at the step's start"))
     return issues
+
+
+def algebraic_loops(routes: list[Route], feedthrough: dict[str, dict[str, set[str]]]) -> list[list[str]]:
+    """The cycles of direct feedthrough: links (an output to an input) and, inside a node, an
+    output that depends directly on an input (``feedthrough``: node → output → inputs). One
+    cycle per knot of ports that reach each other, as "node.port" names from an output round
+    to it again."""
+    succ: dict[str, set[str]] = {}
+    for r in routes:
+        succ.setdefault(f"{r.src_node}.{r.src_port}", set()).add(f"{r.dst_node}.{r.dst_port}")
+    for node, outs in feedthrough.items():
+        for out, ins in outs.items():
+            for i in ins:
+                succ.setdefault(f"{node}.{i}", set()).add(f"{node}.{out}")
+    loops: list[list[str]] = []
+    covered: set[str] = set()
+    for start in sorted(succ):
+        if start in covered:
+            continue
+        path = _path_back(start, succ)
+        if path is not None:
+            loops.append(path)
+            covered.update(path)
+    return loops
+
+
+def _path_back(start: str, succ: dict[str, set[str]]) -> list[str] | None:
+    """The shortest path from ``start`` round to itself, or None (breadth first)."""
+    came: dict[str, str] = {}
+    frontier = [start]
+    while frontier:
+        nxt = []
+        for port in frontier:
+            for to in sorted(succ.get(port, ())):
+                if to == start:
+                    path = [port]
+                    while path[-1] != start:
+                        path.append(came[path[-1]])
+                    return [*reversed(path), start]
+                if to not in came:
+                    came[to] = port
+                    nxt.append(to)
+        frontier = nxt
+    return None

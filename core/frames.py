@@ -15,7 +15,7 @@ Kinds and layouts (after version and kind):
   as asked, else why it failed: a node reports that failure as its own end)
 * ``LIVE``     local only, server: ``node, alive`` (liveliness changes fed into the inbox)
 * ``HELLO``    node → server, before its first outputs: ``uid, capabilities`` (``{"rollback": bool,
-  "ports": {"input": [...], "output": [...]}}``, the ports as its project file has them)
+  "variableStep": bool, "ports": {"input": [...], "output": [...]}}``, the ports as its project file has them)
 * ``ROLLBACK`` server → nodes: ``step, t``: restore the state saved before that step
 * ``REPLAY``   server → one node: ``node, release``: the last START/STEP again, for a node that
   came back after a link cut (it may have missed the release, or the server its outputs)

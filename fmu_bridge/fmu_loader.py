@@ -209,6 +209,31 @@ class FmuMapping:
         """The model description's element of the interface used (its capability flags)."""
         return self.md.coSimulation if self.interface == CO_SIMULATION else self.md.modelExchange
 
+    @property
+    def variable_step(self) -> bool:
+        """Whether the FMU takes communication steps of any length (a Model Exchange FMU does:
+        the node's integrator steps it)."""
+        if self.interface != CO_SIMULATION:
+            return True
+        return bool(getattr(self.md.coSimulation, "canHandleVariableCommunicationStepSize", False))
+
+    def feedthrough(self) -> dict[str, set[str]]:
+        """Each mapped output port → the mapped input ports it depends on directly, from the model
+        structure; an output listed without ``dependencies`` depends on every input (as FMI
+        says), and an output not listed there depends on none."""
+        ports_of = {p.variable: p.port for p in self.inputs}
+        every = set(ports_of.values())
+        out: dict[str, set[str]] = {}
+        for unknown in self.md.outputs:
+            port = next((p.port for p in self.outputs if p.variable == getattr(unknown.variable, "name", None)), None)
+            if port is None:
+                continue
+            if unknown.dependencies is None:
+                out[port] = set(every)
+            else:
+                out[port] = {ports_of[v.name] for v in unknown.dependencies if v.name in ports_of}
+        return out
+
 
 def check_fmu(path: Path, node: Node, parameters: dict[str, Any] | None = None) -> FmuMapping:
     """Everything checked before an FMU's binary loads: the FMU is readable, FMI 2.0 or 3.0
@@ -248,6 +273,7 @@ class FmuInstance:
         cs = mapping.capabilities
         self.can_rollback = bool(getattr(cs, "canGetAndSetFMUstate", False))
         self.can_serialize = self.can_rollback and bool(getattr(cs, "canSerializeFMUstate", False))
+        self.variable_step = mapping.variable_step
         self.event_mode = bool(self.fmi3 and getattr(cs, "hasEventMode", False))
         self.early_return = bool(self.fmi3 and getattr(cs, "canReturnEarlyAfterIntermediateUpdate", False))
         self._variables = {v.name: v for v in self.md.modelVariables}

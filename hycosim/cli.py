@@ -16,7 +16,7 @@ import time
 from dataclasses import asdict
 from functools import partial
 from pathlib import Path
-from typing import Annotated, NoReturn, Optional
+from typing import Annotated, Any, NoReturn, Optional
 
 import typer
 from rich.console import Console
@@ -158,9 +158,12 @@ def validate(
             for line in problems:
                 err.print(f"  {line}", highlight=False, markup=False)
             raise typer.Exit(2)
+        _check_retakes(file, loaded)
     out.print(f"OK {file}: project {p.projectName!r}, {len(p.nodeLists)} nodes, {len(p.linkLists)} links, "
               f"{len(loaded.routes)} routes, {len(p.events)} events" + ("" if models else " (models not checked)"),
               highlight=False)
+    if models:
+        _warn_algebraic_loops(file, loaded)
     if p.coSimulation.checkpointEvery is not None and models:
         from clients.loader import why_no_checkpoint
 
@@ -172,6 +175,43 @@ def validate(
     if bridged:
         out.print(f"{len(bridged)} node(s) wait for a bridge FMU in some tool: {', '.join(bridged)} "
                   f"(build them with: hycosim fmu build {file} -o fmus)", highlight=False)
+
+
+def _check_retakes(file: Path, loaded: Any) -> None:
+    """Iterative coupling and the error-controlled step need every stepping node to take a step
+    again: name each one that cannot, exit 2."""
+    from clients.loader import why_no_retake
+
+    cosim = loaded.project.coSimulation
+    for key, variable in (("iterate", False), ("stepControl", True)):
+        if getattr(cosim, key) is None:
+            continue
+        unable = [(n.nodeName, why) for n in loaded.project.stepping_nodes()
+                  if (why := why_no_retake(n, loaded.path.parent, variable))]
+        if unable:
+            err.print(f"[red]error:[/red] {file}: coSimulation.{key}: every stepping node must be able to take a step "
+                      f"again{' with another length' if variable else ''}", highlight=False)
+            for name, why in unable:
+                err.print(f"  node {name!r}: {why}", highlight=False, markup=False)
+            raise typer.Exit(2)
+
+
+def _warn_algebraic_loops(file: Path, loaded: Any) -> None:
+    """Name each cycle of direct feedthrough, which a step-by-step scheme takes a step late."""
+    from clients.loader import feedthrough_of
+    from core.coupling import algebraic_loops
+
+    p = loaded.project
+    feedthrough = {n.nodeName: feedthrough_of(n, loaded.path.parent) for n in p.stepping_nodes()}
+    for loop in algebraic_loops(loaded.routes, feedthrough):
+        if p.coSimulation.iterate is None:
+            err.print(f"[yellow]warning:[/yellow] {file}: algebraic loop {' → '.join(loop)}: "
+                      f"{p.coSimulation.coupling.replace('gauss-seidel', 'Gauss-Seidel').replace('jacobi', 'Jacobi')} "
+                      "coupling takes it a macro step late; coSimulation.iterate solves it at each step",
+                      highlight=False)
+        else:
+            out.print(f"algebraic loop {' → '.join(loop)}: solved at each step by coSimulation.iterate",
+                      highlight=False)
 
 
 @app.command()
@@ -285,6 +325,20 @@ def report(
         out.print(f"reason: {s.reason}", highlight=False)
     if s.coupling:
         out.print(f"coupling: {s.coupling}", highlight=False)
+    for label, text in (("iteration", s.iteration), ("step control", s.step_control)):
+        if text:
+            out.print(f"{label}: {text}", highlight=False)
+    if s.takes:
+        out.print(f"takes per step: mean {s.takes['mean']:.2f}, max {s.takes['max']:g}; "
+                  f"{s.takes['steps_taken_again']:g} steps taken more than once", highlight=False)
+    if s.not_converged:
+        worst = s.not_converged.get("worst") or {}
+        out.print(f"[yellow]{s.not_converged['not_converged']} steps did not converge[/yellow]"
+                  + (f"; worst: input {worst.get('port')} at t={worst.get('t')} s changed by {worst.get('change')}"
+                     if worst else ""), highlight=False)
+    if s.step_sizes:
+        out.print(f"macro steps used: {s.step_sizes['min']:.3g} to {s.step_sizes['max']:.3g} s, "
+                  f"mean {s.step_sizes['mean']:.3g} s", highlight=False)
     table = Table(title="who held the barrier")
     for col in ("node", "steps taken", "share of waiting", "steps held", "mean arrival (ms)"):
         table.add_column(col)

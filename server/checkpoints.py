@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import re
 import shutil
@@ -36,7 +37,8 @@ RECORD_FILES = {"values.csv", "timing.csv", "events.jsonl", "samples.jsonl"}
 
 # The server's state: each key and the type it must have when read back.
 _SERVER_KEYS = {"step": int, "t": float, "origin": float, "j": int, "mode": str, "disarmed": list,
-                "outputs": dict, "inputs": dict, "histories": dict, "records": dict, "localised": dict}
+                "outputs": dict, "inputs": dict, "histories": dict, "records": dict, "localised": dict,
+                "h": float}  # the macro step to try next (an error-controlled step's size)
 
 
 class CheckpointError(RuntimeError):
@@ -122,7 +124,7 @@ def read(path: Path, config_sha256: str | None = None) -> Checkpoint:
     if type(server) is not dict or any(type(server.get(k)) is not tp for k, tp in _SERVER_KEYS.items()):
         raise CheckpointError(f"{path / SERVER_FILE} does not hold a server state")
     records = server["records"]
-    if not (0 <= server["step"] < 1 << 62 and all(type(v) is int and v >= 0 for v in records.values())
+    if not (0 <= server["step"] < 1 << 62 and math.isfinite(server["h"]) and server["h"] > 0 and all(type(v) is int and v >= 0 for v in records.values())
             and set(records) == RECORD_FILES):
         raise CheckpointError(f"{path / SERVER_FILE} holds a step or record offsets out of range")
     for history in server["histories"].values():

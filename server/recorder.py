@@ -132,6 +132,8 @@ class Recorder:
         self._stepping = [n.nodeName for n in project.stepping_nodes()]
         # A multi-rate run says at each point which nodes started a step there.
         self._marks_steps = loaded.coupling.multirate
+        # A run that may take steps again says how often it took each.
+        self._counts_takes = project.coSimulation.iterate is not None or project.coSimulation.stepControl is not None
         self._async_labels = [f"{r.dst_node}.{r.dst_port}" for r in loaded.routes
                               if project.node(r.src_node).asynchronous]
         at = resume_at or {}
@@ -151,7 +153,8 @@ class Recorder:
                                    *out_cols, *in_cols])
             self._timing.writerow(["step", "t", "wait_s", "holder", "lateness_s",
                                    *(f"arrival_s:{n}" for n in self._stepping),
-                                   *(f"age_s:{label}" for label in self._async_labels)])
+                                   *(f"age_s:{label}" for label in self._async_labels),
+                                   *(["takes"] if self._counts_takes else [])])
         self._flushed = time.monotonic()
         self.meta = dict(meta)
         if resume_at is None:
@@ -180,11 +183,13 @@ class Recorder:
         self._samples_file.buffer.write(encode_sample(node, point, t, values))
 
     def timing(self, step: int, t: float, wait_s: float, holder: str, lateness_s: float | None,
-               arrivals: dict[str, float], ages: dict[str, float | None]) -> None:
+               arrivals: dict[str, float], ages: dict[str, float | None], takes: int = 1) -> None:
+        """One point's timing: of the step that ended there (``takes``: how often it was taken)."""
         self._timing.writerow([
             step, repr(t), f"{wait_s:.9f}", holder, "" if lateness_s is None else f"{lateness_s:.6f}",
             *(f"{arrivals[n]:.9f}" if n in arrivals else "" for n in self._stepping),
-            *("" if ages.get(label) is None else f"{ages[label]:.6f}" for label in self._async_labels)])
+            *("" if ages.get(label) is None else f"{ages[label]:.6f}" for label in self._async_labels),
+            *([takes] if self._counts_takes else [])])
         now = time.monotonic()
         if now - self._flushed >= FLUSH_EVERY_S:
             self.flush(step)

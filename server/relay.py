@@ -12,6 +12,7 @@ Read top to bottom, :meth:`Relay.run` is the whole algorithm (Jacobi coupling):
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -37,6 +38,7 @@ from server.coordinator import Coordinator, GuardEvaluationError
 from server.gateway import Gateway, GatewayError
 from server.intake import Dropped, Intake
 from server.recorder import Recorder, RecordError
+from server.retakes import IterationLog, StepSizer, input_change, relaxed
 from server.routing import OutputView, Router
 
 
@@ -95,6 +97,10 @@ class Relay:
         self.recorder = recorder
         self.coordinator = Coordinator(self.project.events, loaded.guards)
         self.router = Router(loaded)
+        self._input_labels = {n.nodeName: [f"{n.nodeName}.{p.name}" for p in n.input] for n in self.project.nodeLists}
+        # Iterative coupling and the error-controlled step, once the nodes said they can take part.
+        self.iteration: IterationLog | None = None
+        self.sizer: StepSizer | None = None
         self.intake = Intake(self.project.nodeLists)
         self.stepping = [n.nodeName for n in self.project.stepping_nodes()]
         self.coupling = loaded.coupling
@@ -406,7 +412,7 @@ class Relay:
         start, every = self.cosim.startTime, self.cosim.checkpointEvery or math.inf
         return start + (math.floor((t - start) / every + 1e-9) + 1) * every
 
-    def _take_checkpoint(self, k: int, t: float, origin: float, j: int, localised: dict[str, Any]) -> None:
+    def _take_checkpoint(self, k: int, t: float, origin: float, j: int, localised: dict[str, Any], h: float) -> None:
         """Ask every stepping node for its state at point k (they send it after their next
         outputs) and keep the server's own, records included, until theirs are in."""
         if self._pending is not None:
@@ -417,7 +423,7 @@ class Relay:
                   "outputs": {n: list(v) for n, v in self.outputs.items()},
                   "inputs": {n: list(v) for n, v in self.router.inputs.items()},
                   "histories": {n: h.snapshot() for n, h in self.histories.items()},
-                  "records": self.recorder.positions(k), "localised": localised}
+                  "records": self.recorder.positions(k), "localised": localised, "h": float(h)}
         self._pending = _PendingCheckpoint(k, server)
         self.release.put(frames.encode(frames.CHECKPOINT, k))
 
@@ -618,13 +624,97 @@ class Relay:
         if tol is None:
             self.recorder.meta["event_localisation"] = "none: fixed macro steps (no eventTolerance)"
             return False
-        fixed = sorted(n for n in self.stepping if not self.capabilities.get(n, {}).get("rollback"))
-        if fixed:
-            self.recorder.meta["event_localisation"] = (
-                f"none: fixed macro steps ({', '.join(fixed)} cannot get and set state)")
+        why = self._cannot_retake(variable=True)
+        if why:
+            self.recorder.meta["event_localisation"] = f"none: fixed macro steps ({why})"
             return False
         self.recorder.meta["event_localisation"] = f"rollback and bisection to {tol:g} s"
         return True
+
+    def _cannot_retake(self, variable: bool) -> str:
+        """Why steps cannot be taken again (shorter, with ``variable``): the nodes that cannot."""
+        said = {n: self.capabilities.get(n, {}) for n in self.stepping}
+        fixed = sorted(n for n, c in said.items() if c.get("rollback") is not True)
+        why = [f"{', '.join(fixed)} cannot get and set state"] if fixed else []
+        if variable:
+            rigid = sorted(n for n, c in said.items() if c.get("variableStep") is False)
+            if rigid:
+                why.append(f"{', '.join(rigid)} cannot take steps of any length")
+        return "; ".join(why)
+
+    def _retake_plan(self) -> None:
+        """Whether steps are iterated or their size controlled; say which, or why not, in the metadata."""
+        meta, cosim = self.recorder.meta, self.cosim
+        if cosim.iterate is not None:
+            it = cosim.iterate
+            why = self._cannot_retake(variable=False)
+            if why:
+                meta["iteration"] = f"none: one take of each step ({why})"
+                self._log.warning("no iterative coupling", why=why)
+            else:
+                self.iteration = IterationLog(it)
+                meta["iteration"] = (f"up to {it.maxIterations} takes of each step until the inputs change by at most "
+                                     f"{it.tolerance:g}·max(1, |value|)"
+                                     + (f", relaxation {it.relaxation:g}" if it.relaxation != 1.0 else "")
+                                     + f"; a step that does not converge: {it.onFailure}")
+        if cosim.stepControl is not None:
+            sc = cosim.stepControl
+            why = self._cannot_retake(variable=True)
+            if why:
+                meta["step_control"] = f"none: fixed macro steps of {cosim.stepSize:g} s ({why})"
+                self._log.warning("no step control", why=why)
+            else:
+                self.sizer = StepSizer.starting(sc, cosim.stepSize)
+                meta["step_control"] = (f"steps of {sc.minStep:g} to {sc.maxStep:g} s, each input's change over a step "
+                                        f"at most {sc.tolerance:g}·max(1, |value|)")
+
+    def _change(self, mode: str, used: dict[str, list[Any]], tolerance: float) -> tuple[dict[str, list[Any]], float, str, float]:
+        """The inputs routed from the outputs now, and their change from ``used`` (input_change)."""
+        candidate = self.router.candidate(mode, self.outputs)
+        return (candidate, *input_change(candidate, used, self._input_labels, tolerance))
+
+    def _iterated(self, k: int, t: float, h: float, mode: str) -> tuple[dict[str, float], float, int]:
+        """Take step k until the inputs routed from its end stop changing; return arrivals, wait
+        and takes. The inputs it was last taken on stay in the router (they are point k's record)."""
+        it = self.iteration.settings
+        takes = 1
+        arrivals, wait = self._release(k, t, h, mode)
+        while True:
+            used = self.router.inputs
+            candidate, change, port, absolute = self._change(mode, used, it.tolerance)
+            if change <= 1.0 or takes >= it.maxIterations:
+                break
+            self.release.put(frames.encode(frames.ROLLBACK, k, t))
+            self.router.inputs = relaxed(candidate, used, it.relaxation)
+            arrivals, wait = self._release(k, t, h, mode)
+            takes += 1
+        self.iteration.add(k, t, takes, change, port, absolute)
+        self.recorder.meta["iterations"] = self.iteration.record()  # in the meta however the run ends
+        if change > 1.0:
+            self._log.warning("step did not converge", step=k, t=t, takes=takes, port=port, change=absolute)
+            if it.onFailure == "stop":
+                raise RunError(f"step {k} (t={t:g} s) did not converge in {takes} takes: input {port} still changed "
+                               f"by {absolute:g} (tolerance {it.tolerance:g}·max(1, |value|))")
+        return arrivals, wait, takes
+
+    def _controlled(self, k: int, t: float, h: float, mode: str,
+                    record: Callable[[], None]) -> tuple[float, dict[str, float], float, int]:
+        """Take step k, shorter again and again while its inputs changed too much over it; return
+        the step length that stood, arrivals, wait and takes."""
+        tolerance = self.sizer.settings.tolerance
+        used = {n: list(v) for n, v in self.router.inputs.items()}
+        takes = 1
+        arrivals, wait = self._release(k, t, h, mode, meanwhile=record)
+        while True:
+            _, change, _, _ = self._change(mode, used, tolerance)
+            shorter = self.sizer.judge(h, change)
+            if shorter is None:
+                self.recorder.meta["step_sizes"] = self.sizer.record()  # in the meta however the run ends
+                return h, arrivals, wait, takes
+            self.release.put(frames.encode(frames.ROLLBACK, k, t))
+            h = shorter
+            arrivals, wait = self._release(k, t, h, mode)
+            takes += 1
 
     def _release(self, k: int, t: float, h: float, mode: str,
                  meanwhile: Callable[[], None] | None = None) -> tuple[dict[str, float], float]:
@@ -681,6 +771,12 @@ class Relay:
                 meanwhile()
         return arrivals, time.perf_counter() - released_at
 
+    def _record_point(self, k: int, t: float, mode: str, outputs: dict[str, list[Any]], stepped: list[str] | None,
+                      wait: float, holder: str, lateness: float | None, arrivals: dict[str, float],
+                      ages: dict[str, float | None], takes: int) -> None:
+        self.recorder.row(k, t, mode, outputs, self.router.inputs, stepped)
+        self.recorder.timing(k, t, wait, holder, lateness, arrivals, ages, takes)
+
     def _localise(self, k: int, t: float, h: float, mode: str, watched_at_start: bool,
                   arrivals: dict[str, float], wait: float) -> tuple[float, dict[str, float], float, dict[str, Any]]:
         """Shrink step k until a guard crossing inside it lies within eventTolerance of its end.
@@ -713,7 +809,8 @@ class Relay:
         H = cosim.stepSize
         rt = cosim.real_time_factor()
         wall0 = time.time()
-        checkpoint = cosim.eventTolerance is not None
+        # Whether nodes save their state before each step, so that a step can be taken again.
+        checkpoint = cosim.eventTolerance is not None or cosim.iterate is not None or cosim.stepControl is not None
         every = cosim.checkpointEvery
         # Points lie on a grid origin + j·H; a located event starts a new grid at its time.
         origin, j, k, t = cosim.startTime, 0, 0, cosim.startTime
@@ -728,6 +825,7 @@ class Relay:
             point, arrivals, wait = self._restore(_Recover("server", self._resume, "resumed"))
             k, t, origin, j, localised = (point["step"], point["t"], point["origin"], point["j"],
                                           dict(point["localised"]))
+            resumed_h = point["h"]
             next_checkpoint = self._next_checkpoint(t)
             clock = RealTimeClock(t, time.time(), rt) if rt is not None else None
             if self.gateway is not None:
@@ -744,18 +842,23 @@ class Relay:
             arrivals = self._collect(0, released_at)
             wait = time.perf_counter() - released_at
         localise = self._localisation_plan()
+        self._retake_plan()
+        if self.sizer is not None and self._resume is not None:
+            self.sizer.h = resumed_h
         self.recorder.meta["coupling"] = self.coupling.describe()
         self._checkpoints = self._checkpoint_plan()
         end = cosim.stopTime - 1e-9 * H
         self._last_point = math.ceil((cosim.stopTime - cosim.startTime) / H - 1e-9)
-        in_order = self.coupling.scheme == "gauss-seidel"
+        # Gauss-Seidel and iteration replace outputs before point k is recorded: it keeps its own.
+        keep_outputs = self.coupling.scheme == "gauss-seidel" or self.iteration is not None
+        takes = 1  # of the step that ended at the current point
         perf0 = time.perf_counter()
         k0 = k
         last_progress = 0.0
         while True:
             # A multi-rate run's checkpoints wait for a point where no node is inside its step.
             if self._checkpoints and next_checkpoint - 1e-9 * H <= t < end and k % self.coupling.period == 0:
-                self._take_checkpoint(k, t, origin, j, localised)
+                self._take_checkpoint(k, t, origin, j, localised, self.sizer.h if self.sizer else H)
                 next_checkpoint = self._next_checkpoint(t)
             for node, history in self.histories.items():
                 held = history.at(t)
@@ -788,23 +891,31 @@ class Relay:
                 self.progress.steps_per_s = (k - k0) / (now - perf0) if now > perf0 else 0.0
                 self._on_progress(self.progress)
 
-            # Gauss-Seidel replaces outputs while it releases: point k's are kept for its record.
-            at_k = {n: list(v) for n, v in self.outputs.items()} if in_order else self.outputs
+            at_k = dict(self.outputs) if keep_outputs else self.outputs
             stepped = self.coupling.due(k) if self.coupling.multirate and t < end else None
-
-            def record() -> None:
-                # Point k as it is now: called before the next collect replaces outputs and arrivals.
-                self.recorder.row(k, t, mode, at_k, self.router.inputs, stepped)
-                self.recorder.timing(k, t, wait, holder, lateness, arrivals, ages)
-
+            # Point k as it is now (its timing: of the step that ended here), and the inputs the
+            # step from it is taken on (an iterated step's last): written while the nodes step.
+            record = functools.partial(self._record_point, k, t, mode, at_k, stepped, wait, holder, lateness,
+                                       arrivals, ages, takes)
             if t >= end or self._stop_requested.is_set():
                 record()
                 break
-            next_t = min(origin + (j + 1) * H, cosim.stopTime)
-            h = next_t - t
+            if self.sizer is not None:
+                next_t = min(t + self.sizer.h, cosim.stopTime)
+            else:
+                next_t = min(origin + (j + 1) * H, cosim.stopTime)
+            h = h_used = next_t - t
             watched = localise and self.coordinator.pending_guard_holds(view)
             try:
-                arrivals, wait = self._release(k, t, h, mode, meanwhile=record)
+                if self.iteration is not None:
+                    try:
+                        arrivals, wait, takes = self._iterated(k, t, h, mode)
+                    finally:
+                        record()  # also when the step failed: point k stands
+                elif self.sizer is not None:
+                    h_used, arrivals, wait, takes = self._controlled(k, t, h, mode, record)
+                else:
+                    arrivals, wait = self._release(k, t, h, mode, meanwhile=record)
                 localised = {}
                 if localise:
                     h_used, arrivals, wait, localised = self._localise(k, t, h, mode, watched, arrivals, wait)
@@ -815,11 +926,14 @@ class Relay:
                 point, arrivals, wait = self._restore(cause)
                 k, t, origin, j, localised = (point["step"], point["t"], point["origin"], point["j"],
                                               dict(point["localised"]))
+                takes = 1
+                if self.sizer is not None:
+                    self.sizer.h = point["h"]
                 next_checkpoint = self._next_checkpoint(t)
                 if clock is not None:
                     clock = RealTimeClock(t, time.time(), rt)
                 continue
-            if localise and h_used != h:
+            if h_used != h:  # a located event, or a controlled step taken shorter
                 origin, j, next_t = t + h_used, -1, t + h_used
             t = next_t
             j += 1

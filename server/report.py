@@ -47,6 +47,13 @@ class RunSummary:
     ended_by: dict[str, Any] | None = None  # a node whose model ended the run: node, step, t, message
     coupling: str = ""  # the master algorithm (Jacobi or Gauss-Seidel, node rates)
     node_steps: dict[str, int] = field(default_factory=dict)  # steps each stepping node took (a slow node fewer)
+    # Iterative coupling or the error-controlled step: what the meta says of them, how often each
+    # step was taken (mean, max, steps taken more than once) and the step lengths used.
+    iteration: str = ""
+    step_control: str = ""
+    takes: dict[str, float] | None = None
+    step_sizes: dict[str, float] | None = None
+    not_converged: dict[str, Any] | None = None
 
 
 class EndedBy(BaseModel):
@@ -54,6 +61,14 @@ class EndedBy(BaseModel):
     step: int
     t: float
     message: str = ""
+
+
+class Iterations(BaseModel):
+    """``meta.json``'s account of iterative coupling (server.retakes.IterationLog.record)."""
+
+    model_config = ConfigDict(extra="allow")
+    not_converged: int = 0
+    worst: dict[str, Any] | None = None
 
 
 class RunMeta(BaseModel):
@@ -71,6 +86,9 @@ class RunMeta(BaseModel):
     server_waits: dict[str, int] = Field(default_factory=dict)
     ended_by: EndedBy | None = None
     coupling: str = ""
+    iteration: str = ""
+    step_control: str = ""
+    iterations: Iterations | None = None
 
 
 class ModeSwitchRecord(BaseModel):
@@ -93,7 +111,7 @@ def _problem(err: ValidationError) -> str:
 
 
 def _timing_number(column: str) -> bool:
-    return column in ("step", "t", "wait_s", "lateness_s") or column.startswith(("arrival_s:", "age_s:"))
+    return column in ("step", "t", "wait_s", "lateness_s", "takes") or column.startswith(("arrival_s:", "age_s:"))
 
 
 def _rows(path: Path, numeric=None, required: tuple[str, ...] = ()) -> Iterator[dict[str, Any]]:
@@ -150,10 +168,22 @@ def summarise(run_dir: Path, slowest: int = 5) -> RunSummary:
     age_n: dict[str, int] = {}
     ranked: list[tuple[float, int, dict[str, Any]]] = []  # a heap of the slowest steps so far
     points = 0
+    takes = {"n": 0, "sum": 0.0, "max": 0.0, "again": 0}
+    sizes = {"n": 0, "min": math.inf, "max": 0.0}
+    t_first = t_last = None
     for index, row in enumerate(_rows(run_dir / "timing.csv", _timing_number, required=("step", "t", "wait_s"))):
         points += 1
+        t_row = row["t"]
         if index == 0:
+            t_first = t_last = t_row
             continue  # step 0's wait is the start-up, not a macro step
+        if t_last is not None and t_row is not None:
+            h = t_row - t_last
+            sizes.update(n=sizes["n"] + 1, min=min(sizes["min"], h), max=max(sizes["max"], h))
+        t_last = t_row
+        if row.get("takes") is not None:
+            n = row["takes"]
+            takes.update(n=takes["n"] + 1, sum=takes["sum"] + n, max=max(takes["max"], n), again=takes["again"] + (n > 1))
         holder, wait = row["holder"], row["wait_s"]
         waits[holder] = waits.get(holder, 0.0) + wait
         counts[holder] = counts.get(holder, 0) + 1
@@ -196,6 +226,12 @@ def summarise(run_dir: Path, slowest: int = 5) -> RunSummary:
         wait_strategy=meta.waitStrategy, server_waits=meta.server_waits,
         ended_by=meta.ended_by.model_dump() if meta.ended_by else None,
         coupling=meta.coupling, node_steps=dict(sorted(arrival_n.items())),
+        iteration=meta.iteration, step_control=meta.step_control,
+        takes={"mean": takes["sum"] / takes["n"], "max": takes["max"], "steps_taken_again": takes["again"]}
+        if takes["n"] else None,
+        step_sizes={"min": sizes["min"], "max": sizes["max"], "mean": (t_last - t_first) / sizes["n"]}
+        if meta.step_control and sizes["n"] else None,
+        not_converged=meta.iterations.model_dump() if meta.iterations and meta.iterations.not_converged else None,
     )
 
 

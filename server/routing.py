@@ -95,6 +95,16 @@ class Router:
             inputs[hop.dst_node][hop.dst_index] = value if hop.convert is None else hop.convert(value)
         return ages
 
+    def candidate(self, mode: str, outputs: Mapping[str, list[Any]]) -> dict[str, list[Any]]:
+        """The inputs :meth:`route` would give from stepping nodes' ``outputs`` now, as a copy
+        (``self.inputs`` unchanged; asynchronous values as the last route brought them)."""
+        inputs = {n: list(v) for n, v in self.inputs.items()}
+        for hop in self._plans[mode]:
+            if hop.src_node not in self._async:
+                value = outputs[hop.src_node][hop.src_index]
+                inputs[hop.dst_node][hop.dst_index] = value if hop.convert is None else hop.convert(value)
+        return inputs
+
     def route_into(self, node: str, mode: str, outputs: Mapping[str, list[Any]]) -> None:
         """Update ``self.inputs[node]`` alone from stepping nodes' outputs (Gauss-Seidel, within a
         step: its asynchronous inputs stay as :meth:`route` brought them to the step's start)."""

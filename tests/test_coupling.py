@@ -155,6 +155,13 @@ def _coupled_projects(draw) -> dict:
         cosim["order"] = draw(st.lists(st.sampled_from(_NAMES), max_size=5) | st.integers() | st.text(max_size=3))
     if draw(st.booleans()):
         cosim["eventTolerance"] = 0.001
+    numbers = st.sampled_from([0.001, 0.1, 0.0, -1.0, 2.0, 1e308]) | st.integers(-2, 3) | st.text(max_size=2)
+    if draw(st.booleans()):
+        cosim["iterate"] = draw(st.fixed_dictionaries({"tolerance": numbers}, optional={
+            "maxIterations": numbers, "relaxation": numbers, "onFailure": st.sampled_from(["continue", "stop", "x"])}))
+    if draw(st.booleans()):
+        cosim["stepControl"] = draw(st.fixed_dictionaries({}, optional={
+            "tolerance": numbers, "minStep": numbers, "maxStep": numbers}) | st.integers())
     return {"nodeNum": 4, "nodeLists": nodes, "linkNum": len(links),
             "linkLists": [{"from": f"{src}.y", "to": f"{dst}.u"} for src, dst in links], "coSimulation": cosim}
 
@@ -167,6 +174,11 @@ def test_coupling_keys_give_a_plan_or_errors_that_name_them(doc):
         assert exc.issues and all(i.path for i in exc.issues)
         return
     c, base = loaded.coupling, doc["coSimulation"]["stepSize"]
+    cosim = loaded.project.coSimulation
+    if cosim.stepControl is not None:
+        assert 0 < cosim.stepControl.minStep <= cosim.stepControl.maxStep and cosim.iterate is None
+    if cosim.iterate is not None or cosim.stepControl is not None:  # steps taken again: single-rate Jacobi
+        assert c.scheme == "jacobi" and not c.multirate and cosim.eventTolerance is None
     assert sorted(c.rates) == ["a", "b", "c"] and sorted(c.order) == ["a", "b", "c"]
     for node in doc["nodeLists"][:3]:
         m = c.rates[node["nodeName"]]
@@ -200,8 +212,9 @@ def _recovering(tmp_path: Path, **extra) -> Path:
 @pytest.mark.parametrize("setting, victim", [
     ({"g2": {"stepSize": 0.07}}, "node g2"),  # checkpoints at 0.7 s steps: every 7th base point at most
     ({"coupling": "gauss-seidel"}, "node g1"),
+    ({"iterate": {"tolerance": 1e-9}}, "node g2"),
 ])
-def test_checkpoints_restore_multi_rate_and_gauss_seidel_runs_to_what_they_record_unkilled(tmp_path, setting, victim):
+def test_checkpoints_restore_multi_rate_gauss_seidel_and_iterated_runs_to_what_they_record_unkilled(tmp_path, setting, victim):
     (tmp_path / "ref").mkdir()
     reference = (run_project(_recovering(tmp_path / "ref", **setting), tmp_path / "ref" / "runs")
                  / "values.csv").read_bytes()
@@ -214,3 +227,5 @@ def test_checkpoints_restore_multi_rate_and_gauss_seidel_runs_to_what_they_recor
     assert [(r["node"], r["cause"]) for r in m["recoveries"]] == [(victim.split()[1], "restarted")]
     period = 7 if "g2" in setting else 1
     assert all(r["restored"] % period == 0 for r in m["recoveries"])
+    if "iterate" in setting:  # the chain rod → g1 → g2 settles in three takes of each step
+        assert m["iterations"]["max_takes"] == 3 and m["iterations"]["not_converged"] == 0

@@ -109,7 +109,7 @@ def test_a_node_that_cannot_serialise_is_named_by_validate_and_by_the_run_it_end
 
 def test_checkpoints_are_written_whole_kept_two_deep_and_checked_when_read(tmp_path):
     server = {"step": 0, "t": 0.0, "origin": 0.0, "j": 0, "mode": "free", "disarmed": [], "outputs": {},
-              "inputs": {}, "histories": {}, "records": dict.fromkeys(checkpoints.RECORD_FILES, 0), "localised": {}}
+              "inputs": {}, "histories": {}, "records": dict.fromkeys(checkpoints.RECORD_FILES, 0), "localised": {}, "h": 0.01}
     for step in (10, 20, 30):
         checkpoints.write(tmp_path, step, {**server, "step": step}, {"a": bytes([step]) * 100}, "hash")
     assert checkpoints.steps(tmp_path) == [20, 30]
@@ -205,7 +205,7 @@ def _checkpoint_folders(draw):
         "histories": st.dictionaries(st.text(max_size=3), _json_values, max_size=2),
         "records": st.dictionaries(st.sampled_from(sorted(checkpoints.RECORD_FILES)) | st.text(max_size=4),
                                    st.integers(-2, 100) | _json_values, max_size=4),
-        "localised": _json_values}) | _json_values)
+        "localised": _json_values, "h": st.floats() | st.integers(0, 2)}) | _json_values)
     files = {"server.msgpack": draw(st.just(msgpack.packb(server, use_bin_type=True)) | st.binary(max_size=40))}
     files.update(draw(st.dictionaries(_file_names, st.binary(max_size=20), max_size=3)))
     honest = draw(st.booleans())

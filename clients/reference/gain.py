@@ -20,6 +20,7 @@ class Gain(Node):
     PARAMETERS = frozenset({"k", "b", "work_s"})
     INPUTS = frozenset({"u"})
     OUTPUTS = frozenset({"y"})
+    FEEDTHROUGH = {"y": frozenset({"u"})}
 
     def setup(self, ctx: NodeContext) -> None:
         self.k = float(ctx.parameter("k", 1.0))

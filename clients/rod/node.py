@@ -71,6 +71,10 @@ class RodNode(Node):
         self.rod.advance(h)
 
     @property
+    def can_vary_step(self) -> bool:
+        return False  # it advances whole MuJoCo steps: a step of another length would drift its clock
+
+    @property
     def can_rollback(self) -> bool:
         return True
 

@@ -1,0 +1,167 @@
+"""Steps taken again: iterative coupling and the error-controlled macro step, end to end over Zenoh."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+
+from core.config import parse_project
+from core.coupling import algebraic_loops
+from server.retakes import StepSizer, input_change
+from tests.helpers import column, hycosim, meta, read_rows, run_project, write_project
+
+
+def _loop(tmp_path: Path, ka: float, kb: float, **cosim) -> Path:
+    """a.y = ka·b.y + 1 and b.y = kb·a.y: two gains, each an output fed straight through."""
+    return write_project(tmp_path / "loop.json", [
+        {"nodeName": "a", "UID": 1, "model": "gain", "parameters": {"k": ka, "b": 1.0}, "input": ["u"], "output": ["y"]},
+        {"nodeName": "b", "UID": 2, "model": "gain", "parameters": {"k": kb}, "input": ["u"], "output": ["y"]},
+    ], [{"from": "a.y", "to": "b.u"}, {"from": "b.y", "to": "a.u"}],
+        cosim={"stepSize": 0.1, "stopTime": 0.5, **cosim})
+
+
+def _takes(run: Path) -> list[int]:
+    with open(run / "timing.csv", newline="") as f:
+        return [int(r["takes"]) for r in csv.DictReader(f)]
+
+
+def test_iterative_coupling_solves_an_algebraic_loop_at_every_step_that_jacobi_takes_late(tmp_path):
+    plain = _loop(tmp_path, 0.5, 0.5)
+    res = hycosim("validate", str(plain))
+    assert res.returncode == 0
+    assert "algebraic loop a.u → a.y → b.u → b.y → a.u: Jacobi coupling takes it a macro step late" in res.stderr
+    late = read_rows(run_project(plain, tmp_path / "j"))
+    assert column(late, "a.y")[1] == pytest.approx(1.0)  # b's start value, one step old
+
+    cfg = _loop(tmp_path, 0.5, 0.5, iterate={"tolerance": 1e-10, "maxIterations": 50})
+    res = hycosim("validate", str(cfg))
+    assert res.returncode == 0 and "solved at each step by coSimulation.iterate" in res.stdout
+    run = run_project(cfg, tmp_path / "i")
+    rows = read_rows(run)
+    a, b = column(rows, "a.y"), column(rows, "b.y")
+    for k in range(1, len(rows)):  # a = 0.5·b + 1, b = 0.5·a: a = 4/3, b = 2/3 at every point
+        assert a[k] == pytest.approx(4 / 3, rel=1e-8) and b[k] == pytest.approx(2 / 3, rel=1e-8), k
+    takes = _takes(run)
+    assert takes[0] == 1 and all(n > 2 for n in takes[1:2]) and max(takes) <= 50
+    m = meta(run)
+    assert m["iterations"]["not_converged"] == 0 and m["iterations"]["max_takes"] == max(takes)
+    text = hycosim("report", str(run)).stdout
+    assert "iteration: up to 50 takes of each step" in text and "takes per step: mean" in text
+
+
+def test_relaxation_makes_a_loop_converge_and_a_step_that_does_not_is_reported_or_ends_the_run(tmp_path):
+    """a = −1.5·b + 1, b = 1.5·a: the plain fixed point spirals out (gain 1.5 round the loop);
+    damped by 0.3 it converges to a = 1/3.25."""
+    cosim = {"iterate": {"tolerance": 1e-9, "maxIterations": 4}}
+    run = run_project(_loop(tmp_path, -1.5, 1.5, **cosim), tmp_path / "go")
+    m = meta(run)
+    steps = len(read_rows(run)) - 1
+    assert m["iterations"]["not_converged"] == steps and _takes(run)[1:] == [4] * steps
+    assert m["iterations"]["worst"]["port"] in ("a.u", "b.u")
+    assert f"{steps} steps did not converge; worst: input" in hycosim("report", str(run)).stdout
+
+    cosim["iterate"]["onFailure"] = "stop"
+    res = hycosim("run", str(_loop(tmp_path, -1.5, 1.5, **cosim)), "--runs-dir", str(tmp_path / "stop"), "--no-progress")
+    assert res.returncode != 0 and "step 0 (t=0 s) did not converge in 4 takes: input" in res.stderr, res.stderr
+    assert "Traceback" not in res.stderr
+
+    cosim = {"iterate": {"tolerance": 1e-9, "maxIterations": 200, "relaxation": 0.3}}
+    rows = read_rows(run_project(_loop(tmp_path, -1.5, 1.5, **cosim), tmp_path / "damped"))
+    assert column(rows, "a.y")[-1] == pytest.approx(1 / 3.25, rel=1e-6)
+    assert column(rows, "b.y")[-1] == pytest.approx(1.5 / 3.25, rel=1e-6)
+
+
+def _ball(tmp_path: Path, **cosim) -> Path:
+    return write_project(tmp_path / "ball.json", [
+        {"nodeName": "ball", "UID": 1, "model": "bouncing_ball", "output": ["h", "v"]},
+        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+    ], [{"from": "ball.v", "to": "g.u"}], cosim={"stepSize": 0.01, "stopTime": 1.5, **cosim})
+
+
+def test_the_error_controlled_step_is_short_where_the_inputs_move_fast_and_long_where_they_do_not(tmp_path):
+    tol = 0.5  # free fall: v changes by 9.81·h, so steps of some 0.05 s; a bounce: by 2|v| at once
+    run = run_project(_ball(tmp_path, stepControl={"tolerance": tol, "minStep": 1e-4, "maxStep": 0.2}),
+                      tmp_path / "runs")
+    rows = read_rows(run)
+    t, u = column(rows, "t"), column(rows, "g.u")
+    h = [b - a for a, b in zip(t, t[1:])]
+    assert t[-1] == 1.5 and all(x > 0 for x in h)
+    sizes = meta(run)["step_sizes"]
+    assert sizes["rejected"] > 0 and sizes["accepted"] == len(h)
+    assert min(h[:-1]) < 0.005 and max(h) > 0.05  # shrunk at the bounce, grown in free fall
+    # Every step that stood moved its input by at most the tolerance, unless taken at minStep.
+    v = column(rows, "ball.v")
+    for k in range(len(h)):
+        if h[k] > 1.0001e-4:
+            assert abs(v[k + 1] - u[k]) <= tol * max(1.0, abs(u[k]), abs(v[k + 1])) + 1e-12, k
+    text = hycosim("report", str(run)).stdout
+    assert "step control: steps of 0.0001 to 0.2 s" in text and "macro steps used:" in text
+
+
+def test_retakes_refuse_what_cannot_take_a_step_again_by_name(tmp_path):
+    (tmp_path / "hold.py").write_text(
+        "from clients.node import Node\n"
+        "class Hold(Node):\n"
+        "    def outputs(self):\n        return {'y': 0.0}\n"
+        "    def step(self, t, h, inputs):\n        pass\n")
+    nodes = [{"nodeName": "src", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+             {"nodeName": "h", "UID": 2, "model": "hold.py:Hold", "input": ["u"], "output": ["y"]}]
+    for key, value in (("iterate", {"tolerance": 1e-6}),
+                       ("stepControl", {"tolerance": 1e-3, "minStep": 1e-3, "maxStep": 0.1})):
+        cfg = write_project(tmp_path / "p.json", nodes, [{"from": "src.y", "to": "h.u"}], cosim={key: value})
+        res = hycosim("validate", str(cfg))
+        assert res.returncode == 2, res.stdout
+        assert f"coSimulation.{key}: every stepping node must be able to take a step again" in res.stderr
+        assert "node 'h': its model Hold has no get_state/set_state" in res.stderr and "Traceback" not in res.stderr
+
+
+@pytest.mark.parametrize("cosim, expected", [
+    ({"iterate": {"tolerance": 0}}, "coSimulation.iterate.tolerance"),
+    ({"iterate": {"tolerance": 1e-6, "relaxation": 1.5}}, "coSimulation.iterate.relaxation"),
+    ({"iterate": {"tolerance": 1e-6, "maxIterations": 1}}, "coSimulation.iterate.maxIterations"),
+    ({"stepControl": {"tolerance": -1, "minStep": 0.001, "maxStep": 0.1}}, "coSimulation.stepControl.tolerance"),
+    ({"stepControl": {"tolerance": 1e-3, "minStep": 0.2, "maxStep": 0.1}},
+     "coSimulation.stepControl: minStep 0.2 s is above maxStep 0.1 s"),
+    ({"stepControl": {"tolerance": 1e-3, "minStep": 0.001, "maxStep": 0.1}, "iterate": {"tolerance": 1e-6}},
+     "iterative coupling and an error-controlled step cannot be combined"),
+    ({"iterate": {"tolerance": 1e-6}, "coupling": "gauss-seidel"},
+     "coSimulation.iterate: iterative coupling works with Jacobi coupling only"),
+    ({"stepControl": {"tolerance": 1e-3, "minStep": 0.001, "maxStep": 0.1}, "eventTolerance": 0.001},
+     "coSimulation.stepControl: an error-controlled step and locating events by rollback cannot be combined"),
+])
+def test_bad_retake_settings_are_named(cosim, expected):
+    doc = {"nodeNum": 2, "nodeLists": [
+        {"nodeName": "a", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "b", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]}],
+        "linkNum": 1, "linkLists": [{"from": "a.y", "to": "b.u"}], "coSimulation": {"stepSize": 0.01, **cosim}}
+    with pytest.raises(Exception) as info:
+        parse_project(json.loads(json.dumps(doc)), "p.json")
+    assert expected in str(info.value)
+
+
+def test_algebraic_loops_follow_feedthrough_inside_nodes_only():
+    doc = {"nodeNum": 3, "nodeLists": [
+        {"nodeName": n, "UID": i, "model": "gain", "input": ["u"], "output": ["y"]} for i, n in enumerate("abc", 1)],
+        "linkNum": 3, "linkLists": [{"from": "a.y", "to": "b.u"}, {"from": "b.y", "to": "c.u"},
+                                    {"from": "c.y", "to": "a.u"}]}
+    routes = parse_project(doc).routes
+    through = {n: {"y": {"u"}} for n in "abc"}
+    assert algebraic_loops(routes, through) == [["a.u", "a.y", "b.u", "b.y", "c.u", "c.y", "a.u"]]
+    assert algebraic_loops(routes, {**through, "b": {}}) == []  # b's output is its state: no loop
+
+
+def test_the_step_size_control_and_the_change_it_reads():
+    from core.config import StepControl
+
+    labels = {"n": ["n.x", "n.F", "n.flag"]}
+    change, port, absolute = input_change({"n": [0.1, 50.0, True]}, {"n": [0.0, 40.0, False]}, labels, 0.1)
+    assert port == "n.F" and absolute == 10.0 and change == pytest.approx(10.0 / (0.1 * 50.0))
+    sizer = StepSizer.starting(StepControl(tolerance=0.1, minStep=0.001, maxStep=0.1), 0.5)
+    assert sizer.h == 0.1  # the first step tried lies within the bounds
+    shorter = sizer.judge(0.1, 4.0)
+    assert shorter == pytest.approx(0.1 * 0.2) and sizer.rejected == 1  # at most five times shorter at once
+    assert sizer.judge(0.02, 0.5) is None and sizer.h == pytest.approx(0.02 * 1.6)
+    assert sizer.judge(0.001, 9.0) is None and sizer.forced == 1  # minStep stands over the tolerance
