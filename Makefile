@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup run test test-long bench fmus trials train docs clean
+.PHONY: setup run test test-long bench fmus trials train docs clean chromium
 
 setup: $(STAMP)
 
@@ -31,13 +31,18 @@ trials: $(STAMP)
 train: $(STAMP)
 	$(VENV)/bin/hycosim train -o runs/train
 
-test: $(STAMP)
+test: $(STAMP) chromium
 	$(PY) -m pytest -q -p no:cacheprovider --durations=25
+
+# The dashboard's tests drive Debian's chromium through Playwright (no browser download).
+chromium:
+	@command -v chromium >/dev/null 2>&1 || { apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium; }
 
 test-long: $(STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider -m long
 
-bench: $(STAMP)
+bench: $(STAMP) chromium
 	$(PY) -m pip install --quiet -e ".[test,bench]"
 	$(PY) benchmarks/barrier.py
 	$(PY) benchmarks/fmu_overhead.py
@@ -46,6 +51,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/fuzz.py
 	$(PY) benchmarks/recovery.py
 	$(PY) benchmarks/accuracy.py
+	$(PY) benchmarks/dashboard_cost.py
 
 # The manual as a site in site/ (make test builds it too, strictly, and runs its examples).
 docs: $(STAMP)

@@ -220,13 +220,14 @@ def main() -> None:
     ap.add_argument("--mr-stop", type=float, default=2.0)
     ap.add_argument("--transient-stop", type=float, default=5.0, help="0: leave the sharp-transient case out")
     ap.add_argument("--tolerances", type=float, nargs="+", default=[1e-2, 5e-3, 2e-3])
+    ap.add_argument("--fixed-h", type=float, default=0.001, help="the fixed step the controlled one is set against")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         dir_ = Path(tmp)
         rows = accuracy(dir_, args.h, args.stop)
         rates = multirate(dir_, args.mr_stop)
-        sharp = transient(dir_, args.transient_stop, args.tolerances) if args.transient_stop > 0 else []
+        sharp = transient(dir_, args.transient_stop, args.tolerances, args.fixed_h) if args.transient_stop > 0 else []
     by = {(r["coupling"], r["H"]): r for r in rows}
     ratios = {f"{h:g}": by[("gauss-seidel", h)]["error_x1"] / by[("jacobi", h)]["error_x1"] for h in args.h}
     result = {"oscillator": rows, "gs_over_jacobi_error": ratios, "multirate": rates, "transient": sharp}

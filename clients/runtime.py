@@ -12,6 +12,7 @@ import json
 import math
 import os
 import signal
+import socket
 import time
 from typing import Any
 
@@ -494,7 +495,7 @@ class NodeRuntime:
         return frames.encode(frames.HELLO, self.spec.UID, {
             "rollback": rollback, "serialize": stepping and self.impl.can_serialize,
             "variableStep": stepping and self.impl.can_vary_step, "restart": restart,
-            "ports": self.spec.wire_ports()})
+            "ports": self.spec.wire_ports(), "host": socket.gethostname()[:64]})
 
     def _on_stop(self, frame: frames.Frame) -> None:
         """The server's STOP: the end of the run, or of a failed one, which is this node's failure too."""

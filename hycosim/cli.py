@@ -267,6 +267,8 @@ def run(
                                                        "is started again")] = 3,
     resume: Annotated[Optional[Path], typer.Option(help="go on with the run in this directory (its server died) "
                                                        "from its last checkpoint")] = None,
+    dashboard: Annotated[bool, typer.Option(help="watch the run in a browser (hycosim dashboard)")] = False,
+    dashboard_port: Annotated[int, typer.Option(min=0, max=65535, help="the dashboard's port on 127.0.0.1")] = 8050,
 ) -> None:
     """Run the server and every node as local processes on loopback (FILE: a project JSON or an SSP package)."""
     from hycosim.embedded import run_embedded
@@ -278,8 +280,12 @@ def run(
     if resume is not None and not (resume / "meta.json").is_file():
         err.print(f"[red]error:[/red] --resume: {resume} is not a run directory (no meta.json)", highlight=False)
         raise typer.Exit(2)
+    if dashboard and loaded.project.security is not None and loaded.project.security.credentials:
+        err.print("[red]error:[/red] --dashboard: this project's server requires credentials; attach a dashboard "
+                  "with its own: hycosim dashboard ENDPOINT --user NAME --password-file FILE", highlight=False)
+        raise typer.Exit(2)
     result = run_embedded(loaded, file, listen=listen, runs_dir=runs_dir, console=err, show_progress=progress,
-                          restarts=restarts, resume=resume)
+                          restarts=restarts, resume=resume, dashboard_port=dashboard_port if dashboard else None)
     if result.code >= 128:
         ignore_stops()  # a Ctrl-C pressed twice: the run is over, say so
     if result.code:
@@ -390,6 +396,26 @@ def plot(
     out.print(f"wrote {path}", highlight=False)
 
 
+def _monitor_credentials(endpoint: str, tls_ca: Path | None, password_file: Path | None) -> tuple[dict | None, str | None]:
+    """A monitor's TLS settings and password (``status``, ``dashboard``); exit 2 naming what is wrong."""
+    from core.security import SecurityError, ca_settings
+
+    if endpoint.startswith("tls/") and tls_ca is None:
+        err.print(f"[red]error:[/red] {endpoint} is a TLS endpoint: give --tls-ca with the CA that signed "
+                  "the server's certificate", highlight=False)
+        raise typer.Exit(2)
+    try:
+        return (ca_settings(tls_ca) if tls_ca else None,
+                password_file.read_text().strip() if password_file else None)
+    except OSError as exc:
+        err.print(f"[red]error:[/red] {password_file}: cannot read the password ({exc.strerror or exc})",
+                  highlight=False)
+        raise typer.Exit(2) from None
+    except SecurityError as exc:
+        err.print(f"[red]error:[/red] {exc}", highlight=False)
+        raise typer.Exit(2) from None
+
+
 @app.command()
 def status(
     endpoint: str,
@@ -401,26 +427,13 @@ def status(
 ) -> None:
     """Ask a running server who is attached."""
     from core.keys import ProjectKeys
-    from core.security import SecurityError, ca_settings
     from core.session import ConnectError, client_config, open_session
 
     endpoint = _endpoint("endpoint", endpoint)
-    if endpoint.startswith("tls/") and tls_ca is None:
-        err.print(f"[red]error:[/red] {endpoint} is a TLS endpoint: give --tls-ca with the CA that signed "
-                  "the server's certificate", highlight=False)
-        raise typer.Exit(2)
+    tls, password = _monitor_credentials(endpoint, tls_ca, password_file)
     try:
-        tls = ca_settings(tls_ca) if tls_ca else None
-        password = password_file.read_text().strip() if password_file else None
         session = open_session(client_config(endpoint, timeout_s=timeout, user=user, password=password, tls=tls),
                                endpoint)
-    except OSError as exc:
-        err.print(f"[red]error:[/red] {password_file}: cannot read the password ({exc.strerror or exc})",
-                  highlight=False)
-        raise typer.Exit(2) from None
-    except SecurityError as exc:
-        err.print(f"[red]error:[/red] {exc}", highlight=False)
-        raise typer.Exit(2) from None
     except ConnectError as exc:
         err.print(f"[red]error:[/red] {exc}", highlight=False)
         raise typer.Exit(3) from None
@@ -457,6 +470,54 @@ def _is_status(answer: object) -> bool:
 
 # The schema as shipped: beside this module, and named by the configs in the repository.
 SCHEMA_FILE = Path(__file__).resolve().parent / "project.schema.json"
+
+
+@app.command()
+def dashboard(
+    target: Annotated[str, typer.Argument(help="a run directory, or the endpoint of a running server")],
+    port: Annotated[int, typer.Option(min=0, max=65535, help="the page's port (0: any free one)")] = 8050,
+    host: Annotated[str, typer.Option(help="address to serve the page on")] = "127.0.0.1",
+    project: Annotated[Optional[str], typer.Option(help="the project, when one endpoint serves several")] = None,
+    user: Annotated[Optional[str], typer.Option(help="user, when the server requires credentials")] = None,
+    password_file: Annotated[Optional[Path], typer.Option(help="that user's password")] = None,
+    tls_ca: Annotated[Optional[Path], typer.Option(help="CA certificate (PEM) for a tls/ endpoint")] = None,
+) -> None:
+    """Watch a running co-simulation, or look through a finished run, in a browser."""
+    from dashboard.app import bind, serve
+    from server.report import RunDirError
+
+    path = Path(target)
+    if path.is_dir():
+        from dashboard.finished import FinishedRun
+
+        try:
+            source = FinishedRun(path)
+        except RunDirError as exc:
+            err.print(f"[red]error:[/red] {exc}", highlight=False)
+            raise typer.Exit(2) from None
+        closing = None
+    else:
+        from dashboard.live import LiveFeed
+
+        endpoint = _endpoint("endpoint", target)
+        tls, password = _monitor_credentials(endpoint, tls_ca, password_file)
+        source = LiveFeed(endpoint, project, user=user, password=password, tls=tls)
+        source.start()
+        closing = source.close
+    try:
+        sock = bind(host, port)
+    except OSError as exc:
+        err.print(f"[red]error:[/red] --port: cannot serve the page on {host}:{port} ({exc.strerror or exc})",
+                  highlight=False)
+        raise typer.Exit(2) from None
+    shown = f"[{host}]" if ":" in host else host
+    out.print(f"dashboard: http://{shown}:{sock.getsockname()[1]}/", highlight=False)
+    sys.stdout.flush()  # a launcher reads the address from a pipe
+    try:
+        serve(source, sock)
+    finally:
+        if closing is not None:
+            closing()
 
 
 @app.command()

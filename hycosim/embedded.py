@@ -98,10 +98,12 @@ def _pump(stream, sink: queue.Queue) -> None:
 
 def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None = None,
                  runs_dir: Path = Path("runs"), console: Console | None = None,
-                 show_progress: bool = True, restarts: int = 3, resume: Path | None = None) -> EmbeddedResult:
+                 show_progress: bool = True, restarts: int = 3, resume: Path | None = None,
+                 dashboard_port: int | None = None) -> EmbeddedResult:
     """Run the server and every node on loopback. With checkpoints (coSimulation.checkpointEvery)
     a node process that dies mid-run is started again, at most ``restarts`` times per node;
-    ``resume``: go on with the run in that directory from its last checkpoint."""
+    ``resume``: go on with the run in that directory from its last checkpoint;
+    ``dashboard_port``: serve the dashboard of the run on that port of 127.0.0.1 while it runs."""
     console = console or Console(stderr=True)
     endpoint = listen or free_loopback_endpoint()
     run_dir = resume if resume is not None else run_dir_for(runs_dir, loaded.name)
@@ -123,6 +125,10 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
 
     nodes: dict[str, subprocess.Popen] = {spec.nodeName: start_node(spec.nodeName, mode)
                                           for spec in loaded.project.nodeLists}
+    board = None
+    if dashboard_port is not None:
+        board = _start_dashboard([*cmd, "dashboard", endpoint, "--project", loaded.name, "--port", str(dashboard_port)],
+                                 run_dir, env, console)
     restartable = loaded.project.coSimulation.checkpointEvery is not None
     restarted: dict[str, int] = {}
     lines: queue.Queue = queue.Queue()
@@ -195,6 +201,37 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
         for proc in (server, *nodes.values()):
             proc.wait()
         return EmbeddedResult(code if code and code >= 128 else 130, run_dir, message or "interrupted by Ctrl-C", {})
+    finally:
+        _stop_dashboard(board)
+
+
+def _start_dashboard(command: list[str], run_dir: Path, env: dict[str, str], console: Console) -> subprocess.Popen:
+    """Start the dashboard process and say where its page is (it connects to the server by itself)."""
+    board = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=open(run_dir / "dashboard.stderr.txt", "w"),
+                             text=True, env=env)
+    lines: queue.Queue = queue.Queue()
+    threading.Thread(target=_pump, args=(board.stdout, lines), daemon=True).start()
+    try:
+        line = lines.get(timeout=30)
+    except queue.Empty:
+        line = None
+    if line and line.startswith("dashboard: "):
+        console.print(f"{line.strip()} (open it in a browser; it closes with the run)", highlight=False)
+    else:
+        console.print(f"[yellow]warning:[/yellow] the dashboard did not start: "
+                      f"{_tail(run_dir / 'dashboard.stderr.txt') or 'no word from it'}", highlight=False)
+    return board
+
+
+def _stop_dashboard(board: subprocess.Popen | None) -> None:
+    if board is None or board.poll() is not None:
+        return
+    board.terminate()
+    try:
+        board.wait(timeout=5)
+    except subprocess.TimeoutExpired:
+        board.kill()
+        board.wait()
 
 
 def _shut_down(server: subprocess.Popen, nodes: dict[str, subprocess.Popen], run_dir: Path, code: int | None,

@@ -12,6 +12,7 @@ Read top to bottom, :meth:`Relay.run` is the whole algorithm (Jacobi coupling):
 
 from __future__ import annotations
 
+import collections
 import functools
 import json
 import math
@@ -40,6 +41,10 @@ from server.intake import Dropped, Intake
 from server.recorder import Recorder, RecordError
 from server.retakes import IterationLog, StepSizer, input_change, relaxed
 from server.routing import OutputView, Router
+
+
+# A status answer holds at most this many of the points asked for (a dashboard's plots).
+STATUS_POINTS = 256
 
 
 class RunError(RuntimeError):
@@ -82,6 +87,7 @@ class Progress:
     mode: str = FREE_MODE
     steps_per_s: float = 0.0
     attached: list[str] = field(default_factory=list)
+    lateness_s: float | None = None  # a paced run's, at the last point
 
 
 class Relay:
@@ -132,6 +138,12 @@ class Relay:
         self.lost: dict[str, float] = {}  # node → when its token went, while within linkGrace
         self.reattached: dict[str, int] = {}
         self.ended_by: dict[str, Any] | None = None  # the node whose model ended the run, when, and why
+        self.switches: collections.deque[dict[str, Any]] = collections.deque(maxlen=200)  # the latest mode switches
+        # The latest points as (time, holder, wait, arrivals): the status answer's last second.
+        self._recent: collections.deque[tuple[float, str, float, dict[str, float]]] = collections.deque(maxlen=4096)
+        self._shown: tuple[int, float, str, dict[str, list[Any]], dict[str, list[Any]], float | None] = (
+            0, self.cosim.startTime, FREE_MODE, {}, {}, None)
+        self._history: collections.deque[tuple] = collections.deque(maxlen=4096)  # the latest points, for the dashboard
         self._last_release: bytes | None = None
         self._start_frame: bytes | None = None
         # Checkpoints (coSimulation.checkpointEvery): on once every stepping node said it can
@@ -162,10 +174,54 @@ class Relay:
         self.inbox.inject(frames.encode(frames.LIVE, node, alive))
 
     def _on_status(self, query: zenoh.Query) -> None:
-        query.reply(self.keys.status, json.dumps({
-            "project": self.project.projectName, "attached": sorted(self.alive),
-            "expected": [n.nodeName for n in self.project.nodeLists],
-            "step": self.progress.step, "t": self.progress.t, "mode": self.progress.mode}))
+        since = query.parameters.get("since")
+        try:
+            after = int(since) if since is not None and len(since) < 20 else None
+        except ValueError:
+            after = None  # anyone may ask: a selector that is no step asks for no points
+        # A byte port's value is no JSON: it goes as null (the dashboard plots numbers only).
+        query.reply(self.keys.status, json.dumps(self.status(after), default=lambda _: None))
+
+    def status(self, since: int | None = None) -> dict[str, Any]:
+        """Who is attached and where the run is, for ``hycosim status`` and the dashboard (read
+        from Zenoh's thread: copies of what the loop changes, each taken at once under the GIL).
+        ``since``: also the recent points after that step (at most STATUS_POINTS, evenly thinned)."""
+        restarts: dict[str, int] = {}
+        for r in list(self.recoveries):
+            restarts[r["node"]] = restarts.get(r["node"], 0) + 1
+        nodes = []
+        for n in self.project.nodeLists:
+            host = self.capabilities.get(n.nodeName, {}).get("host")
+            nodes.append({"name": n.nodeName, "uid": n.UID, "async": n.asynchronous,
+                          "input": n.input_names(), "output": n.output_names(),
+                          "host": host if type(host) is str else None, "restarts": restarts.get(n.nodeName, 0)})
+        shown = self._shown
+        now = time.perf_counter()
+        recent = [p for p in list(self._recent) if now - p[0] <= 1.0]  # the points of the last second
+        held: dict[str, float] = {}
+        arrived: dict[str, list[float]] = {}
+        for _, holder, wait, arrivals in recent:
+            if holder:
+                held[holder] = held.get(holder, 0.0) + wait
+            for node, at in arrivals.items():
+                arrived.setdefault(node, []).append(at)
+        total = sum(held.values())
+        window = {"steps": len(recent), "held": {n: w / total for n, w in held.items()} if total > 0 else {},
+                  "arrival_ms": {n: 1000 * sum(a) / len(a) for n, a in arrived.items()}}
+        return {"project": self.project.projectName, "attached": sorted(self.alive), "lost": sorted(self.lost),
+                "expected": [n.nodeName for n in self.project.nodeLists], "nodes": nodes,
+                "run": self.recorder.run_dir.name, "step": shown[0], "t": shown[1],
+                "mode": shown[2], "stopTime": self.cosim.stopTime, "lateness_s": self.progress.lateness_s,
+                "dropped": dict(self.intake.dropped), "switches": list(self.switches), "window": window,
+                "outputs": shown[3], "inputs": shown[4], "point_wall": shown[5],
+                **({} if since is None else {"points": self._points_since(since)})}
+
+    def _points_since(self, since: int) -> list[list[Any]]:
+        """``[step, t, outputs, inputs]`` of the kept points after step ``since``, thinned."""
+        points = [p for p in list(self._history) if p[0] > since]
+        stride = -(-len(points) // STATUS_POINTS)
+        kept = points[::-1][::stride][::-1] if stride > 1 else points  # the latest point always among them
+        return [[k, t, outputs, inputs] for k, t, _, outputs, inputs, _ in kept]
 
     def request_stop(self) -> None:
         """Ask the loop to stop at the next macro-step point (thread-safe)."""
@@ -874,6 +930,7 @@ class Relay:
                 if localised:
                     entry["localised"] = localised
                 self.recorder.event(entry)
+                self.switches.append(entry)
                 self._log.info("mode switch", step=k, t=t, name=switch.event, to=switch.to_mode, values=switch.values)
             mode = self.coordinator.mode
             ages = self.router.route(mode, t, self.outputs, self.histories)
@@ -885,7 +942,13 @@ class Relay:
                     time.sleep(ahead)
             holder = max(arrivals, key=arrivals.get) if arrivals else ""
             self.progress.step, self.progress.t, self.progress.mode = k, t, mode
+            self.progress.lateness_s = lateness
             now = time.perf_counter()
+            self._recent.append((now, holder, wait, arrivals))
+            # Point k's values, whole, for the status answer (the outputs change while the nodes step).
+            self._shown = (k, t, mode, dict(self.outputs), {n: list(v) for n, v in self.router.inputs.items()},
+                           time.time())
+            self._history.append(self._shown)
             if self._on_progress is not None and now - last_progress >= self._progress_every:
                 last_progress = now
                 self.progress.steps_per_s = (k - k0) / (now - perf0) if now > perf0 else 0.0

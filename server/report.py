@@ -276,7 +276,7 @@ def read_columns(run_dir: Path, ports: list[str]) -> dict[str, array]:
     return data
 
 
-def _envelope(t: array, y: array, buckets: int = PLOT_BUCKETS) -> tuple[Any, Any]:
+def envelope(t: array, y: array, buckets: int = PLOT_BUCKETS) -> tuple[Any, Any]:
     """t and y thinned to each bucket's lowest and highest point, in time order: a figure a
     thousand pixels wide shows the same as with a million points, and draws in a moment."""
     import numpy as np
@@ -306,7 +306,7 @@ def plot_run(run_dir: Path, ports: list[str], out: Path) -> Path:
     events = read_events(run_dir)
     fig, ax = plt.subplots(figsize=(10, 5))
     for port in (c for c in data if c != "t"):
-        ax.plot(*_envelope(data["t"], data[port]), label=port)
+        ax.plot(*envelope(data["t"], data[port]), label=port)
     for i, ev in enumerate(events):
         ax.axvline(ev["t"], color="red" if ev["to"] != "free" else "green", linestyle="--", linewidth=1,
                    label=f"{ev['from']}→{ev['to']}" if i < 6 else None)

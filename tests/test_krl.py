@@ -162,16 +162,16 @@ def test_trials_refuse_bad_angles_and_counts_before_running(tmp_path, args, mess
 
 def test_short_trials_run_produces_the_table_and_files(tmp_path):
     out = tmp_path / "trials"
-    res = hycosim("trials", "--angles", "30", "60", "--trials", "2", "-o", str(out), timeout=900)
+    res = hycosim("trials", "--angles", "30", "50", "--trials", "1", "-o", str(out), timeout=900)
     assert res.returncode == 0, res.stderr[-2000:]
-    assert "paper %" in res.stdout and "│ 60°" in res.stdout and "rod and robot as FMUs" in res.stdout
+    assert "paper %" in res.stdout and "│ 50°" in res.stdout and "rod and robot as FMUs" in res.stdout
     with open(out / "trials.csv", newline="") as f:
         rows = list(csv.DictReader(f))
-    assert len(rows) == 4 and {r["angle"] for r in rows} == {"30.0", "60.0"}
+    assert len(rows) == 2 and {r["angle"] for r in rows} == {"30.0", "50.0"}
     assert {r["nodes"] for r in rows} == {"fmu"}  # the paper's design: the rod and robot scene as FMUs
     project = json.loads(next(out.glob("30deg-00/project.json")).read_text())
     assert [n["nodeName"] for n in project["nodeLists"] if "fmu" in n] == ["rod", "robot"]
-    assert sum(r["success"] == "True" for r in rows) >= 3
+    assert all(r["success"] == "True" for r in rows)  # the shipped policy grasps every trial at 30–50°
     assert (out / "trials.png").stat().st_size > 20_000
     one = next(out.glob("30deg-00/krl/frames.xml"))
     assert one.read_text().strip().splitlines()[-1].startswith('<Robot><Pos A1=""')

@@ -173,7 +173,7 @@ def test_a_long_run_is_read_back_in_one_pass(tmp_path):
     extremes per pixel bucket without losing a peak."""
     from array import array
 
-    from server.report import PLOT_BUCKETS, _envelope, plot_run, summarise
+    from server.report import PLOT_BUCKETS, envelope, plot_run, summarise
 
     run = tmp_path / "long"
     run.mkdir()
@@ -197,12 +197,12 @@ def test_a_long_run_is_read_back_in_one_pass(tmp_path):
     assert s.mean_arrival_ms["a"] == pytest.approx(1000 * sum(waits[1:]) / (n - 1))
     t = array("d", (k * 0.001 for k in range(n)))
     spike = array("d", (3.0 if k == 77_777 else 0.0 for k in range(n)))
-    tt, yy = _envelope(t, spike)
+    tt, yy = envelope(t, spike)
     assert len(tt) <= 2 * PLOT_BUCKETS and 3.0 in yy and list(tt) == sorted(tt)
     gap = array("d", (math.nan if 1000 <= k < 5000 else 1.0 for k in range(n)))
-    assert any(math.isnan(v) for v in _envelope(t, gap)[1])  # a gap stays a gap
+    assert any(math.isnan(v) for v in envelope(t, gap)[1])  # a gap stays a gap
     short = array("d", [1.0, 2.0])
-    assert list(_envelope(array("d", [0.0, 1.0]), short)[1]) == [1.0, 2.0]
+    assert list(envelope(array("d", [0.0, 1.0]), short)[1]) == [1.0, 2.0]
     png = plot_run(run, ["a.y", "b.y"], tmp_path / "long.png")
     assert png.stat().st_size > 10_000
 

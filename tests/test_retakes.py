@@ -29,12 +29,9 @@ def _takes(run: Path) -> list[int]:
 
 
 def test_iterative_coupling_solves_an_algebraic_loop_at_every_step_that_jacobi_takes_late(tmp_path):
-    plain = _loop(tmp_path, 0.5, 0.5)
-    res = hycosim("validate", str(plain))
+    res = hycosim("validate", str(_loop(tmp_path, 0.5, 0.5)))
     assert res.returncode == 0
     assert "algebraic loop a.u → a.y → b.u → b.y → a.u: Jacobi coupling takes it a macro step late" in res.stderr
-    late = read_rows(run_project(plain, tmp_path / "j"))
-    assert column(late, "a.y")[1] == pytest.approx(1.0)  # b's start value, one step old
 
     cfg = _loop(tmp_path, 0.5, 0.5, iterate={"tolerance": 1e-10, "maxIterations": 50})
     res = hycosim("validate", str(cfg))

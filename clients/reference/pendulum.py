@@ -18,7 +18,8 @@ class Pendulum(Node):
 
     PARAMETERS = frozenset({"length", "g", "damping", "theta0", "omega0", "micro_steps"})
     INPUTS = frozenset({"theta_in", "omega_in"})
-    OUTPUTS = frozenset({"theta", "omega"})
+    # The pivot and the bob in the x–z plane (m): what a dashboard draws of it.
+    OUTPUTS = frozenset({"theta", "omega", "pivot_x", "pivot_z", "bob_x", "bob_z"})
 
     def setup(self, ctx: NodeContext) -> None:
         self.length = float(ctx.parameter("length", 1.0))
@@ -33,7 +34,8 @@ class Pendulum(Node):
         return omega, -(self.g / self.length) * math.sin(theta) - self.c * omega
 
     def outputs(self) -> dict[str, Any]:
-        return {"theta": self.theta, "omega": self.omega}
+        return {"theta": self.theta, "omega": self.omega, "pivot_x": 0.0, "pivot_z": 0.0,
+                "bob_x": self.length * math.sin(self.theta), "bob_z": -self.length * math.cos(self.theta)}
 
     def set_mode(self, mode: str, driven: bool) -> None:
         self.driven = driven

@@ -1,0 +1,208 @@
+"""What watching a run costs it, and how late the page shows a step.
+
+Overhead: the barrier ring of benchmarks/barrier.py (N nodes, y = 0.5·u + 1) run by
+``hycosim run``, once plain and once with ``--dashboard`` and a headless chromium page open on
+it plotting a port, the rounds interleaved; steps/s medians and their ratio.
+
+Latency: a paced run (100 steps per second of wall time) with the dashboard and the page;
+for every step, the time from its point at the server (all its outputs in: the server's wall
+clock, in the status answer) to the first snapshot reaching the page that shows it or a later
+step (points are 10 ms apart, so a step's time is the shown point's less the steps between).
+
+A big finished run: a run directory of ``--big`` steps (two nodes, written as the recorder
+writes them) opened with ``hycosim dashboard RUN_DIR``: seconds until the page lists the nodes
+(usable), and until a chosen port's plot has drawn.
+
+    python benchmarks/dashboard_cost.py [--n 2] [--steps 20000] [--repeat 3] [--paced-s 10] [--big 1000000] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+from _procs import free_port, kill_group, start
+
+from barrier import ring_config
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def _page_up(url: str, timeout: float = 60) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            with urllib.request.urlopen(url, timeout=1):
+                return
+        except OSError:
+            time.sleep(0.05)
+    raise RuntimeError(f"no dashboard at {url}")
+
+
+def _watch(url: str, launched: threading.Event, until: threading.Event, seen: list) -> None:
+    """Launch headless chromium (before the run starts: its start-up is no part of what the run
+    pays), then open the page, plotting ``n0.y``, and keep it open until told."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=shutil.which("chromium"), args=["--no-sandbox"])
+        page = browser.new_page()
+        page.expose_function("hycosimSeen", lambda step, at: seen.append((step, at)))
+        page.add_init_script("""
+            const Real = WebSocket;
+            window.WebSocket = function (...a) { const ws = new Real(...a);
+              ws.addEventListener('message', (ev) => { const m = JSON.parse(ev.data);
+                if (m.state === 'running' && m.point_wall) hycosimSeen([m.step, m.point_wall], Date.now() / 1000); });
+              return ws; };""")
+        page.goto("about:blank")
+        launched.set()
+        _page_up(url)
+        page.goto(url + "?ports=n0.y")
+        until.wait()
+        browser.close()
+
+
+def run(cfg: Path, runs: Path, dashboard: bool, seen: list | None = None, timeout: float = 300) -> float:
+    """``hycosim run`` the project (with the dashboard and a page on it); its steps/s."""
+    args = [sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", str(runs), "--no-progress"]
+    launched, done = threading.Event(), threading.Event()
+    watcher = None
+    if dashboard:
+        port = free_port()
+        args += ["--dashboard", "--dashboard-port", str(port)]
+        watcher = threading.Thread(target=_watch, args=(f"http://127.0.0.1:{port}/", launched, done,
+                                                        seen if seen is not None else []))
+        watcher.start()
+        launched.wait(60)
+    proc = start(args, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        _, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        kill_group(proc)
+        raise
+    finally:
+        done.set()
+        if watcher:
+            watcher.join(timeout=30)
+    if proc.returncode:
+        raise RuntimeError(f"run failed ({proc.returncode}): {err[-800:]}")
+    meta = json.loads(max(runs.glob("*/meta.json"), key=lambda p: p.stat().st_mtime).read_text())
+    return float(meta["steps_per_s"])
+
+
+def big_run(run_dir: Path, steps: int) -> Path:
+    """A completed run of ``steps`` steps as the recorder leaves it (two nodes, one switch)."""
+    import csv
+    import math
+
+    run_dir.mkdir(parents=True)
+    with open(run_dir / "values.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["step", "t", "mode", "a.y", "b.y", "b.u"])
+        for k in range(steps + 1):
+            t = k * 0.001
+            w.writerow([k, repr(t), "free" if k < steps // 2 else "hold", math.sin(t), math.cos(t), math.sin(t)])
+    with open(run_dir / "timing.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["step", "t", "wait_s", "holder", "lateness_s", "arrival_s:a", "arrival_s:b"])
+        for k in range(steps + 1):
+            w.writerow([k, repr(k * 0.001), "0.000300000", "ab"[k % 2], "", "0.000200000", "0.000300000"])
+    (run_dir / "events.jsonl").write_text(json.dumps({"step": steps // 2, "t": steps // 2 * 0.001, "event": "hold",
+                                                      "from": "free", "to": "hold", "guard": "a.y > 0",
+                                                      "values": {"a.y": 0.5}}) + "\n")
+    (run_dir / "meta.json").write_text(json.dumps({"status": "completed", "steps": steps + 1, "steps_per_s": 3000.0}))
+    return run_dir
+
+
+def open_big(run_dir: Path) -> dict:
+    """Seconds from opening the page until the nodes are listed, and until the plot has drawn."""
+    from playwright.sync_api import sync_playwright
+
+    port = free_port()
+    board = start([sys.executable, "-m", "hycosim", "dashboard", str(run_dir), "--port", str(port)], cwd=REPO,
+                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        _page_up(f"http://127.0.0.1:{port}/")
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=shutil.which("chromium"), args=["--no-sandbox"])
+            page = browser.new_page()
+            began = time.perf_counter()
+            page.goto(f"http://127.0.0.1:{port}/?ports=a.y")
+            page.wait_for_selector("tr[data-node='b']", timeout=120_000)
+            usable = time.perf_counter() - began
+            page.wait_for_function("window.hycosim.plots['a.y'] && window.hycosim.plots['a.y'].drawn > 100",
+                                   timeout=120_000)
+            drawn = time.perf_counter() - began
+            points = page.evaluate("window.hycosim.plots['a.y'].drawn")
+            browser.close()
+    finally:
+        kill_group(board)
+    return {"usable_s": usable, "plot_s": drawn, "points_sent": points}
+
+
+def latencies(seen: list, step_wall: float) -> list[float]:
+    """For each step, the seconds from its point at the server to the first snapshot showing it or later."""
+    out, shown = [], -1
+    for (step, released), at in seen:
+        for k in range(shown + 1, step + 1):
+            out.append(at - (released - (step - k) * step_wall))
+        shown = max(shown, step)
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=2)
+    ap.add_argument("--steps", type=int, default=20000)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--paced-s", type=float, default=10.0)
+    ap.add_argument("--big", type=int, default=1_000_000, help="steps of the finished run opened (0: none)")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    rates: dict[str, list[float]] = {"plain": [], "dashboard": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        for i in range(args.repeat):
+            for kind in rates:
+                cfg = ring_config(args.n, args.steps, tmp / f"ring-{kind}-{i}.json")
+                rates[kind].append(run(cfg, tmp / f"runs-{kind}-{i}", kind == "dashboard"))
+        cfg = ring_config(args.n, int(args.paced_s / 0.01), tmp / "paced.json")
+        doc = json.loads(cfg.read_text())
+        doc["coSimulation"].update(stepSize=0.01, stopTime=args.paced_s, realTime=True)
+        cfg.write_text(json.dumps(doc))
+        seen: list = []
+        run(cfg, tmp / "runs-paced", True, seen)
+        big = open_big(big_run(tmp / "big", args.big)) if args.big else None
+    lat = sorted(latencies(seen, 0.01))
+    plain, board = statistics.median(rates["plain"]), statistics.median(rates["dashboard"])
+    result = {"n": args.n, "steps": args.steps, "steps_per_s": rates, "median_plain": plain,
+              "median_dashboard": board, "ratio": board / plain,
+              "latency_ms": {"steps": len(lat), "median": 1000 * statistics.median(lat) if lat else None,
+                             "p95": 1000 * lat[int(0.95 * (len(lat) - 1))] if lat else None},
+              "big_run": big}
+    if args.json:
+        print(json.dumps(result, indent=1))
+        return
+    print(f"ring of {args.n}, {args.steps} steps, {args.repeat} interleaved rounds (medians):")
+    print(f"  plain {plain:,.0f} steps/s, with the dashboard and a page open {board:,.0f} steps/s: "
+          f"ratio {board / plain:.3f}")
+    la = result["latency_ms"]
+    if lat:
+        print(f"release to page, paced run of {args.paced_s:g} s ({la['steps']} steps shown): "
+              f"median {la['median']:.0f} ms, 95th percentile {la['p95']:.0f} ms")
+    if big:
+        print(f"a finished run of {args.big:,} steps: the page usable after {big['usable_s']:.2f} s, the plot drawn "
+              f"after {big['plot_s']:.2f} s ({big['points_sent']:,} points sent)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,155 @@
+// The dashboard page: a WebSocket feed of snapshots, drawn into the tables and uPlot charts.
+"use strict";
+const $ = (id) => document.getElementById(id);
+const params = new URLSearchParams(location.search);
+const state = { selected: (params.get("ports") || "").split(",").filter(Boolean), plots: {}, data: {}, snapshot: null, ws: null, latencies: [] };
+window.hycosim = state;  // for the tests and the curious
+
+function fmt(v, digits = 3) { return v === null || v === undefined ? "–" : Number(v).toFixed(digits); }
+function text(el, v) { if (el.textContent !== String(v)) el.textContent = v; }
+
+function connect() {
+  const ws = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/ws`);
+  state.ws = ws;
+  ws.onopen = () => { state.data = {}; ws.send(JSON.stringify({ select: state.selected })); };
+  ws.onmessage = (ev) => {
+    const msg = JSON.parse(ev.data);
+    if (msg.problems) showProblems(msg.problems);
+    if (msg.state) {
+      // How old the point shown is when its snapshot arrives (the server's wall clock; same host).
+      if (msg.point_wall) state.latencies.push(Date.now() / 1000 - msg.point_wall);
+      render(msg);
+    }
+  };
+  ws.onclose = () => {  // the dashboard process went, or the link: say so, and try again
+    const el = $("state"); el.className = "state connecting"; el.textContent = "dashboard unreachable; retrying…";
+    setTimeout(connect, 1000);
+  };
+}
+
+function showProblems(problems) {
+  const box = $("problems"); box.innerHTML = "";
+  for (const p of problems) {
+    const div = document.createElement("div");
+    div.textContent = p.error + (p.closest && p.closest.length ? ` — did you mean ${p.closest.join(", ")}?` : "");
+    box.appendChild(div);
+  }
+}
+
+function render(s) {
+  state.snapshot = s;
+  text($("project"), s.project); text($("run"), s.run || "");
+  const st = $("state"); st.className = `state ${s.state}`;
+  text(st, (s.message || s.state) + (s.loading && s.loading.length ? ` (reading ${s.loading.join(", ")}…)` : ""));
+  if (s.read_problems && s.read_problems.length) showProblems(s.read_problems);
+  text($("step"), s.step); text($("t"), s.t === null ? "–" : fmt(s.t, 3)); text($("rate"), fmt(s.steps_per_s, 0));
+  text($("mode"), s.mode || "–"); text($("lateness"), s.lateness_s === null ? "–" : fmt(1000 * s.lateness_s, 1));
+  const drops = Object.entries(s.dropped || {});
+  text($("dropped"), drops.length ? drops.map(([r, n]) => `${r}: ${n}`).join(", ") : "none");
+  const body = $("nodes").tBodies[0];
+  const rows = s.nodes.map((n) => {
+    const status = n.attached === null ? "" : n.lost ? "lost" : n.attached ? "attached" : "not attached";
+    return `<tr data-node="${esc(n.name)}"><td>${esc(n.name)}</td><td class="${status.replace(" ", "-")}">${status}</td>` +
+      `<td>${esc(n.host || "")}</td><td>${n.held_share === null ? "–" : fmt(100 * n.held_share, 1) + " %"}</td>` +
+      `<td>${fmt(n.mean_arrival_ms, 3)}</td><td>${n.restarts ?? "–"}</td><td>${fmt(n.sample_age_s, 3)}</td></tr>`;
+  }).join("");
+  if (body.dataset.html !== rows) { body.innerHTML = rows; body.dataset.html = rows; }
+  const list = $("switches");
+  const items = (s.switches || []).map((e) =>
+    `<li>t=${fmt(e.t, 4)} s: <b>${esc(e.event)}</b> ${esc(e.from)} → ${esc(e.to)} <code>${esc(e.guard)}</code> ` +
+    `${esc(JSON.stringify(e.values))}</li>`).join("");
+  if (list.dataset.html !== items) { list.innerHTML = items; list.dataset.html = items; }
+  $("slider").hidden = s.source !== "run";
+  scene(s.scene || {});
+  state.markers = (s.switches || []).map((e) => e.t);
+  for (const [port, part] of Object.entries(s.series)) {
+    // Only what this page lacks comes: points after those it has, or all of them anew.
+    const held = state.data[port] && part.from > 0 ? state.data[port] : [[], []];
+    held[0].push(...part.t); held[1].push(...part.y);
+    state.data[port] = held;
+    draw(port, held);
+  }
+}
+
+const COLOURS = ["#8e5b2e", "#2a62c9", "#27ae60", "#c0392b", "#7f8c8d"];
+function scene(nodes) {  // the twin, side view: each node's points joined in order, on a fixed scale
+  const names = Object.keys(nodes);
+  $("scene-box").hidden = names.length === 0;
+  if (!names.length) return;
+  const b = state.bounds || (state.bounds = { x0: Infinity, x1: -Infinity, z0: Infinity, z1: -Infinity });
+  for (const n of names) for (const [x, z] of nodes[n]) {
+    b.x0 = Math.min(b.x0, x); b.x1 = Math.max(b.x1, x); b.z0 = Math.min(b.z0, z); b.z1 = Math.max(b.z1, z);
+  }
+  const c = $("scene"), ctx = c.getContext("2d"), pad = 30;
+  const span = Math.max(b.x1 - b.x0, b.z1 - b.z0, 1e-6);
+  const k = Math.min(c.width, c.height) - 2 * pad;
+  const px = (x) => pad + (x - b.x0) / span * k, pz = (z) => c.height - pad - (z - b.z0) / span * k;
+  ctx.clearRect(0, 0, c.width, c.height);
+  names.forEach((n, i) => {
+    const pts = nodes[n], colour = COLOURS[i % COLOURS.length];
+    ctx.strokeStyle = ctx.fillStyle = colour; ctx.lineWidth = 4;
+    ctx.beginPath(); pts.forEach(([x, z], j) => (j ? ctx.lineTo(px(x), pz(z)) : ctx.moveTo(px(x), pz(z)))); ctx.stroke();
+    for (const [x, z] of pts) { ctx.beginPath(); ctx.arc(px(x), pz(z), 5, 0, 2 * Math.PI); ctx.fill(); }
+    ctx.fillText(n, px(pts[0][0]) + 8, pz(pts[0][1]) - 8);
+  });
+}
+
+function esc(v) { return String(v).replace(/[&<>"']/g, (c) => `&#${c.charCodeAt(0)};`); }
+
+function draw(port, data) {
+  let p = state.plots[port];
+  if (!p) {
+    const box = document.createElement("div"); box.className = "plot"; box.dataset.port = port;
+    box.innerHTML = `<h3>${esc(port)} <span class="value"></span></h3>`;
+    $("plots").appendChild(box);
+    const opts = {
+      width: Math.max(400, $("plots").clientWidth - 20), height: 200,
+      scales: { x: { time: false } }, series: [{ label: "t (s)" }, { label: port, stroke: "#2a62c9", width: 1.5 }],
+      hooks: { draw: [(u) => marks(u, state.markers || [])] },
+    };
+    p = state.plots[port] = { chart: new uPlot(opts, data, box), box, drawn: 0 };
+  }
+  p.chart.setData(data);
+  p.drawn = data[0].length;
+  cursorValue(port);
+}
+
+function marks(u, times) {  // the mode switches: dashed lines across the plot
+  const ctx = u.ctx; ctx.save(); ctx.strokeStyle = "#c0392b"; ctx.setLineDash([4, 4]);
+  for (const t of times) {
+    const x = u.valToPos(t, "x", true);
+    if (x >= u.bbox.left && x <= u.bbox.left + u.bbox.width) {
+      ctx.beginPath(); ctx.moveTo(x, u.bbox.top); ctx.lineTo(x, u.bbox.top + u.bbox.height); ctx.stroke();
+    }
+  }
+  ctx.restore();
+}
+
+function cursorValue(port) {  // a finished run's time slider: each plot's value at the chosen time
+  const p = state.plots[port]; if (!p || state.snapshot?.source !== "run") return;
+  const [t, y] = p.chart.data; if (!t.length) return;
+  const at = t[0] + (t[t.length - 1] - t[0]) * $("cursor").value / 1000;
+  let i = t.findIndex((v) => v >= at); if (i < 0) i = t.length - 1;
+  text($("cursor-t"), `t = ${fmt(t[i], 4)} s`);
+  text(p.box.querySelector(".value"), `= ${fmt(y[i], 6)}`);
+  p.chart.setCursor({ left: p.chart.valToPos(t[i], "x"), top: p.chart.valToPos(y[i] ?? 0, "y") });
+}
+
+$("cursor").addEventListener("input", () => state.selected.forEach(cursorValue));
+$("pick").addEventListener("submit", (ev) => {
+  ev.preventDefault();
+  const port = $("port").value.trim();
+  if (port && !state.selected.includes(port)) state.selected.push(port);
+  $("port").value = "";
+  if (state.ws && state.ws.readyState === 1) { state.data = {}; state.ws.send(JSON.stringify({ select: state.selected })); }
+});
+
+async function loadPorts() {
+  try {
+    const r = await fetch("/api/ports"); const { ports } = await r.json();
+    $("portlist").innerHTML = ports.map((p) => `<option value="${esc(p)}">`).join("");
+    if (!ports.length) setTimeout(loadPorts, 1000);  // a live run's ports come with the server's first answer
+  } catch (e) { setTimeout(loadPorts, 1000); }
+}
+loadPorts();
+connect();

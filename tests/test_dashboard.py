@@ -1,0 +1,207 @@
+"""The web dashboard: a live run and a finished one in a real browser (Debian's chromium through
+Playwright), what the page serves, and the live feed's receivers."""
+
+from __future__ import annotations
+
+import http.client
+import json
+import shutil
+import socket
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from dashboard.app import check_selection, finite
+from dashboard.live import LiveFeed, _checked_status
+from dashboard.series import ThinnedSeries
+from tests.helpers import hycosim, reap, spawn, write_project
+from tests.wire_strategies import values
+
+CHROMIUM = shutil.which("chromium")
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _page_up(url: str, timeout: float = 40) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            with urllib.request.urlopen(url, timeout=1) as r:
+                if r.status == 200:
+                    return
+        except OSError:
+            time.sleep(0.1)
+    raise AssertionError(f"no page at {url} within {timeout} s")
+
+
+def _catch(tmp_path: Path) -> Path:
+    """A falling ball caught by a rising hand at about 0.55 s, paced at half real time (8 s), and
+    a pendulum whose pivot and bob the page draws."""
+    return write_project(tmp_path / "catch.json", [
+        {"nodeName": "ball", "UID": 1, "model": "bouncing_ball", "parameters": {"h0": 2.0, "v0": 0.0, "e": 0.8},
+         "input": ["h_in", "v_in"], "output": ["h", "v", {"name": "impacts", "type": "Integer"}]},
+        {"nodeName": "hand", "UID": 2, "model": "ramp", "parameters": {"a": 0.2, "b": 0.5}, "output": ["y", "v"]},
+        {"nodeName": "arm", "UID": 3, "model": "pendulum", "parameters": {"theta0": 1.0},
+         "output": ["theta", "pivot_x", "pivot_z", "bob_x", "bob_z"]},
+    ], [{"from": "hand", "to": "ball", "pairs": [["y", "h_in"], ["v", "v_in"]], "activeIn": ["catch"]}],
+        events=[{"name": "catch", "when": "ball.h <= hand.y and hand.y < 1.0", "drives": "ball", "until": "hand.y >= 1.2"}],
+        cosim={"stepSize": 0.01, "stopTime": 4.0, "realTime": 2.0}, name="catch")
+
+
+def _get(port: int, path: str) -> int:
+    """The status of a GET sent as written (no client-side normalisation of ``..``)."""
+    conn = http.client.HTTPConnection("127.0.0.1", port, timeout=5)
+    conn.request("GET", path)
+    status = conn.getresponse().status
+    conn.close()
+    return status
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is installed by `make test`")
+def test_a_run_watched_live_and_then_opened_finished_in_a_real_browser(tmp_path):
+    from playwright.sync_api import sync_playwright
+
+    port = _free_port()
+    run = spawn("run", str(_catch(tmp_path)), "--runs-dir", str(tmp_path / "runs"), "--no-progress",
+                "--dashboard", "--dashboard-port", str(port))
+    board = None
+    try:
+        _page_up(f"http://127.0.0.1:{port}/")
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
+            page = browser.new_page(viewport={"width": 1400, "height": 900})
+            page.goto(f"http://127.0.0.1:{port}/?ports=ball.h")
+            for node in ("ball", "hand", "arm"):
+                page.wait_for_selector(f"tr[data-node='{node}']", timeout=30_000)
+            page.wait_for_function("Number(document.getElementById('step').textContent) > 0", timeout=30_000)
+            first = int(page.text_content("#step"))
+            page.wait_for_timeout(600)
+            assert int(page.text_content("#step")) > first  # updated live, several times a second
+            page.wait_for_function("window.hycosim.plots['ball.h'] && window.hycosim.plots['ball.h'].drawn > 5",
+                                   timeout=20_000)
+            page.wait_for_selector("#switches li", timeout=20_000)
+            assert "catch" in page.text_content("#switches") and "free → catch" in page.text_content("#switches")
+            assert "attached" in page.text_content("#nodes")
+            # The twin, drawn from the pendulum's pivot_x/z and bob_x/z: the canvas has ink on it.
+            page.wait_for_selector("#scene-box:not([hidden])", timeout=10_000)
+            inked = page.evaluate("""() => { const c = document.getElementById('scene');
+                const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+                let n = 0; for (let i = 3; i < d.length; i += 4) n += d[i] > 0; return n; }""")
+            assert inked > 200
+            page.screenshot(path=str(tmp_path / "live.png"))
+            assert (tmp_path / "live.png").stat().st_size > 10_000
+            out, err = run.communicate(timeout=60)
+            assert run.returncode == 0, err
+            assert f"dashboard: http://127.0.0.1:{port}/" in err
+
+            run_dir = next((tmp_path / "runs").iterdir())
+            port2 = _free_port()
+            board = spawn("dashboard", str(run_dir), "--port", str(port2))
+            _page_up(f"http://127.0.0.1:{port2}/")
+            page.goto(f"http://127.0.0.1:{port2}/?ports=ball.h,ball.hh")
+            page.wait_for_function("window.hycosim.plots['ball.h'] && window.hycosim.plots['ball.h'].drawn > 100",
+                                   timeout=20_000)
+            assert "no port 'ball.hh'" in page.text_content("#problems")
+            assert "did you mean ball.h" in page.text_content("#problems")
+            assert "free → catch" in page.text_content("#switches")
+            page.fill("#cursor", "0")  # the time slider: the plot's value at the run's start
+            page.dispatch_event("#cursor", "input")
+            assert page.text_content("#cursor-t") == "t = 0.0000 s"
+            assert page.text_content(".plot .value") == "= 2.000000"  # dropped from 2 m
+            page.screenshot(path=str(tmp_path / "finished.png"))
+            browser.close()
+        # Nothing outside the package's static folder is served, however the path is spelt.
+        for path in ("/static/../meta.json", "/static/%2e%2e/%2e%2e/meta.json", "/static//etc/passwd",
+                     f"/static/{run_dir}/meta.json", "/meta.json", "/values.csv"):
+            assert _get(port2, path) == 404, path
+        assert _get(port2, "/static/dashboard.js") == 200
+    finally:
+        reap(run, *([board] if board else []))
+
+
+def test_a_dashboard_that_cannot_reach_its_server_says_so_and_keeps_trying():
+    feed = LiveFeed(f"tcp/127.0.0.1:{_free_port()}", "nothing", retry_s=0.2)
+    feed.start()
+    try:
+        deadline = time.monotonic() + 20
+        while "cannot reach" not in feed.snapshot([])["message"] and time.monotonic() < deadline:
+            time.sleep(0.05)
+        snap = feed.snapshot([])
+        assert snap["state"] == "connecting" and "retrying" in snap["message"]
+    finally:
+        feed.close()
+
+
+def test_bad_dashboard_targets_are_refused_by_name(tmp_path):
+    (tmp_path / "empty").mkdir()
+    res = hycosim("dashboard", str(tmp_path / "empty"), "--port", "0")
+    assert res.returncode == 2 and "not a run directory (no meta.json)" in res.stderr and "Traceback" not in res.stderr
+
+
+_answers = st.fixed_dictionaries(
+    {"project": st.just("p") | values},
+    optional={"nodes": st.just([{"name": "a", "uid": 1, "input": ["u"], "output": ["y", "z"]},
+                                {"name": "g", "uid": 2, "input": [], "output": ["y"]}]) | values,
+              "attached": st.lists(st.sampled_from(["a", "g"]) | values, max_size=3) | values,
+              "step": st.integers(-1, 10) | values, "t": st.floats() | st.integers(-2, 10 ** 400) | values,
+              "window": st.fixed_dictionaries({}, optional={"steps": st.integers(0, 5) | values,
+                                                            "held": st.dictionaries(st.sampled_from(["a", "g"]), values),
+                                                            "arrival_ms": values}) | values,
+              "outputs": st.dictionaries(st.sampled_from(["a", "g", "x"]) | st.text(max_size=2),
+                                         st.lists(st.floats() | st.integers(-2, 10 ** 400) | st.booleans() | values,
+                                                  max_size=3) | values, max_size=3) | values,
+              "inputs": values, "switches": st.lists(st.fixed_dictionaries({"t": st.floats() | values}) | values,
+                                                      max_size=3) | values,
+              "dropped": values, "mode": values, "lateness_s": values, "point_wall": values, "stopTime": values})
+
+
+@given(st.lists(_answers | values, max_size=5))
+def test_the_live_feed_takes_any_status_answer_without_failing(answers):
+    """Whatever answers on the status key (anyone may), the feed uses what fits and the page gets JSON."""
+    feed = LiveFeed("tcp/127.0.0.1:1", "p")
+    for answer in answers:
+        checked = _checked_status(answer)
+        if checked is None:
+            continue
+        assert type(checked["project"]) is str and all(type(n["uid"]) is int for n in checked["nodes"])
+        feed.take(checked)
+    snap = finite(feed.snapshot(feed.ports()))
+    json.dumps(snap, allow_nan=False)
+    for part in snap["series"].values():
+        assert part["from"] == 0 and len(part["t"]) == len(part["y"]) and part["t"] == sorted(part["t"])
+
+
+@given(values)
+def test_a_selection_from_the_page_is_ports_or_problems_with_the_closest_names(raw):
+    ports = ["ball.h", "ball.v", "hand.y"]
+    chosen, problems = check_selection(raw, ports)
+    assert set(chosen) <= set(ports) and len(chosen) <= 16
+    if type(raw) is not list or any(p not in ports for p in raw):
+        assert problems
+    assert check_selection(["ball.hh"], ports)[1][0]["closest"][0] == "ball.h"
+
+
+def test_a_series_spans_the_whole_run_in_bounded_points_and_forgets_a_step_taken_again():
+    s = ThinnedSeries(capacity=100)
+    for k in range(100_000):
+        s.add(k * 0.001, float(k))
+    t, y = s.points()
+    assert 100 <= len(t) < 200 and t[0] == 0.0 and t[-1] > 99.0 and t == sorted(t)
+    version = s.version
+    assert s.since(version, len(t)) is None  # a page that has it all is sent nothing
+    s.add(t[-1] + 10.0, 5.0)
+    s.add(t[-1] + 20.0, 6.0)
+    tail = s.since(version, len(t))
+    assert tail is None or (tail["from"] == len(t) and tail["t"][-1] <= t[-1] + 20.0)  # only what it lacks
+    back = s.t[-2] + 0.0005  # a step taken again from before the last point drawn: that point is undone
+    s.add(back, -1.0)
+    assert s.t[-1] == back and s.y[-1] == -1.0 and max(s.t) == back
+    assert s.version > version and s.since(version, len(t))["from"] == 0  # held points changed: all anew
