@@ -124,7 +124,7 @@ def test_fuzz_benchmark_reports_an_unharmed_run_at_a_small_scale():
 
 
 def test_recovery_benchmark_reports_identical_records_at_a_small_scale():
-    res = subprocess.run([sys.executable, "benchmarks/recovery.py", "--stop", "10", "--every", "0.5", "--node-kills", "1",
+    res = subprocess.run([sys.executable, "benchmarks/recovery.py", "--stop", "10", "--every", "0.5", "--node-kills", "2",
                           "--server-kills", "1", "--replay-stop", "0", "--ring-steps", "2000", "--repeat", "1",
                           "--json"],
                          capture_output=True, text=True, timeout=400, cwd=REPO, env=env())
@@ -132,7 +132,8 @@ def test_recovery_benchmark_reports_identical_records_at_a_small_scale():
     r = json.loads(res.stdout)
     assert r["reference"]["rows"] == 1001
     kills = r["node_kills"]
-    assert kills["restores"] == kills["kills"] == 1 and kills["identical"] and kills["rows"] == 1001
+    # A short run may end before the second kill; every kill that lands mid-run is one restore.
+    assert 1 <= kills["restores"] <= kills["kills"] <= 2 and kills["identical"] and kills["rows"] == 1001
     assert 0 < kills["recovery_s"]["max"] < 30
     assert r["server_kills"] == {"resumes": 1, "identical": True, "rows": 1001}
     assert r["checkpoint_cost"]["ratio"] > 0
