@@ -98,7 +98,9 @@ def _checked_status(answer: Any) -> dict[str, Any] | None:
             "point_wall": _number(answer.get("point_wall")),
             "steps": window.get("steps") if type(window.get("steps")) is int else 0,
             "held": per_node("held"), "arrival_ms": per_node("arrival_ms"),
-            "outputs": values(answer.get("outputs")), "inputs": values(answer.get("inputs")), "points": points}
+            "outputs": values(answer.get("outputs")), "inputs": values(answer.get("inputs")), "points": points,
+            "ages": {k: _number(v) for k, v in answer["ages"].items() if type(k) is str}
+            if type(answer.get("ages")) is dict else {}}
 
 
 class LiveFeed:
@@ -287,6 +289,6 @@ class LiveFeed:
                     "mode": s.get("mode", ""), "stopTime": s.get("stopTime"), "steps_per_s": s.get("steps", 0),
                     "lateness_s": s.get("lateness_s"), "point_wall": s.get("point_wall"), "nodes": nodes,
                     "switches": list(s.get("switches", [])), "dropped": dict(s.get("dropped", {})),
-                    "scene": self._scene(),
+                    "scene": self._scene(), "ages": dict(s.get("ages", {})),
                     "series": {p: d for p in select if p in self.series
                                and (d := self.series[p].since(*held.get(p, (-1, 0)))) is not None}}

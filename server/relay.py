@@ -144,6 +144,7 @@ class Relay:
         self._shown: tuple[int, float, str, dict[str, list[Any]], dict[str, list[Any]], float | None] = (
             0, self.cosim.startTime, FREE_MODE, {}, {}, None)
         self._history: collections.deque[tuple] = collections.deque(maxlen=4096)  # the latest points, for the dashboard
+        self._ages: dict[str, float | None] = {}  # each asynchronous value's age at the latest point
         self._last_release: bytes | None = None
         self._start_frame: bytes | None = None
         # Checkpoints (coSimulation.checkpointEvery): on once every stepping node said it can
@@ -213,7 +214,7 @@ class Relay:
                 "run": self.recorder.run_dir.name, "step": shown[0], "t": shown[1],
                 "mode": shown[2], "stopTime": self.cosim.stopTime, "lateness_s": self.progress.lateness_s,
                 "dropped": dict(self.intake.dropped), "switches": list(self.switches), "window": window,
-                "outputs": shown[3], "inputs": shown[4], "point_wall": shown[5],
+                "outputs": shown[3], "inputs": shown[4], "point_wall": shown[5], "ages": dict(self._ages),
                 **({} if since is None else {"points": self._points_since(since)})}
 
     def _points_since(self, since: int) -> list[list[Any]]:
@@ -949,6 +950,7 @@ class Relay:
             self._shown = (k, t, mode, dict(self.outputs), {n: list(v) for n, v in self.router.inputs.items()},
                            time.time())
             self._history.append(self._shown)
+            self._ages = ages
             if self._on_progress is not None and now - last_progress >= self._progress_every:
                 last_progress = now
                 self.progress.steps_per_s = (k - k0) / (now - perf0) if now > perf0 else 0.0

@@ -49,9 +49,11 @@ def _catch(tmp_path: Path) -> Path:
         {"nodeName": "ball", "UID": 1, "model": "bouncing_ball", "parameters": {"h0": 2.0, "v0": 0.0, "e": 0.8},
          "input": ["h_in", "v_in"], "output": ["h", "v", {"name": "impacts", "type": "Integer"}]},
         {"nodeName": "hand", "UID": 2, "model": "ramp", "parameters": {"a": 0.2, "b": 0.5}, "output": ["y", "v"]},
-        {"nodeName": "arm", "UID": 3, "model": "pendulum", "parameters": {"theta0": 1.0},
+        {"nodeName": "arm", "UID": 3, "model": "pendulum", "parameters": {"theta0": 1.0}, "input": ["omega_in"],
          "output": ["theta", "pivot_x", "pivot_z", "bob_x", "bob_z"]},
-    ], [{"from": "hand", "to": "ball", "pairs": [["y", "h_in"], ["v", "v_in"]], "activeIn": ["catch"]}],
+        {"nodeName": "clock", "UID": 4, "model": "ramp_source", "async": True, "rate": 20, "output": ["y"]},
+    ], [{"from": "hand", "to": "ball", "pairs": [["y", "h_in"], ["v", "v_in"]], "activeIn": ["catch"]},
+        {"from": "clock.y", "to": "arm.omega_in"}],
         events=[{"name": "catch", "when": "ball.h <= hand.y and hand.y < 1.0", "drives": "ball", "until": "hand.y >= 1.2"}],
         cosim={"stepSize": 0.01, "stopTime": 4.0, "realTime": 2.0}, name="catch")
 
@@ -79,7 +81,7 @@ def test_a_run_watched_live_and_then_opened_finished_in_a_real_browser(tmp_path)
             browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
             page = browser.new_page(viewport={"width": 1400, "height": 900})
             page.goto(f"http://127.0.0.1:{port}/?ports=ball.h")
-            for node in ("ball", "hand", "arm"):
+            for node in ("ball", "hand", "arm", "clock"):
                 page.wait_for_selector(f"tr[data-node='{node}']", timeout=30_000)
             page.wait_for_function("Number(document.getElementById('step').textContent) > 0", timeout=30_000)
             first = int(page.text_content("#step"))
@@ -90,6 +92,8 @@ def test_a_run_watched_live_and_then_opened_finished_in_a_real_browser(tmp_path)
             page.wait_for_selector("#switches li", timeout=20_000)
             assert "catch" in page.text_content("#switches") and "free → catch" in page.text_content("#switches")
             assert "attached" in page.text_content("#nodes")
+            page.wait_for_function("document.getElementById('ages').textContent.startsWith('arm.omega_in: 0.0')",
+                                   timeout=10_000)  # a 20 Hz source: its value at most 0.05 s old
             # The twin, drawn from the pendulum's pivot_x/z and bob_x/z: the canvas has ink on it.
             page.wait_for_selector("#scene-box:not([hidden])", timeout=10_000)
             inked = page.evaluate("""() => { const c = document.getElementById('scene');
@@ -160,6 +164,7 @@ _answers = st.fixed_dictionaries(
                                                   max_size=3) | values, max_size=3) | values,
               "inputs": values, "switches": st.lists(st.fixed_dictionaries({"t": st.floats() | values}) | values,
                                                       max_size=3) | values,
+              "ages": st.dictionaries(st.text(max_size=3) | st.integers(), st.floats() | values, max_size=3) | values,
               "dropped": values, "mode": values, "lateness_s": values, "point_wall": values, "stopTime": values})
 
 

@@ -46,12 +46,14 @@ function render(s) {
   text($("mode"), s.mode || "–"); text($("lateness"), s.lateness_s === null ? "–" : fmt(1000 * s.lateness_s, 1));
   const drops = Object.entries(s.dropped || {});
   text($("dropped"), drops.length ? drops.map(([r, n]) => `${r}: ${n}`).join(", ") : "none");
+  const ages = Object.entries(s.ages || {});
+  text($("ages"), ages.length ? ages.map(([p, a]) => `${p}: ${fmt(a, 3)}`).join(", ") : "–");
   const body = $("nodes").tBodies[0];
   const rows = s.nodes.map((n) => {
     const status = n.attached === null ? "" : n.lost ? "lost" : n.attached ? "attached" : "not attached";
     return `<tr data-node="${esc(n.name)}"><td>${esc(n.name)}</td><td class="${status.replace(" ", "-")}">${status}</td>` +
       `<td>${esc(n.host || "")}</td><td>${n.held_share === null ? "–" : fmt(100 * n.held_share, 1) + " %"}</td>` +
-      `<td>${fmt(n.mean_arrival_ms, 3)}</td><td>${n.restarts ?? "–"}</td><td>${fmt(n.sample_age_s, 3)}</td></tr>`;
+      `<td>${fmt(n.mean_arrival_ms, 3)}</td><td>${n.restarts ?? "–"}</td></tr>`;
   }).join("");
   if (body.dataset.html !== rows) { body.innerHTML = rows; body.dataset.html = rows; }
   const list = $("switches");
