@@ -206,5 +206,6 @@ class Recording:
                     value = bytes.fromhex(value)
                 except ValueError:
                     raise RecordingError(f"replay: {path}: line {number}: output {port.name!r} is not hex") from None
-            picked.append(float(value) if port.type == PortType.REAL and type(value) is float else value)
+            # JSON writes a whole Real as 0, which reads back as an int: a Real port plays a float.
+            picked.append(float(value) if port.type == PortType.REAL else value)
         return Sample(point, float(t), picked)

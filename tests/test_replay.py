@@ -8,7 +8,7 @@ import shutil
 from pathlib import Path
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from clients.loader import NodeLoadError, check_node
@@ -177,6 +177,7 @@ def _sample_lines(draw) -> str:
 
 @settings(suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(text=_sample_lines())
+@example(text='{"node": "cam", "point": 0, "t": 0.0, "values": [0, false, 0, ""]}\n')  # a whole Real, as JSON writes it
 def test_samples_read_from_any_file_are_checked_or_refused_by_name(tmp_path, text):
     project = {"projectName": "p", "nodeNum": 1, "nodeLists": [_NODE.model_dump(by_alias=True)]}
     (tmp_path / "project.json").write_text(json.dumps(project))
