@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup run test test-long bench fmus trials train docs clean chromium
+.PHONY: setup run test test-long bench fmus trials train baseline docs clean chromium
 
 setup: $(STAMP)
 
@@ -30,6 +30,10 @@ trials: $(STAMP)
 # Train the policy from scratch (demonstrations, behaviour cloning, DDPG).
 train: $(STAMP)
 	$(VENV)/bin/hycosim train -o runs/train
+
+# The paper's own formulation (DDPG from scratch) for the same training time, beside runs/train.
+baseline: $(STAMP)
+	$(PY) benchmarks/policy_baseline.py --minutes 20 --ours runs/train --plot runs/policy_baseline.png
 
 test: $(STAMP) chromium
 	$(PY) -m pytest -q -p no:cacheprovider --durations=25

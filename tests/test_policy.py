@@ -14,9 +14,10 @@ from gymnasium.utils.env_checker import check_env
 
 from clients.policy.ddpg import DDPG, CheckpointError, load_policy
 from clients.policy.env import MAX_STEPS, GraspEnv, reward
-from clients.policy.features import ACT_DIM, OBS_DIM, choice_action
+from clients.policy.features import ACT_DIM, NO_AIM, OBS_DIM, choice_action
 from clients.policy.node import PRETRAINED
-from clients.policy.train import TrainConfig, evaluate, train
+from clients.policy.paper import PaperGraspEnv, joint_targets, plot_against, train_paper
+from clients.policy.train import TrainConfig, evaluate, evaluate_checkpoint, train, wilson
 from clients.robot import kr6
 from tests.helpers import REPO, column, hycosim, read_rows, reap, run_project
 
@@ -119,7 +120,7 @@ def test_jaws_meet_the_rod_at_its_turning_point_and_reopen_after_closing_on_noth
 def short_training(tmp_path_factory):
     out = tmp_path_factory.mktemp("train")
     config = TrainConfig(demo_episodes=12, bc_steps=800, dagger_rounds=1, dagger_episodes=4, critic_warmup_steps=200,
-                         episodes=4, eval_every=4, eval_trials=2)
+                         cloned_episodes=4, episodes=4, eval_every=4, eval_trials=2)
     result = train(out, config)
     return out, result
 
@@ -143,6 +144,55 @@ def test_short_training_beats_a_random_policy(short_training):
     assert (out / "learning_curve.png").stat().st_size > 10_000
     state = torch.load(out / "last.pt", weights_only=False)
     assert state["episodes"] == 4 and state["config_hash"] and "norm" in state and "metrics" in state
+    # The critics were measured on held-out rollouts of the cloned policy, before and after
+    # learning from its own rollouts: Q(s, a) against the discounted return that followed.
+    err = state["history"]["critic_error"]
+    assert set(err) == {"demonstrations_only", "with_rollouts"}
+    assert all(v["mae"] >= 0 and math.isfinite(v["q_mean"]) for v in err.values())
+    assert err["demonstrations_only"]["return_mean"] == err["with_rollouts"]["return_mean"]  # the same episodes
+
+
+def test_evaluation_spreads_episodes_over_processes_with_intervals_and_matches_in_process(short_training):
+    out, _ = short_training
+    figures = evaluate_checkpoint(out / "best.pt", trials=3, workers=2, seed=700, angles=(40.0, 60.0))
+    alone = evaluate(load_policy(out / "best.pt"), GraspEnv(), trials=3, seed=700)
+    for angle in ("40", "60"):
+        f = figures[angle]
+        assert f["episodes"] == 3 and f["success"] == alone[angle]["success"]  # the same episodes
+        assert f["success_95"][0] <= f["success"] <= f["success_95"][1]
+        assert math.isclose(f["distance_mm"], alone[angle]["distance_mm"])
+    lo, hi = wilson(90, 100)
+    assert 0.82 < lo < 0.83 and 0.94 < hi < 0.95 and wilson(98, 100)[0] > 0.92  # 100 episodes tell 90 % from 98 %
+    res = hycosim("evaluate", str(out / "missing.pt"), "--trials", "1", timeout=60)
+    assert res.returncode == 2 and "missing.pt does not exist" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_the_papers_formulation_trains_from_scratch_and_plots_beside_ours(short_training, tmp_path):
+    out, _ = short_training
+    env = PaperGraspEnv()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        check_env(env, skip_render_check=True)
+    assert env.observation_space.shape == (13,) and env.action_space.shape == (6,)
+    assert np.allclose(joint_targets(-np.ones(6)), kr6.LIMITS[:, 0]) and np.allclose(joint_targets(np.ones(6)), kr6.LIMITS[:, 1])
+    result = train_paper(seconds=3.0, seed=0, eval_every=1000, eval_trials=1)
+    assert result["episodes"] >= 1 and len(result["evals"]) == 2  # before and after
+    assert result["evals"][-1]["seconds"] >= 3.0 and all(0 <= v <= 1 for v in result["evals"][-1]["per_angle"].values())
+    ours = torch.load(out / "last.pt", weights_only=False)["history"]["evals"]
+    assert [e["episode"] for e in ours] == [0, 4] and ours[0]["seconds"] < ours[1]["seconds"]
+    path = plot_against({"seed 0": ours}, {"seed 0": result["evals"]}, tmp_path / "b.png")
+    assert path.stat().st_size > 10_000
+
+
+def test_the_observation_carries_the_turning_point_the_command_in_flight_aims_at():
+    env = GraspEnv()
+    obs, _ = env.reset(seed=3, options={"angle_deg": 50})
+    assert obs[-1] == NO_AIM  # no command yet
+    for choice in (1, 0, 1):
+        points = list(env.predictor.points)
+        obs, *_ = env.step(choice_action(choice))
+        assert len(points) == 2
+        assert math.isclose(obs[-1], points[choice].t - env.rod.time, abs_tol=1e-5)
 
 
 def test_checkpoint_round_trip_and_resume(short_training, tmp_path):
@@ -162,7 +212,7 @@ def test_checkpoint_round_trip_and_resume(short_training, tmp_path):
 
 def test_training_interrupted_after_cloning_resumes_without_cloning_again(tmp_path):
     config = TrainConfig(demo_episodes=3, bc_steps=50, dagger_rounds=1, dagger_episodes=1, critic_warmup_steps=20,
-                         episodes=2, eval_every=2, eval_trials=1)
+                         cloned_episodes=1, episodes=2, eval_every=2, eval_trials=1)
     phases: list[str] = []
 
     def ctrl_c_in_the_first_ddpg_episode(d: dict) -> None:

@@ -21,8 +21,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from clients.policy.features import (ACT_DIM, OBS_DIM, Predictor, action_to_targets, choice_action, grip_reflex,
-                                     missed, observe)
+from clients.policy.features import (ACT_DIM, OBS_DIM, Predictor, action_to_targets, aim_time, choice_action,
+                                     grip_reflex, missed, observe)
 from clients.robot import kr6
 from clients.robot.scene import RobotScene, SceneParams
 from clients.rod.model import RodModel, RodParams, pendulum_period
@@ -80,6 +80,7 @@ class GraspEnv(gym.Env):
         self.predictor.points, self.predictor.predicted_at = [], -math.inf
         self.steps = 0
         self.pending = kr6.READY.copy()  # the action in flight (one macro step of delay)
+        self.aim: float | None = None    # the time of the turning point it goes for
         self.grip = False
         self.out = self.scene.outputs(False)
         self.previous_distance = self.out.distance
@@ -89,15 +90,21 @@ class GraspEnv(gym.Env):
         o = self.out
         t = self.rod.time
         points = self.predictor.update(t, self.rod.angle, self.rod.omega, o.q)
-        return observe(t, o.q, o.tcp, self.rod.outputs().grasp, self.rod.angle, self.rod.omega, o.gap, points)
+        return observe(t, o.q, o.tcp, self.rod.outputs().grasp, self.rod.angle, self.rod.omega, o.gap, points,
+                       self.aim)
 
     def step(self, action: np.ndarray):
         targets, self.pending = self.pending, action_to_targets(action, self.predictor.points, self.out.q)
+        self.aim = aim_time(action, self.predictor.points)
         if self.grip and missed(self.out.gap, self.rod_params.radius):
             self.grip = False
         # The jaws start moving in this very step (no exchange between decision and servo).
         self.grip = self.grip or grip_reflex(self.rod.time, self.out.tcp, self.out.gap, self.predictor.points,
                                              self.rod_params.radius, delay=H / 2)
+        return self._advance(targets)
+
+    def _advance(self, targets: np.ndarray):
+        """One macro step of the rod and the robot towards ``targets``: the step's outcome and reward."""
         self.rod.advance(H)
         self.out = self.scene.step(H, targets, self.grip, self.rod.angle)
         self.steps += 1

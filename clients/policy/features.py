@@ -1,6 +1,6 @@
 """What the policy sees and does, shared by the training environment and the policy node.
 
-Observation (33 numbers, normalised by the agent's running statistics):
+Observation (34 numbers, normalised by the agent's running statistics):
 
 * the six joint angles (rad) and the TCP position (m);
 * the rod's grasp-point position (m), angle (rad) and angular velocity (rad/s);
@@ -9,7 +9,12 @@ Observation (33 numbers, normalised by the agent's running statistics):
   (rad) and the time until each (s), and whether the robot can be there in time
   (travel time at the axis speed limits to the IK pose, minus the time left) — what a
   person catching a pendulum watches: where it will stop, and when;
-* the IK joint angles that put the jaws across the rod at each of those two points.
+* the IK joint angles that put the jaws across the rod at each of those two points;
+* the time until the turning point the command in flight aims at (``NO_AIM`` before the
+  first). An action takes effect one macro step after its observation, so that command is
+  part of the state: without it the policy cannot tell whether to keep going for the point
+  it chose or to switch. Switching mid-way carried the arm through the rod's sweep in 14 of
+  the 16 failed grasps out of 100 of the reference controller's episodes at 60°.
 
 Action (7 numbers in [-1, 1]): the robot's joint targets (the paper's "angular positions of
 the robot's motion axes"), expressed in the frame the observation offers: the first number
@@ -37,23 +42,37 @@ from clients.robot.controller import travel_time, turning_points
 from clients.robot.scene import RobotScene
 from clients.rod.model import RodModel
 
-OBS_DIM = 33
+OBS_DIM = 34
 ACT_DIM = 7
 RESIDUAL_DEG = 3.0  # a checkpoint is trained for one scale: it is stored with it and checked
 RESIDUAL = np.radians(RESIDUAL_DEG)
 REFLEX_DISTANCE = 0.01  # m: the arm must be there already, not sweeping past
 REPREDICT_EVERY = 0.1   # s
 REPREDICT_NEAR = 0.25   # s: closer than this to the next turning point, re-predict every step
+NO_AIM = 2.0            # s: the aim feature before any command (as for a point not predicted)
 
 
 def action_to_targets(action: np.ndarray, points: list["TurningPoint"], q: np.ndarray) -> np.ndarray:
     """Joint targets from an action, given the predicted turning points (hold still if none)."""
     a = np.clip(np.asarray(action, dtype=float), -1.0, 1.0)
-    if not points:
+    base = aimed_point(a, points)
+    if base is None:
         return np.asarray(q, dtype=float)
-    base = points[0] if a[0] <= 0 or len(points) < 2 else points[1]
     target = base.q + a[1:] * RESIDUAL
     return np.clip(target, kr6.LIMITS[:, 0], kr6.LIMITS[:, 1])
+
+
+def aimed_point(action: np.ndarray, points: list["TurningPoint"]) -> "TurningPoint | None":
+    """The predicted turning point an action goes for (None when none is predicted)."""
+    if not points:
+        return None
+    return points[0] if action[0] <= 0 or len(points) < 2 else points[1]
+
+
+def aim_time(action: np.ndarray, points: list["TurningPoint"]) -> float | None:
+    """The absolute time of the turning point an action goes for, for the next observation."""
+    p = aimed_point(np.clip(np.asarray(action, dtype=float), -1.0, 1.0), points)
+    return None if p is None else p.t
 
 
 def choice_action(index: int) -> np.ndarray:
@@ -124,7 +143,7 @@ class Predictor:
 
 
 def observe(t: float, q: np.ndarray, tcp: np.ndarray, grasp: np.ndarray, angle: float, omega: float, gap: float,
-            points: list[TurningPoint]) -> np.ndarray:
+            points: list[TurningPoint], aim: float | None) -> np.ndarray:
     feats = [*q, *tcp, *grasp, angle, omega, gap]
     poses = []
     for i in range(2):
@@ -136,4 +155,6 @@ def observe(t: float, q: np.ndarray, tcp: np.ndarray, grasp: np.ndarray, angle: 
         else:
             feats += [0.0, 2.0, -1.0]
             poses += list(q)
-    return np.asarray(feats + poses, dtype=np.float32)
+    # Clipped: a point passed long ago and one far ahead say the same (go for another; wait).
+    aimed = NO_AIM if aim is None else float(np.clip(aim - t, -0.5, NO_AIM))
+    return np.asarray(feats + poses + [aimed], dtype=np.float32)

@@ -18,7 +18,8 @@ import numpy as np
 
 from clients.node import Node, NodeContext, pack_state, unpack_state
 from clients.policy.ddpg import load_policy
-from clients.policy.features import Predictor, TurningPoint, action_to_targets, grip_reflex, missed, observe
+from clients.policy.features import (Predictor, TurningPoint, action_to_targets, aim_time, grip_reflex, missed,
+                                     observe)
 from clients.robot import kr6
 from clients.robot.node import SCENE_PARAMETERS, scene_params
 from clients.robot.scene import RobotScene, SceneParams
@@ -44,6 +45,7 @@ class PolicyNode(Node):
                                    RobotScene(SceneParams(**{**params.__dict__, "check_reach": False})))
         self.q_cmd = kr6.READY.copy()
         self.grip = False
+        self.aim: float | None = None  # the time of the turning point the last command goes for
         self.infer_ms = 0.0
 
     def outputs(self) -> dict[str, Any]:
@@ -61,8 +63,10 @@ class PolicyNode(Node):
             self.grip = True  # hold what we have
         else:
             points = self.predictor.update(t, angle, omega, q)
-            obs = observe(t, q, tcp, grasp, angle, omega, float(inputs["gap"]), points)
-            self.q_cmd = action_to_targets(self.agent.act(obs), points, q)
+            obs = observe(t, q, tcp, grasp, angle, omega, float(inputs["gap"]), points, self.aim)
+            action = self.agent.act(obs)
+            self.q_cmd = action_to_targets(action, points, q)
+            self.aim = aim_time(action, points)
             gap = float(inputs["gap"])
             if self.grip and missed(gap, self.rod_radius):
                 self.grip = False
@@ -80,12 +84,13 @@ class PolicyNode(Node):
         p = self.predictor
         points = [[tp.t, tp.angle, tp.q.tolist(), tp.ok, tp.grasp.tolist()] for tp in p.points]
         return pack_state({"scene": p.scene.snapshot(), "points": points, "predicted_at": p.predicted_at,
-                           "q_cmd": self.q_cmd.tolist(), "grip": self.grip, "infer_ms": self.infer_ms})
+                           "q_cmd": self.q_cmd.tolist(), "grip": self.grip, "infer_ms": self.infer_ms,
+                           "aim": self.aim})
 
     def set_state(self, state: bytes) -> None:
-        s = unpack_state(state, {"scene", "points", "predicted_at", "q_cmd", "grip", "infer_ms"})
+        s = unpack_state(state, {"scene", "points", "predicted_at", "q_cmd", "grip", "infer_ms", "aim"})
         q_cmd = np.asarray(s["q_cmd"], dtype=float)
-        if q_cmd.shape != (6,) or type(s["points"]) is not list:
+        if q_cmd.shape != (6,) or type(s["points"]) is not list or not (s["aim"] is None or type(s["aim"]) is float):
             raise ValueError("not a state of the policy node")
         p = self.predictor
         p.scene.restore(s["scene"])
@@ -93,3 +98,4 @@ class PolicyNode(Node):
                     for t, a, q, ok, g in s["points"]]
         p.predicted_at = float(s["predicted_at"])
         self.q_cmd, self.grip, self.infer_ms = q_cmd, bool(s["grip"]), float(s["infer_ms"])
+        self.aim = None if s["aim"] is None else float(s["aim"])

@@ -32,6 +32,7 @@ class TrainConfig:
     dagger_rounds: int = 3      # the cloned policy drives, the reference labels what it sees
     dagger_episodes: int = 40
     critic_warmup_steps: int = 5000
+    cloned_episodes: int = 40   # the cloned policy's own rollouts, exploring, for the critics before the actor moves
     episodes: int = 200
     eval_every: int = 20
     eval_trials: int = 10
@@ -44,11 +45,12 @@ class TrainConfig:
 
 def evaluate(agent: DDPG | None, env: GraspEnv, trials: int, seed: int = 10_000,
              expert: bool = False) -> dict[str, dict[str, float]]:
-    """Success rate, precise-grasp rate (within ``PRECISE_MM`` of the grasp point), mean time
-    and mean final distance per release angle (deterministic policy)."""
+    """Per release angle (deterministic policy): success rate, precise-grasp rate (within
+    ``PRECISE_MM`` of the grasp point), collisions, mean episode time, mean time to a grasp,
+    mean final distance, and the episodes counted."""
     results = {}
     for angle in EVAL_ANGLES:
-        wins, precise, times, dists = 0, 0, [], []
+        wins, precise, collisions, times, grasp_times, dists = 0, 0, 0, [], [], []
         for i in range(trials):
             obs, _ = env.reset(seed=seed + i, options={"angle_deg": angle})
             done = False
@@ -58,15 +60,76 @@ def evaluate(agent: DDPG | None, env: GraspEnv, trials: int, seed: int = 10_000,
                 done = term or trunc
             wins += info["success"]
             precise += info["success"] and 1000 * info["distance"] <= PRECISE_MM
+            collisions += info["collision"]
             times.append(info["time"])
+            if info["success"]:
+                grasp_times.append(info["time"])
             dists.append(info["distance"])
         results[f"{angle:g}"] = {"success": wins / trials, "precise": precise / trials,
-                                 "time_s": float(np.mean(times)), "distance_mm": 1000 * float(np.mean(dists))}
+                                 "collision": collisions / trials, "episodes": trials,
+                                 "time_s": float(np.mean(times)),
+                                 "grasp_time_s": float(np.mean(grasp_times)) if grasp_times else None,
+                                 "distance_mm": 1000 * float(np.mean(dists))}
     return results
 
 
+def _evaluate_part(path: str, angle: float, seeds: tuple[int, int]) -> list[dict]:
+    from clients.policy.ddpg import load_policy
+
+    torch.set_num_threads(1)
+    agent, env = load_policy(path), GraspEnv()
+    outcomes = []
+    for s in range(*seeds):
+        obs, _ = env.reset(seed=s, options={"angle_deg": angle})
+        done = False
+        while not done:
+            obs, _, term, trunc, info = env.step(agent.act(obs))
+            done = term or trunc
+        outcomes.append(info)
+    return outcomes
+
+
+def evaluate_checkpoint(path: Path, trials: int, workers: int = 1, seed: int = 10_000,
+                        angles: tuple[float, ...] = EVAL_ANGLES) -> dict[str, dict]:
+    """:func:`evaluate` of a checkpoint file, its episodes spread over ``workers`` processes,
+    with each rate's 95 % Wilson interval: at 100 episodes per angle 90 % reads 83–94 %
+    and 98 % reads 93–99 %, so the two are told apart."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    chunk = max(1, -(-trials // max(1, workers)))
+    parts = [(angle, (seed + i, seed + min(i + chunk, trials))) for angle in angles for i in range(0, trials, chunk)]
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        done = list(pool.map(_evaluate_part, [str(path)] * len(parts), [a for a, _ in parts], [s for _, s in parts]))
+    results = {}
+    for angle in angles:
+        infos = [info for (a, _), chunk_infos in zip(parts, done) if a == angle for info in chunk_infos]
+        n = len(infos)
+        wins = sum(i["success"] for i in infos)
+        precise = sum(i["success"] and 1000 * i["distance"] <= PRECISE_MM for i in infos)
+        grasp_times = [i["time"] for i in infos if i["success"]]
+        results[f"{angle:g}"] = {
+            "episodes": n, "success": wins / n, "success_95": wilson(wins, n), "precise": precise / n,
+            "precise_95": wilson(precise, n), "collision": sum(i["collision"] for i in infos) / n,
+            "time_s": float(np.mean([i["time"] for i in infos])),
+            "grasp_time_s": float(np.mean(grasp_times)) if grasp_times else None,
+            "distance_mm": 1000 * float(np.mean([i["distance"] for i in infos])),
+            "grasp_distance_mm": 1000 * float(np.mean([i["distance"] for i in infos if i["success"]]))
+            if grasp_times else None}
+    return results
+
+
+def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """The Wilson score interval of a rate k/n (sound near 0 and 1, where the normal one is not)."""
+    if n == 0:
+        return (0.0, 1.0)
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return (float(max(0.0, centre - half)), float(min(1.0, centre + half)))
+
+
 def _episode(env: GraspEnv, act: Callable[[np.ndarray], np.ndarray], seed: int, buffer: ReplayBuffer | None,
-             demo: bool = False, norm=None) -> tuple[float, bool, list]:
+             demo: bool = False, rewards: list | None = None) -> tuple[float, bool, list]:
     obs, _ = env.reset(seed=seed)
     total, done, seen = 0.0, False, []
     while not done:
@@ -75,9 +138,33 @@ def _episode(env: GraspEnv, act: Callable[[np.ndarray], np.ndarray], seed: int, 
         if buffer is not None:
             buffer.add(obs, a, r, nxt, float(term), demo)
         seen.append((obs, a))
+        if rewards is not None:
+            rewards.append(r)
         total += r
         obs, done = nxt, term or trunc
     return total, bool(info["success"]), seen
+
+
+def critic_error(agent: DDPG, seen: list, rewards: list, ends: list[int]) -> dict[str, float]:
+    """How well the critics know the value of the actions taken in some episodes: Q(s, a)
+    against the discounted return that followed (Monte Carlo), mean absolute and relative.
+    The return of a truncated episode misses what the critics bootstrap; episodes here end
+    on a grasp, a collision or the step limit's penalty, so the difference is small."""
+    returns = np.zeros(len(rewards))
+    start = 0
+    for end in ends:
+        g = 0.0
+        for i in range(end - 1, start - 1, -1):
+            g = rewards[i] + agent.cfg.gamma * g
+            returns[i] = g
+        start = end
+    obs = torch.from_numpy(agent.norm(np.array([o for o, _ in seen])))
+    act = torch.from_numpy(np.array([a for _, a in seen], dtype=np.float32))
+    with torch.no_grad():
+        q = agent.q(obs, act).squeeze(1).numpy()
+    err = np.abs(q - returns)
+    return {"mae": float(err.mean()), "relative": float(err.mean() / max(np.abs(returns).mean(), 1e-9)),
+            "q_mean": float(q.mean()), "return_mean": float(returns.mean())}
 
 
 def _labelled_episode(env: GraspEnv, agent: DDPG, seed: int) -> list:
@@ -117,6 +204,7 @@ def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | Non
             raise CheckpointError(f"{last} does not fit the networks ({exc}): {afresh}") from None
         history = state["history"]
         episodes_done = state["episodes"]
+        started -= float(state.get("trained_s") or 0.0)  # training time counts across resumes
     resumed = last.exists()
     report = progress or (lambda _: None)
     # Demonstrations (also on resume: the buffer is not checkpointed).
@@ -142,11 +230,32 @@ def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | Non
                         "total": config.dagger_rounds * config.dagger_episodes})
             demo_obs_arr, demo_act_arr = np.array(demo_obs), np.array(demo_act)
             bc = agent.pretrain_actor(demo_obs_arr, demo_act_arr, config.bc_steps)
+        # The critics first learn from the demonstrations alone (as before this phase had
+        # rollouts), then from the cloned policy's own exploring rollouts too: the error on
+        # those rollouts, measured after each, is what the actor's gradient is made of.
+        agent.freeze_anchor()
         for _ in range(config.critic_warmup_steps):
             agent.update(buffer, train_actor=False)
+        held, rewards, ends = [], [], []  # rollouts kept out of the buffer, to measure the critics on
+        held_out = max(1, config.cloned_episodes // 4) if config.cloned_episodes else 0
+        for i in range(held_out + config.cloned_episodes):
+            agent.new_episode()
+            keep = i < held_out
+            _, _, seen = _episode(env, lambda o: agent.act(o, explore=True), config.seed * 100_000 + 90_000 + i,
+                                  None if keep else buffer, rewards=rewards if keep else None)
+            if keep:
+                held.extend(seen)
+                ends.append(len(rewards))
+            report({"phase": "rollouts", "done": i + 1, "total": held_out + config.cloned_episodes})
+        if held:
+            history["critic_error"] = {"demonstrations_only": critic_error(agent, held, rewards, ends)}
+            for _ in range(config.critic_warmup_steps):
+                agent.update(buffer, train_actor=False)
+            history["critic_error"]["with_rollouts"] = critic_error(agent, held, rewards, ends)
         ev = evaluate(agent, env, config.eval_trials)
         mean = float(np.mean([v["success"] for v in ev.values()]))
-        history["evals"].append({"episode": 0, "per_angle": ev, "mean_success": mean})
+        history["evals"].append({"episode": 0, "per_angle": ev, "mean_success": mean,
+                                 "seconds": time.monotonic() - started})
         pretrained = agent.state(config_hash=config.digest(), episodes=0, history=history, metrics=ev,
                                  trained_s=time.monotonic() - started, train_config=asdict(config))
         _save(pretrained, out / "best.pt")
@@ -155,8 +264,10 @@ def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | Non
     best = max((_score(e) for e in history["evals"]), default=(-1.0, -1.0, -float("inf")))
     rng_seed = config.seed * 1_000_000 + 50_000
     for ep in range(episodes_done, config.episodes):
+        agent.new_episode()
         ret, success, seen = _episode(env, lambda o: agent.act(o, explore=True), rng_seed + ep, buffer)
-        agent.norm.update(np.array([o for o, _ in seen]))
+        # The normalisation stays that of the cloned policy: moving it would move the cloned
+        # actor the DDPG phase is anchored to (its inputs are the normalised observations).
         for _ in range(len(seen)):
             agent.update(buffer)
         history["returns"].append({"episode": ep + 1, "return": ret, "success": success})
@@ -164,17 +275,20 @@ def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | Non
         if (ep + 1) % config.eval_every == 0 or ep + 1 == config.episodes:
             ev = evaluate(agent, env, config.eval_trials)
             mean = float(np.mean([v["success"] for v in ev.values()]))
-            history["evals"].append({"episode": ep + 1, "per_angle": ev, "mean_success": mean})
+            history["evals"].append({"episode": ep + 1, "per_angle": ev, "mean_success": mean,
+                                     "seconds": time.monotonic() - started})
             report({"phase": "eval", "episode": ep + 1, "per_angle": ev, "mean_success": mean})
             extra = dict(config_hash=config.digest(), episodes=ep + 1, history=history,
-                         trained_s=time.monotonic() - started, metrics=ev, train_config=asdict(config))
+                         trained_s=time.monotonic() - started, metrics=ev, train_config=asdict(config),
+                         start_metrics=history["evals"][0]["per_angle"])
             score = _score(history["evals"][-1])
             if score >= best:
                 best = score
                 _save(agent.state(**extra), out / "best.pt")
             _save(agent.state(**extra), last)
     plot_learning_curve(history, out / "learning_curve.png")
-    return {"best_mean_success": best[1], "best_mean_precise": best[0], "evals": history["evals"], "trained_s": time.monotonic() - started}
+    return {"best_mean_success": best[1], "best_mean_precise": best[0], "evals": history["evals"],
+            "trained_s": time.monotonic() - started, "critic_error": history.get("critic_error")}
 
 
 def _save(state: dict, path: Path) -> None:
@@ -211,8 +325,10 @@ def plot_learning_curve(history: dict, path: Path) -> Path:
     for angle in EVAL_ANGLES:
         pts = [(e["episode"], e["per_angle"][f"{angle:g}"]["success"]) for e in history["evals"]]
         if pts:
-            a2.plot(*zip(*pts), marker="o", label=f"{angle:g}°")
-    a2.set_ylabel("evaluation success")
+            line, = a2.plot(*zip(*pts), marker="o", label=f"{angle:g}°")
+            if pts[0][0] == 0:  # the cloned start, for reference
+                a2.axhline(pts[0][1], ls="--", lw=0.8, color=line.get_color())
+    a2.set_ylabel("evaluation success (dashed: cloned start)")
     a2.set_xlabel("DDPG episode")
     a2.set_ylim(-0.05, 1.05)
     a2.legend(fontsize=8)

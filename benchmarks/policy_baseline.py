@@ -1,0 +1,81 @@
+"""The paper's own formulation of the grasp policy against the engineered one, for the same
+training time on this machine.
+
+The paper's formulation (``clients/policy/paper.py``): state = TCP position, six joint angles,
+the rod's grasp-point position and angle; action = six joint targets; Equation 6 as reward;
+plain DDPG from scratch, no demonstrations. It is trained for ``--minutes`` of wall time
+per seed and evaluated every ``--eval-every`` episodes (success per release angle, the
+episodes of the engineered policy's evaluation). The engineered policy's curves are read
+from the training folders given with ``--ours`` (``hycosim train -o DIR`` writes them): its
+evaluations over its training time, its cloned start as a dashed line.
+
+    python benchmarks/policy_baseline.py [--minutes 20] [--seeds 0] [--ours DIR ...] [--plot FILE] [--json]
+
+Reported, not tuned to a target.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import torch
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+from clients.policy.paper import plot_against, train_paper  # noqa: E402
+
+
+def ours_history(folder: Path) -> list[dict]:
+    """The evaluations of an engineered training run, from its ``last.pt``."""
+    state = torch.load(folder / "last.pt", map_location="cpu", weights_only=False)
+    return state["history"]["evals"]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--minutes", type=float, default=20.0)
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0])
+    parser.add_argument("--eval-every", type=int, default=50)
+    parser.add_argument("--eval-trials", type=int, default=5)
+    parser.add_argument("--ours", type=Path, nargs="*", default=[])
+    parser.add_argument("--plot", type=Path, default=Path("policy_baseline.png"))
+    parser.add_argument("--json", action="store_true")
+    args = parser.parse_args()
+
+    paper = {}
+    for seed in args.seeds:
+        result = train_paper(60 * args.minutes, seed, args.eval_every, args.eval_trials)
+        paper[f"seed {seed}"] = result["evals"]
+        last = result["evals"][-1]
+        best = max(result["evals"], key=lambda e: e["mean_success"])
+        print(f"paper's formulation, seed {seed}: {result['episodes']} episodes in {result['seconds'] / 60:.1f} min; "
+              f"last evaluation {_angles(last['per_angle'])}; best {_angles(best['per_angle'])} "
+              f"(after {best['seconds'] / 60:.1f} min)")
+    ours = {}
+    for folder in args.ours:
+        evals = ours_history(folder)
+        ours[folder.name] = evals
+        best = max(evals, key=lambda e: e["mean_success"])
+        print(f"engineered ({folder.name}): cloned start {_angles(_rates(evals[0]))} after "
+              f"{evals[0].get('seconds', 0) / 60:.1f} min; best {_angles(_rates(best))} "
+              f"(after {best.get('seconds', 0) / 60:.1f} min, episode {best['episode']})")
+    plot_against(ours, paper, args.plot)
+    print(f"wrote {args.plot}")
+    if args.json:
+        print(json.dumps({"paper": paper, "ours": ours}))
+
+
+def _rates(evaluation: dict) -> dict[str, float]:
+    return {k: v["success"] for k, v in evaluation["per_angle"].items()}
+
+
+def _angles(per_angle: dict[str, float]) -> str:
+    return " ".join(f"{k}°: {100 * v:.0f} %" for k, v in per_angle.items())
+
+
+if __name__ == "__main__":
+    main()
