@@ -1,25 +1,31 @@
 """Accuracy and cost of the master algorithms, against the monolithic solution.
 
-The two-mass oscillator coupled through a spring (force–displacement coupling: mass 1 gives
-its displacement, mass 2 gives back the spring's force; m = 1 kg, k1 = k2 = 10 N/m,
-kc = 100 N/m, x1(0) = 0.1 m), split in two nodes (benchmarks/_oscillator.py, each node
-integrating its own ODE finely, so that the error is the coupling's). Each coupling runs at
-each macro step H through ``hycosim run``; the reference is the exact solution of the whole
-linear system (its matrix exponential, by eigendecomposition). Reported per run: the global
-error (max |x1 − x1_ref| and |x2 − x2_ref| over the run), the energy drift |E(T) − E(0)| / E(0),
-macro steps and wall time.
+The reference problems, each split across FMUs the benchmark builds (benchmarks/_mass_fmu.py,
+packaged with pythonfmu: one FMU, an instance per mass, each in its own node process; every
+mass integrates its own ODE finely, so that the error is the coupling's):
+
+* the two-mass oscillator coupled through a spring (force–displacement coupling: mass 1 gives
+  its displacement, mass 2 holds the coupling spring and gives back the force it puts on mass 1;
+  m = 1 kg, k1 = k2 = 10 N/m, kc = 100 N/m, x1(0) = 0.1 m);
+* a chain of three masses (the same springs, the middle mass holding both coupling springs and
+  taking both neighbours' displacements: two coupled loops).
+
+Each coupling runs at each macro step H through ``hycosim run``; the reference is the exact
+solution of the whole linear system (its matrix exponential, by eigendecomposition). Reported
+per run: the global error (max |x − x_ref| of the first and second mass over the run), the
+energy drift |E(T) − E(0)| / E(0), macro steps, takes (every iteration counted) and wall time.
 
 Iterative coupling (Jacobi, each step taken again until its inputs stop changing) beside
 Jacobi and Gauss-Seidel. The error-controlled step on a case with one sharp transient (the
-damped system at rest, mass 1 struck by a 20 ms pulse): fixed H = 1 ms against the controlled
-step at several tolerances, with the exact solution around the pulse as reference.
+damped two-mass system at rest, mass 1 struck by a 20 ms pulse): fixed H = 1 ms against the
+controlled step at several tolerances, with the exact solution around the pulse as reference.
 
 Multi-rate: a 1 kHz source feeding a 100 Hz node feeding a 1 Hz node, run once with those
 rates and once all at 1 kHz: the frames exchanged (releases sent, frames the server took in)
 and whether the fast node's values are the same.
 
-    python benchmarks/accuracy.py [--stop 2] [--h 0.01 0.005 0.002] [--mr-stop 2] [--transient-stop 5]
-                                  [--tolerances 0.01 0.005 0.002] [--json]
+    python benchmarks/accuracy.py [--stop 2] [--h 0.01 0.005 0.002] [--problems two three] [--mr-stop 2]
+                                  [--transient-stop 5] [--tolerances 0.01 0.005 0.002] [--json]
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import math
 import sys
 import tempfile
 import time
@@ -38,10 +45,18 @@ from _procs import free_port, run
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
-M1 = M2 = 1.0
-K1 = K2 = 10.0
+sys.path.insert(0, str(REPO))
+M1 = M2 = M3 = 1.0
+K1 = K2 = K3 = 10.0
 KC = 100.0
 X10 = 0.1
+
+
+def build_mass_fmu(dir_: Path) -> Path:
+    """The mass FMU (benchmarks/_mass_fmu.py through pythonfmu), with its state saved and restored."""
+    from fmu_bridge.model_fmu import build_model_fmu
+
+    return build_model_fmu(HERE / "_mass_fmu.py", dir_ / "fmu", can_get_and_set_state=True)
 
 
 def _run(cfg: Path, runs: Path, timeout: float = 600) -> tuple[Path, float]:
@@ -60,33 +75,59 @@ def _columns(run_dir: Path) -> dict[str, np.ndarray]:
     return {key: np.array([float(r[key]) for r in rows]) for key in rows[0] if key not in ("mode", "stepped")}
 
 
-# The master algorithms compared: each a coupling and what else goes in coSimulation.
-SCHEMES = {"jacobi": {"coupling": "jacobi"}, "gauss-seidel": {"coupling": "gauss-seidel", "order": ["m1", "m2"]},
+# The master algorithms compared: each a coupling and what else goes in coSimulation. Gauss-Seidel:
+# the masses that take a force go first (on the force at the step's start), then the one holding
+# the springs, on their new displacements.
+SCHEMES = {"jacobi": {"coupling": "jacobi"}, "gauss-seidel": {"coupling": "gauss-seidel"},
            "iterative": {"coupling": "jacobi", "iterate": {"tolerance": 1e-9, "maxIterations": 30}}}
+ORDER = {"two": ["m1", "m2"], "three": ["m1", "m3", "m2"]}
 
 
-def oscillator(dir_: Path, scheme: str, h: float, stop: float, **extra) -> Path:
-    """The two-mass oscillator under a scheme of SCHEMES (``extra``: more node parameters, for both)."""
-    model = str(HERE / "_oscillator.py")
-    doc = {"projectName": "osc", "serverIP": f"127.0.0.1:{free_port()}", "nodeNum": 2,
-           "nodeLists": [
-               {"nodeName": "m1", "UID": 1, "model": f"{model}:Mass1", "input": ["F"], "output": ["x", "v"],
-                "parameters": {"m": M1, "k": K1, "x0": X10, **extra.get("m1", {})}},
-               {"nodeName": "m2", "UID": 2, "model": f"{model}:Mass2", "input": ["x1"], "output": ["x", "v", "F"],
-                "parameters": {"m": M2, "k": K2, "kc": KC, "x1_0": X10, **extra.get("m2", {})}}],
-           "linkNum": 2, "linkLists": [{"from": "m1.x", "to": "m2.x1"}, {"from": "m2.F", "to": "m1.F"}],
-           # Gauss-Seidel: the two read each other, so mass 1 goes first, on the force at the step's start.
-           "coSimulation": {"stepSize": h, "stopTime": stop, **SCHEMES.get(scheme, {}), **extra.get("cosim", {})}}
-    path = dir_ / f"osc-{scheme}-{h:g}-{len(list(dir_.glob('osc-*')))}.json"
+def _mass(name: str, uid: int, fmu: Path, inputs: list[str], outputs: list[str], **parameters) -> dict:
+    return {"nodeName": name, "UID": uid, "fmu": str(fmu), "input": inputs, "output": ["x", "v", *outputs],
+            "parameters": parameters}
+
+
+def oscillator(dir_: Path, fmu: Path, scheme: str, h: float, stop: float, problem: str = "two", **extra) -> Path:
+    """A reference problem (``two`` masses or ``three`` in a chain) under a scheme of SCHEMES
+    (``extra``: more parameters for a node by its name, and ``cosim``)."""
+    if problem == "two":
+        nodes = [_mass("m1", 1, fmu, ["F"], [], m=M1, k=K1, x=X10),
+                 _mass("m2", 2, fmu, ["xl"], ["Fl"], m=M2, k=K2, kl=KC, xl=X10)]
+        links = [{"from": "m1.x", "to": "m2.xl"}, {"from": "m2.Fl", "to": "m1.F"}]
+    else:
+        nodes = [_mass("m1", 1, fmu, ["F"], [], m=M1, k=K1, x=X10),
+                 _mass("m2", 2, fmu, ["xl", "xr"], ["Fl", "Fr"], m=M2, k=K2, kl=KC, kr=KC, xl=X10),
+                 _mass("m3", 3, fmu, ["F"], [], m=M3, k=K3)]
+        links = [{"from": "m1.x", "to": "m2.xl"}, {"from": "m3.x", "to": "m2.xr"},
+                 {"from": "m2.Fl", "to": "m1.F"}, {"from": "m2.Fr", "to": "m3.F"}]
+    for node in nodes:
+        node["parameters"].update(extra.get(node["nodeName"], {}))
+    cosim = {"stepSize": h, "stopTime": stop, **SCHEMES.get(scheme, {}), **extra.get("cosim", {})}
+    if scheme == "gauss-seidel":
+        cosim["order"] = ORDER[problem]
+    doc = {"projectName": "osc", "serverIP": f"127.0.0.1:{free_port()}", "nodeNum": len(nodes), "nodeLists": nodes,
+           "linkNum": len(links), "linkLists": links, "coSimulation": cosim}
+    path = dir_ / f"osc-{problem}-{scheme}-{h:g}-{len(list(dir_.glob('osc-*')))}.json"
     path.write_text(json.dumps(doc))
     return path
 
 
-def _system(c: float = 0.0) -> np.ndarray:
-    return np.array([[0, 1, 0, 0],
-                     [-(K1 + KC) / M1, -c / M1, KC / M1, 0],
-                     [0, 0, 0, 1],
-                     [KC / M2, 0, -(K2 + KC) / M2, -c / M2]], dtype=float)
+def _system(problem: str = "two", c: float = 0.0) -> np.ndarray:
+    """The monolithic system y' = A·y, y = [x1, v1, x2, v2(, x3, v3)]."""
+    if problem == "two":
+        masses, stiffness = [M1, M2], np.array([[K1 + KC, -KC], [-KC, K2 + KC]])
+    else:
+        masses = [M1, M2, M3]
+        stiffness = np.array([[K1 + KC, -KC, 0], [-KC, K2 + 2 * KC, -KC], [0, -KC, K3 + KC]])
+    n = len(masses)
+    a = np.zeros((2 * n, 2 * n))
+    for i in range(n):
+        a[2 * i, 2 * i + 1] = 1.0
+        a[2 * i + 1, 2 * i + 1] = -c / masses[i]
+        for j in range(n):
+            a[2 * i + 1, 2 * j] = -stiffness[i, j] / masses[i]
+    return a
 
 
 def _free(a: np.ndarray, y0: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -96,17 +137,23 @@ def _free(a: np.ndarray, y0: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.real((v[None, :, :] * (c * np.exp(np.outer(t, w)))[:, None, :]).sum(axis=2))
 
 
-def reference(t: np.ndarray) -> np.ndarray:
-    """The monolithic solution [x1, v1, x2, v2] at times t, exactly (the system is linear)."""
-    return _free(_system(), np.array([X10, 0.0, 0.0, 0.0]), t)
+def reference(t: np.ndarray, problem: str = "two") -> np.ndarray:
+    """The monolithic solution [x1, v1, x2, v2(, x3, v3)] at times t, exactly (the system is linear)."""
+    a = _system(problem)
+    y0 = np.zeros(len(a))
+    y0[0] = X10
+    return _free(a, y0, t)
+
+
+def pulse(s: float, at: float, width: float, peak: float) -> float:
+    """The half-sine force pulse of _mass_fmu.Mass: ``peak`` newtons at its middle, nothing outside."""
+    return peak * math.sin(math.pi * (s - at) / width) if at <= s <= at + width else 0.0
 
 
 def pulse_reference(t: np.ndarray, c: float, at: float, width: float, peak: float) -> np.ndarray:
-    """The monolithic solution of the damped system at rest until mass 1 is struck by the pulse:
-    exact before and after it, RK4 at 1 µs through it."""
-    from _oscillator import pulse
-
-    a = _system(c)
+    """The monolithic solution of the damped two-mass system at rest until mass 1 is struck by the
+    pulse: exact before and after it, RK4 at 1 µs through it."""
+    a = _system("two", c)
     n = int(round(width / 1e-6))
     dt = width / n
     grid, y = [np.zeros(4)], np.zeros(4)
@@ -129,8 +176,13 @@ def pulse_reference(t: np.ndarray, c: float, at: float, width: float, peak: floa
     return out
 
 
-def energy(x1, v1, x2, v2) -> np.ndarray:
-    return 0.5 * (M1 * v1 ** 2 + M2 * v2 ** 2 + K1 * x1 ** 2 + K2 * x2 ** 2 + KC * (x2 - x1) ** 2)
+def energy(c: dict[str, np.ndarray], problem: str = "two") -> np.ndarray:
+    """The system's energy at every recorded point (kinetic, the wall springs, the coupling springs)."""
+    x = [c[f"m{i}.x"] for i in (1, 2, 3) if f"m{i}.x" in c]
+    v = [c[f"m{i}.v"] for i in (1, 2, 3) if f"m{i}.v" in c]
+    m, k = [M1, M2, M3], [K1, K2, K3]
+    e = sum(0.5 * m[i] * v[i] ** 2 + 0.5 * k[i] * x[i] ** 2 for i in range(len(x)))
+    return e + sum(0.5 * KC * (x[i + 1] - x[i]) ** 2 for i in range(len(x) - 1))
 
 
 def _takes(run_dir: Path) -> int:
@@ -140,19 +192,21 @@ def _takes(run_dir: Path) -> int:
     return sum(int(r.get("takes") or 1) for r in rows)
 
 
-def accuracy(dir_: Path, steps: list[float], stop: float) -> list[dict]:
+def accuracy(dir_: Path, fmu: Path, steps: list[float], stop: float, problems: list[str]) -> list[dict]:
     rows = []
-    for h in steps:
-        for scheme in SCHEMES:
-            run_dir, wall = _run(oscillator(dir_, scheme, h, stop), dir_ / f"runs-{scheme}-{h:g}")
-            c = _columns(run_dir)
-            ref = reference(c["t"])
-            e = energy(c["m1.x"], c["m1.v"], c["m2.x"], c["m2.v"])
-            rows.append({"coupling": scheme, "H": h, "macro_steps": len(c["t"]) - 1, "takes": _takes(run_dir),
-                         "wall_s": round(wall, 2),
-                         "error_x1": float(np.max(np.abs(c["m1.x"] - ref[:, 0]))),
-                         "error_x2": float(np.max(np.abs(c["m2.x"] - ref[:, 2]))),
-                         "energy_drift": float(abs(e[-1] - e[0]) / e[0])})
+    for problem in problems:
+        for h in steps:
+            for scheme in SCHEMES:
+                run_dir, wall = _run(oscillator(dir_, fmu, scheme, h, stop, problem),
+                                     dir_ / f"runs-{problem}-{scheme}-{h:g}")
+                c = _columns(run_dir)
+                ref = reference(c["t"], problem)
+                e = energy(c, problem)
+                rows.append({"problem": problem, "coupling": scheme, "H": h, "macro_steps": len(c["t"]) - 1,
+                             "takes": _takes(run_dir), "wall_s": round(wall, 2),
+                             "error_x1": float(np.max(np.abs(c["m1.x"] - ref[:, 0]))),
+                             "error_x2": float(np.max(np.abs(c["m2.x"] - ref[:, 2]))),
+                             "energy_drift": float(abs(e[-1] - e[0]) / e[0])})
     return rows
 
 
@@ -160,14 +214,14 @@ def accuracy(dir_: Path, steps: list[float], stop: float) -> list[dict]:
 DAMPING, PULSE = 20.0, {"pulse_at": 1.0, "pulse_width": 0.02, "pulse": 50.0}
 
 
-def transient(dir_: Path, stop: float, tolerances: list[float], fixed: float = 0.001) -> list[dict]:
+def transient(dir_: Path, fmu: Path, stop: float, tolerances: list[float], fixed: float = 0.001) -> list[dict]:
     """Jacobi at a fixed H = ``fixed`` against the error-controlled step at each tolerance."""
-    at_rest = {"m1": {"x0": 0.0, "c": DAMPING, **PULSE}, "m2": {"x1_0": 0.0, "c": DAMPING}}
+    at_rest = {"m1": {"x": 0.0, "c": DAMPING, **PULSE}, "m2": {"xl": 0.0, "c": DAMPING}}
     cases = [("fixed", fixed, {})] + [
         ("controlled", tol, {"stepControl": {"tolerance": tol, "minStep": 1e-4, "maxStep": 0.2}}) for tol in tolerances]
     rows = []
     for kind, value, cosim in cases:
-        cfg = oscillator(dir_, "jacobi", fixed if kind == "fixed" else 0.01, stop, **at_rest, cosim=cosim)
+        cfg = oscillator(dir_, fmu, "jacobi", fixed if kind == "fixed" else 0.01, stop, **at_rest, cosim=cosim)
         run_dir, wall = _run(cfg, dir_ / f"runs-transient-{kind}-{value:g}")
         c = _columns(run_dir)
         ref = pulse_reference(c["t"], DAMPING, PULSE["pulse_at"], PULSE["pulse_width"], PULSE["pulse"])
@@ -180,7 +234,7 @@ def transient(dir_: Path, stop: float, tolerances: list[float], fixed: float = 0
     return rows
 
 
-def chain(dir_: Path, stop: float, rates: bool) -> Path:
+def rates_chain(dir_: Path, stop: float, rates: bool) -> Path:
     nodes = [{"nodeName": "fast", "UID": 1, "model": "ramp", "output": ["y", "v"]},
              {"nodeName": "mid", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
              {"nodeName": "slow", "UID": 3, "model": "gain", "input": ["u"], "output": ["y"]}]
@@ -198,7 +252,7 @@ def multirate(dir_: Path, stop: float) -> dict:
     out = {}
     fast = {}
     for rates in (False, True):
-        run_dir, wall = _run(chain(dir_, stop, rates), dir_ / f"runs-chain-{rates}")
+        run_dir, wall = _run(rates_chain(dir_, stop, rates), dir_ / f"runs-chain-{rates}")
         meta = json.loads((run_dir / "meta.json").read_text())
         c = _columns(run_dir)
         points = len(c["t"])
@@ -213,34 +267,76 @@ def multirate(dir_: Path, stop: float) -> dict:
     return out
 
 
+def plot(rows: list[dict], sharp: list[dict], out: Path) -> Path:
+    """Global error and energy drift against macro steps taken (every take counted), one line per
+    coupling and problem; the sharp transient's fixed and controlled steps beside them."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
+
+    fig, axes = plt.subplots(1, 3 if sharp else 2, figsize=(15 if sharp else 10, 4.5))
+    for problem in dict.fromkeys(r["problem"] for r in rows):
+        for scheme in SCHEMES:
+            mine = sorted((r for r in rows if r["problem"] == problem and r["coupling"] == scheme),
+                          key=lambda r: r["takes"])
+            style = "-o" if problem == "two" else "--s"
+            label = f"{scheme}, {problem} masses"
+            axes[0].loglog([r["takes"] for r in mine], [r["error_x1"] for r in mine], style, label=label)
+            axes[1].loglog([r["takes"] for r in mine], [r["energy_drift"] for r in mine], style, label=label)
+    axes[0].set(xlabel="steps taken (every take counted)", ylabel="global error in x1 (m)")
+    axes[1].set(xlabel="steps taken (every take counted)", ylabel="energy drift |E(T) − E(0)| / E(0)")
+    if sharp:
+        for r in sharp:
+            axes[2].loglog(r["takes"], r["error_x1"], "o", label=r["step"])
+        axes[2].set(xlabel="steps taken (every take counted)", ylabel="global error in x1 (m)", title="sharp transient, Jacobi")
+    for ax in axes:
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.yaxis.set_minor_formatter(NullFormatter())
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--stop", type=float, default=2.0)
     ap.add_argument("--h", type=float, nargs="+", default=[0.01, 0.005, 0.002])
+    ap.add_argument("--problems", nargs="+", choices=["two", "three"], default=["two", "three"])
     ap.add_argument("--mr-stop", type=float, default=2.0)
     ap.add_argument("--transient-stop", type=float, default=5.0, help="0: leave the sharp-transient case out")
     ap.add_argument("--tolerances", type=float, nargs="+", default=[1e-2, 5e-3, 2e-3])
     ap.add_argument("--fixed-h", type=float, default=0.001, help="the fixed step the controlled one is set against")
+    ap.add_argument("--plot", type=Path, help="write the error-against-cost figure here (PNG)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         dir_ = Path(tmp)
-        rows = accuracy(dir_, args.h, args.stop)
+        fmu = build_mass_fmu(dir_)
+        rows = accuracy(dir_, fmu, args.h, args.stop, args.problems)
         rates = multirate(dir_, args.mr_stop)
-        sharp = transient(dir_, args.transient_stop, args.tolerances, args.fixed_h) if args.transient_stop > 0 else []
-    by = {(r["coupling"], r["H"]): r for r in rows}
-    ratios = {f"{h:g}": by[("gauss-seidel", h)]["error_x1"] / by[("jacobi", h)]["error_x1"] for h in args.h}
+        sharp = transient(dir_, fmu, args.transient_stop, args.tolerances, args.fixed_h) if args.transient_stop > 0 else []
+    by = {(r["problem"], r["coupling"], r["H"]): r for r in rows}
+    ratios = {problem: {f"{h:g}": by[(problem, "gauss-seidel", h)]["error_x1"] / by[(problem, "jacobi", h)]["error_x1"]
+                        for h in args.h} for problem in args.problems}
     result = {"oscillator": rows, "gs_over_jacobi_error": ratios, "multirate": rates, "transient": sharp}
+    if args.plot:
+        result["plot"] = str(plot(rows, sharp, args.plot))
     if args.json:
         print(json.dumps(result, indent=1))
         return
-    print(f"{'coupling':<14}{'H (s)':>8}{'steps':>8}{'takes':>8}{'wall (s)':>10}{'err x1 (m)':>13}"
+    print(f"{'masses':<8}{'coupling':<14}{'H (s)':>8}{'steps':>8}{'takes':>8}{'wall (s)':>10}{'err x1 (m)':>13}"
           f"{'err x2 (m)':>13}{'energy drift':>14}")
     for r in rows:
-        print(f"{r['coupling']:<14}{r['H']:>8g}{r['macro_steps']:>8}{r['takes']:>8}{r['wall_s']:>10.2f}"
-              f"{r['error_x1']:>13.3e}{r['error_x2']:>13.3e}{r['energy_drift']:>14.3e}")
-    print("Gauss-Seidel / Jacobi global error at the same H: "
-          + ", ".join(f"H={h}: {v:.2f}" for h, v in ratios.items()))
+        print(f"{r['problem']:<8}{r['coupling']:<14}{r['H']:>8g}{r['macro_steps']:>8}{r['takes']:>8}"
+              f"{r['wall_s']:>10.2f}{r['error_x1']:>13.3e}{r['error_x2']:>13.3e}{r['energy_drift']:>14.3e}")
+    for problem, by_h in ratios.items():
+        print(f"Gauss-Seidel / Jacobi global error at the same H, {problem} masses: "
+              + ", ".join(f"H={h}: {v:.2f}" for h, v in by_h.items()))
     s, m = rates["single_rate"], rates["multi_rate"]
     print(f"multi-rate 1 kHz / 100 Hz / 1 Hz against all at 1 kHz: {m['messages']:,} vs {s['messages']:,} frames "
           f"(ratio {rates['message_ratio']:.2f}); fast node's values identical: {rates['fast_node_identical']}")
@@ -250,6 +346,8 @@ def main() -> None:
         for r in sharp:
             print(f"{r['step']:<18}{r['macro_steps']:>8}{r['takes']:>8}{r['rejected']:>10}{r['wall_s']:>10.2f}"
                   f"{r['error_x1']:>13.3e}{r['error_x2']:>13.3e}")
+    if args.plot:
+        print(f"figure: {args.plot}")
 
 
 if __name__ == "__main__":

@@ -295,8 +295,24 @@ def envelope(t: array, y: array, buckets: int = PLOT_BUCKETS) -> tuple[Any, Any]
     return tv[keep], yv[keep]
 
 
+def read_steps(run_dir: Path) -> dict[str, array]:
+    """Each macro step's end ``t``, length ``h`` and ``takes`` (how often it was taken, 1 where the
+    run kept no count) from ``timing.csv``, in one pass."""
+    data = {"t": array("d"), "h": array("d"), "takes": array("d")}
+    last = None
+    for row in _rows(run_dir / "timing.csv", _timing_number, required=("step", "t")):
+        t = row["t"]
+        if last is not None and t is not None:
+            data["t"].append(t)
+            data["h"].append(t - last)
+            data["takes"].append(row.get("takes") or 1)
+        last = t
+    return data
+
+
 def plot_run(run_dir: Path, ports: list[str], out: Path) -> Path:
-    """Draw the chosen ``node.port`` columns over time with mode switches marked."""
+    """Draw the chosen ``node.port`` columns over time with mode switches marked; below them, for
+    a run whose master varied its step or took steps again, the step lengths and the takes."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -304,16 +320,32 @@ def plot_run(run_dir: Path, ports: list[str], out: Path) -> Path:
 
     data = read_columns(run_dir, ports)
     events = read_events(run_dir)
-    fig, ax = plt.subplots(figsize=(10, 5))
+    meta = read_meta(run_dir)
+    extra = []
+    if meta.step_control or meta.iteration:
+        steps = read_steps(run_dir)
+        if meta.step_control and not meta.step_control.startswith("none") and len(steps["h"]):
+            extra.append(("macro step (s)", steps["t"], steps["h"], True))
+        if meta.iteration and not meta.iteration.startswith("none") or max(steps["takes"], default=1) > 1:
+            extra.append(("takes of the step", steps["t"], steps["takes"], False))
+    fig, axes = plt.subplots(1 + len(extra), 1, sharex=True, squeeze=False, figsize=(10, 5 + 2 * len(extra)),
+                             gridspec_kw={"height_ratios": [3] + [1] * len(extra)})
+    ax = axes[0][0]
     for port in (c for c in data if c != "t"):
         ax.plot(*envelope(data["t"], data[port]), label=port)
     for i, ev in enumerate(events):
         ax.axvline(ev["t"], color="red" if ev["to"] != "free" else "green", linestyle="--", linewidth=1,
                    label=f"{ev['from']}→{ev['to']}" if i < 6 else None)
-    ax.set_xlabel("t (s)")
-    ax.set_title(f"{Path(run_dir).name}")
-    ax.grid(True, alpha=0.3)
+    ax.set_title(f"{Path(run_dir).name}" + (f" ({meta.coupling})" if meta.coupling else ""))
     ax.legend(loc="best", fontsize=8)
+    for (label, t, y, log), row in zip(extra, axes[1:]):
+        row[0].step(*envelope(t, y), where="pre", linewidth=1)
+        row[0].set_ylabel(label, fontsize=8)
+        if log:
+            row[0].set_yscale("log")
+    for row in axes:
+        row[0].grid(True, alpha=0.3)
+    axes[-1][0].set_xlabel("t (s)")
     fig.tight_layout()
     fig.savefig(out, dpi=110)
     plt.close(fig)

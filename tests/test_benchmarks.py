@@ -140,22 +140,25 @@ def test_recovery_benchmark_reports_identical_records_at_a_small_scale():
     assert "replay" not in r  # tests/test_replay.py runs the replayed trial
 
 
-def test_accuracy_benchmark_compares_the_couplings_with_the_exact_solution_and_counts_messages():
+def test_accuracy_benchmark_compares_the_couplings_with_the_exact_solution_and_counts_messages(tmp_path):
     res = subprocess.run([sys.executable, "benchmarks/accuracy.py", "--stop", "0.5", "--h", "0.01", "--mr-stop",
-                          "0.3", "--transient-stop", "1.1", "--fixed-h", "0.002", "--tolerances", "0.01", "--json"],
+                          "0.3", "--transient-stop", "1.1", "--fixed-h", "0.002", "--tolerances", "0.01",
+                          "--plot", str(tmp_path / "accuracy.png"), "--json"],
                          capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
     assert res.returncode == 0, res.stderr
     r = json.loads(res.stdout)
-    by = {row["coupling"]: row for row in r["oscillator"]}
-    assert set(by) == {"jacobi", "gauss-seidel", "iterative"} and all(row["macro_steps"] == 50 for row in by.values())
-    assert 0 < by["gauss-seidel"]["error_x1"] < by["jacobi"]["error_x1"] < 0.2  # x1 swings ±0.1 m
-    assert 0 < by["iterative"]["error_x1"] < by["jacobi"]["error_x1"] and by["iterative"]["takes"] > 50
+    for problem in ("two", "three"):  # each split across FMUs, one node process a mass
+        by = {row["coupling"]: row for row in r["oscillator"] if row["problem"] == problem}
+        assert set(by) == {"jacobi", "gauss-seidel", "iterative"} and all(row["macro_steps"] == 50 for row in by.values())
+        assert 0 < by["gauss-seidel"]["error_x1"] < by["jacobi"]["error_x1"] < 0.2  # x1 swings ±0.1 m
+        assert 0 < by["iterative"]["error_x1"] < by["jacobi"]["error_x1"] and by["iterative"]["takes"] > 50
+        assert r["gs_over_jacobi_error"][problem]["0.01"] == by["gauss-seidel"]["error_x1"] / by["jacobi"]["error_x1"]
     fixed, controlled = r["transient"]
     assert fixed["macro_steps"] == 550 and fixed["takes"] == 550
     # At rest until the pulse at 1 s, the controlled step grows; at the pulse it is taken again shorter.
     assert controlled["macro_steps"] < fixed["macro_steps"] and controlled["rejected"] > 0
     assert 0 < controlled["error_x1"] < 0.01 and 0 < fixed["error_x1"] < 0.01
-    assert r["gs_over_jacobi_error"]["0.01"] == by["gauss-seidel"]["error_x1"] / by["jacobi"]["error_x1"]
+    assert (tmp_path / "accuracy.png").stat().st_size > 20_000
     m = r["multirate"]
     assert m["single_rate"]["releases"] == m["multi_rate"]["releases"] == 300
     assert m["multi_rate"]["messages"] < m["single_rate"]["messages"] and m["fast_node_identical"]

@@ -10,6 +10,7 @@ import pytest
 
 from core.config import parse_project
 from core.coupling import algebraic_loops
+from server.report import read_steps
 from server.retakes import StepSizer, input_change
 from tests.helpers import column, hycosim, meta, read_rows, run_project, write_project
 
@@ -47,6 +48,8 @@ def test_iterative_coupling_solves_an_algebraic_loop_at_every_step_that_jacobi_t
     assert m["iterations"]["not_converged"] == 0 and m["iterations"]["max_takes"] == max(takes)
     text = hycosim("report", str(run)).stdout
     assert "iteration: up to 50 takes of each step" in text and "takes per step: mean" in text
+    assert list(read_steps(run)["takes"]) == takes[1:]
+    _plots_panels(run, tmp_path / "i.png", ["a.y"], 2)  # the values, and the takes under them
 
 
 def test_relaxation_makes_a_loop_converge_and_a_step_that_does_not_is_reported_or_ends_the_run(tmp_path):
@@ -96,6 +99,18 @@ def test_the_error_controlled_step_is_short_where_the_inputs_move_fast_and_long_
             assert abs(v[k + 1] - u[k]) <= tol * max(1.0, abs(u[k]), abs(v[k + 1])) + 1e-12, k
     text = hycosim("report", str(run)).stdout
     assert "step control: steps of 0.0001 to 0.2 s" in text and "macro steps used:" in text
+    assert list(read_steps(run)["h"]) == pytest.approx(h)
+    _plots_panels(run, tmp_path / "h.png", ["ball.h"], 3)  # the values, the step lengths, the takes
+
+
+def _plots_panels(run: Path, png: Path, ports: list[str], panels: int) -> None:
+    """``hycosim plot`` draws the run with ``panels`` rows of plots (the figure's height grows by row)."""
+    import matplotlib.image
+
+    res = hycosim("plot", str(run), *ports, "-o", str(png))
+    assert res.returncode == 0, res.stderr
+    height, width = matplotlib.image.imread(png).shape[:2]
+    assert width == 1100 and height == 110 * (5 + 2 * (panels - 1))
 
 
 def test_retakes_refuse_what_cannot_take_a_step_again_by_name(tmp_path):
