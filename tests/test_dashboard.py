@@ -131,6 +131,61 @@ def test_a_run_watched_live_and_then_opened_finished_in_a_real_browser(tmp_path)
         reap(run, *([board] if board else []))
 
 
+@pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is installed by `make test`")
+def test_a_secured_run_watched_by_two_browsers_through_a_monitors_credentials(tmp_path):
+    """A server that requires credentials: a dashboard attached as a monitor user serves two
+    browsers at once, both live; one with a wrong password says so on its page and retries; the
+    run does not notice any of it."""
+    from playwright.sync_api import sync_playwright
+
+    (tmp_path / "creds.txt").write_text("server:srv-pw\nclock:clock-pw\ng:g-pw\nwatcher:w-pw\n")
+    (tmp_path / "w.txt").write_text("w-pw\n")
+    (tmp_path / "bad.txt").write_text("not-the-password\n")
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+    ], [{"from": "clock.y", "to": "g.u"}], cosim={"stepSize": 0.01, "stopTime": 8.0, "realTime": True,
+                                                 "attachTimeout": 20.0},
+        name="secure", security={"credentials": "creds.txt"})
+    endpoint = json.loads(cfg.read_text())["serverIP"]
+    run_dir = tmp_path / "run"
+    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
+    nodes = [spawn("node", n, str(cfg)) for n in ("clock", "g")]  # passwords from the credentials file
+    good, bad = _free_port(), _free_port()
+    boards = [spawn("dashboard", endpoint, "--project", "secure", "--user", "watcher", "--password-file",
+                    str(tmp_path / f), "--port", str(port)) for f, port in (("w.txt", good), ("bad.txt", bad))]
+    try:
+        _page_up(f"http://127.0.0.1:{good}/")
+        _page_up(f"http://127.0.0.1:{bad}/")
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
+            pages = [browser.new_context().new_page() for _ in range(2)]  # two browsers' worth: no shared state
+            for page in pages:
+                page.goto(f"http://127.0.0.1:{good}/?ports=g.y")
+            for page in pages:
+                for node in ("clock", "g"):
+                    page.wait_for_selector(f"tr[data-node='{node}'] td.attached", timeout=30_000)
+                page.wait_for_function("window.hycosim.plots['g.y'] && window.hycosim.plots['g.y'].drawn > 5",
+                                       timeout=20_000)
+            first = [int(page.text_content("#step")) for page in pages]
+            pages[0].wait_for_timeout(600)
+            assert all(int(page.text_content("#step")) > k for page, k in zip(pages, first))  # both live
+            refused = browser.new_page()
+            refused.goto(f"http://127.0.0.1:{bad}/")
+            refused.wait_for_function("document.getElementById('state').textContent.includes('cannot reach')",
+                                      timeout=20_000)
+            assert "retrying" in refused.text_content("#state")
+            assert refused.query_selector("tr[data-node]") is None  # it learnt nothing of the run
+            browser.close()
+        _, err = server.communicate(timeout=60)
+        assert server.returncode == 0, err
+        assert all(n.wait(timeout=30) == 0 for n in nodes)
+    finally:
+        reap(server, *nodes, *boards)
+    meta = json.loads((run_dir / "meta.json").read_text())
+    assert meta["status"] == "completed" and meta["dropped_frames"] == {}
+
+
 def test_a_dashboard_that_cannot_reach_its_server_says_so_and_keeps_trying():
     feed = LiveFeed(f"tcp/127.0.0.1:{_free_port()}", "nothing", retry_s=0.2)
     feed.start()
