@@ -25,7 +25,7 @@ rates and once all at 1 kHz: the frames exchanged (releases sent, frames the ser
 and whether the fast node's values are the same.
 
     python benchmarks/accuracy.py [--stop 2] [--h 0.01 0.005 0.002] [--problems two three] [--mr-stop 2]
-                                  [--transient-stop 5] [--tolerances 0.01 0.005 0.002] [--json]
+                                  [--transient-stop 5] [--tolerances 1e-4 3e-5 1e-5] [--plot PNG] [--json]
 """
 
 from __future__ import annotations
@@ -309,7 +309,7 @@ def main() -> None:
     ap.add_argument("--problems", nargs="+", choices=["two", "three"], default=["two", "three"])
     ap.add_argument("--mr-stop", type=float, default=2.0)
     ap.add_argument("--transient-stop", type=float, default=5.0, help="0: leave the sharp-transient case out")
-    ap.add_argument("--tolerances", type=float, nargs="+", default=[1e-2, 5e-3, 2e-3])
+    ap.add_argument("--tolerances", type=float, nargs="+", default=[1e-4, 3e-5, 1e-5])
     ap.add_argument("--fixed-h", type=float, default=0.001, help="the fixed step the controlled one is set against")
     ap.add_argument("--plot", type=Path, help="write the error-against-cost figure here (PNG)")
     ap.add_argument("--json", action="store_true")

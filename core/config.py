@@ -175,9 +175,11 @@ class Iterate(_Strict):
 
 
 class StepControl(_Strict):
-    """Error-controlled macro step: a step whose coupled inputs changed by more than
-    ``tolerance``·max(1, |value|) over it is rolled back and taken again shorter; steps grow
-    while the change stays below. coSimulation.stepSize is the first step tried."""
+    """Error-controlled macro step: a step over which a coupled input held at its start value
+    was wrong by more than ``tolerance``·max(1, |value|) seconds (its change over the step times
+    the step, halved: the held value's error integrated over the step) is rolled back and taken
+    again shorter; steps grow while the error stays below. coSimulation.stepSize is the first
+    step tried."""
 
     model_config = ConfigDict(allow_inf_nan=False)
     tolerance: float = Field(gt=0)

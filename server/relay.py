@@ -722,8 +722,8 @@ class Relay:
                 self._log.warning("no step control", why=why)
             else:
                 self.sizer = StepSizer.starting(sc, cosim.stepSize)
-                meta["step_control"] = (f"steps of {sc.minStep:g} to {sc.maxStep:g} s, each input's change over a step "
-                                        f"at most {sc.tolerance:g}·max(1, |value|)")
+                meta["step_control"] = (f"steps of {sc.minStep:g} to {sc.maxStep:g} s, each held input's error over a "
+                                        f"step (its change × step / 2) at most {sc.tolerance:g}·max(1, |value|) s")
 
     def _change(self, mode: str, used: dict[str, list[Any]], tolerance: float) -> tuple[dict[str, list[Any]], float, str, float]:
         """The inputs routed from the outputs now, and their change from ``used`` (input_change)."""

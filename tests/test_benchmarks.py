@@ -142,7 +142,7 @@ def test_recovery_benchmark_reports_identical_records_at_a_small_scale():
 
 def test_accuracy_benchmark_compares_the_couplings_with_the_exact_solution_and_counts_messages(tmp_path):
     res = subprocess.run([sys.executable, "benchmarks/accuracy.py", "--stop", "0.5", "--h", "0.01", "--mr-stop",
-                          "0.3", "--transient-stop", "1.1", "--fixed-h", "0.002", "--tolerances", "0.01",
+                          "0.3", "--transient-stop", "1.1", "--fixed-h", "0.002", "--tolerances", "1e-4",
                           "--plot", str(tmp_path / "accuracy.png"), "--json"],
                          capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
     assert res.returncode == 0, res.stderr

@@ -82,7 +82,9 @@ def _ball(tmp_path: Path, **cosim) -> Path:
 
 
 def test_the_error_controlled_step_is_short_where_the_inputs_move_fast_and_long_where_they_do_not(tmp_path):
-    tol = 0.5  # free fall: v changes by 9.81·h, so steps of some 0.05 s; a bounce: by 2|v| at once
+    # The held input's error over a step is |Δu|·h/2. Free fall: Δv = 9.81·h, so steps of some
+    # 0.02–0.04 s; a bounce: Δv ≈ 2|v| at once, so steps of a few ms.
+    tol = 0.002
     run = run_project(_ball(tmp_path, stepControl={"tolerance": tol, "minStep": 1e-4, "maxStep": 0.2}),
                       tmp_path / "runs")
     rows = read_rows(run)
@@ -91,12 +93,12 @@ def test_the_error_controlled_step_is_short_where_the_inputs_move_fast_and_long_
     assert t[-1] == 1.5 and all(x > 0 for x in h)
     sizes = meta(run)["step_sizes"]
     assert sizes["rejected"] > 0 and sizes["accepted"] == len(h)
-    assert min(h[:-1]) < 0.005 and max(h) > 0.05  # shrunk at the bounce, grown in free fall
-    # Every step that stood moved its input by at most the tolerance, unless taken at minStep.
+    assert min(h[:-1]) < 0.003 and max(h) > 0.02  # shrunk at the bounce, grown in free fall
+    # Every step that stood held its input within the tolerance, unless taken at minStep.
     v = column(rows, "ball.v")
     for k in range(len(h)):
         if h[k] > 1.0001e-4:
-            assert abs(v[k + 1] - u[k]) <= tol * max(1.0, abs(u[k]), abs(v[k + 1])) + 1e-12, k
+            assert abs(v[k + 1] - u[k]) * h[k] / 2 <= tol * max(1.0, abs(u[k]), abs(v[k + 1])) + 1e-12, k
     text = hycosim("report", str(run)).stdout
     assert "step control: steps of 0.0001 to 0.2 s" in text and "macro steps used:" in text
     assert list(read_steps(run)["h"]) == pytest.approx(h)
@@ -173,7 +175,11 @@ def test_the_step_size_control_and_the_change_it_reads():
     assert port == "n.F" and absolute == 10.0 and change == pytest.approx(10.0 / (0.1 * 50.0))
     sizer = StepSizer.starting(StepControl(tolerance=0.1, minStep=0.001, maxStep=0.1), 0.5)
     assert sizer.h == 0.1  # the first step tried lies within the bounds
-    shorter = sizer.judge(0.1, 4.0)
-    assert shorter == pytest.approx(0.1 * 0.2) and sizer.rejected == 1  # at most five times shorter at once
-    assert sizer.judge(0.02, 0.5) is None and sizer.h == pytest.approx(0.02 * 1.6)
-    assert sizer.judge(0.001, 9.0) is None and sizer.forced == 1  # minStep stands over the tolerance
+    # Judged: the held input's error over the step, change·h/2 tolerances; it grows as h².
+    assert sizer.judge(0.1, 19.0) is None and sizer.rejected == 0  # 0.95: within the tolerance
+    assert sizer.judge(0.1, 40.0) == pytest.approx(0.1 * (0.8 / 2.0) ** 0.5) and sizer.rejected == 1
+    shorter = sizer.judge(0.1, 1000.0)
+    assert shorter == pytest.approx(0.1 * 0.2) and sizer.rejected == 2  # at most five times shorter at once
+    assert sizer.judge(0.02, 50.0) is None and sizer.h == pytest.approx(0.02 * 1.6 ** 0.5)
+    assert sizer.judge(0.02, 0.5) is None and sizer.h == pytest.approx(0.04)  # at most twice as long
+    assert sizer.judge(0.001, 9000.0) is None and sizer.forced == 1  # minStep stands over the tolerance
