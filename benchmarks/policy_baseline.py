@@ -31,7 +31,7 @@ from clients.policy.paper import plot_against, train_paper  # noqa: E402
 
 def ours_history(folder: Path) -> list[dict]:
     """The evaluations of an engineered training run, from its ``last.pt``."""
-    state = torch.load(folder / "last.pt", map_location="cpu", weights_only=False)
+    state = torch.load(folder / "last.pt", map_location="cpu", weights_only=True)
     return state["history"]["evals"]
 
 

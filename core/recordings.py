@@ -206,6 +206,12 @@ class Recording:
                     value = bytes.fromhex(value)
                 except ValueError:
                     raise RecordingError(f"replay: {path}: line {number}: output {port.name!r} is not hex") from None
-            # JSON writes a whole Real as 0, which reads back as an int: a Real port plays a float.
-            picked.append(float(value) if port.type == PortType.REAL else value)
+            if port.type == PortType.REAL:
+                # JSON writes a whole Real as 0, which reads back as an int: a Real port plays a float.
+                try:
+                    value = float(value)
+                except OverflowError:
+                    raise RecordingError(f"replay: {path}: line {number}: output {port.name!r} holds "
+                                         f"{str(value)[:30]}…, beyond any float") from None
+            picked.append(value)
         return Sample(point, float(t), picked)

@@ -905,7 +905,17 @@ def evaluate(
     from clients.policy.ddpg import CheckpointError, load_policy
     from clients.policy.train import evaluate_checkpoint
 
-    figures = {}
+    def save(figures: dict) -> None:  # after each checkpoint: what was measured stays on disk
+        if json_out is None:
+            return
+        try:
+            json_out.write_text(json.dumps(figures, indent=1))
+        except OSError as exc:
+            err.print(f"[red]error:[/red] --json: cannot write {json_out} ({exc.strerror or exc})", highlight=False)
+            raise typer.Exit(2) from None
+
+    figures: dict = {}
+    save(figures)  # a file that cannot be written is named before the episodes, not after
     for path in checkpoints:
         try:
             meta = load_policy(path).meta
@@ -914,6 +924,7 @@ def evaluate(
             raise typer.Exit(2) from None
         figures[str(path)] = {"episodes_trained": meta.get("episodes"),
                               "per_angle": evaluate_checkpoint(path, trials, workers, seed)}
+        save(figures)
         out.print(f"{path} (DDPG episodes {meta.get('episodes')}), {trials} episodes per angle:", highlight=False)
         for angle, v in figures[str(path)]["per_angle"].items():
             lo, hi = v["success_95"]
@@ -921,8 +932,6 @@ def evaluate(
             out.print(f"  {angle:>3}°  success {100 * v['success']:5.1f} % ({100 * lo:.0f}–{100 * hi:.0f})  "
                       f"≤ 3 mm {100 * v['precise']:5.1f} %  collisions {100 * v['collision']:4.1f} %  "
                       f"time to grasp {grasp}  distance {v['distance_mm']:.2f} mm", highlight=False)
-    if json_out is not None:
-        json_out.write_text(json.dumps(figures, indent=1))
 
 
 krl_app = typer.Typer(no_args_is_help=True, help="KUKA EthernetKRL: export a run's path; an emulated controller.")

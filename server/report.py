@@ -171,7 +171,7 @@ def summarise(run_dir: Path, slowest: int = 5) -> RunSummary:
     takes = {"n": 0, "sum": 0.0, "max": 0.0, "again": 0}
     sizes = {"n": 0, "min": math.inf, "max": 0.0}
     t_first = t_last = None
-    for index, row in enumerate(_rows(run_dir / "timing.csv", _timing_number, required=("step", "t", "wait_s"))):
+    for index, row in enumerate(_rows(run_dir / "timing.csv", _timing_number, required=("step", "t", "wait_s", "holder"))):
         points += 1
         t_row = row["t"]
         if index == 0:
@@ -196,7 +196,7 @@ def summarise(run_dir: Path, slowest: int = 5) -> RunSummary:
                 label = key.split(":", 1)[1]
                 age_sum[label] = age_sum.get(label, 0.0) + value
                 age_n[label] = age_n.get(label, 0) + 1
-        if row["lateness_s"] is not None:
+        if row.get("lateness_s") is not None:  # a column only a paced run fills
             x = row["lateness_s"]
             late.update(n=late["n"] + 1, sum=late["sum"] + x, max=max(late["max"], x),
                         over_1ms=late["over_1ms"] + (x > 0.001))

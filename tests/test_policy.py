@@ -11,11 +11,14 @@ import numpy as np
 import pytest
 import torch
 from gymnasium.utils.env_checker import check_env
+from hypothesis import given
+from hypothesis import strategies as st
 
 from clients.policy.ddpg import DDPG, CheckpointError, load_policy
 from clients.policy.env import MAX_STEPS, GraspEnv, reward
 from clients.policy.features import ACT_DIM, NO_AIM, OBS_DIM, choice_action
-from clients.policy.node import PRETRAINED
+from clients.node import NodeContext, pack_state, unpack_state
+from clients.policy.node import PRETRAINED, PolicyNode
 from clients.policy.paper import PaperGraspEnv, joint_targets, plot_against, train_paper
 from clients.policy.train import TrainConfig, evaluate, evaluate_checkpoint, train, wilson
 from clients.robot import kr6
@@ -165,6 +168,9 @@ def test_evaluation_spreads_episodes_over_processes_with_intervals_and_matches_i
     assert 0.82 < lo < 0.83 and 0.94 < hi < 0.95 and wilson(98, 100)[0] > 0.92  # 100 episodes tell 90 % from 98 %
     res = hycosim("evaluate", str(out / "missing.pt"), "--trials", "1", timeout=60)
     assert res.returncode == 2 and "missing.pt does not exist" in res.stderr and "Traceback" not in res.stderr
+    res = hycosim("evaluate", str(out / "best.pt"), "--trials", "1", "--json", str(out / "no" / "such" / "f.json"),
+                  timeout=60)
+    assert res.returncode == 2 and "--json: cannot write" in res.stderr and "Traceback" not in res.stderr
 
 
 def test_the_papers_formulation_trains_from_scratch_and_plots_beside_ours(short_training, tmp_path):
@@ -230,6 +236,14 @@ def test_training_interrupted_after_cloning_resumes_without_cloning_again(tmp_pa
     assert phases.count("ddpg") == 2 and [e["episode"] for e in result["evals"]] == [0, 2]
 
 
+class _RunsCode:
+    def __init__(self, marker):
+        self.marker = marker
+
+    def __reduce__(self):
+        return (self.marker.__class__.touch, (self.marker,))
+
+
 def test_missing_or_incompatible_checkpoint_gives_a_clear_error(tmp_path):
     with pytest.raises(CheckpointError, match="does not exist"):
         load_policy(tmp_path / "none.pt")
@@ -246,6 +260,17 @@ def test_missing_or_incompatible_checkpoint_gives_a_clear_error(tmp_path):
     torch.save(state, tmp_path / "scale.pt")
     with pytest.raises(CheckpointError, match="trained for joint corrections of ±15.0°"):
         load_policy(tmp_path / "scale.pt")
+    state = DDPG().state()
+    state["updates"] = [1]  # a hand-made checkpoint: refused by name, not a traceback
+    torch.save(state, tmp_path / "odd.pt")
+    with pytest.raises(CheckpointError, match="does not fit the networks"):
+        load_policy(tmp_path / "odd.pt")
+    # A checkpoint whose pickle would run code when read: refused, and the code never runs.
+    marker = tmp_path / "ran"
+    torch.save({"version": 1, "x": _RunsCode(marker)}, tmp_path / "evil.pt")
+    with pytest.raises(CheckpointError, match="not readable"):
+        load_policy(tmp_path / "evil.pt")
+    assert not marker.exists()
     doc = json.loads((REPO / "configs" / "grasp-policy.json").read_text())
     doc["nodeLists"][2]["parameters"]["checkpoint"] = str(tmp_path / "none.pt")
     cfg = tmp_path / "p.json"
@@ -303,3 +328,47 @@ def test_full_training_reaches_the_target(tmp_path):
     assert result["best_mean_success"] >= 0.95
     assert result["trained_s"] < 1800
     assert best["per_angle"]
+
+
+@pytest.fixture(scope="module")
+def policy_node(tmp_path_factory):
+    node = PolicyNode()
+    node.setup(NodeContext("policy", 3, [], [], {}, 0.01, 0.0, tmp_path_factory.mktemp("policy")))
+    return node
+
+
+@given(aim=st.none() | st.floats(allow_nan=True, allow_infinity=True) | st.integers(-2 ** 63, 2 ** 64 - 1) | st.text(max_size=3)
+       | st.lists(st.floats(), max_size=2) | st.booleans())
+def test_a_policy_node_state_restores_a_finite_aim_or_is_refused(policy_node, aim):
+    """A RESTORE's state comes over the network: the aim of the command in flight is None or a
+    finite float, or the whole state is refused (the runtime drops it, counted)."""
+    state = unpack_state(policy_node.get_state(), {"aim"})
+    state["aim"] = aim
+    try:
+        policy_node.set_state(pack_state(state))
+    except ValueError:
+        assert not (aim is None or type(aim) is float and math.isfinite(aim))
+        return
+    assert policy_node.aim == aim and (aim is None or math.isfinite(policy_node.aim))
+
+
+_CHECKPOINT_KEYS = ["version", "obs_dim", "act_dim", "hidden", "residual_deg", "actor", "critic", "critic2", "anchor",
+                    "updates", "norm", "config", "episodes", "metrics"]
+_junk = (st.none() | st.booleans() | st.integers(-3, 300) | st.floats(allow_nan=True) | st.text(max_size=4)
+         | st.lists(st.integers(0, 3), max_size=3) | st.dictionaries(st.text(max_size=3), st.integers(0, 3), max_size=2)
+         | st.integers(1, 4).map(lambda n: torch.zeros(n)))
+
+
+@given(changes=st.dictionaries(st.sampled_from(_CHECKPOINT_KEYS), _junk, min_size=1, max_size=3))
+def test_a_checkpoint_with_any_entry_changed_loads_or_is_refused_by_name(tmp_path_factory, changes):
+    """A checkpoint is a user's file: whatever its entries hold, it loads as a policy that acts,
+    or CheckpointError names it."""
+    path = tmp_path_factory.mktemp("ckpt") / "c.pt"
+    torch.save({**DDPG().state(), **changes}, path)
+    try:
+        agent = load_policy(path)
+    except CheckpointError as exc:
+        assert str(path) in str(exc)
+        return
+    action = agent.act(np.zeros(OBS_DIM, np.float32))
+    assert action.shape == (ACT_DIM,) and np.all(np.abs(action) <= 1.0)

@@ -157,7 +157,7 @@ def _sample_lines(draw) -> str:
         values = list(draw(_VALID))
         how = draw(st.sampled_from(["ok", "ok", "ok", "value", "point", "t", "width", "node", "text", "torn"]))
         if how == "value":
-            values[draw(st.integers(0, 3))] = draw(_JUNK)
+            values[draw(st.integers(0, 3))] = draw(_JUNK | st.integers(-10 ** 400, 10 ** 400))
         line = encode_sample("cam" if how != "node" else draw(st.sampled_from(["other", ""])), point, t, values)
         record = json.loads(line)
         if how == "point":
@@ -178,6 +178,7 @@ def _sample_lines(draw) -> str:
 @settings(suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(text=_sample_lines())
 @example(text='{"node": "cam", "point": 0, "t": 0.0, "values": [0, false, 0, ""]}\n')  # a whole Real, as JSON writes it
+@example(text='{"node": "cam", "point": 0, "t": 0.0, "values": [1%s, false, 0, ""]}\n' % ("0" * 400))  # no float
 def test_samples_read_from_any_file_are_checked_or_refused_by_name(tmp_path, text):
     project = {"projectName": "p", "nodeNum": 1, "nodeLists": [_NODE.model_dump(by_alias=True)]}
     (tmp_path / "project.json").write_text(json.dumps(project))

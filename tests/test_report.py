@@ -6,6 +6,8 @@ import json
 import math
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from tests.helpers import hycosim, meta, read_rows, run_project, write_project
 
@@ -217,3 +219,52 @@ def test_runs_started_in_the_same_second_get_folders_of_their_own(tmp_path):
         dirs = list(pool.map(lambda _: run_dir_for(tmp_path / "runs", "p"), range(24)))
     assert len(set(dirs)) == 24 and all(d.is_dir() for d in dirs)
     assert sorted(d.name for d in (tmp_path / "runs").iterdir()) == sorted(d.name for d in dirs)
+
+
+_CELLS = st.sampled_from(["", "x", "nan", "inf", "-inf", "-1", "0", "1e400", "3", "0.5", "a,b", "\"", "2.0e-3"])
+
+
+@st.composite
+def _timing_files(draw) -> str:
+    """A timing.csv as the recorder writes it (with takes), then some cells, lines or the header broken."""
+    header = ["step", "t", "wait_s", "holder", "lateness_s", "arrival_s:a", "takes"]
+    rows = [[str(k), repr(k * 0.01), "0.0001", "a", "", "0.0002", "1"] for k in range(draw(st.integers(0, 5)))]
+    for _ in range(draw(st.integers(0, 4))):
+        how = draw(st.sampled_from(["cell", "cell", "short", "long", "header"]))
+        if how == "header":
+            header[draw(st.integers(0, len(header) - 1))] = draw(st.sampled_from(["", "step", "t", "x"]))
+        elif rows:
+            row = rows[draw(st.integers(0, len(rows) - 1))]
+            if not row:
+                row.append(draw(_CELLS))
+            elif how == "cell":
+                row[draw(st.integers(0, len(row) - 1))] = draw(_CELLS)
+            elif how == "short":
+                del row[draw(st.integers(0, len(row) - 1)):]
+            else:
+                row.append(draw(_CELLS))
+    return "\n".join(",".join(r) for r in [header, *rows]) + "\n"
+
+
+@settings(suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(timing=_timing_files(), meta_text=st.sampled_from(
+    ['{"status": "completed", "steps": 3, "step_control": "steps of 0.001 to 0.1 s", "iteration": "up to 5 takes"}',
+     '{"status": "running"}', '[]', '{"steps": "many"}', 'not json']))
+def test_a_run_directory_read_back_is_figures_or_a_named_error(tmp_path, timing, meta_text):
+    """A run directory is a user's to edit: report, plot's step panels and the columns read it
+    back, or say which file is wrong; never a traceback."""
+    from server.report import RunDirError, read_columns, read_steps, summarise
+
+    run = tmp_path / "run"
+    run.mkdir(exist_ok=True)
+    (run / "meta.json").write_text(meta_text)
+    (run / "timing.csv").write_text(timing)
+    (run / "values.csv").write_text(timing.replace("holder", "mode"))
+    for read in (summarise, read_steps, lambda r: read_columns(r, [])):
+        try:
+            got = read(run)
+        except RunDirError as exc:
+            assert str(run) in str(exc)
+            continue
+        if isinstance(got, dict) and "h" in got:  # read_steps: one length and one count per step
+            assert len(got["t"]) == len(got["h"]) == len(got["takes"])

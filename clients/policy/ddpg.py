@@ -26,6 +26,7 @@ pretrained to imitate them. The DDPG phase then fine-tunes without forgetting:
 from __future__ import annotations
 
 import copy
+import math
 import random
 from dataclasses import dataclass, field
 
@@ -69,9 +70,17 @@ class RunningNorm:
         return {"mean": self.mean.tolist(), "var": self.var.tolist(), "count": self.count}
 
     @staticmethod
-    def from_state(state: dict) -> "RunningNorm":
-        n = RunningNorm(len(state["mean"]))
-        n.mean, n.var, n.count = np.array(state["mean"]), np.array(state["var"]), state["count"]
+    def from_state(state: dict, dim: int) -> "RunningNorm":
+        """The statistics :meth:`state` saved, for ``dim`` observations; ValueError if they are not."""
+        if type(state) is not dict:
+            raise ValueError("the observation statistics are not a map")
+        mean, var, count = (np.asarray(state.get(k), dtype=float) for k in ("mean", "var", "count"))
+        if mean.shape != (dim,) or var.shape != (dim,) or count.shape != ():
+            raise ValueError(f"the observation statistics are not of {dim} observations")
+        if not (np.isfinite(mean).all() and np.isfinite(var).all() and (var >= 0).all() and 0 < count < math.inf):
+            raise ValueError("the observation statistics hold values that are no mean, variance or count")
+        n = RunningNorm(dim)
+        n.mean, n.var, n.count = mean, var, float(count)
         return n
 
 
@@ -311,12 +320,12 @@ class DDPG:
         if optimisers and "actor_opt" in state:
             self.actor_opt.load_state_dict(state["actor_opt"])
             self.critic_opt.load_state_dict(state["critic_opt"])
-        self.norm = RunningNorm.from_state(state["norm"])
+        self.norm = RunningNorm.from_state(state["norm"], self.obs_dim)
 
 
 def strip_checkpoint(src, dst) -> None:
     """A small copy of a checkpoint for acting and evaluation: no optimiser or target networks."""
-    state = torch.load(src, map_location="cpu", weights_only=False)
+    state = torch.load(src, map_location="cpu", weights_only=True)
     keep = ("version", "obs_dim", "act_dim", "hidden", "residual_deg", "actor", "critic", "norm", "config", "config_hash",
             "episodes", "metrics", "start_metrics", "trained_s", "train_config")
     torch.save({k: state[k] for k in keep if k in state}, dst)
@@ -326,29 +335,42 @@ class CheckpointError(RuntimeError):
     """A checkpoint that is missing, unreadable or made for another observation/action layout."""
 
 
+def _is(value, expected: int | float) -> bool:
+    """``value`` is the number ``expected`` (a checkpoint's entry may hold anything: a tensor, text)."""
+    return type(value) in (int, float) and value == expected
+
+
 def load_policy(path, hidden: int | None = None) -> DDPG:
-    """A DDPG agent from a checkpoint file, for acting; CheckpointError names the file."""
+    """A DDPG agent from a checkpoint file, for acting; CheckpointError names the file.
+
+    Read with ``weights_only``: a checkpoint is tensors, numbers, strings and lists, and torch
+    then refuses a pickle that would run code when read (a file from elsewhere may)."""
     from pathlib import Path
 
     path = Path(path)
     if not path.is_file():
         raise CheckpointError(f"checkpoint {path} does not exist (train one with `hycosim train`)")
     try:
-        state = torch.load(path, map_location="cpu", weights_only=False)
+        state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:
         raise CheckpointError(f"checkpoint {path} is not readable: {exc}") from None
-    if not isinstance(state, dict) or state.get("version") != CHECKPOINT_VERSION:
+    if not isinstance(state, dict) or not _is(state.get("version"), CHECKPOINT_VERSION):
         raise CheckpointError(f"checkpoint {path} is not a hycosim DDPG checkpoint of version {CHECKPOINT_VERSION}")
-    if state.get("obs_dim") != OBS_DIM or state.get("act_dim") != ACT_DIM:
-        raise CheckpointError(f"checkpoint {path} expects {state.get('obs_dim')} observations and "
-                              f"{state.get('act_dim')} actions; this policy has {OBS_DIM} and {ACT_DIM}")
-    if state.get("residual_deg", 15.0) != RESIDUAL_DEG:
-        raise CheckpointError(f"checkpoint {path} was trained for joint corrections of ±{state.get('residual_deg', 15.0)}°; "
-                              f"this policy applies ±{RESIDUAL_DEG}° (retrain with `hycosim train`)")
-    agent = DDPG(DDPGConfig(hidden=state.get("hidden", hidden or 256)))
+    if not (_is(state.get("obs_dim"), OBS_DIM) and _is(state.get("act_dim"), ACT_DIM)):
+        raise CheckpointError(f"checkpoint {path} expects {str(state.get('obs_dim'))[:20]} observations and "
+                              f"{str(state.get('act_dim'))[:20]} actions; this policy has {OBS_DIM} and {ACT_DIM}")
+    if not _is(state.get("residual_deg", 15.0), RESIDUAL_DEG):
+        raise CheckpointError(f"checkpoint {path} was trained for joint corrections of "
+                              f"±{str(state.get('residual_deg', 15.0))[:20]}°; this policy applies ±{RESIDUAL_DEG}° "
+                              "(retrain with `hycosim train`)")
+    width = state.get("hidden", hidden or 256)
+    if type(width) is not int or not 1 <= width <= 4096:
+        raise CheckpointError(f"checkpoint {path}: its networks' width {str(width)[:20]} is not a whole number "
+                              "from 1 to 4096")
+    agent = DDPG(DDPGConfig(hidden=width))
     try:
         agent.load_state(state, optimisers=False)
-    except (RuntimeError, KeyError) as exc:
+    except (RuntimeError, KeyError, TypeError, ValueError) as exc:
         raise CheckpointError(f"checkpoint {path} does not fit the networks: {exc}") from None
     agent.meta = {k: v for k, v in state.items() if k in ("metrics", "config_hash", "episodes", "trained_s")}
     return agent

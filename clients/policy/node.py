@@ -10,6 +10,7 @@ turning-point prediction, as for the rod node).
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 from typing import Any
@@ -90,7 +91,7 @@ class PolicyNode(Node):
     def set_state(self, state: bytes) -> None:
         s = unpack_state(state, {"scene", "points", "predicted_at", "q_cmd", "grip", "infer_ms", "aim"})
         q_cmd = np.asarray(s["q_cmd"], dtype=float)
-        if q_cmd.shape != (6,) or type(s["points"]) is not list or not (s["aim"] is None or type(s["aim"]) is float):
+        if q_cmd.shape != (6,) or type(s["points"]) is not list or not (s["aim"] is None or type(s["aim"]) is float and math.isfinite(s["aim"])):
             raise ValueError("not a state of the policy node")
         p = self.predictor
         p.scene.restore(s["scene"])

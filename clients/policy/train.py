@@ -190,7 +190,7 @@ def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | Non
     if last.exists():
         afresh = "remove it to start afresh, or use another output folder"
         try:
-            state = torch.load(last, map_location="cpu", weights_only=False)
+            state = torch.load(last, map_location="cpu", weights_only=True)
         except Exception as exc:  # torch raises pickle, zip and runtime errors alike for a damaged file
             raise CheckpointError(f"{last} is not a readable checkpoint ({exc}): {afresh}") from None
         if not isinstance(state, dict) or "history" not in state or "episodes" not in state:
@@ -200,7 +200,7 @@ def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | Non
                              "use another output folder")
         try:
             agent.load_state(state)
-        except (RuntimeError, KeyError, ValueError) as exc:
+        except (RuntimeError, KeyError, TypeError, ValueError) as exc:
             raise CheckpointError(f"{last} does not fit the networks ({exc}): {afresh}") from None
         history = state["history"]
         episodes_done = state["episodes"]
