@@ -826,6 +826,8 @@ def train(
     demos: Annotated[int, typer.Option(min=0, help="reference-controller episodes to learn from")] = 100,
     eval_every: Annotated[int, typer.Option(min=1, help="evaluate every N episodes")] = 20,
     eval_trials: Annotated[int, typer.Option(min=1, help="evaluation episodes per release angle")] = 10,
+    select_trials: Annotated[int, typer.Option(min=0, help="episodes per angle to choose best.pt on at the end "
+                                               "(0: the periodic evaluations choose)")] = 50,
     seed: Annotated[int, typer.Option()] = 0,
     ship: Annotated[Optional[Path], typer.Option(help="also write a small copy of the best checkpoint here")] = None,
 ) -> None:
@@ -836,7 +838,7 @@ def train(
     from clients.policy.train import TrainConfig, train as run_training
 
     config = TrainConfig(demo_episodes=demos, episodes=episodes, eval_every=eval_every, eval_trials=eval_trials,
-                         seed=seed)
+                         select_trials=select_trials, seed=seed)
     config.ddpg.seed = seed
     stats = {"returns": [], "successes": []}
     with Progress(TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
@@ -845,12 +847,15 @@ def train(
         dagger_task = progress.add_task("DAgger", total=config.dagger_rounds * config.dagger_episodes, info="")
         rollout_task = progress.add_task("critics on the cloned policy", total=None, info="")
         task = progress.add_task("DDPG", total=episodes, info="")
+        select_task = progress.add_task("choosing best.pt", total=None, info="")
 
         def report(d: dict) -> None:
             if d["phase"] == "demonstrations":
                 progress.update(demo_task, completed=d["done"])
             elif d["phase"] == "dagger":
                 progress.update(dagger_task, completed=d["done"])
+            elif d["phase"] == "select":
+                progress.update(select_task, completed=d["done"], total=d["total"])
             elif d["phase"] == "rollouts":
                 progress.update(rollout_task, completed=d["done"], total=d["total"])
             elif d["phase"] == "ddpg":
@@ -885,6 +890,9 @@ def train(
         out.print(f"critics on held-out rollouts of the cloned policy ({when.replace('_', ' ')}): mean error "
                   f"{e['mae']:.1f} on returns of mean {e['return_mean']:.1f} ({100 * e['relative']:.0f} %)",
                   highlight=False)
+    if result.get("selected_episode") is not None:
+        out.print(f"best.pt: the policy after {result['selected_episode']} DDPG episodes, chosen on "
+                  f"{config.select_trials} fresh episodes per angle among the leading evaluations", highlight=False)
     out.print(f"best mean evaluation success {100 * result['best_mean_success']:.0f} % "
               f"({100 * result['best_mean_precise']:.0f} % within 3 mm) in "
               f"{result['trained_s']:.0f} s; checkpoints and learning_curve.png in {output}", highlight=False)

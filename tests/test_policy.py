@@ -14,13 +14,14 @@ from gymnasium.utils.env_checker import check_env
 from hypothesis import given
 from hypothesis import strategies as st
 
-from clients.policy.ddpg import DDPG, CheckpointError, load_policy
+from clients.policy.ddpg import DDPG, CheckpointError, DDPGConfig, ReplayBuffer, load_policy
 from clients.policy.env import MAX_STEPS, GraspEnv, reward
 from clients.policy.features import ACT_DIM, NO_AIM, OBS_DIM, choice_action
 from clients.node import NodeContext, pack_state, unpack_state
 from clients.policy.node import PRETRAINED, PolicyNode
 from clients.policy.paper import PaperGraspEnv, joint_targets, plot_against, train_paper
-from clients.policy.train import TrainConfig, evaluate, evaluate_checkpoint, train, wilson
+from clients.policy.train import (SELECTION_SEED, TrainConfig, _episode, evaluate, evaluate_checkpoint, focus_options,
+                                  train, wilson)
 from clients.robot import kr6
 from tests.helpers import REPO, column, hycosim, read_rows, reap, run_project
 
@@ -123,7 +124,7 @@ def test_jaws_meet_the_rod_at_its_turning_point_and_reopen_after_closing_on_noth
 def short_training(tmp_path_factory):
     out = tmp_path_factory.mktemp("train")
     config = TrainConfig(demo_episodes=12, bc_steps=800, dagger_rounds=1, dagger_episodes=4, critic_warmup_steps=200,
-                         cloned_episodes=4, episodes=4, eval_every=4, eval_trials=2)
+                         cloned_episodes=4, episodes=4, eval_every=4, eval_trials=2, select_trials=2)
     result = train(out, config)
     return out, result
 
@@ -218,7 +219,7 @@ def test_checkpoint_round_trip_and_resume(short_training, tmp_path):
 
 def test_training_interrupted_after_cloning_resumes_without_cloning_again(tmp_path):
     config = TrainConfig(demo_episodes=3, bc_steps=50, dagger_rounds=1, dagger_episodes=1, critic_warmup_steps=20,
-                         cloned_episodes=1, episodes=2, eval_every=2, eval_trials=1)
+                         cloned_episodes=1, episodes=2, eval_every=2, eval_trials=1, select_trials=0)
     phases: list[str] = []
 
     def ctrl_c_in_the_first_ddpg_episode(d: dict) -> None:
@@ -234,6 +235,60 @@ def test_training_interrupted_after_cloning_resumes_without_cloning_again(tmp_pa
     result = train(tmp_path, config, lambda d: phases.append(d["phase"]))
     assert "dagger" not in phases and "pretrained" not in phases  # no second cloning
     assert phases.count("ddpg") == 2 and [e["episode"] for e in result["evals"]] == [0, 2]
+    # The cloned policy's rollouts were in the buffer before the interruption: rebuilt on resume.
+    assert phases.count("rollouts") == config.cloned_episodes and "select" not in phases
+
+
+def test_best_checkpoint_is_chosen_on_fresh_episodes_among_the_leading_evaluations(short_training):
+    out, result = short_training
+    best = torch.load(out / "best.pt", weights_only=True)
+    selection = torch.load(out / "last.pt", weights_only=True)["history"]["selection"]
+    chosen = selection["episode"]
+    assert result["selected_episode"] == chosen == best["selection"]["episode"]
+    assert set(selection["candidates"]) == {"0", "4"}  # the leading evaluations and the last: here both
+    for figures in selection["candidates"].values():
+        assert all(v["episodes"] == 2 for v in figures["per_angle"].values())
+    # The chosen one scored best on the selection's own episodes (ties go to the later).
+    scores = {int(ep): tuple(c["score"]) for ep, c in selection["candidates"].items()}
+    assert scores[chosen] == max(scores.values()) and all(scores[ep] < scores[chosen] for ep in scores if ep > chosen)
+    snapshot = torch.load(out / "snapshots" / f"episode-{chosen:05d}.pt", weights_only=True)
+    assert all(torch.equal(best["actor"][k], snapshot["actor"][k]) for k in snapshot["actor"])
+    assert best["episodes"] == chosen
+    # The selection's episodes are not those `hycosim evaluate` reports on by default.
+    assert SELECTION_SEED >= 10_000 + 1_000
+
+
+def test_n_step_returns_are_summed_with_discount_and_bootstrap_where_the_episode_did_not_end():
+    buf = ReplayBuffer(capacity=10, obs_dim=1, act_dim=1, n_step=2, gamma=0.5)
+    o = [np.array([float(i)], np.float32) for i in range(4)]
+    steps = [(o[0], [0.0], 1.0, o[1], 0.0), (o[1], [0.0], 2.0, o[2], 0.0), (o[2], [0.0], 4.0, o[3], 1.0)]
+    buf.add_episode(steps)
+    assert buf.size == 3
+    assert list(buf.rew_n[:3]) == [1.0 + 0.5 * 2.0, 2.0 + 0.5 * 4.0, 4.0]
+    assert [float(x[0]) for x in buf.nxt_n[:3]] == [2.0, 3.0, 3.0]
+    assert list(buf.done_n[:3]) == [0.0, 1.0, 1.0] and list(buf.disc_n[:3]) == [0.25, 0.25, 0.5]
+    assert list(buf.rew[:3]) == [1.0, 2.0, 4.0] and list(buf.done[:3]) == [0.0, 0.0, 1.0]  # the one-step values stay
+    # Learning with them runs, and the critics' target uses them (a loss that differs from n = 1).
+    losses = {}
+    for n in (1, 5):
+        agent = DDPG(DDPGConfig(n_step=n, batch=32))
+        big = ReplayBuffer(capacity=500, n_step=n, gamma=agent.cfg.gamma)
+        env = GraspEnv()
+        _episode(env, lambda _o: env.expert_action(), 3, big, demo=True)
+        losses[n] = agent.update(big, train_actor=False)["critic_loss"]
+    assert all(math.isfinite(v) for v in losses.values()) and losses[1] != losses[5]
+
+
+def test_focused_episodes_go_where_the_recent_ones_failed():
+    rng = np.random.default_rng(0)
+    recent = [{"angle": a, "success": a < 55} for a in np.linspace(30, 60, 60)]
+    draws = [focus_options(rng, recent, 1.0) for _ in range(400)]
+    angles = np.array([d["angle_deg"] for d in draws])
+    assert ((30 <= angles) & (angles <= 60)).all()
+    assert np.mean(angles >= 50) > 0.6  # the band with the failures, well above its third
+    assert np.mean(angles < 50) > 0.05  # the others still get their turn
+    assert all(focus_options(rng, recent, 0.0) is None for _ in range(50))
+    assert sum(focus_options(rng, recent, 0.5) is None for _ in range(400)) in range(150, 250)
 
 
 class _RunsCode:

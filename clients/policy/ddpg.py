@@ -20,7 +20,9 @@ pretrained to imitate them. The DDPG phase then fine-tunes without forgetting:
   critics; its gradient is near zero on both sides, so it is trained towards whichever
   option the critics rate higher by a margin (as for the discrete part of a parameterised
   action, Hausknecht and Stone 2016), and explored with temporally correlated noise so that
-  an exploring episode keeps a choice long enough to see where it leads.
+  an exploring episode keeps a choice long enough to see where it leads;
+* optionally (``n_step``), the critics also learn from n-step returns, as DDPGfD does; measured
+  on this task it did not help (docs/scenario.md), so it is off by default.
 """
 
 from __future__ import annotations
@@ -93,32 +95,57 @@ def mlp(inp: int, out: int, hidden: int = 256, final: nn.Module | None = None) -
 
 
 class ReplayBuffer:
-    def __init__(self, capacity: int = 300_000, obs_dim: int = OBS_DIM, act_dim: int = ACT_DIM):
+    """Transitions, each with its one-step and its n-step target inputs: the rewards of up to
+    ``n_step`` steps summed with discount, the observation they lead to, whether the episode
+    ended within them, and the discount left to bootstrap with (DDPGfD's n-step return)."""
+
+    def __init__(self, capacity: int = 300_000, obs_dim: int = OBS_DIM, act_dim: int = ACT_DIM,
+                 n_step: int = 1, gamma: float = 0.98):
         self.capacity = capacity
+        self.n_step, self.gamma = n_step, gamma
         self.obs = np.zeros((capacity, obs_dim), np.float32)
         self.act = np.zeros((capacity, act_dim), np.float32)
         self.rew = np.zeros(capacity, np.float32)
         self.nxt = np.zeros((capacity, obs_dim), np.float32)
         self.done = np.zeros(capacity, np.float32)
+        self.rew_n = np.zeros(capacity, np.float32)
+        self.nxt_n = np.zeros((capacity, obs_dim), np.float32)
+        self.done_n = np.zeros(capacity, np.float32)
+        self.disc_n = np.zeros(capacity, np.float32)
         self.demo = np.zeros(capacity, bool)
         self.size = 0
         self.pos = 0
         self.n_demo = 0
 
-    def add(self, o, a, r, o2, d, demo: bool = False) -> None:
+    def add(self, o, a, r, o2, d, demo: bool = False, n_step: tuple | None = None) -> None:
+        """One transition; ``n_step`` is (reward sum, observation, done, discount), or the
+        one-step values when not given."""
         i = self.pos
         if demo:  # demonstrations stay: they fill the start of the buffer, which is never overwritten
             i = self.n_demo
             self.n_demo += 1
             self.pos = max(self.pos, self.n_demo)
         self.obs[i], self.act[i], self.rew[i], self.nxt[i], self.done[i], self.demo[i] = o, a, r, o2, d, demo
+        self.rew_n[i], self.nxt_n[i], self.done_n[i], self.disc_n[i] = n_step or (r, o2, d, self.gamma)
         self.size = min(self.capacity, max(self.size, i + 1))
         if not demo:
             self.pos = self.pos + 1 if self.pos + 1 < self.capacity else self.n_demo
 
+    def add_episode(self, steps: list[tuple], demo: bool = False) -> None:
+        """An episode's transitions (o, a, r, o2, done) in order, each stored with the
+        return of up to ``n_step`` steps from it; near the end the sum is shorter, and a
+        truncated episode bootstraps from its last observation."""
+        g = self.gamma
+        for t, (o, a, r, o2, d) in enumerate(steps):
+            window = steps[t:t + self.n_step]
+            total = sum(g ** k * step[2] for k, step in enumerate(window))
+            last = window[-1]
+            self.add(o, a, r, o2, d, demo, (total, last[3], last[4], g ** len(window)))
+
     def sample(self, n: int, rng: np.random.Generator):
         idx = rng.integers(0, self.size, n)
-        return self.obs[idx], self.act[idx], self.rew[idx], self.nxt[idx], self.done[idx], self.demo[idx]
+        return (self.obs[idx], self.act[idx], self.rew[idx], self.nxt[idx], self.done[idx], self.demo[idx],
+                self.rew_n[idx], self.nxt_n[idx], self.done_n[idx], self.disc_n[idx])
 
 
 @dataclass
@@ -135,6 +162,8 @@ class DDPGConfig:
     choice: bool = True          # the first action number is the choice of turning point
     policy_noise: float = 0.1    # target-policy smoothing on the corrections (TD3)
     noise_clip: float = 0.2
+    n_step: int = 1              # the critics also learn from n-step returns (DDPGfD) when above 1
+    n_step_weight: float = 1.0
     policy_delay: int = 2
     alpha: float = 2.5           # TD3+BC: the weight of Q against the cloning terms
     bc_weight: float = 1.0
@@ -169,8 +198,9 @@ class DDPG:
     # --- acting ----------------------------------------------------------------------
 
     @torch.no_grad()
-    def act(self, obs: np.ndarray, explore: bool = False) -> np.ndarray:
-        a = self.actor(torch.from_numpy(self.norm(obs))[None]).numpy()[0]
+    def act(self, obs: np.ndarray, explore: bool = False, actor: nn.Module | None = None) -> np.ndarray:
+        """The action for one observation (``actor``: another network than the one learning)."""
+        a = (actor or self.actor)(torch.from_numpy(self.norm(obs))[None]).numpy()[0]
         if explore and not self.cfg.choice:
             a = a + self.rng.normal(0.0, self.cfg.noise, a.shape)
         elif explore:
@@ -193,9 +223,10 @@ class DDPG:
     # --- learning --------------------------------------------------------------------
 
     def _batch(self, buffer: ReplayBuffer):
-        o, a, r, o2, d, demo = buffer.sample(self.cfg.batch, self.rng)
+        o, a, r, o2, d, demo, rn, on, dn, gn = buffer.sample(self.cfg.batch, self.rng)
         t = lambda x: torch.from_numpy(np.asarray(x, np.float32))  # noqa: E731
-        return t(self.norm(o)), t(a), t(r)[:, None], t(self.norm(o2)), t(d)[:, None], torch.from_numpy(demo)
+        return (t(self.norm(o)), t(a), t(r)[:, None], t(self.norm(o2)), t(d)[:, None], torch.from_numpy(demo),
+                t(rn)[:, None], t(self.norm(on)), t(dn)[:, None], t(gn)[:, None])
 
     def pretrain_actor(self, obs: np.ndarray, actions: np.ndarray, steps: int) -> float:
         """Behaviour cloning on demonstrations; returns the final mean squared error."""
@@ -219,19 +250,31 @@ class DDPG:
         oa = torch.cat([o, a], 1)
         return torch.min(self.critic(oa), self.critic2(oa))
 
+    def _target_value(self, o2: torch.Tensor) -> torch.Tensor:
+        """The smaller target critic's value of the target actor's action, smoothed (TD3)."""
+        cfg = self.cfg
+        a2 = self.actor_target(o2)
+        # Smoothing on the corrections only: noise on the choice would flip it, not smooth it.
+        c = 1 if cfg.choice else 0
+        a2[:, c:] = (a2[:, c:] + (torch.randn_like(a2[:, c:]) * cfg.policy_noise).clamp(-cfg.noise_clip, cfg.noise_clip)
+                     ).clamp(-1.0, 1.0)
+        oa2 = torch.cat([o2, a2], 1)
+        return torch.min(self.critic_target(oa2), self.critic2_target(oa2))
+
     def update(self, buffer: ReplayBuffer, train_actor: bool = True) -> dict[str, float]:
         cfg = self.cfg
-        o, a, r, o2, d, demo = self._batch(buffer)
+        o, a, r, o2, d, demo, rn, on, dn, gn = self._batch(buffer)
         with torch.no_grad():
-            a2 = self.actor_target(o2)
-            # Smoothing on the corrections only: noise on the choice would flip it, not smooth it.
-            c = 1 if cfg.choice else 0
-            a2[:, c:] = (a2[:, c:] + (torch.randn_like(a2[:, c:]) * cfg.policy_noise).clamp(-cfg.noise_clip, cfg.noise_clip)
-                         ).clamp(-1.0, 1.0)
-            oa2 = torch.cat([o2, a2], 1)
-            target = r + cfg.gamma * (1 - d) * torch.min(self.critic_target(oa2), self.critic2_target(oa2))
+            target = r + cfg.gamma * (1 - d) * self._target_value(o2)
+            if cfg.n_step > 1:
+                # A collision seconds after a choice of turning point reaches that choice's
+                # value n steps at a time, not one.
+                target_n = rn + gn * (1 - dn) * self._target_value(on)
         oa = torch.cat([o, a], 1)
-        critic_loss = ((self.critic(oa) - target) ** 2).mean() + ((self.critic2(oa) - target) ** 2).mean()
+        q1, q2 = self.critic(oa), self.critic2(oa)
+        critic_loss = ((q1 - target) ** 2).mean() + ((q2 - target) ** 2).mean()
+        if cfg.n_step > 1:
+            critic_loss = critic_loss + cfg.n_step_weight * (((q1 - target_n) ** 2).mean() + ((q2 - target_n) ** 2).mean())
         self.critic_opt.zero_grad()
         critic_loss.backward()
         self.critic_opt.step()
@@ -327,7 +370,7 @@ def strip_checkpoint(src, dst) -> None:
     """A small copy of a checkpoint for acting and evaluation: no optimiser or target networks."""
     state = torch.load(src, map_location="cpu", weights_only=True)
     keep = ("version", "obs_dim", "act_dim", "hidden", "residual_deg", "actor", "critic", "norm", "config", "config_hash",
-            "episodes", "metrics", "start_metrics", "trained_s", "train_config")
+            "episodes", "metrics", "start_metrics", "trained_s", "train_config", "selection")
     torch.save({k: state[k] for k in keep if k in state}, dst)
 
 

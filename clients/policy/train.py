@@ -2,8 +2,10 @@
 
 Checkpoints (``last.pt``, ``best.pt``) hold the weights, optimiser states, normalisation
 statistics, the training config and its hash, episodes done and metrics; a run resumes
-from ``last.pt``. At the end ``learning_curve.png`` shows episode return and evaluation
-success per release angle.
+from ``last.pt``. Each evaluation also leaves a small snapshot (``snapshots/``); at the end
+the leading ones and the last are compared on fresh episodes and the best becomes
+``best.pt`` (10 evaluation episodes per angle only shortlist). ``learning_curve.png``
+shows episode return and evaluation success per release angle.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from clients.policy.env import GraspEnv
 
 EVAL_ANGLES = (30.0, 40.0, 50.0, 60.0)
 PRECISE_MM = 3.0  # the trials' target for the grasp distance error
+SELECTION_SEED = 20_000  # episodes the final choice of checkpoint is made on (evaluations use 10_000 on)
 
 
 @dataclass
@@ -36,6 +39,8 @@ class TrainConfig:
     episodes: int = 200
     eval_every: int = 20
     eval_trials: int = 10
+    focus: float = 0.0          # share of DDPG episodes released in a band of angles drawn by how often it fails
+    select_trials: int = 50     # per angle, on fresh episodes, to choose best.pt among the leading checkpoints
     seed: int = 0
     ddpg: DDPGConfig = field(default_factory=DDPGConfig)
 
@@ -129,20 +134,38 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
 
 
 def _episode(env: GraspEnv, act: Callable[[np.ndarray], np.ndarray], seed: int, buffer: ReplayBuffer | None,
-             demo: bool = False, rewards: list | None = None) -> tuple[float, bool, list]:
-    obs, _ = env.reset(seed=seed)
-    total, done, seen = 0.0, False, []
+             demo: bool = False, rewards: list | None = None, options: dict | None = None) -> tuple[float, bool, list]:
+    obs, _ = env.reset(seed=seed, options=options)
+    total, done, seen, steps = 0.0, False, [], []
     while not done:
         a = act(obs)
         nxt, r, term, trunc, info = env.step(a)
-        if buffer is not None:
-            buffer.add(obs, a, r, nxt, float(term), demo)
+        steps.append((obs, a, r, nxt, float(term)))
         seen.append((obs, a))
         if rewards is not None:
             rewards.append(r)
         total += r
         obs, done = nxt, term or trunc
+    if buffer is not None:
+        buffer.add_episode(steps, demo)
     return total, bool(info["success"]), seen
+
+
+BANDS = ((30.0, 40.0), (40.0, 50.0), (50.0, 60.0))
+
+
+def focus_options(rng: np.random.Generator, recent: list[dict], share: float) -> dict | None:
+    """Where the next DDPG episode releases the rod: with probability ``share``, in a band of
+    angles drawn by the failure rate of the recent episodes released in it (Laplace-smoothed,
+    so a band seldom seen still gets its turn); otherwise as the environment draws it."""
+    if share <= 0 or rng.random() >= share:
+        return None
+    weights = []
+    for lo, hi in BANDS:
+        outcomes = [r["success"] for r in recent if "angle" in r and lo <= r["angle"] <= hi]
+        weights.append((len(outcomes) - sum(outcomes) + 1) / (len(outcomes) + 2))
+    band = BANDS[int(rng.choice(len(BANDS), p=np.array(weights) / sum(weights)))]
+    return {"angle_deg": float(rng.uniform(*band))}
 
 
 def critic_error(agent: DDPG, seen: list, rewards: list, ends: list[int]) -> dict[str, float]:
@@ -183,7 +206,7 @@ def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | Non
     out.mkdir(parents=True, exist_ok=True)
     env = GraspEnv()
     agent = DDPG(config.ddpg)
-    buffer = ReplayBuffer()
+    buffer = ReplayBuffer(n_step=config.ddpg.n_step, gamma=config.ddpg.gamma)
     history: dict = {"returns": [], "evals": []}
     episodes_done, started = 0, time.monotonic()
     last = out / "last.pt"
@@ -216,6 +239,13 @@ def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | Non
             demo_act.append(a)
         report({"phase": "demonstrations", "done": i + 1, "total": config.demo_episodes})
     demo_obs_arr, demo_act_arr = np.array(demo_obs), np.array(demo_act)
+    if resumed and agent.anchor is not None:
+        # The cloned policy's exploring rollouts were in the buffer too: rebuilt the same way.
+        for i in range(config.cloned_episodes):
+            agent.new_episode()
+            _episode(env, lambda o: agent.act(o, explore=True, actor=agent.anchor), config.seed * 100_000 + 95_000 + i,
+                     buffer)
+            report({"phase": "rollouts", "done": i + 1, "total": config.cloned_episodes})
     if not resumed:
         agent.norm.update(demo_obs_arr)
         bc = agent.pretrain_actor(demo_obs_arr, demo_act_arr, config.bc_steps)
@@ -260,17 +290,19 @@ def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | Non
                                  trained_s=time.monotonic() - started, train_config=asdict(config))
         _save(pretrained, out / "best.pt")
         _save(pretrained, last)  # a resume goes on from here, without cloning again
+        _snapshot(pretrained, out, 0)
         report({"phase": "pretrained", "bc_mse": bc, "per_angle": ev, "mean_success": mean})
     best = max((_score(e) for e in history["evals"]), default=(-1.0, -1.0, -float("inf")))
     rng_seed = config.seed * 1_000_000 + 50_000
     for ep in range(episodes_done, config.episodes):
         agent.new_episode()
-        ret, success, seen = _episode(env, lambda o: agent.act(o, explore=True), rng_seed + ep, buffer)
+        where = focus_options(np.random.default_rng(rng_seed + ep), history["returns"][-50:], config.focus)
+        ret, success, seen = _episode(env, lambda o: agent.act(o, explore=True), rng_seed + ep, buffer, options=where)
         # The normalisation stays that of the cloned policy: moving it would move the cloned
         # actor the DDPG phase is anchored to (its inputs are the normalised observations).
         for _ in range(len(seen)):
             agent.update(buffer)
-        history["returns"].append({"episode": ep + 1, "return": ret, "success": success})
+        history["returns"].append({"episode": ep + 1, "return": ret, "success": success, "angle": env.amplitude_deg})
         report({"phase": "ddpg", "episode": ep + 1, "total": config.episodes, "return": ret, "success": success})
         if (ep + 1) % config.eval_every == 0 or ep + 1 == config.episodes:
             ev = evaluate(agent, env, config.eval_trials)
@@ -286,9 +318,49 @@ def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | Non
                 best = score
                 _save(agent.state(**extra), out / "best.pt")
             _save(agent.state(**extra), last)
+            _snapshot(agent.state(**extra), out, ep + 1)
+    if config.select_trials > 0 and history["evals"]:
+        history["selection"] = select_checkpoint(out, history["evals"], config.select_trials, report)
+        _save({**torch.load(last, map_location="cpu", weights_only=True), "history": history}, last)
     plot_learning_curve(history, out / "learning_curve.png")
+    chosen = history.get("selection", {}).get("episode")
     return {"best_mean_success": best[1], "best_mean_precise": best[0], "evals": history["evals"],
-            "trained_s": time.monotonic() - started, "critic_error": history.get("critic_error")}
+            "trained_s": time.monotonic() - started, "critic_error": history.get("critic_error"),
+            "selected_episode": chosen}
+
+
+def _snapshot(state: dict, out: Path, episode: int) -> None:
+    """The policy as it stood at an evaluation (no optimiser or targets), for the final choice."""
+    (out / "snapshots").mkdir(exist_ok=True)
+    keep = ("version", "obs_dim", "act_dim", "hidden", "residual_deg", "actor", "critic", "norm", "config",
+            "config_hash", "episodes", "metrics", "start_metrics", "trained_s", "train_config")
+    _save({k: state[k] for k in keep if k in state}, out / "snapshots" / f"episode-{episode:05d}.pt")
+
+
+def select_checkpoint(out: Path, evals: list[dict], trials: int, report: Callable[[dict], None],
+                      leaders: int = 3) -> dict:
+    """``best.pt``: of the leading checkpoints by the training's evaluations (10 episodes per
+    angle cannot tell 90 % from 98 %) and the last, the one that scores best on ``trials``
+    fresh episodes per angle, none of them the training's or the reported evaluation's."""
+    import os
+
+    ranked = sorted(evals, key=_score, reverse=True)[:leaders]
+    episodes = sorted({e["episode"] for e in ranked} | {evals[-1]["episode"]})
+    figures = {}
+    for n, episode in enumerate(episodes):
+        path = out / "snapshots" / f"episode-{episode:05d}.pt"
+        if path.exists():
+            figures[episode] = evaluate_checkpoint(path, trials, workers=os.cpu_count() or 1, seed=SELECTION_SEED)
+        report({"phase": "select", "done": n + 1, "total": len(episodes)})
+    if not figures:
+        return {}
+    scored = {ep: _score({"per_angle": f, "mean_success": float(np.mean([v["success"] for v in f.values()]))})
+              for ep, f in figures.items()}
+    chosen = max(scored, key=lambda ep: (scored[ep], ep))
+    state = torch.load(out / "snapshots" / f"episode-{chosen:05d}.pt", map_location="cpu", weights_only=True)
+    _save({**state, "selection": {"episode": chosen, "trials": trials, "per_angle": figures[chosen]}}, out / "best.pt")
+    return {"episode": chosen, "trials": trials,
+            "candidates": {str(ep): {"score": list(scored[ep]), "per_angle": figures[ep]} for ep in figures}}
 
 
 def _save(state: dict, path: Path) -> None:
