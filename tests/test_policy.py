@@ -91,6 +91,22 @@ def test_reward_terms_from_constructed_states_in_the_env():
     assert r == -1.0
 
 
+def test_reference_keeps_the_turning_point_it_goes_for_while_it_can_still_reach_it():
+    # Episodes at 60° where choosing afresh at every step switched between the two turning
+    # points on the way and the arm hit the rod: the choice kept, each is one aim and a grasp.
+    env = GraspEnv()
+    for seed in (10010, 10015, 10022):
+        env.reset(seed=seed, options={"angle_deg": 60})
+        aims, done = [], False
+        while not done:
+            _, _, term, trunc, info = env.step(env.expert_action())
+            done = term or trunc
+            if env.aim is not None and (not aims or abs(env.aim - aims[-1]) > 0.1):
+                aims.append(env.aim)
+        assert info["success"] and not info["collision"], (seed, info)
+        assert len(aims) == 1, (seed, aims)
+
+
 def test_jaws_meet_the_rod_at_its_turning_point_and_reopen_after_closing_on_nothing():
     env = GraspEnv()
     # The reference choice at each release angle: the timed reflex puts the grasp within a

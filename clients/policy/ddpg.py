@@ -158,7 +158,9 @@ class DDPGConfig:
     noise: float = 0.05          # Gaussian exploration on the joint corrections
     choice_noise: float = 0.6    # Ornstein-Uhlenbeck exploration on the turning-point choice
     choice_theta: float = 0.05   # its pull back per step: a deviation lasts ~20 steps
-    choice_margin: float = 1.0   # Q units the other turning point must gain before the actor switches
+    # Q units the other turning point must gain before the actor switches: the critics' error
+    # on held-out returns is ~25 (of ~44), and at 1.0 the phase traded 60° grasps for speed.
+    choice_margin: float = 10.0
     choice: bool = True          # the first action number is the choice of turning point
     policy_noise: float = 0.1    # target-policy smoothing on the corrections (TD3)
     noise_clip: float = 0.2

@@ -373,10 +373,12 @@ def _save(state: dict, path: Path) -> None:
 
 def _score(evaluation: dict) -> tuple[float, float, float]:
     """Best checkpoint: the most grasps within PRECISE_MM (the jaws close on the rod anywhere
-    between them, but the trials measure the offset), then the most grasps, then the closest."""
+    between them, but the trials measure the offset), then the most grasps, then the quickest
+    episodes (what the reward's discount asks for, and the trials' execution time; among
+    policies that all grasp within a millimetre the mean distance only told noise apart)."""
     per_angle = list(evaluation["per_angle"].values())
     return (float(np.mean([v.get("precise", 0.0) for v in per_angle])), evaluation["mean_success"],
-            -float(np.mean([v["distance_mm"] for v in per_angle])))
+            -float(np.mean([v["time_s"] for v in per_angle])))
 
 
 def plot_learning_curve(history: dict, path: Path) -> Path:
