@@ -21,9 +21,10 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from clients.policy.features import (ACT_DIM, OBS_DIM, Predictor, action_to_targets, aim_time, choice_action,
-                                     grip_reflex, missed, observe)
+from clients.policy.features import (ACT_DIM, OBS_DIM, Predictor, TurningPoint, action_to_targets, aim_time,
+                                     choice_action, grip_reflex, missed, observe)
 from clients.robot import kr6
+from clients.robot.controller import travel_time
 from clients.robot.scene import RobotScene, SceneParams
 from clients.rod.model import RodModel, RodParams, pendulum_period
 
@@ -146,6 +147,6 @@ class GraspEnv(gym.Env):
                 return choice_action(i)
         return choice_action(len(points) - 1 if points else 0)
 
-    def _slack(self, p) -> float:
+    def _slack(self, p: TurningPoint) -> float:
         """Seconds to spare going for turning point ``p`` at the axis speed limits."""
-        return (p.t - self.rod.time) - float(np.max(np.abs(p.q - self.out.q) / kr6.SPEEDS))
+        return (p.t - self.rod.time) - travel_time(self.out.q, p.q)
