@@ -368,12 +368,19 @@ class DDPG:
         self.norm = RunningNorm.from_state(state["norm"], self.obs_dim)
 
 
+# What acting and evaluation need of a checkpoint: no optimiser, target networks or history.
+ACTING_KEYS = ("version", "obs_dim", "act_dim", "hidden", "residual_deg", "actor", "critic", "norm", "config",
+               "config_hash", "episodes", "metrics", "start_metrics", "trained_s", "train_config", "selection")
+
+
+def acting_part(state: dict) -> dict:
+    """The entries of a checkpoint that acting and evaluation read."""
+    return {k: state[k] for k in ACTING_KEYS if k in state}
+
+
 def strip_checkpoint(src, dst) -> None:
     """A small copy of a checkpoint for acting and evaluation: no optimiser or target networks."""
-    state = torch.load(src, map_location="cpu", weights_only=True)
-    keep = ("version", "obs_dim", "act_dim", "hidden", "residual_deg", "actor", "critic", "norm", "config", "config_hash",
-            "episodes", "metrics", "start_metrics", "trained_s", "train_config", "selection")
-    torch.save({k: state[k] for k in keep if k in state}, dst)
+    torch.save(acting_part(torch.load(src, map_location="cpu", weights_only=True)), dst)
 
 
 class CheckpointError(RuntimeError):

@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 import torch
 
-from clients.policy.ddpg import DDPG, CheckpointError, DDPGConfig, ReplayBuffer
+from clients.policy.ddpg import DDPG, CheckpointError, DDPGConfig, ReplayBuffer, acting_part
 from clients.policy.env import GraspEnv
 
 EVAL_ANGLES = (30.0, 40.0, 50.0, 60.0)
@@ -332,9 +332,7 @@ def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | Non
 def _snapshot(state: dict, out: Path, episode: int) -> None:
     """The policy as it stood at an evaluation (no optimiser or targets), for the final choice."""
     (out / "snapshots").mkdir(exist_ok=True)
-    keep = ("version", "obs_dim", "act_dim", "hidden", "residual_deg", "actor", "critic", "norm", "config",
-            "config_hash", "episodes", "metrics", "start_metrics", "trained_s", "train_config")
-    _save({k: state[k] for k in keep if k in state}, out / "snapshots" / f"episode-{episode:05d}.pt")
+    _save(acting_part(state), out / "snapshots" / f"episode-{episode:05d}.pt")
 
 
 def select_checkpoint(out: Path, evals: list[dict], trials: int, report: Callable[[dict], None],
