@@ -56,6 +56,10 @@ def _peak_rss_and_argv(pid: int) -> tuple[float, list[str]] | None:
         argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
     except OSError:
         return None
+    if not any(argv):
+        # The process let go of its memory (exiting) between the two reads: its status
+        # still had VmHWM, but this reading names nobody. The previous one stands.
+        return None
     for line in status.splitlines():
         if line.startswith("VmHWM:"):
             return int(line.split()[1]) / 1024.0, [a.decode(errors="replace") for a in argv if a]
