@@ -443,3 +443,72 @@ def test_a_checkpoint_with_any_entry_changed_loads_or_is_refused_by_name(tmp_pat
         return
     action = agent.act(np.zeros(OBS_DIM, np.float32))
     assert action.shape == (ACT_DIM,) and np.all(np.abs(action) <= 1.0)
+
+
+def _valid_history() -> st.SearchStrategy:
+    share = st.floats(0.0, 1.0)
+    figures = st.fixed_dictionaries({"success": share, "precise": share, "time_s": st.floats(0.0, 3.0),
+                                     "grasp_time_s": st.none() | st.floats(0.0, 3.0)})
+    evaluation = st.fixed_dictionaries({"episode": st.integers(0, 400), "mean_success": share,
+                                        "per_angle": st.fixed_dictionaries({a: figures for a in ("30", "40", "50", "60")})})
+    episode = st.fixed_dictionaries({"episode": st.integers(1, 400), "return": st.floats(-50.0, 150.0),
+                                     "success": st.booleans(), "angle": st.floats(30.0, 60.0)})
+    return st.fixed_dictionaries({"returns": st.lists(episode, max_size=4), "evals": st.lists(evaluation, min_size=1,
+                                                                                              max_size=3)})
+
+
+def _places(doc, where=()):
+    """Every entry of a nested record, as the path of keys and indices that reaches it."""
+    items = doc.items() if isinstance(doc, dict) else enumerate(doc) if isinstance(doc, list) else ()
+    for key, value in items:
+        yield (*where, key)
+        yield from _places(value, (*where, key))
+
+
+@given(data=st.data())
+def test_a_resumed_training_history_of_any_shape_is_gone_on_from_or_refused_by_name(data, tmp_path_factory):
+    """``last.pt``'s history is a user's file: a structure-aware change anywhere in a valid one
+    (an entry replaced by junk or removed) is refused by name, or what the trainer reads of it
+    (scores, failure-focused episodes, the learning curve) works."""
+    from clients.policy.history import ResumeError, check_resumable
+    from clients.policy.train import EVAL_ANGLES, _score, plot_learning_curve
+
+    history = data.draw(_valid_history())
+    for _ in range(data.draw(st.integers(0, 2))):
+        places = list(_places(history))
+        if not places:
+            break
+        *parent_path, key = data.draw(st.sampled_from(places))
+        parent = history
+        for step in parent_path:
+            parent = parent[step]
+        if data.draw(st.booleans()):
+            parent[key] = data.draw(_junk)
+        elif isinstance(parent, dict):
+            del parent[key]
+        else:
+            parent.pop(key)
+    state = {"history": history, "episodes": data.draw(st.integers(0, 3) | _junk),
+             "trained_s": data.draw(st.floats(0.0, 100.0) | _junk)}
+    try:
+        got, episodes, trained = check_resumable(state, EVAL_ANGLES)
+    except ResumeError as exc:
+        assert str(exc).startswith("its ")
+        return
+    assert type(episodes) is int and episodes >= 0 and math.isfinite(trained) and trained >= 0
+    for evaluation in got["evals"]:
+        score = _score(evaluation)
+        assert all(math.isfinite(x) for x in score)
+    focus_options(np.random.default_rng(0), got["returns"][-50:], 1.0)
+    plot_learning_curve(got, tmp_path_factory.mktemp("curve") / "c.png")
+
+
+def test_a_training_folder_whose_history_is_malformed_is_named_before_any_episode(tmp_path):
+    config = TrainConfig(episodes=1, demo_episodes=1, select_trials=0)
+    history = {"returns": [], "evals": [{"episode": 0, "mean_success": 1.0, "per_angle": {"30": {"success": 1.0}}}]}
+    torch.save(DDPG(config.ddpg).state(config_hash=config.digest(), episodes=0, history=history), tmp_path / "last.pt")
+    phases: list[str] = []
+    with pytest.raises(CheckpointError, match=r"last.pt: its history does not hold a training record "
+                                              r"\(evals.0.per_angle.30.time_s: Field required\).*remove it"):
+        train(tmp_path, config, lambda d: phases.append(d["phase"]))
+    assert phases == [] and not (tmp_path / "best.pt").exists()

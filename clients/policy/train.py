@@ -22,6 +22,7 @@ import torch
 
 from clients.policy.ddpg import DDPG, CheckpointError, DDPGConfig, ReplayBuffer, acting_part
 from clients.policy.env import GraspEnv
+from clients.policy.history import ResumeError, check_resumable
 
 EVAL_ANGLES = (30.0, 40.0, 50.0, 60.0)
 PRECISE_MM = 3.0  # the trials' target for the grasp distance error
@@ -225,9 +226,11 @@ def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | Non
             agent.load_state(state)
         except (RuntimeError, KeyError, TypeError, ValueError) as exc:
             raise CheckpointError(f"{last} does not fit the networks ({exc}): {afresh}") from None
-        history = state["history"]
-        episodes_done = state["episodes"]
-        started -= float(state.get("trained_s") or 0.0)  # training time counts across resumes
+        try:
+            history, episodes_done, trained_s = check_resumable(state, EVAL_ANGLES)
+        except ResumeError as exc:
+            raise CheckpointError(f"{last}: {exc}: {afresh}") from None
+        started -= trained_s  # training time counts across resumes
     resumed = last.exists()
     report = progress or (lambda _: None)
     # Demonstrations (also on resume: the buffer is not checkpointed).
