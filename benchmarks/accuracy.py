@@ -20,9 +20,10 @@ Jacobi and Gauss-Seidel. The error-controlled step on a case with one sharp tran
 damped two-mass system at rest, mass 1 struck by a 20 ms pulse): fixed H = 1 ms against the
 controlled step at several tolerances, with the exact solution around the pulse as reference.
 
-Multi-rate: a 1 kHz source feeding a 100 Hz node feeding a 1 Hz node, run once with those
-rates and once all at 1 kHz: the frames exchanged (releases sent, frames the server took in)
-and whether the fast node's values are the same.
+Multi-rate: a 1 kHz source feeding a 100 Hz node feeding a 1 Hz node, run with those rates
+(releases batched, as by default, and once with one release per base point) and once all at
+1 kHz: the frames exchanged (releases sent, frames the server took in), whether the fast
+node's values are the same, and whether batching left every recorded value as it was.
 
     python benchmarks/accuracy.py [--stop 2] [--h 0.01 0.005 0.002] [--problems two three] [--mr-stop 2]
                                   [--transient-stop 5] [--tolerances 1e-4 3e-5 1e-5] [--plot PNG] [--json]
@@ -234,7 +235,7 @@ def transient(dir_: Path, fmu: Path, stop: float, tolerances: list[float], fixed
     return rows
 
 
-def rates_chain(dir_: Path, stop: float, rates: bool) -> Path:
+def rates_chain(dir_: Path, stop: float, rates: bool, batch: bool = True) -> Path:
     nodes = [{"nodeName": "fast", "UID": 1, "model": "ramp", "output": ["y", "v"]},
              {"nodeName": "mid", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
              {"nodeName": "slow", "UID": 3, "model": "gain", "input": ["u"], "output": ["y"]}]
@@ -242,8 +243,8 @@ def rates_chain(dir_: Path, stop: float, rates: bool) -> Path:
         nodes[1]["stepSize"], nodes[2]["stepSize"] = 0.01, 1.0
     doc = {"projectName": "rates", "serverIP": f"127.0.0.1:{free_port()}", "nodeNum": 3, "nodeLists": nodes,
            "linkNum": 2, "linkLists": [{"from": "fast.y", "to": "mid.u"}, {"from": "mid.y", "to": "slow.u"}],
-           "coSimulation": {"stepSize": 0.001, "stopTime": stop}}
-    path = dir_ / f"chain-{'multi' if rates else 'single'}.json"
+           "coSimulation": {"stepSize": 0.001, "stopTime": stop, "batchReleases": batch}}
+    path = dir_ / f"chain-{'multi' if rates else 'single'}-{batch}.json"
     path.write_text(json.dumps(doc))
     return path
 
@@ -251,19 +252,22 @@ def rates_chain(dir_: Path, stop: float, rates: bool) -> Path:
 def multirate(dir_: Path, stop: float) -> dict:
     out = {}
     fast = {}
-    for rates in (False, True):
-        run_dir, wall = _run(rates_chain(dir_, stop, rates), dir_ / f"runs-chain-{rates}")
+    values = {}
+    for key, rates, batch in (("single_rate", False, True), ("multi_rate", True, True),
+                              ("multi_rate_unbatched", True, False)):
+        run_dir, wall = _run(rates_chain(dir_, stop, rates, batch), dir_ / f"runs-chain-{key}")
         meta = json.loads((run_dir / "meta.json").read_text())
         c = _columns(run_dir)
-        points = len(c["t"])
-        releases = points - 1  # one release per base point before stopTime (the START aside)
-        received = sum(meta["server_waits"].values())
-        key = "multi_rate" if rates else "single_rate"
-        out[key] = {"releases": releases, "frames_in": received, "messages": releases + received,
-                    "wall_s": round(wall, 2)}
+        # Releases (STEP or STEPS; the START and STOP are the same in both) and the nodes' frames taken in.
+        releases, received = meta["messages"]["releases"], meta["messages"]["received"]
+        values[key] = (run_dir / "values.csv").read_bytes()
+        out[key] = {"points": len(c["t"]), "releases": releases, "frames_in": received,
+                    "messages": releases + received, "wall_s": round(wall, 2), "coupling": meta["coupling"]}
         fast[key] = c["fast.y"]
     out["message_ratio"] = out["multi_rate"]["messages"] / out["single_rate"]["messages"]
+    out["unbatched_message_ratio"] = out["multi_rate_unbatched"]["messages"] / out["single_rate"]["messages"]
     out["fast_node_identical"] = bool(np.array_equal(fast["multi_rate"], fast["single_rate"]))
+    out["batching_changes_nothing"] = values["multi_rate"] == values["multi_rate_unbatched"]
     return out
 
 
@@ -339,7 +343,9 @@ def main() -> None:
               + ", ".join(f"H={h}: {v:.2f}" for h, v in by_h.items()))
     s, m = rates["single_rate"], rates["multi_rate"]
     print(f"multi-rate 1 kHz / 100 Hz / 1 Hz against all at 1 kHz: {m['messages']:,} vs {s['messages']:,} frames "
-          f"(ratio {rates['message_ratio']:.2f}); fast node's values identical: {rates['fast_node_identical']}")
+          f"(ratio {rates['message_ratio']:.3f}; {rates['unbatched_message_ratio']:.2f} with one release per base "
+          f"point); fast node's values identical: {rates['fast_node_identical']}; values.csv the same batched and "
+          f"not: {rates['batching_changes_nothing']}")
     if sharp:
         print(f"sharp transient (pulse at {PULSE['pulse_at']:g} s, {args.transient_stop:g} s run), Jacobi:")
         print(f"{'step':<18}{'steps':>8}{'takes':>8}{'rejected':>10}{'wall (s)':>10}{'err x1 (m)':>13}{'err x2 (m)':>13}")

@@ -140,7 +140,7 @@ class NodeRuntime:
                 if start.kind == frames.STOP:
                     self._on_stop(start)
                     return
-                if start.kind == frames.STEP and not isinstance(self.impl, AsyncSource):
+                if start.kind in (frames.STEP, frames.STEPS) and not isinstance(self.impl, AsyncSource):
                     # The run is under way: this process is a restart. Say so at once (a node
                     # process says HELLO once per run); a server that takes checkpoints
                     # restores the run, and this node with it; one that does not stops the run.
@@ -150,7 +150,7 @@ class NodeRuntime:
                 played = isinstance(self.impl, SamplePlayer)
                 if not played and (start.kind not in (frames.START, frames.RESTORE) or (
                         start.kind == frames.RESTORE and isinstance(self.impl, AsyncSource))):
-                    at = f" (step {start.fields[0]})" if start.kind == frames.STEP else ""
+                    at = f" (step {start.fields[0]})" if start.kind in (frames.STEP, frames.STEPS) else ""
                     raise NodeRunError(f"node {self.name!r}: the run on {self.endpoint} was already under way{at} "
                                        "when it attached; a node joins before the run starts")
                 try:
@@ -191,7 +191,7 @@ class NodeRuntime:
             self._publisher.put(payload)
         except FrameTooLarge as exc:
             frame = frames.decode(payload)
-            values = frame.fields[3] if frame.kind in (frames.OUTPUTS, frames.SAMPLE) else []
+            values = frame.fields[3] if frame.kind in (frames.OUTPUTS, frames.SAMPLE, frames.BATCH) else []
             largest = frames.largest_values(zip((port for port, _ in self._out_ports), values))
             raise NodeRunError(f"node {self.name!r}: its outputs at step {self.steps} are {exc}; "
                                f"largest: {largest}") from None
@@ -251,15 +251,16 @@ class NodeRuntime:
         kind = frame.kind
         if local:
             return frame  # liveliness news from this process's own subscriber
-        if kind == frames.STEP and self._release_for is not None and self._release_for not in frame.fields[4]:
+        if kind in (frames.STEP, frames.STEPS) and self._release_for is not None and \
+                self._release_for not in frame.fields[4 if kind == frames.STEP else 3]:
             return None  # a release of other nodes (this one is not due, or not yet in Gauss-Seidel order)
-        if kind in (frames.START, frames.STEP):
+        if kind in (frames.START, frames.STEP, frames.STEPS):
             return frames.check_release(frame, self._release_for, self._in_types)
         if kind == frames.REPLAY:
             if frame.fields[0] != self.name:
                 return None
             inner = frames.decode(frame.fields[1])
-            if inner.kind not in (frames.START, frames.STEP):
+            if inner.kind not in (frames.START, frames.STEP, frames.STEPS):
                 raise frames.FrameError(f"a replay of a {frames.KIND_NAMES[inner.kind]} frame")
             return frames.Frame(frames.REPLAY, (self.name, frames.check_release(inner, self._release_for, self._in_types)))
         if kind == frames.ROLLBACK:
@@ -322,6 +323,37 @@ class NodeRuntime:
                 impl.step(t, h, inputs)
             frame = frames.encode(frames.OUTPUTS, self.spec.UID, k + 1, t + (h or 0.0),
                                   self._pack_outputs(impl.outputs()))
+            self._send(frame)
+            return frame
+        except SimulationEnded as exc:
+            self._end(k + 1, exc.t, True, f"{exc}")
+            return None
+        except NodeRunError as exc:
+            self._end(k + 1, t, False, str(exc))
+        except NodeModelError as exc:
+            self._end(k + 1, t, False, f"{exc} (step {k})")
+        except Exception as exc:
+            message = f"node {self.name!r}: its model failed at step {k} (t={t:g} s): {type(exc).__name__}: {exc}"
+            self._log.exception("model failed", step=k)
+            self._end(k + 1, t, False, message)
+        return None  # not reached: _end raises for a failure
+
+    def _step_batch(self, impl: Node, k: int, times: list[float], inputs: dict[str, Any]) -> bytes | None:
+        """A batched release (STEPS) from point k over the base points ``times``: this node's own
+        steps that start inside it, each as a STEP would have it (a base-rate node from one
+        point to the next, a slower one over its rate, cut at stopTime), all on ``inputs``;
+        send the outputs after each as one BATCH labelled k + 1 and return it. None if the
+        model ended the simulation; a failure is reported (END) and raised."""
+        outs: list[list[Any]] = []
+        t = end = times[0]
+        try:
+            for i in range(0, len(times) - 1, self._rate):
+                t = times[i]
+                end = times[i + 1] if self._rate == 1 else t + min(self._rate * self.cosim.stepSize,
+                                                                    self.cosim.stopTime - t)
+                impl.step(t, end - t, inputs)
+                outs.append(self._pack_outputs(impl.outputs()))
+            frame = frames.encode(frames.BATCH, self.spec.UID, k + 1, end, outs[-1], outs[:-1])
             self._send(frame)
             return frame
         except SimulationEnded as exc:
@@ -415,7 +447,7 @@ class NodeRuntime:
             if frame.kind == frames.REPLAY:
                 # Back after a link cut: the release we may have missed, or already answered.
                 inner = frame.fields[1]
-                if inner.kind == frames.STEP and inner.fields[0] > done:
+                if inner.kind in (frames.STEP, frames.STEPS) and inner.fields[0] > done:
                     frame = inner
                 else:
                     self._send(last_out)
@@ -442,10 +474,14 @@ class NodeRuntime:
                 impl.set_state(saved)
                 self._log.info("rollback", step=k, t=t)
                 continue
-            if frame.kind != frames.STEP:  # a START: this run has started already
+            if frame.kind == frames.STEPS:
+                k, times, new_mode, inputs, driven_nodes = frame.fields
+                t, h = times[0], None
+            elif frame.kind == frames.STEP:
+                k, t, h, new_mode, inputs, driven_nodes = frame.fields
+            else:  # a START: this run has started already
                 self.drops.drop("not a release", "a START while the run is under way", self.steps)
                 continue
-            k, t, h, new_mode, inputs, driven_nodes = frame.fields
             if checkpoint and saved_step != k:
                 saved, saved_step = impl.get_state(), k
             now_driven = self.name in driven_nodes
@@ -453,9 +489,16 @@ class NodeRuntime:
                 mode, driven = new_mode, now_driven
                 impl.set_mode(mode, driven)
                 self._log.info("mode", step=k, mode=mode, driven=driven)
+            values = dict(zip(self._in_names, inputs[self.name]))
+            if frame.kind == frames.STEPS:
+                out = self._step_batch(impl, k, times, values)
+                if out is None:
+                    return
+                self.steps, done, last_out = k + len(times) - 1, k + len(times) - 2, out
+                continue
             if self._rate > 1:  # its own step, the last one cut at stopTime as the base's is
                 h = min(self._rate * self.cosim.stepSize, self.cosim.stopTime - t)
-            out = self._step_model(impl, k, t, h, dict(zip(self._in_names, inputs[self.name])))
+            out = self._step_model(impl, k, t, h, values)
             if out is None:
                 return
             self.steps, done, last_out = k + 1, k, out
@@ -494,7 +537,7 @@ class NodeRuntime:
         stepping = isinstance(self.impl, Node)
         return frames.encode(frames.HELLO, self.spec.UID, {
             "rollback": rollback, "serialize": stepping and self.impl.can_serialize,
-            "variableStep": stepping and self.impl.can_vary_step, "restart": restart,
+            "variableStep": stepping and self.impl.can_vary_step, "restart": restart, "batches": stepping,
             "ports": self.spec.wire_ports(), "host": socket.gethostname()[:64]})
 
     def _on_stop(self, frame: frames.Frame) -> None:

@@ -230,6 +230,9 @@ class CoSimulation(_Strict):
     # An error-controlled macro step (Jacobi, every stepping node able to roll back and to take
     # steps of any length): see StepControl. None: fixed macro steps of stepSize.
     stepControl: StepControl | None = None
+    # Multi-rate runs only: release the nodes for several base steps at once where the links
+    # allow it (core.coupling.batch_span); false: one release per base point, as single-rate.
+    batchReleases: bool = True
 
     def real_time_factor(self) -> float | None:
         if self.realTime is False:

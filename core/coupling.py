@@ -9,6 +9,11 @@ Multi-rate: a node whose entry gives ``stepSize``, an integer multiple m of the 
 ``coSimulation.stepSize``, steps at every m-th base point (from startTime) over m base steps
 (the last one cut at stopTime); its outputs hold between its steps, and its inputs are those
 routed at its step's start.
+
+Batched releases: between two points where some link needs an exchange, nothing a node reads
+changes, so the server releases the nodes once for all the base steps in between (STEPS) and
+each answers once (BATCH) with its outputs after each of its own steps: the same values,
+recorded at every base point, for a fraction of the messages. See :func:`batch_span`.
 """
 
 from __future__ import annotations
@@ -16,7 +21,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from core.config import Issue, Project, Route
+from core.config import Issue, PortType, Project, Route
+from core.frames import MAX_BATCH
+
+# A BATCH carries one list of outputs per step of its node: on the low-latency transport
+# (frames of at most 32 KiB) a span keeps each node's under half of that, with numbers
+# packed in 9 bytes and a text or binary value counted as 64 (a larger one needs
+# "lowLatency": false, batched or not).
+BATCH_BYTES = 16 * 1024
 
 # How far node stepSize / base stepSize may be from an integer (relative): decimal step
 # sizes (0.1 / 0.01) are not exact in binary.
@@ -31,6 +43,8 @@ class CouplingPlan:
     rates: dict[str, int]  # node → its step as a multiple of the base step
     order: tuple[str, ...]  # Gauss-Seidel: the order nodes step in; Jacobi: the file's order
     multirate: bool = False  # some node steps slower than the base (read at every step: a plain field)
+    batch: int = 1  # base steps a release may span (1: one release per base point)
+    unbatched: str = ""  # why a multi-rate run releases every base point, if it does
 
     @property
     def period(self) -> int:
@@ -47,6 +61,8 @@ class CouplingPlan:
         slow = {n: m for n, m in self.rates.items() if m > 1}
         if slow:
             text += "; multi-rate: " + ", ".join(f"{n} every {m} base steps" for n, m in slow.items())
+            text += (f"; releases batched over {self.batch} base steps" if self.batch > 1
+                     else f"; one release per base point ({self.unbatched})" if self.unbatched else "")
         return text
 
 
@@ -105,6 +121,42 @@ def _on_cycle(node: str, reads: dict[str, set[str]], among: set[str]) -> bool:
     return False
 
 
+def batch_span(project: Project, routes: list[Route], rates: dict[str, int]) -> tuple[int, str]:
+    """How many base steps one release may span in a multi-rate Jacobi run, and why 1 if it is.
+
+    A link from a node of rate a to one of rate b needs an exchange every max(a, b) base steps:
+    the reader takes its inputs only at its own steps, and the writer's outputs change only at
+    its own. So between multiples of P, the greatest common divisor of those periods, no input
+    any node steps on changes, and a release can span P base steps, provided every rate divides
+    P or is a multiple of it (a node then takes whole steps inside a batch, or whole batches
+    inside its step). Events, iteration, error control and checkpoints act at every base
+    point; asynchronous sources change inputs at any time: with any of them, P is 1. On the
+    low-latency transport the span is also kept small enough for each node's BATCH to fit.
+    """
+    cosim = project.coSimulation
+    for on, why in ((not cosim.batchReleases, "coSimulation.batchReleases is false"),
+                    (cosim.coupling != "jacobi", "Gauss-Seidel"), (bool(project.events), "events"),
+                    (cosim.iterate is not None, "iterative coupling"),
+                    (cosim.stepControl is not None, "an error-controlled step"),
+                    (cosim.checkpointEvery is not None, "checkpoints"),
+                    (bool(project.async_nodes()), "asynchronous sources")):
+        if on:
+            return 1, why
+    periods = [max(rates[r.src_node], rates[r.dst_node]) for r in routes if r.src_node in rates and r.dst_node in rates]
+    span = math.gcd(*periods) if periods else math.lcm(*rates.values())
+    per_step = {n.nodeName: 4 + sum(64 if p.type in (PortType.STRING, PortType.BINARY) else 9 for p in n.output)
+                for n in project.stepping_nodes()}
+    budget = BATCH_BYTES if cosim.lowLatency else math.inf
+
+    def fits(p: int) -> bool:
+        return all(-(-p // rates[n]) * size <= budget for n, size in per_step.items())
+
+    # The largest span that fits a frame and that every rate divides or is a multiple of.
+    span = next((p for p in range(min(span, MAX_BATCH), 0, -1)
+                 if span % p == 0 and all(p % m == 0 or m % p == 0 for m in rates.values()) and fits(p)), 1)
+    return span, "" if span > 1 else "the links exchange at every base point"
+
+
 def plan(project: Project, routes: list[Route]) -> CouplingPlan:
     """The coupling of a valid project (:func:`coupling_issues` found nothing)."""
     cosim = project.coSimulation
@@ -113,7 +165,9 @@ def plan(project: Project, routes: list[Route]) -> CouplingPlan:
         order = tuple(cosim.order) if cosim.order else tuple(derived_order(project, routes)[0])
     else:
         order = tuple(rates)
-    return CouplingPlan(cosim.coupling, rates, order, any(m > 1 for m in rates.values()))
+    multirate = any(m > 1 for m in rates.values())
+    batch, unbatched = batch_span(project, routes, rates) if multirate else (1, "")
+    return CouplingPlan(cosim.coupling, rates, order, multirate, batch, unbatched)
 
 
 def _slower(nodes: list[str]) -> str:

@@ -30,6 +30,13 @@ Kinds and layouts (after version and kind):
 * ``RESTORE``  server → nodes: ``node, step, t, index, count, chunk, options``: set that node's
   state to a checkpoint's (chunked as STATE) and answer with a HELLO and its outputs at point
   ``step``; options as START's
+* ``STEPS``    server → nodes: ``step, times, mode, inputs, driven``: a batched multi-rate release
+  of ``len(times) - 1`` base steps from point ``step`` (``times``: the base points' times, the
+  last the batch's end). Each node due takes its own steps inside it from these inputs (the
+  links make sure they do not change inside it) and answers with one BATCH
+* ``BATCH``    node → server: ``uid, step, t, values, earlier``: the answer to a STEPS (labelled
+  as OUTPUTS are); ``values`` at the end of the node's last step, ``earlier`` the outputs at
+  the end of each of its steps before that, in order
 
 :func:`decode` checks every field's type (exactly as msgpack yields them: a bool is no
 number, a float no step), so that no receiver meets a list where it reads a name or an
@@ -61,6 +68,8 @@ END = 10
 CHECKPOINT = 11
 STATE = 12
 RESTORE = 13
+STEPS = 14
+BATCH = 15
 
 # STOP reasons of a run that ended as asked; any other reason is a failure.
 STOP_COMPLETED = "completed"
@@ -69,7 +78,7 @@ CLEAN_STOPS = (STOP_COMPLETED, STOP_STOPPED)
 
 KIND_NAMES = {OUTPUTS: "OUTPUTS", SAMPLE: "SAMPLE", START: "START", STEP: "STEP", STOP: "STOP", LIVE: "LIVE",
               HELLO: "HELLO", ROLLBACK: "ROLLBACK", REPLAY: "REPLAY", END: "END",
-              CHECKPOINT: "CHECKPOINT", STATE: "STATE", RESTORE: "RESTORE"}
+              CHECKPOINT: "CHECKPOINT", STATE: "STATE", RESTORE: "RESTORE", STEPS: "STEPS", BATCH: "BATCH"}
 
 # Steps and sequence numbers stay well inside int64 (the gateway packs them as such).
 MAX_STEP = 1 << 62
@@ -78,6 +87,10 @@ MAX_STEP = 1 << 62
 # at most MAX_CHUNKS pieces (a state of up to 192 MiB, which bounds what a forged one takes).
 STATE_CHUNK = 24 * 1024
 MAX_CHUNKS = 1 << 13
+
+# A batched release (STEPS) spans at most this many base steps: its answers carry a value list
+# per step of the fastest node, and a frame must fit the low-latency transport.
+MAX_BATCH = 100
 
 _NUM = (int, float)  # exact types: msgpack yields bool for booleans, never an int subclass
 
@@ -113,6 +126,10 @@ _SHAPES: dict[int, tuple[int, Callable[[tuple], bool]]] = {
     STATE: (5, lambda f: _int(f[0]) and _int(f[1]) and _int(f[2]) and _int(f[3]) and type(f[4]) is bytes),
     RESTORE: (7, lambda f: _str(f[0]) and _int(f[1]) and _num(f[2]) and _int(f[3]) and _int(f[4])
               and type(f[5]) is bytes and type(f[6]) is dict),
+    STEPS: (5, lambda f: type(f[0]) is int and type(f[1]) is list and type(f[2]) is str and type(f[3]) is dict
+            and type(f[4]) is list),
+    BATCH: (5, lambda f: type(f[0]) is int and type(f[1]) is int and type(f[2]) in _NUM and type(f[3]) is list
+            and type(f[4]) is list),
 }
 
 _SHORT = reprlib.Repr()
@@ -167,10 +184,11 @@ def decode(payload: bytes) -> Frame:
 
 def check_release(frame: Frame, node: str | None = None, input_types: tuple[tuple[type, ...], ...] | None = None
                   ) -> Frame:
-    """Return a START or STEP frame a node can act on; raise FrameError otherwise.
+    """Return a START, STEP or STEPS frame a node can act on; raise FrameError otherwise.
 
-    :func:`decode` has checked the field types. Here: times finite, a step size above zero, a
-    step number in range, and with ``node``, a STEP that gives that node its inputs, exactly
+    :func:`decode` has checked the field types. Here: times finite, a step size above zero
+    (STEPS: 2 to MAX_BATCH + 1 times, each a number, rising), a step number in range, and
+    with ``node``, a STEP or STEPS that gives that node its inputs, exactly
     ``len(input_types)`` of them, each of one of its port's types (``input_types``: per input,
     the Python types msgpack yields for it). A release anyone on an unsecured network may have
     written is checked before a node acts on it.
@@ -183,11 +201,17 @@ def check_release(frame: Frame, node: str | None = None, input_types: tuple[tupl
             raise FrameError(f"START frame with times that are not finite or a step size not above 0: "
                              f"{short(list(f[1:5]))}")
         return frame
-    if frame.kind != STEP:
+    if frame.kind == STEPS:
+        k, times, _, inputs, _ = f
+        if not (0 <= k < MAX_STEP and 2 <= len(times) <= MAX_BATCH + 1 and all(type(x) in _NUM for x in times)
+                and all(isfinite(x) for x in times) and all(a < b for a, b in zip(times, times[1:]))):
+            raise FrameError(f"STEPS frame with step {short(k)}, times {short(times)}: out of range or not rising")
+    elif frame.kind == STEP:
+        k, t, h, _, inputs, _ = f
+        if not (0 <= k < MAX_STEP and isfinite(t) and isfinite(h) and h > 0):
+            raise FrameError(f"STEP frame with step {short(k)}, t {short(t)}, h {short(h)}: out of range")
+    else:
         raise FrameError(f"a {KIND_NAMES.get(frame.kind, frame.kind)} frame is not a release")
-    k, t, h, _, inputs, _ = f
-    if not (0 <= k < MAX_STEP and isfinite(t) and isfinite(h) and h > 0):
-        raise FrameError(f"STEP frame with step {short(k)}, t {short(t)}, h {short(h)}: out of range")
     if node is not None:
         mine = inputs.get(node)
         if type(mine) is not list:

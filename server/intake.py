@@ -56,7 +56,7 @@ class Intake:
             frame = frames.decode(payload)
         except frames.FrameError as exc:
             raise Dropped("malformed", f"from {node}: {exc}") from None
-        if frame.kind not in (frames.OUTPUTS, frames.SAMPLE, frames.HELLO, frames.END, frames.STATE):
+        if frame.kind not in (frames.OUTPUTS, frames.SAMPLE, frames.HELLO, frames.END, frames.STATE, frames.BATCH):
             raise Dropped("wrong kind", f"from {node}: a {frames.KIND_NAMES[frame.kind]} frame is not for the server")
         uid = frame.fields[0]
         if uid != spec.UID:
@@ -82,11 +82,28 @@ class Intake:
             if spec.asynchronous:
                 raise Dropped("wrong kind", f"{node} is asynchronous: it does not end a run")
             return frame
-        values = frame.fields[3]
+        if frame.kind == frames.BATCH:
+            if spec.asynchronous:
+                raise Dropped("wrong kind", f"{node} is asynchronous: it takes no batched steps")
+            earlier = frame.fields[4]
+            if len(earlier) >= frames.MAX_BATCH:
+                raise Dropped("unknown ports", f"from {node}: {len(earlier) + 1} steps' outputs in one batch, "
+                                               f"at most {frames.MAX_BATCH}")
+            for values in earlier:
+                self._check_values(node, frame, t, values)
+            self._check_values(node, frame, t, frame.fields[3])
+            return frame
         # A played asynchronous node also sends OUTPUTS: its word that a point's samples are all sent.
         if (frame.kind == frames.SAMPLE) != spec.asynchronous and not (spec.replay and spec.asynchronous):
             raise Dropped("wrong kind", f"{node} is {'' if spec.asynchronous else 'not '}asynchronous")
+        self._check_values(node, frame, t, frame.fields[3])
+        return frame
+
+    def _check_values(self, node: str, frame: frames.Frame, t: float, values: object) -> None:
+        """Dropped unless ``values`` are one value of its port's type for each of ``node``'s outputs."""
         ports = self._types[node]
+        if type(values) is not list:
+            raise Dropped("wrong type", f"from {node}: {frames.short(values)} where its outputs' values go")
         if len(values) != len(ports):
             raise Dropped("unknown ports", f"from {node}: {len(values)} values for {len(ports)} outputs")
         for value, (port, types) in zip(values, ports):
@@ -94,7 +111,6 @@ class Intake:
                 raise Dropped("wrong type", f"{node}.{port} got {type(value).__name__} {frames.short(value)}")
             if type(value) is float and not math.isfinite(value):
                 self._note_non_finite(f"{node}.{port}", frame, t, value)
-        return frame
 
     def _note_non_finite(self, label: str, frame: frames.Frame, t: float, value: float) -> None:
         if label in self.non_finite:

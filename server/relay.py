@@ -117,6 +117,13 @@ class Relay:
         self._due_at: dict[str, int] = {n: 0 for n in self.stepping}
         self._released_at: dict[str, float] = {}
         self._early: dict[str, frames.Frame] = {}
+        # Batched releases (STEPS, multi-rate): base steps one may span once the nodes said they
+        # can take them; per node, how many of its own steps' outputs a BATCH carries before its
+        # last, and those it brought for the batch being gathered.
+        self._span = 1
+        self._batch_steps: dict[str, int] = {}
+        self._earlier: dict[str, list[list[Any]]] = {}
+        self.messages = {"releases": 0, "received": 0}  # release frames sent, node frames taken in
         self._last_release_of: dict[str, bytes] = {}  # node → the last release that named it
         self._last_point = math.inf  # the index of the point at stopTime, on a grid from startTime
         # Asynchronous nodes played from a recording take part in the barrier: each point waits
@@ -269,6 +276,7 @@ class Relay:
             self.recorder.close(status_text, reason=reason, dropped_frames=dict(self.intake.dropped),
                                 non_finite=self.intake.non_finite,
                                 reattached=dict(self.reattached), server_waits=self.inbox.waits,
+                                messages=dict(self.messages),
                                 checkpoints_taken=self.checkpoints_taken,
                                 samples_received={n: h.received for n, h in self.histories.items()})
             for decl in (status, watcher, token):
@@ -402,6 +410,7 @@ class Relay:
             self.capabilities[node] = dict(said)
             self._check_ports(node, self.capabilities[node].get("ports"))
             return None
+        self.messages["received"] += 1
         return node, frame
 
     def _grace(self) -> float:
@@ -616,6 +625,8 @@ class Relay:
             pending.discard(node)
             if node not in self.histories:  # a played source's values are its samples'
                 self.outputs[node] = frame.fields[3]
+            if frame.kind == frames.BATCH:
+                self._earlier[node] = frame.fields[4]
             arrivals[node] = time.perf_counter() - self._released_at.get(node, released_at)
 
         if self._early:
@@ -655,6 +666,16 @@ class Relay:
                 continue
             if frame.kind == frames.END:
                 self._on_end(node, step, frame)
+            batched = self._batch_steps.get(node)
+            if (frame.kind == frames.BATCH) != (batched is not None):
+                self.intake.drop("wrong kind", f"{node} sent a {frames.KIND_NAMES[frame.kind]} frame for step "
+                                 f"{frame_step}, which it was released for {'in' if batched is None else 'as'} "
+                                 "a batch", step, node)
+                continue
+            if batched is not None and len(frame.fields[4]) != batched:
+                self.intake.drop("wrong step", f"{node} sent the outputs of {len(frame.fields[4]) + 1} steps for "
+                                 f"a batch of {batched + 1} of its steps", step, node)
+                continue
             if node in pending:
                 take(node, frame)
             elif node in self.paced or node in self._early or self._due_at.get(node, step) <= step:
@@ -774,40 +795,56 @@ class Relay:
             takes += 1
 
     def _release(self, k: int, t: float, h: float, mode: str,
-                 meanwhile: Callable[[], None] | None = None) -> tuple[dict[str, float], float]:
+                 meanwhile: Callable[[], None] | None = None,
+                 times: list[float] | None = None) -> tuple[dict[str, float], float]:
         """Release step k (t → t+h) and gather the outputs due at t+h; return arrivals and wait.
 
         Jacobi: one release for every node due at k, on the inputs routed at t. Gauss-Seidel:
         one release per node in order, each on inputs routed again from its predecessors'
         outputs at t+h. ``meanwhile`` runs once the (first) release is sent, while the nodes
         integrate: work there (recording the point) is off the barrier's critical path.
+        ``times``: a batched release (STEPS) over these base points, gathered at the last.
         """
         released_at = time.perf_counter()
         if self.coupling.scheme == "gauss-seidel":
             return self._release_in_order(k, t, h, mode, released_at, meanwhile)
         due = self.coupling.due(k) if self.coupling.multirate else self.stepping
         try:
-            self._put_release(k, t, h, mode, due, released_at)
+            self._put_release(k, t, h, mode, due, released_at, times)
         finally:
             if meanwhile is not None:
                 meanwhile()  # a release that could not be sent still leaves its point recorded
-        arrivals = self._collect(k + 1, released_at)
+        arrivals = self._collect(k + 1 if times is None else k + len(times) - 1, released_at)
         return arrivals, time.perf_counter() - released_at
 
-    def _put_release(self, k: int, t: float, h: float, mode: str, nodes: list[str], released_at: float) -> None:
+    def _put_release(self, k: int, t: float, h: float, mode: str, nodes: list[str], released_at: float,
+                     times: list[float] | None = None) -> None:
         """Send the release of step k to ``nodes``: each owes its outputs, labelled k + 1, at the
-        end of its own step (k + its rate, or the last point)."""
+        end of its own step (k + its rate, or the last point). ``times``: a batched release
+        over these base points, after which a node as fast as the batch or faster owes its
+        outputs (one BATCH, with those of its steps before the last)."""
         inputs = {n: self.router.inputs[n] for n in nodes}
-        self._last_release = frames.encode(frames.STEP, k, t, h, mode, inputs, self.coordinator.driven_nodes())
+        if times is None:
+            self._last_release = frames.encode(frames.STEP, k, t, h, mode, inputs, self.coordinator.driven_nodes())
+        else:
+            self._last_release = frames.encode(frames.STEPS, k, times, mode, inputs, self.coordinator.driven_nodes())
         try:
             self.release.put(self._last_release)
         except FrameTooLarge as exc:
             raise RunError(f"the release of step {k} (t={t:g} s) is {exc}; largest inputs, by node: "
                            f"{frames.largest_values(inputs.items())}") from None
+        self.messages["releases"] += 1
+        count = 1 if times is None else len(times) - 1
+        self._earlier.clear()
         for n in nodes:
             self._label[n] = k + 1
             m = self.coupling.rates[n]
-            self._due_at[n] = k + 1 if m == 1 else min(k + m, self._last_point)
+            if times is None:
+                self._batch_steps.pop(n, None)
+                self._due_at[n] = k + 1 if m == 1 else min(k + m, self._last_point)
+            else:
+                self._batch_steps[n] = len(range(0, count, m)) - 1
+                self._due_at[n] = k + count if m <= self._span else min(k + m, self._last_point)
             self._released_at[n] = released_at
             self._last_release_of[n] = self._last_release
 
@@ -833,6 +870,26 @@ class Relay:
                       ages: dict[str, float | None], takes: int) -> None:
         self.recorder.row(k, t, mode, outputs, self.router.inputs, stepped)
         self.recorder.timing(k, t, wait, holder, lateness, arrivals, ages, takes)
+
+    def _record_inside(self, k: int, times: list[float], mode: str, at_k: dict[str, list[Any]],
+                       arrivals: dict[str, float]) -> None:
+        """The base points inside the batched release from point k, each with the outputs every
+        node had there (a node's after each of its own steps, held between) and the inputs
+        they route to: what a release per base point would have recorded. Their timing: no
+        wait of their own (the batch's is at its end), and for each node whose step ended
+        there, when the frame with its outputs came."""
+        outputs = dict(at_k)
+        holder = max(arrivals, key=arrivals.get) if arrivals else ""
+        for i in range(1, len(times) - 1):
+            came = {}
+            for node, earlier in self._earlier.items():
+                m = self.coupling.rates[node]
+                if i % m == 0:
+                    outputs[node] = earlier[i // m - 1]
+                    came[node] = arrivals[node]
+            self.router.route(mode, times[i], outputs, self.histories)
+            self.recorder.row(k + i, times[i], mode, outputs, self.router.inputs, self.coupling.due(k + i))
+            self.recorder.timing(k + i, times[i], 0.0, holder, None, came, {})
 
     def _localise(self, k: int, t: float, h: float, mode: str, watched_at_start: bool,
                   arrivals: dict[str, float], wait: float) -> tuple[float, dict[str, float], float, dict[str, Any]]:
@@ -903,11 +960,18 @@ class Relay:
         if self.sizer is not None and self._resume is not None:
             self.sizer.h = resumed_h
         self.recorder.meta["coupling"] = self.coupling.describe()
+        if self.coupling.batch > 1:
+            cannot = [n for n in self.stepping if self.capabilities.get(n, {}).get("batches") is not True]
+            self._span = 1 if cannot else self.coupling.batch
+            if cannot:  # a bridge FMU through the gateway steps one release at a time
+                self.recorder.meta["coupling"] = self.coupling.describe().replace(
+                    f"releases batched over {self.coupling.batch} base steps",
+                    f"one release per base point ({', '.join(cannot)} cannot take batched steps)")
         self._checkpoints = self._checkpoint_plan()
         end = cosim.stopTime - 1e-9 * H
         self._last_point = math.ceil((cosim.stopTime - cosim.startTime) / H - 1e-9)
         # Gauss-Seidel and iteration replace outputs before point k is recorded: it keeps its own.
-        keep_outputs = self.coupling.scheme == "gauss-seidel" or self.iteration is not None
+        keep_outputs = self.coupling.scheme == "gauss-seidel" or self.iteration is not None or self._span > 1
         takes = 1  # of the step that ended at the current point
         perf0 = time.perf_counter()
         k0 = k
@@ -965,8 +1029,13 @@ class Relay:
             if t >= end or self._stop_requested.is_set():
                 record()
                 break
+            times = None
             if self.sizer is not None:
                 next_t = min(t + self.sizer.h, cosim.stopTime)
+            elif self._span > 1:  # a batched release: its base points as single releases would have them
+                times = [min(origin + (j + i) * H, cosim.stopTime)
+                         for i in range(min(self._span, self._last_point - k) + 1)]
+                next_t = times[-1]
             else:
                 next_t = min(origin + (j + 1) * H, cosim.stopTime)
             h = h_used = next_t - t
@@ -980,7 +1049,9 @@ class Relay:
                 elif self.sizer is not None:
                     h_used, arrivals, wait, takes = self._controlled(k, t, h, mode, record)
                 else:
-                    arrivals, wait = self._release(k, t, h, mode, meanwhile=record)
+                    arrivals, wait = self._release(k, t, h, mode, meanwhile=record, times=times)
+                    if times is not None:
+                        self._record_inside(k, times, mode, at_k, arrivals)
                 localised = {}
                 if localise:
                     h_used, arrivals, wait, localised = self._localise(k, t, h, mode, watched, arrivals, wait)
@@ -1001,8 +1072,9 @@ class Relay:
             if h_used != h:  # a located event, or a controlled step taken shorter
                 origin, j, next_t = t + h_used, -1, t + h_used
             t = next_t
-            j += 1
-            k += 1
+            step_count = 1 if times is None else len(times) - 1
+            j += step_count
+            k += step_count
         elapsed = time.perf_counter() - perf0
         self.recorder.meta["steps_per_s"] = (k - k0) / elapsed if elapsed > 0 else None
         if self._on_progress is not None:

@@ -374,3 +374,34 @@ def test_a_malformed_hello_is_named_by_what_is_wrong_with_it():
     for payload, message in cases.items():
         with pytest.raises(gp.ProtocolError, match=message):
             gp.parse_hello(payload)
+
+
+def test_a_multi_rate_run_with_a_bridge_fmu_releases_every_base_point_and_says_why(tmp_path):
+    """The links would let releases span 2 base steps (the clock steps every 0.2 s), but a bridge
+    FMU behind the gateway takes one release at a time: the run releases every base point and
+    meta.json names the node; the values are a multi-rate run's."""
+    cfg = _project(tmp_path)
+    doc = json.loads(cfg.read_text())
+    doc["nodeLists"][1]["stepSize"] = 0.2
+    cfg.write_text(json.dumps(doc))
+    assert load_project(cfg).coupling.batch == 2
+    fmu = build_bridge_fmu(load_project(cfg), "tool", tmp_path / "fmus").path
+    server, clock = _start(cfg, tmp_path / "run")
+    script = f"""
+from fmpy import simulate_fmu
+simulate_fmu({str(fmu)!r}, start_time=0, stop_time=1.0, step_size=0.1, output_interval=0.1)
+"""
+    importer = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, env=env())
+    (_, err), (_, serr), _ = _finish([importer, server, clock])
+    assert importer.returncode == 0, err
+    assert server.returncode == 0, serr
+    run = tmp_path / "run"
+    m = meta(run)
+    assert m["coupling"].endswith("one release per base point (tool cannot take batched steps)")
+    assert m["messages"]["releases"] == 10
+    rows = read_rows(run)
+    clock_y, tool_u = column(rows, "clock.y"), column(rows, "tool.u")
+    assert [r["stepped"] for r in rows[:4]] == ["tool clock", "tool", "tool clock", "tool"]
+    # The clock's output holds over its 0.2 s steps; the tool reads it at every base point.
+    assert clock_y[:5] == pytest.approx([0.0, 0.0, 0.2, 0.2, 0.4]) and tool_u[:5] == clock_y[:5]

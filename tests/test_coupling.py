@@ -42,10 +42,72 @@ def test_a_multi_rate_node_steps_at_its_multiples_holds_its_outputs_and_reads_in
     assert mid[105] == pytest.approx(u_mid[100]) and slow[105] == pytest.approx(u_slow[100])
     assert u_slow[50] == pytest.approx(mid[50]) != 0.0
     m = meta(run)
-    assert m["coupling"] == "Jacobi; multi-rate: mid every 10 base steps, slow every 50 base steps"
+    assert m["coupling"] == ("Jacobi; multi-rate: mid every 10 base steps, slow every 50 base steps; "
+                             "releases batched over 10 base steps")
     report = json.loads(hycosim("report", str(run), "--json").stdout)
     assert report["node_steps"] == {"fast": 105, "mid": 11, "slow": 3}
     assert hycosim("report", str(run)).stdout.count("multi-rate: mid every 10 base steps") == 1
+
+
+def test_batched_releases_record_what_one_release_per_base_point_records_with_fewer_messages(tmp_path):
+    """A ramp at the base rate feeding a node every 5 base steps, which feeds one every 20, which
+    feeds another at the base rate; stopTime off the grid: releases span 5 base steps (the
+    ramp→mid link's period), and every recorded value, input and step mark is what a release
+    at every base point gives."""
+    runs = {}
+    for batch in (True, False):
+        cfg = write_project(tmp_path / f"b-{batch}.json", [
+            {"nodeName": "fast", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+            {"nodeName": "mid", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"], "stepSize": 0.05},
+            {"nodeName": "slow", "UID": 3, "model": "gain", "input": ["u"], "output": ["y"], "stepSize": 0.2},
+            {"nodeName": "echo", "UID": 4, "model": "gain", "input": ["u"], "output": ["y"], "parameters": {"b": 0.5}},
+        ], [{"from": "fast.y", "to": "mid.u"}, {"from": "mid.y", "to": "slow.u"}, {"from": "slow.y", "to": "echo.u"}],
+            cosim={"stepSize": 0.01, "stopTime": 0.637, "batchReleases": batch})
+        runs[batch] = run_project(cfg, tmp_path / f"runs-{batch}")
+    batched, single = runs[True], runs[False]
+    assert (batched / "values.csv").read_bytes() == (single / "values.csv").read_bytes()
+    rows = read_rows(batched)
+    assert len(rows) == 65 and len(set(column(rows, "fast.y"))) == 65 and len(set(column(rows, "echo.y"))) > 2
+    assert meta(batched)["coupling"].endswith("releases batched over 5 base steps")
+    assert meta(single)["coupling"].endswith("one release per base point (coSimulation.batchReleases is false)")
+    # 64 base steps: 13 releases, the last 4 steps long, against 64.
+    assert meta(batched)["messages"]["releases"] == 13 and meta(single)["messages"]["releases"] == 64
+    assert meta(batched)["messages"]["received"] < meta(single)["messages"]["received"] / 2
+    assert meta(batched)["dropped_frames"] == {}
+    report = json.loads(hycosim("report", str(batched), "--json").stdout)
+    assert report["node_steps"] == json.loads(hycosim("report", str(single), "--json").stdout)["node_steps"]
+
+
+@given(rates=st.lists(st.sampled_from([1, 2, 3, 4, 5, 6, 10, 20, 50, 100, 300, 1000]), min_size=1, max_size=4),
+       links=st.lists(st.tuples(st.integers(0, 3), st.integers(0, 3)), max_size=5), data=st.data())
+def test_a_release_spans_only_base_steps_in_which_no_input_any_node_steps_on_changes(rates, links, data):
+    """The span batch_span gives: every link's exchange period (the slower end's step) is a
+    multiple of it, every rate divides it or is a multiple of it, it fits MAX_BATCH, and on the
+    low-latency transport each node's BATCH (a list of outputs per step of its) fits a frame."""
+    from core.coupling import BATCH_BYTES
+    from core.frames import MAX_BATCH
+
+    names = [f"n{i}" for i in range(len(rates))]
+    links = sorted({(s % len(rates), d % len(rates)) for s, d in links})
+    widths = [data.draw(st.sampled_from([1, 1, 40, 400])) for _ in rates]
+    nodes = [{"nodeName": n, "UID": i + 1, "model": "gain", "input": [f"u{j}" for j in range(len(rates))],
+              "output": ["y", *(f"z{j}" for j in range(w - 1))], "stepSize": m * 0.001}
+             for i, (n, m, w) in enumerate(zip(names, rates, widths))]
+    cosim = {"stepSize": 0.001, "stopTime": 1.0, "batchReleases": data.draw(st.booleans()),
+             "lowLatency": data.draw(st.booleans())}
+    doc = {"nodeNum": len(nodes), "nodeLists": nodes, "linkNum": len(links), "coSimulation": cosim,
+           "linkLists": [{"from": f"n{s}.y", "to": f"n{d}.u{s}"} for s, d in links]}
+    plan = parse_project(doc, "p.json").coupling
+    span = plan.batch
+    assert 1 <= span <= MAX_BATCH
+    assert all(max(rates[s], rates[d]) % span == 0 for s, d in links)
+    assert all(span % m == 0 or m % span == 0 for m in rates)
+    if cosim["lowLatency"] and span > 1:
+        assert all(-(-span // m) * (4 + 9 * w) <= BATCH_BYTES for m, w in zip(rates, widths))
+    if not cosim["batchReleases"] or max(rates) == 1:
+        assert span == 1
+    elif not links and all(m == rates[0] for m in rates) and rates[0] <= MAX_BATCH and max(widths) == 1:
+        assert span == rates[0]  # unlinked nodes of one rate: a release per step of theirs
 
 
 def _chain(tmp_path: Path, coupling: str, order: list[str] | None = None) -> Path:

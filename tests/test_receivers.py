@@ -77,6 +77,12 @@ def test_the_servers_intake_accepts_only_frames_it_can_use(loaded, node, payload
     if frame.kind in (frames.OUTPUTS, frames.SAMPLE):
         assert 0 <= frame.fields[1] < frames.MAX_STEP and math.isfinite(frame.fields[2])
         assert [type(v) in WIRE_TYPES[p.type] for v, p in zip(frame.fields[3], spec.output)] == [True] * len(spec.output)
+    elif frame.kind == frames.BATCH:
+        assert not spec.asynchronous and 0 <= frame.fields[1] < frames.MAX_STEP and math.isfinite(frame.fields[2])
+        assert len(frame.fields[4]) < frames.MAX_BATCH
+        for values in [*frame.fields[4], frame.fields[3]]:  # each step's outputs, all of its ports, each typed
+            assert type(values) is list and len(values) == len(spec.output)
+            assert all(type(v) in WIRE_TYPES[p.type] for v, p in zip(values, spec.output))
     elif frame.kind == frames.STATE:
         _, step, index, count, chunk = frame.fields
         assert not spec.asynchronous and 0 <= step < frames.MAX_STEP and 0 <= index < count <= frames.MAX_CHUNKS
@@ -105,7 +111,7 @@ def test_the_relay_drops_what_it_cannot_use_and_never_stops_on_a_payload(relay, 
     if got is None:
         return  # dropped (counted) or a sample taken into its history
     name, frame = got
-    assert name == node and frame.kind in (frames.OUTPUTS, frames.END)
+    assert name == node and frame.kind in (frames.OUTPUTS, frames.END, frames.BATCH)
     assert type(frame.fields[1]) is int and sum(relay.intake.dropped.values()) == before
 
 
@@ -114,16 +120,16 @@ def test_the_relay_drops_what_it_cannot_use_and_never_stops_on_a_payload(relay, 
 def test_a_node_acts_only_on_releases_that_give_it_exactly_its_inputs(loaded, node, data):
     _quiet()
     runtime = NodeRuntime(loaded, node, impl=None, endpoint="tcp/127.0.0.1:1")
-    payload = data.draw(payloads | frame_arrays([frames.STEP, frames.REPLAY, frames.RESTORE, frames.CHECKPOINT])
-                        .map(frames.msgpack.packb))
+    payload = data.draw(payloads | frame_arrays([frames.STEP, frames.STEPS, frames.REPLAY, frames.RESTORE,
+                                                 frames.CHECKPOINT]).map(frames.msgpack.packb))
     try:
         frame = runtime._accept(False, payload)
     except frames.FrameError:
         return
     if frame is None:
         return  # a replay for another node, or a release of others (this node is not due)
-    assert frame.kind in (frames.START, frames.STEP, frames.REPLAY, frames.ROLLBACK, frames.STOP, frames.CHECKPOINT,
-                          frames.RESTORE)
+    assert frame.kind in (frames.START, frames.STEP, frames.STEPS, frames.REPLAY, frames.ROLLBACK, frames.STOP,
+                          frames.CHECKPOINT, frames.RESTORE)
     if frame.kind == frames.RESTORE:
         name, step, t, index, count, chunk, _ = frame.fields
         assert name == node and 0 <= step < frames.MAX_STEP and 0 <= index < count and math.isfinite(t)
@@ -132,12 +138,17 @@ def test_a_node_acts_only_on_releases_that_give_it_exactly_its_inputs(loaded, no
         assert 0 <= frame.fields[0] < frames.MAX_STEP
         return
     release = frame.fields[1] if frame.kind == frames.REPLAY else frame
-    if release.kind == frames.STEP:
-        mine = release.fields[4][node]
+    if release.kind in (frames.STEP, frames.STEPS):
+        mine = release.fields[4 if release.kind == frames.STEP else 3][node]
         spec = loaded.project.node(node)
         assert len(mine) == len(spec.input)
         assert all(type(v) in WIRE_TYPES[p.type] for v, p in zip(mine, spec.input))
+    if release.kind == frames.STEP:
         assert math.isfinite(release.fields[1]) and release.fields[2] > 0
+    if release.kind == frames.STEPS:  # base points a node can step between, in order, a bounded number
+        times = release.fields[1]
+        assert 2 <= len(times) <= frames.MAX_BATCH + 1 and all(math.isfinite(x) for x in times)
+        assert all(a < b for a, b in zip(times, times[1:]))
 
 
 def test_only_this_process_can_speak_as_the_local_key(loaded):
@@ -155,7 +166,7 @@ def _gateway_connections(loaded) -> list[_Connection]:
     return [_Connection(a, loaded.project.node(n), token=None) for n in ("g", "h")]
 
 
-@given(payloads | frame_arrays([frames.START, frames.STEP, frames.STOP]).map(frames.msgpack.packb))
+@given(payloads | frame_arrays([frames.START, frames.STEP, frames.STEPS, frames.STOP]).map(frames.msgpack.packb))
 def test_the_gateway_translates_only_releases_every_bridge_fmu_can_take(loaded, payload):
     conns = _gateway_connections(loaded)
     try:

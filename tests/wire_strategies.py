@@ -51,6 +51,12 @@ _PLAUSIBLE: dict[int, tuple[st.SearchStrategy, ...]] = {
     frames.STATE: (uids, steps, st.integers(-1, 3), st.integers(-1, 3) | st.integers(0, 2 ** 20), st.binary(max_size=24)),
     frames.RESTORE: (names, steps, times, st.integers(-1, 3), st.integers(-1, 3), st.binary(max_size=24),
                      st.fixed_dictionaries({"checkpoint": st.booleans()}) | values),
+    # Batched releases: times mostly rising and few, sometimes too many, unsorted or not finite.
+    frames.STEPS: (steps, st.lists(st.floats(0.0, 10.0), min_size=2, max_size=4).map(sorted)
+                   | st.lists(times, max_size=4) | st.just([0.0] * (frames.MAX_BATCH + 2)),
+                   names, st.dictionaries(names, port_values, max_size=3), st.lists(names, max_size=3)),
+    frames.BATCH: (uids, steps, times, port_values, st.lists(port_values | scalars, max_size=3)
+                   | st.just([[0.0]] * frames.MAX_BATCH)),
 }
 
 
@@ -62,7 +68,7 @@ def frame_arrays(kinds: list[int] | None = None) -> st.SearchStrategy:
     def draw(draw_) -> list:
         kind = draw_(st.sampled_from(chosen))
         if kind == frames.REPLAY:
-            inner = draw_(frame_arrays([frames.START, frames.STEP, frames.STOP, frames.OUTPUTS]))
+            inner = draw_(frame_arrays([frames.START, frames.STEP, frames.STEPS, frames.STOP, frames.OUTPUTS]))
             fields = [draw_(_or_any(names)), draw_(st.just(msgpack.packb(inner)) | st.binary(max_size=16))]
         else:
             fields = [draw_(_or_any(s)) for s in _PLAUSIBLE[kind]]
@@ -128,8 +134,8 @@ def examples(strategy: st.SearchStrategy, n: int) -> list:
 
 def forgeable(payload: bytes, key: str, uids: dict[str, int]) -> bool:
     """Whether a payload written on ``key`` is a frame the project's own sender could have sent:
-    on ``up/<node>`` an OUTPUTS, SAMPLE or END with that node's UID and a step in the run's range;
-    on ``down`` a STEP, STOP or a REPLAY naming a node. On a network without access control such
+    on ``up/<node>`` an OUTPUTS, SAMPLE, END or BATCH with that node's UID and a step in the run's
+    range; on ``down`` a STEP, STEPS, STOP or a REPLAY naming a node. On a network without access control such
     a frame cannot be told from the real one (that is what credentials and ACL are for), so the
     live fuzz of an open project leaves them out. Deliberately simpler than the receivers' checks."""
     try:
@@ -142,12 +148,13 @@ def forgeable(payload: bytes, key: str, uids: dict[str, int]) -> bool:
     chunks = key.split("/")
     if chunks[-2:-1] == ["up"]:
         owner = uids.get(chunks[-1])
-        return (obj[1] in (frames.OUTPUTS, frames.SAMPLE, frames.END) and len(obj) > 3 and owner is not None
+        return (obj[1] in (frames.OUTPUTS, frames.SAMPLE, frames.END, frames.BATCH) and len(obj) > 3
+                and owner is not None
                 and obj[2] == owner and type(obj[3]) is int and 0 <= obj[3] < 10 ** 7)
     if chunks[-1] == "down":
         if obj[1] == frames.REPLAY:
             return len(obj) > 2 and type(obj[2]) is str and obj[2] in uids
-        return obj[1] in (frames.STEP, frames.STOP)
+        return obj[1] in (frames.STEP, frames.STEPS, frames.STOP)
     return False
 
 
