@@ -48,16 +48,19 @@ def _page_up(url: str, timeout: float = 60) -> None:
     raise RuntimeError(f"no dashboard at {url}")
 
 
-def _watch(url: str, launched: threading.Event, until: threading.Event, seen: list) -> None:
+def _watch(url: str, launched: threading.Event, until: threading.Event, seen: list | None) -> None:
     """Launch headless chromium (before the run starts: its start-up is no part of what the run
-    pays), then open the page, plotting ``n0.y``, and keep it open until told."""
+    pays), then open the page, plotting ``n0.y``, and keep it open until told. ``seen``: also
+    report every snapshot the page receives (the latency run only: each report is a call from
+    the page through Playwright's driver into this process, the harness's work, not a browser's)."""
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=shutil.which("chromium"), args=["--no-sandbox"])
         page = browser.new_page()
-        page.expose_function("hycosimSeen", lambda step, at: seen.append((step, at)))
-        page.add_init_script("""
+        if seen is not None:
+            page.expose_function("hycosimSeen", lambda step, at: seen.append((step, at)))
+            page.add_init_script("""
             const Real = WebSocket;
             window.WebSocket = function (...a) { const ws = new Real(...a);
               ws.addEventListener('message', (ev) => { const m = JSON.parse(ev.data);
@@ -79,8 +82,7 @@ def run(cfg: Path, runs: Path, dashboard: bool, seen: list | None = None, timeou
     if dashboard:
         port = free_port()
         args += ["--dashboard", "--dashboard-port", str(port)]
-        watcher = threading.Thread(target=_watch, args=(f"http://127.0.0.1:{port}/", launched, done,
-                                                        seen if seen is not None else []))
+        watcher = threading.Thread(target=_watch, args=(f"http://127.0.0.1:{port}/", launched, done, seen))
         watcher.start()
         launched.wait(60)
     proc = start(args, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)

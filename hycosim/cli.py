@@ -481,6 +481,8 @@ def dashboard(
     user: Annotated[Optional[str], typer.Option(help="user, when the server requires credentials")] = None,
     password_file: Annotated[Optional[Path], typer.Option(help="that user's password")] = None,
     tls_ca: Annotated[Optional[Path], typer.Option(help="CA certificate (PEM) for a tls/ endpoint")] = None,
+    retry: Annotated[float, typer.Option(min=0.05, max=3600.0,
+                                         help="seconds between tries to reach a server that does not answer")] = 2.0,
 ) -> None:
     """Watch a running co-simulation, or look through a finished run, in a browser."""
     from dashboard.app import bind, serve
@@ -501,7 +503,7 @@ def dashboard(
 
         endpoint = _endpoint("endpoint", target)
         tls, password = _monitor_credentials(endpoint, tls_ca, password_file)
-        source = LiveFeed(endpoint, project, user=user, password=password, tls=tls)
+        source = LiveFeed(endpoint, project, user=user, password=password, tls=tls, retry_s=retry)
         source.start()
         closing = source.close
     try:

@@ -112,6 +112,12 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
     cmd = [sys.executable, "-P", "-m", "hycosim"]
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     mode = "a" if resume is not None else "w"
+    board = None
+    if dashboard_port is not None:
+        # Started first, and serving before the run starts: its imports (a web stack, Zenoh)
+        # would otherwise take CPU from the run's first seconds, and the page shows step 0.
+        board = _start_dashboard([*cmd, "dashboard", endpoint, "--project", loaded.name, "--port",
+                                  str(dashboard_port), "--retry", "0.25"], run_dir, env, console)
     server = subprocess.Popen([*cmd, "server", str(config_path), "--listen", endpoint, "--progress-jsonl",
                                *(["--resume", str(run_dir)] if resume is not None else ["--run-dir", str(run_dir)])],
                               stdout=subprocess.PIPE, stderr=open(run_dir / "server.stderr.txt", mode),
@@ -125,10 +131,6 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
 
     nodes: dict[str, subprocess.Popen] = {spec.nodeName: start_node(spec.nodeName, mode)
                                           for spec in loaded.project.nodeLists}
-    board = None
-    if dashboard_port is not None:
-        board = _start_dashboard([*cmd, "dashboard", endpoint, "--project", loaded.name, "--port", str(dashboard_port)],
-                                 run_dir, env, console)
     restartable = loaded.project.coSimulation.checkpointEvery is not None
     restarted: dict[str, int] = {}
     lines: queue.Queue = queue.Queue()
