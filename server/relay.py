@@ -124,6 +124,7 @@ class Relay:
         self._batch_steps: dict[str, int] = {}
         self._earlier: dict[str, list[list[Any]]] = {}
         self.messages = {"releases": 0, "received": 0}  # release frames sent, node frames taken in
+        self._point = 0  # the point the loop is at: the last recorded should a node end the run now
         self._last_release_of: dict[str, bytes] = {}  # node → the last release that named it
         self._last_point = math.inf  # the index of the point at stopTime, on a grid from startTime
         # Asynchronous nodes played from a recording take part in the barrier: each point waits
@@ -687,7 +688,8 @@ class Relay:
     def _on_end(self, node: str, step: int, frame: frames.Frame) -> None:
         """A node's END instead of its outputs for ``step``: its model ended the run, or failed."""
         _, _, t, clean, message = frame.fields
-        message, k = message[:_MESSAGE_MAX], max(step - 1, 0)
+        # The point the run's records end at (inside a batched release: its first point).
+        message, k = message[:_MESSAGE_MAX], self._point
         if not clean:
             # The node's runtime names itself and the step; a message that does not is prefixed.
             raise RunError(message if message.startswith(f"node {node!r}")
@@ -977,6 +979,7 @@ class Relay:
         k0 = k
         last_progress = 0.0
         while True:
+            self._point = k
             # A multi-rate run's checkpoints wait for a point where no node is inside its step.
             if self._checkpoints and next_checkpoint - 1e-9 * H <= t < end and k % self.coupling.period == 0:
                 self._take_checkpoint(k, t, origin, j, localised, self.sizer.h if self.sizer else H)

@@ -89,3 +89,21 @@ def test_a_discard_without_termination_is_a_failure_whose_headline_names_the_dis
     m = meta(run)
     assert m["status"] == "failed" and "discarded doStep" in m["reason"]
     assert len(read_rows(run)) == 3
+
+
+def test_an_fmu_ending_inside_a_batched_release_ends_the_records_at_the_batch_start(tmp_path, fmus):
+    """The clock steps every 5 base steps and nothing links the two, so releases span 5 base
+    steps; the FMU ends at 0.25 s, inside the first: the run ends cleanly, naming it, and the
+    records and ended_by stop at the batch's first point (its inside was never gathered)."""
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"], "stepSize": 0.5},
+        {"nodeName": "e", "UID": 2, "fmu": str(fmus["2"]), "parameters": {"end_at": 0.25}, "output": ["x"]},
+    ], cosim={"stepSize": 0.1, "stopTime": 1.0, "stepTimeout": 10.0})
+    res = hycosim("run", str(cfg), "--runs-dir", str(tmp_path / "runs"), "--no-progress")
+    assert res.returncode == 0, res.stderr
+    assert "node 'e' ended the simulation at t=0.25 s" in res.stdout
+    run = next((tmp_path / "runs").iterdir())
+    m = meta(run)
+    assert m["coupling"].endswith("releases batched over 5 base steps")
+    assert m["status"] == "completed" and m["ended_by"]["node"] == "e" and m["ended_by"]["step"] == 0
+    assert column(read_rows(run), "t") == pytest.approx([0.0])
