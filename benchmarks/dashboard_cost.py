@@ -174,7 +174,9 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         for i in range(args.repeat):
-            for kind in rates:
+            # Each round the other way round: a run after a run of the other kind meets a machine
+            # in another state (caches, the page's browser just closed), whichever kind it is.
+            for kind in (list(rates) if i % 2 == 0 else list(rates)[::-1]):
                 cfg = ring_config(args.n, args.steps, tmp / f"ring-{kind}-{i}.json")
                 rates[kind].append(run(cfg, tmp / f"runs-{kind}-{i}", kind == "dashboard"))
         cfg = ring_config(args.n, int(args.paced_s / 0.01), tmp / "paced.json")
