@@ -55,14 +55,16 @@ class CouplingPlan:
         """The nodes that start a step at base point k, in order."""
         return [n for n in self.order if k % self.rates[n] == 0]
 
-    def describe(self) -> str:
-        """One line for meta.json and the report."""
+    def describe(self, cannot_batch: list[str] | None = None) -> str:
+        """One line for meta.json and the report (``cannot_batch``: the nodes that turned out
+        unable to take batched releases, which the run then does without)."""
         text = "Gauss-Seidel, order " + " → ".join(self.order) if self.scheme == "gauss-seidel" else "Jacobi"
         slow = {n: m for n, m in self.rates.items() if m > 1}
         if slow:
             text += "; multi-rate: " + ", ".join(f"{n} every {m} base steps" for n, m in slow.items())
-            text += (f"; releases batched over {self.batch} base steps" if self.batch > 1
-                     else f"; one release per base point ({self.unbatched})" if self.unbatched else "")
+            unbatched = f"{', '.join(cannot_batch)} cannot take batched steps" if cannot_batch else self.unbatched
+            text += (f"; releases batched over {self.batch} base steps" if self.batch > 1 and not cannot_batch
+                     else f"; one release per base point ({unbatched})" if unbatched else "")
         return text
 
 
@@ -130,7 +132,8 @@ def batch_span(project: Project, routes: list[Route], rates: dict[str, int]) -> 
     any node steps on changes, and a release can span P base steps, provided every rate divides
     P or is a multiple of it (a node then takes whole steps inside a batch, or whole batches
     inside its step). Events, iteration, error control and checkpoints act at every base
-    point; asynchronous sources change inputs at any time: with any of them, P is 1. On the
+    point, real-time pacing paces every one, and asynchronous sources change inputs at any
+    time: with any of them, P is 1. On the
     low-latency transport the span is also kept small enough for each node's BATCH to fit.
     """
     cosim = project.coSimulation
@@ -139,6 +142,8 @@ def batch_span(project: Project, routes: list[Route], rates: dict[str, int]) -> 
                     (cosim.iterate is not None, "iterative coupling"),
                     (cosim.stepControl is not None, "an error-controlled step"),
                     (cosim.checkpointEvery is not None, "checkpoints"),
+                    # Paced runs step each node at its points' wall times, not in bursts.
+                    (cosim.real_time_factor() is not None, "real-time pacing"),
                     (bool(project.async_nodes()), "asynchronous sources")):
         if on:
             return 1, why

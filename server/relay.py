@@ -961,14 +961,10 @@ class Relay:
         self._retake_plan()
         if self.sizer is not None and self._resume is not None:
             self.sizer.h = resumed_h
-        self.recorder.meta["coupling"] = self.coupling.describe()
-        if self.coupling.batch > 1:
-            cannot = [n for n in self.stepping if self.capabilities.get(n, {}).get("batches") is not True]
-            self._span = 1 if cannot else self.coupling.batch
-            if cannot:  # a bridge FMU through the gateway steps one release at a time
-                self.recorder.meta["coupling"] = self.coupling.describe().replace(
-                    f"releases batched over {self.coupling.batch} base steps",
-                    f"one release per base point ({', '.join(cannot)} cannot take batched steps)")
+        # A bridge FMU through the gateway takes one release at a time (its node says no HELLO).
+        cannot = [n for n in self.stepping if self.capabilities.get(n, {}).get("batches") is not True]
+        self._span = 1 if cannot else self.coupling.batch
+        self.recorder.meta["coupling"] = self.coupling.describe(cannot if self.coupling.batch > 1 else None)
         self._checkpoints = self._checkpoint_plan()
         end = cosim.stopTime - 1e-9 * H
         self._last_point = math.ceil((cosim.stopTime - cosim.startTime) / H - 1e-9)

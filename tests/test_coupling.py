@@ -94,7 +94,7 @@ def test_a_release_spans_only_base_steps_in_which_no_input_any_node_steps_on_cha
               "output": ["y", *(f"z{j}" for j in range(w - 1))], "stepSize": m * 0.001}
              for i, (n, m, w) in enumerate(zip(names, rates, widths))]
     cosim = {"stepSize": 0.001, "stopTime": 1.0, "batchReleases": data.draw(st.booleans()),
-             "lowLatency": data.draw(st.booleans())}
+             "lowLatency": data.draw(st.booleans()), "realTime": data.draw(st.sampled_from([False, False, True, 2.0]))}
     doc = {"nodeNum": len(nodes), "nodeLists": nodes, "linkNum": len(links), "coSimulation": cosim,
            "linkLists": [{"from": f"n{s}.y", "to": f"n{d}.u{s}"} for s, d in links]}
     plan = parse_project(doc, "p.json").coupling
@@ -104,8 +104,8 @@ def test_a_release_spans_only_base_steps_in_which_no_input_any_node_steps_on_cha
     assert all(span % m == 0 or m % span == 0 for m in rates)
     if cosim["lowLatency"] and span > 1:
         assert all(-(-span // m) * (4 + 9 * w) <= BATCH_BYTES for m, w in zip(rates, widths))
-    if not cosim["batchReleases"] or max(rates) == 1:
-        assert span == 1
+    if not cosim["batchReleases"] or max(rates) == 1 or cosim["realTime"]:
+        assert span == 1  # off, single-rate, or paced: every base point released at its wall time
     elif not links and all(m == rates[0] for m in rates) and rates[0] <= MAX_BATCH and max(widths) == 1:
         assert span == rates[0]  # unlinked nodes of one rate: a release per step of theirs
 
