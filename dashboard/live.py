@@ -280,9 +280,9 @@ class LiveFeed:
         held = held or {}
         with self._lock:
             s = self.status
-            held, arrival = s.get("held", {}), s.get("arrival_ms", {})
+            shares, arrival = s.get("held", {}), s.get("arrival_ms", {})  # of the barrier, by node
             nodes = [{"name": v.name, "attached": v.attached, "lost": v.lost, "host": v.host, "restarts": v.restarts,
-                      "asynchronous": v.asynchronous, "held_share": held.get(v.name),
+                      "asynchronous": v.asynchronous, "held_share": shares.get(v.name),
                       "mean_arrival_ms": arrival.get(v.name)} for v in self.nodes.values()]
             return {"source": "live", "state": self.state, "message": self.message, "project": self.project or "",
                     "run": s.get("run", ""), "endpoint": self.endpoint, "step": s.get("step", 0), "t": s.get("t"),

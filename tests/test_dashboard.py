@@ -265,3 +265,24 @@ def test_a_series_spans_the_whole_run_in_bounded_points_and_forgets_a_step_taken
     s.add(back, -1.0)
     assert s.t[-1] == back and s.y[-1] == -1.0 and max(s.t) == back
     assert s.version > version and s.since(version, len(t))["from"] == 0  # held points changed: all anew
+
+
+def test_a_page_is_sent_only_the_points_it_lacks():
+    """The feed pushes each selected series as what the page lacks: everything the first time,
+    then only the points after those it holds (all again only when held ones changed)."""
+    feed = LiveFeed("tcp/127.0.0.1:1", "p")
+
+    def answer(first: int, last: int) -> dict:
+        points = [[k, 0.01 * k, {"a": [float(k)]}, {"a": []}] for k in range(first, last + 1)]
+        return _checked_status({"project": "p", "nodes": [{"name": "a", "uid": 1, "input": [], "output": ["y"]}],
+                                "attached": ["a"], "step": last, "t": 0.01 * last, "points": points,
+                                "window": {"steps": len(points)}})
+
+    feed.take(answer(1, 10))
+    first = feed.snapshot(["a.y"])["series"]["a.y"]
+    assert first["from"] == 0 and first["y"] == [float(k) for k in range(1, 11)]
+    held = {"a.y": (first["version"], len(first["t"]))}
+    assert feed.snapshot(["a.y"], held)["series"] == {}  # nothing new: nothing sent
+    feed.take(answer(11, 14))
+    more = feed.snapshot(["a.y"], held)["series"]["a.y"]
+    assert more["from"] == 10 and more["y"] == [11.0, 12.0, 13.0, 14.0]
