@@ -325,18 +325,23 @@ class NodeRuntime:
                                   self._pack_outputs(impl.outputs()))
             self._send(frame)
             return frame
-        except SimulationEnded as exc:
-            self._end(k + 1, exc.t, True, f"{exc}")
-            return None
-        except NodeRunError as exc:
-            self._end(k + 1, t, False, str(exc))
-        except NodeModelError as exc:
-            self._end(k + 1, t, False, f"{exc} (step {k})")
         except Exception as exc:
-            message = f"node {self.name!r}: its model failed at step {k} (t={t:g} s): {type(exc).__name__}: {exc}"
+            self._step_failed(exc, k, t)
+            return None  # the model ended the simulation (_step_failed raises for a failure)
+
+    def _step_failed(self, exc: Exception, k: int, t: float) -> None:
+        """Tell the server, in place of the outputs of the release at point k (from t), how the
+        model's step ended: a model that ended the simulation returns; a failure is raised."""
+        if isinstance(exc, SimulationEnded):
+            self._end(k + 1, exc.t, True, f"{exc}")
+        elif isinstance(exc, NodeRunError):
+            self._end(k + 1, t, False, str(exc))
+        elif isinstance(exc, NodeModelError):
+            self._end(k + 1, t, False, f"{exc} (step {k})")
+        else:
             self._log.exception("model failed", step=k)
-            self._end(k + 1, t, False, message)
-        return None  # not reached: _end raises for a failure
+            self._end(k + 1, t, False, f"node {self.name!r}: its model failed at step {k} (t={t:g} s): "
+                                       f"{type(exc).__name__}: {exc}")
 
     def _step_batch(self, impl: Node, k: int, times: list[float], inputs: dict[str, Any]) -> bytes | None:
         """A batched release (STEPS) from point k over the base points ``times``: this node's own
@@ -356,18 +361,9 @@ class NodeRuntime:
             frame = frames.encode(frames.BATCH, self.spec.UID, k + 1, end, outs[-1], outs[:-1])
             self._send(frame)
             return frame
-        except SimulationEnded as exc:
-            self._end(k + 1, exc.t, True, f"{exc}")
-            return None
-        except NodeRunError as exc:
-            self._end(k + 1, t, False, str(exc))
-        except NodeModelError as exc:
-            self._end(k + 1, t, False, f"{exc} (step {k})")
         except Exception as exc:
-            message = f"node {self.name!r}: its model failed at step {k} (t={t:g} s): {type(exc).__name__}: {exc}"
-            self._log.exception("model failed", step=k)
-            self._end(k + 1, t, False, message)
-        return None  # not reached: _end raises for a failure
+            self._step_failed(exc, k, t)
+            return None  # the model ended the simulation (_step_failed raises for a failure)
 
     def _await_restore(self, step: int) -> frames.Frame | None:
         """A restarted process (the run was at ``step`` when it attached): say HELLO, then wait

@@ -291,3 +291,62 @@ def test_checkpoints_restore_multi_rate_gauss_seidel_and_iterated_runs_to_what_t
     assert all(r["restored"] % period == 0 for r in m["recoveries"])
     if "iterate" in setting:  # the chain rod → g1 → g2 settles in three takes of each step
         assert m["iterations"]["max_takes"] == 3 and m["iterations"]["not_converged"] == 0
+
+
+def test_a_forged_batch_of_another_number_of_steps_is_dropped_and_the_run_records_the_same(tmp_path):
+    """On a project without credentials anyone may write on a node's key: a BATCH with the node's
+    UID and the batch's label but one step's outputs where the release asked for ten is dropped
+    ("wrong step"), counted, and the run records what it records unforged."""
+    import queue
+    import threading
+
+    import zenoh
+
+    from core import frames
+    from core.keys import ProjectKeys
+    from core.session import client_config
+    from tests.helpers import free_endpoint, reap, recorded_rows, spawn, wait_for
+
+    def project(name: str, endpoint: str) -> Path:
+        cfg = write_project(tmp_path / f"{name}.json", [
+            {"nodeName": "fast", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+            {"nodeName": "mid", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"], "stepSize": 0.1,
+             "parameters": {"work_s": 0.05}},
+        ], [{"from": "fast.y", "to": "mid.u"}], cosim={"stepSize": 0.01, "stopTime": 5.0}, name="forge")
+        doc = json.loads(cfg.read_text())
+        doc["serverIP"] = endpoint
+        cfg.write_text(json.dumps(doc))
+        return cfg
+
+    clean = run_project(project("clean", free_endpoint()), tmp_path / "clean")
+    endpoint, keys = free_endpoint(), ProjectKeys("forge")
+    proc = spawn("run", str(project("forged", endpoint)), "--runs-dir", str(tmp_path / "runs"), "--no-progress",
+                 "--listen", endpoint)
+    releases: queue.Queue = queue.Queue()
+    forged: list[int] = []
+    try:
+        wait_for(lambda: recorded_rows(tmp_path / "runs") > 0, 60, "the run's first rows")
+        with zenoh.open(client_config(endpoint)) as session:
+            sub = session.declare_subscriber(keys.down, lambda s: releases.put(s.payload.to_bytes()))
+
+            def forge() -> None:
+                while (payload := releases.get()) is not None:
+                    release = frames.decode(payload)
+                    if release.kind == frames.STEPS:
+                        session.put(keys.up("fast"), frames.encode(frames.BATCH, 1, release.fields[0] + 1,
+                                                                   release.fields[1][-1], [0.0, 1.0], []))
+                        forged.append(release.fields[0])
+
+            forger = threading.Thread(target=forge)
+            forger.start()
+            _, err = proc.communicate(timeout=120)
+            releases.put(None)
+            forger.join(timeout=10)
+            sub.undeclare()
+    finally:
+        reap(proc)
+    assert proc.returncode == 0, err
+    run = next((tmp_path / "runs").iterdir())
+    assert forged and meta(run)["dropped_frames"].get("wrong step", 0) >= 1
+    assert meta(run)["coupling"].endswith("releases batched over 10 base steps")
+    assert (run / "values.csv").read_bytes() == (clean / "values.csv").read_bytes()
