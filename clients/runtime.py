@@ -472,7 +472,6 @@ class NodeRuntime:
                 continue
             if frame.kind == frames.STEPS:
                 k, times, new_mode, inputs, driven_nodes = frame.fields
-                t, h = times[0], None
             elif frame.kind == frames.STEP:
                 k, t, h, new_mode, inputs, driven_nodes = frame.fields
             else:  # a START: this run has started already

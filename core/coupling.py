@@ -133,8 +133,8 @@ def batch_span(project: Project, routes: list[Route], rates: dict[str, int]) -> 
     P or is a multiple of it (a node then takes whole steps inside a batch, or whole batches
     inside its step). Events, iteration, error control and checkpoints act at every base
     point, real-time pacing paces every one, and asynchronous sources change inputs at any
-    time: with any of them, P is 1. On the
-    low-latency transport the span is also kept small enough for each node's BATCH to fit.
+    time: with any of them, P is 1. On the low-latency transport the span is also kept small
+    enough for each node's BATCH to fit a frame.
     """
     cosim = project.coSimulation
     for on, why in ((not cosim.batchReleases, "coSimulation.batchReleases is false"),

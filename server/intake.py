@@ -87,7 +87,7 @@ class Intake:
                 raise Dropped("wrong kind", f"{node} is asynchronous: it takes no batched steps")
             earlier = frame.fields[4]
             if len(earlier) >= frames.MAX_BATCH:
-                raise Dropped("unknown ports", f"from {node}: {len(earlier) + 1} steps' outputs in one batch, "
+                raise Dropped("wrong step", f"from {node}: {len(earlier) + 1} steps' outputs in one batch, "
                                                f"at most {frames.MAX_BATCH}")
             for values in earlier:
                 self._check_values(node, frame, t, values)
