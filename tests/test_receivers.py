@@ -1,7 +1,7 @@
 """Every receiver is total: property-based tests feed each one what the network may bring.
 
 In process, with hypothesis: frame decoding, the server's intake and side-message handling,
-a node's release handling, the gateway's framing and its translation of releases, and the
+its gathering of a batched release's answers, a node's release handling, the gateway's framing and its translation of releases, and the
 bounded drop log. Whatever the bytes, each returns something it can act on or drops it with
 its own exception; nothing else escapes.
 """
@@ -237,3 +237,64 @@ def test_a_logged_exception_carries_its_traceback_in_the_json_line(tmp_path):
     line = json.loads(Path(path).read_text().splitlines()[-1])
     assert line["event"] == "internal error"
     assert "Traceback (most recent call last)" in line["exception"] and "ValueError: the cause" in line["exception"]
+
+
+class _Queued:
+    """An inbox that hands the relay what was queued, then nothing (as a step timeout would)."""
+
+    def __init__(self, items: list[tuple[str, bytes]]):
+        self.items = list(items)
+
+    def recv(self, timeout: float) -> tuple[str, bytes] | None:
+        return self.items.pop(0) if self.items else None
+
+
+_UIDS = {"clock": 1, "g": 2, "h": 3}
+_OUTPUTS = {"clock": st.tuples(st.floats(), st.floats()).map(list),
+            "g": st.tuples(st.floats(), st.integers(-3, 3), st.booleans(), st.text(max_size=3),
+                           st.binary(max_size=3)).map(list),
+            "h": st.tuples(st.floats()).map(list)}
+
+
+@st.composite
+def _answers(draw) -> tuple[str, bytes]:
+    """Plausible BATCH frames for a batch released at point 20 over 10 base steps: each node's
+    UID, its outputs' types, labels and numbers of steps near the right ones."""
+    node = draw(st.sampled_from(sorted(_UIDS)))
+    earlier = draw(st.lists(_OUTPUTS[node], min_size=8, max_size=10))
+    frame = frames.encode(frames.BATCH, _UIDS[node], draw(st.sampled_from([20, 21, 22])), 0.3,
+                          draw(_OUTPUTS[node]), earlier)
+    return f"hycosim/recv/up/{node}", frame
+
+
+@given(st.lists(_answers() | st.tuples(st.sampled_from(["hycosim/recv/up/clock", "hycosim/recv/up/g"]), payloads),
+                max_size=8))
+def test_a_batched_release_is_gathered_whole_from_each_nodes_answer_whatever_else_comes(relay, before):
+    """Released at point 20 for 10 base steps, each node owes one BATCH labelled 21 with nine
+    steps before its last. Whatever comes first (junk, other labels, other numbers of steps),
+    the relay gathers point 30 with ten steps' outputs of each node, each of its ports' types,
+    or stops the run on an END (a forged one cannot be told from a node's on an open network)."""
+    from server.relay import RunError, _ModelEnded
+
+    relay._early.clear()
+    relay._earlier.clear()
+    for node in _UIDS:
+        relay._label[node], relay._due_at[node], relay._batch_steps[node] = 21, 30, 9
+    genuine = [(f"hycosim/recv/up/{node}", frames.encode(frames.BATCH, uid, 21, 0.3, *(
+        [[0.0, 1.0], [[0.0, 1.0]] * 9] if node == "clock" else
+        [[1.0, 2, True, "x", b"y"], [[1.0, 2, True, "x", b"y"]] * 9] if node == "g" else
+        [[1.0], [[1.0]] * 9]))) for node, uid in _UIDS.items()]
+    relay.inbox = _Queued([*before, *genuine])
+    try:
+        arrivals = relay._collect(30, 0.0)
+    except (RunError, _ModelEnded):
+        return
+    finally:
+        relay._batch_steps.clear()
+    assert set(arrivals) == set(_UIDS)
+    spec = relay.project
+    for node in _UIDS:
+        outputs = spec.node(node).output
+        for values in [*relay._earlier[node], relay.outputs[node]]:
+            assert len(values) == len(outputs) and all(type(v) in WIRE_TYPES[p.type] for v, p in zip(values, outputs))
+        assert len(relay._earlier[node]) == 9
