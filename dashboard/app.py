@@ -27,14 +27,17 @@ from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
+from dashboard.changes import Watchers
+
 STATIC = Path(__file__).resolve().parent / "static"
-CHECK_S = 0.02  # how often the feed looks for a newer view to push
+MIN_PUSH_S = 0.02  # the least time between two pushes to a page (a finished run's reader changes in bursts)
 HEARTBEAT_S = 1.0  # a view is pushed at least this often (the page shows it is alive)
 MAX_SELECT = 16  # ports plotted at once
 
 
 class Source(Protocol):
     version: int  # changes whenever there is more to show
+    watchers: Watchers  # notified at each change
 
     def ports(self) -> list[str]: ...
 
@@ -99,10 +102,16 @@ def make_app(source: Source) -> Starlette:
         said: list[dict[str, Any]] = []
         held: dict[str, tuple[int, int]] = {}  # port → (version, points) the page has: only what it lacks is sent
         incoming = asyncio.ensure_future(ws.receive_text())
+        changed = source.watchers.add()
+        newer = asyncio.ensure_future(changed.wait())
         shown, pushed = None, 0.0
         try:
             while True:
-                done, _ = await asyncio.wait({incoming}, timeout=CHECK_S)
+                done, _ = await asyncio.wait({incoming, newer}, return_when=asyncio.FIRST_COMPLETED,
+                                             timeout=max(0.0, pushed + HEARTBEAT_S - time.monotonic()))
+                if newer in done:
+                    changed.clear()  # a change after this sets it again; one before it shows in source.version
+                    newer = asyncio.ensure_future(changed.wait())
                 if incoming in done:
                     text = incoming.result()
                     incoming = asyncio.ensure_future(ws.receive_text())
@@ -123,7 +132,9 @@ def make_app(source: Source) -> Starlette:
                 now = time.monotonic()
                 if shown == source.version and now - pushed < HEARTBEAT_S:
                     continue
-                shown, pushed = source.version, now
+                if now - pushed < MIN_PUSH_S:
+                    await asyncio.sleep(MIN_PUSH_S - (now - pushed))
+                shown, pushed = source.version, time.monotonic()
                 body = await run_in_threadpool(source.snapshot, chosen, held)
                 for port, part in body["series"].items():
                     held[port] = (part["version"], part["from"] + len(part["t"]))
@@ -132,6 +143,8 @@ def make_app(source: Source) -> Starlette:
             pass  # the browser went: the run is not concerned
         finally:
             incoming.cancel()
+            newer.cancel()
+            source.watchers.remove(changed)
 
     return Starlette(routes=[Route("/", index), Route("/api/ports", ports), Route("/api/snapshot", snapshot),
                              WebSocketRoute("/ws", feed), Mount("/static", StaticFiles(directory=STATIC))])

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from core.run_files import RunFileError, finished_lines
+from dashboard.changes import Watchers
 from server.report import RunDirError, envelope, read_columns, read_events, read_meta, summarise
 
 
@@ -80,6 +81,7 @@ class FinishedRun:
         self._summary: dict[str, Any] | None = None
         self._summary_error = ""
         self.version = 0  # counts the pieces read so far: the page is pushed each
+        self.watchers = Watchers()  # the pages' feeds, woken at each
         # One reader, plots first: reading a million rows takes seconds, and the page is usable
         # meanwhile. It reads in a process of its own: a thread reading beside the web server's
         # would hold the interpreter and leave the page's requests waiting for seconds.
@@ -106,6 +108,7 @@ class FinishedRun:
                 self._summarise()
             with self._lock:
                 self.version += 1
+            self.watchers.notify()
 
     def _summarise(self) -> None:
         summary, problem = self._pool.submit(read_summary, self.run_dir).result()

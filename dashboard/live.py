@@ -25,6 +25,7 @@ import zenoh
 
 from core.keys import SERVER_TOKEN, ProjectKeys
 from core.session import ConnectError, client_config, open_session
+from dashboard.changes import Watchers
 from dashboard.series import ThinnedSeries
 
 POLL_S = 0.2  # how often the server is asked (the page is pushed each answer)
@@ -123,6 +124,7 @@ class LiveFeed:
         self.status: dict[str, Any] = {}  # the latest checked answer
         self._since = -1  # the last step whose point is plotted (the server sends the ones after it)
         self.version = 0  # counts the answers taken (and the state changes): the page is pushed each
+        self.watchers = Watchers()  # the pages' feeds, woken at each
         self._thread: threading.Thread | None = None
 
     # --- lifecycle ------------------------------------------------------------------
@@ -140,6 +142,7 @@ class LiveFeed:
         with self._lock:
             self.state, self.message = state, message
             self.version += 1
+        self.watchers.notify()
 
     def _run(self) -> None:
         """Connect, watch, and connect again whenever the server cannot be reached."""
@@ -232,6 +235,7 @@ class LiveFeed:
                 self.state, self.message = "waiting", "attached; waiting for the run's first step"
             self.status = status
             self.version += 1
+        self.watchers.notify()
 
     def _plot(self, node: str, ports: list[str], t: float, values: list) -> None:
         for port, value in zip(ports, values):
@@ -249,6 +253,7 @@ class LiveFeed:
             view = self.nodes.get(name)
             if view is not None:
                 view.attached = sample.kind == zenoh.SampleKind.PUT
+        self.watchers.notify()
 
     # --- what the page gets ----------------------------------------------------------
 

@@ -286,3 +286,53 @@ def test_a_page_is_sent_only_the_points_it_lacks():
     feed.take(answer(11, 14))
     more = feed.snapshot(["a.y"], held)["series"]["a.y"]
     assert more["from"] == 10 and more["y"] == [11.0, 12.0, 13.0, 14.0]
+
+
+def test_the_feed_pushes_a_page_when_the_source_changes_and_only_then():
+    """A source's change wakes each page's feed at once (no polling: a fast run's cores are the
+    run's); a source that does not change is pushed only at the heartbeat."""
+    import threading
+
+    import uvicorn
+    from websockets.sync.client import connect
+
+    from dashboard.app import HEARTBEAT_S, bind, make_app
+
+    feed = LiveFeed("tcp/127.0.0.1:1", "p")  # never started: the test hands it the answers
+
+    def answer(step: int) -> dict:
+        return _checked_status({"project": "p", "nodes": [{"name": "a", "uid": 1, "input": [], "output": ["y"]}],
+                                "attached": ["a"], "step": step, "t": 0.01 * step,
+                                "points": [[step, 0.01 * step, {"a": [float(step)]}, {"a": []}]], "window": {"steps": 1}})
+
+    feed.take(answer(1))
+    sock = bind("127.0.0.1", 0)
+    server = uvicorn.Server(uvicorn.Config(make_app(feed), log_level="warning", lifespan="off", ws="websockets-sansio"))
+    serving = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
+    serving.start()
+    try:
+        with connect(f"ws://127.0.0.1:{sock.getsockname()[1]}/ws", open_timeout=10) as ws:
+            ws.send(json.dumps({"select": ["a.y"]}))
+            assert json.loads(ws.recv(timeout=5))["step"] == 1
+            for step in range(2, 8):
+                time.sleep(0.15)
+                changed = time.monotonic()
+                feed.take(answer(step))
+                got = json.loads(ws.recv(timeout=5))
+                while got.get("step") != step:  # a heartbeat may come between
+                    got = json.loads(ws.recv(timeout=5))
+                assert time.monotonic() - changed < 0.5 * HEARTBEAT_S, "pushed at the heartbeat, not at the change"
+                assert got["series"]["a.y"]["y"][-1] == float(step)
+            quiet = time.monotonic()
+            pushes = 0
+            while time.monotonic() - quiet < 2.5 * HEARTBEAT_S:
+                try:
+                    ws.recv(timeout=0.2)
+                    pushes += 1
+                except TimeoutError:
+                    pass
+            assert 1 <= pushes <= 3  # the heartbeat alone, about once a second
+    finally:
+        server.should_exit = True
+        serving.join(timeout=10)
+    assert not serving.is_alive()

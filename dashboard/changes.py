@@ -1,0 +1,40 @@
+"""Waking the pages' feeds when a source has more to show.
+
+A source (a live run's feed, a finished run's reader) changes in threads of its own; each
+page's feed is a coroutine on the web server's event loop. The feed used to look for a newer
+view fifty times a second, which on a machine whose cores a fast run fills was fifty
+wake-ups a second per page taken from the run; now the source wakes it when it has one.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+
+
+class Watchers:
+    """The feeds waiting on one source: :meth:`add` on the event loop, :meth:`notify` from any thread."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._events: dict[asyncio.Event, asyncio.AbstractEventLoop] = {}
+
+    def add(self) -> asyncio.Event:
+        """An event set whenever the source changes (call it on the loop that awaits it)."""
+        event = asyncio.Event()
+        with self._lock:
+            self._events[event] = asyncio.get_running_loop()
+        return event
+
+    def remove(self, event: asyncio.Event) -> None:
+        with self._lock:
+            self._events.pop(event, None)
+
+    def notify(self) -> None:
+        with self._lock:
+            waiting = list(self._events.items())
+        for event, loop in waiting:
+            try:
+                loop.call_soon_threadsafe(event.set)
+            except RuntimeError:
+                pass  # its loop has closed: the server is stopping
