@@ -161,6 +161,21 @@ def latencies(seen: list, step_wall: float) -> list[float]:
     return out
 
 
+def ratio_interval(plain: list[float], board: list[float], level: float = 0.9, draws: int = 2000) -> tuple[float, float]:
+    """A bootstrap interval of the ratio of the medians, resampling whole rounds (a round's two
+    runs share the machine's state of the moment): how far a set of rounds can tell the ratio."""
+    import random
+
+    rng = random.Random(0)
+    rounds = list(zip(plain, board))
+    got = []
+    for _ in range(draws):
+        pick = [rng.choice(rounds) for _ in rounds]
+        got.append(statistics.median(b for _, b in pick) / statistics.median(p for p, _ in pick))
+    got.sort()
+    return got[int((1 - level) / 2 * draws)], got[int((1 + level) / 2 * draws) - 1]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=2)
@@ -188,8 +203,9 @@ def main() -> None:
         big = open_big(big_run(tmp / "big", args.big)) if args.big else None
     lat = sorted(latencies(seen, 0.01))
     plain, board = statistics.median(rates["plain"]), statistics.median(rates["dashboard"])
+    low, high = ratio_interval(rates["plain"], rates["dashboard"])
     result = {"n": args.n, "steps": args.steps, "steps_per_s": rates, "median_plain": plain,
-              "median_dashboard": board, "ratio": board / plain,
+              "median_dashboard": board, "ratio": board / plain, "ratio_90": [low, high],
               "latency_ms": {"steps": len(lat), "median": 1000 * statistics.median(lat) if lat else None,
                              "p95": 1000 * lat[int(0.95 * (len(lat) - 1))] if lat else None},
               "big_run": big}
@@ -198,7 +214,7 @@ def main() -> None:
         return
     print(f"ring of {args.n}, {args.steps} steps, {args.repeat} interleaved rounds (medians):")
     print(f"  plain {plain:,.0f} steps/s, with the dashboard and a page open {board:,.0f} steps/s: "
-          f"ratio {board / plain:.3f}")
+          f"ratio {board / plain:.3f} (90 % bootstrap interval over rounds {low:.3f}–{high:.3f})")
     la = result["latency_ms"]
     if lat:
         print(f"release to page, paced run of {args.paced_s:g} s ({la['steps']} steps shown): "
