@@ -1,9 +1,9 @@
 """Waking the pages' feeds when a source has more to show.
 
 A source (a live run's feed, a finished run's reader) changes in threads of its own; each
-page's feed is a coroutine on the web server's event loop. The feed used to look for a newer
-view fifty times a second, which on a machine whose cores a fast run fills was fifty
-wake-ups a second per page taken from the run; now the source wakes it when it has one.
+page's feed is a coroutine on the web server's event loop. Rather than look for a newer view
+on a timer (fifty wake-ups a second per page, on cores a fast run may fill), the feed sleeps
+until the source wakes it.
 """
 
 from __future__ import annotations
