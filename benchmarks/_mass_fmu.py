@@ -1,68 +1,106 @@
-"""One mass of the accuracy benchmark's oscillators, as a pythonfmu model (built into an FMU by
-benchmarks/accuracy.py, one FMU for every mass of every reference problem).
+"""Build the accuracy benchmark's mass FMU (benchmarks/_mass_fmu.c: one FMU for every mass of
+every reference problem, an instance per mass) for this machine: a native FMI 2.0
+co-simulation FMU that can interpolate its inputs (``canInterpolateInputs``), save and
+restore its state and serialise it.
 
-The mass m hangs on a spring k and a damper c to the wall. It is coupled to its neighbours in
-one of two ways (force–displacement coupling):
-
-* it takes a force ``F`` from outside (the neighbour computes it) and gives its displacement;
-* or it holds the coupling spring itself: it takes the neighbour's displacement ``xl`` (spring
-  ``kl``, the neighbour on its left) or ``xr`` (spring ``kr``, on its right) and gives back the
-  force that spring puts on the neighbour, ``Fl = kl·(x − xl)`` or ``Fr = kr·(x − xr)``.
-
-A spring constant of 0 leaves that coupling out. The mass may be struck by a half-sine pulse
-(the error-controlled step's sharp transient). It integrates its own ODE finely (RK4, at least
-``substeps`` per step and at most ``max_dt`` long) on inputs held over the step, so that the
-error the benchmark measures is the coupling's. Its state (registered variables) can be saved
-and restored: the coordinator rolls it back for iterative coupling and the controlled step.
+Native C rather than pythonfmu: pythonfmu's exported binary answers
+``fmi2SetRealInputDerivatives`` with "not supported", and input derivatives are what
+iterative coupling with interpolated inputs sends.
 """
 
-import math
+from __future__ import annotations
 
-from pythonfmu import Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Real
+import platform
+import shutil
+import subprocess
+import tempfile
+import zipfile
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+SOURCE = HERE / "_mass_fmu.c"
+IDENT = "Mass"
+GUID = "{8c4e3f0a-6a55-4d8e-9a4b-5d1f0c2e7a31}"
+
+PARAMETERS = [("m", 1.0), ("k", 10.0), ("c", 0.0), ("kl", 0.0), ("kr", 0.0), ("pulse_at", 0.0),
+              ("pulse_width", 1.0), ("pulse", 0.0), ("substeps", 20.0), ("max_dt", 1e-4)]
+INPUTS = ["F", "xl", "xr"]
+OUTPUTS = ["x", "v", "Fl", "Fr"]
+FEEDS = {"Fl": "xl", "Fr": "xr"}  # the outputs an input reaches at once (the spring's force)
 
 
-class Mass(Fmi2Slave):
-    description = "a mass on a spring and damper, coupled by force or by displacement"
+def model_description() -> str:
+    """The FMU's modelDescription.xml: value references in the C source's order."""
+    rows = []
+    for vr, (name, start) in enumerate(PARAMETERS):
+        rows.append(f'    <ScalarVariable name="{name}" valueReference="{vr}" causality="parameter" '
+                    f'variability="fixed" initial="exact"><Real start="{start!r}"/></ScalarVariable>')
+    base = len(PARAMETERS)
+    for i, name in enumerate(INPUTS):
+        rows.append(f'    <ScalarVariable name="{name}" valueReference="{base + i}" causality="input">'
+                    f'<Real start="0.0"/></ScalarVariable>')
+    base += len(INPUTS)
+    for i, name in enumerate(OUTPUTS):
+        # x and v are the state: set as start values (a mass displaced at t = 0).
+        initial = "exact" if name in ("x", "v") else "calculated"
+        start = '<Real start="0.0"/>' if initial == "exact" else "<Real/>"
+        rows.append(f'    <ScalarVariable name="{name}" valueReference="{base + i}" causality="output" '
+                    f'initial="{initial}">{start}</ScalarVariable>')
+    index = {name: i + 1 for i, name in enumerate([p for p, _ in PARAMETERS] + INPUTS + OUTPUTS)}
+    unknowns = []
+    for name in OUTPUTS:
+        feeds = FEEDS.get(name)
+        deps = str(index[feeds]) if feeds else ""
+        unknowns.append(f'      <Unknown index="{index[name]}" dependencies="{deps}"/>')
+    # Fl and Fr are calculated at initialisation, from the start values (all of them: no dependencies).
+    initial = "\n".join(f'      <Unknown index="{index[n]}"/>' for n in OUTPUTS if n not in ("x", "v"))
+    variables, outputs = "\n".join(rows), "\n".join(unknowns)
+    return f"""<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="2.0" modelName="Mass" guid="{GUID}" generationTool="hycosim benchmarks"
+  description="a mass on a spring and damper, coupled by force or by displacement; inputs interpolated"
+  variableNamingConvention="flat" numberOfEventIndicators="0">
+  <CoSimulation modelIdentifier="{IDENT}" canHandleVariableCommunicationStepSize="true"
+    canInterpolateInputs="true" maxOutputDerivativeOrder="0" canGetAndSetFMUstate="true"
+    canSerializeFMUstate="true"/>
+  <ModelVariables>
+{variables}
+  </ModelVariables>
+  <ModelStructure>
+    <Outputs>
+{outputs}
+    </Outputs>
+    <InitialUnknowns>
+{initial}
+    </InitialUnknowns>
+  </ModelStructure>
+</fmiModelDescription>
+"""
 
-    def __init__(self, **kwargs):
-        super().__init__(**kwargs)
-        self.m, self.k, self.c = 1.0, 10.0, 0.0
-        self.kl = self.kr = 0.0
-        self.pulse_at, self.pulse_width, self.pulse = 0.0, 1.0, 0.0
-        self.substeps, self.max_dt = 20.0, 1e-4
-        self.x, self.v = 0.0, 0.0
-        self.F = self.xl = self.xr = 0.0
-        for name in ("m", "k", "c", "kl", "kr", "pulse_at", "pulse_width", "pulse", "substeps", "max_dt"):
-            self.register_variable(Real(name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
-        for name in ("F", "xl", "xr"):
-            self.register_variable(Real(name, causality=Fmi2Causality.input))
-        # x and v are the state and outputs, set as start values (x0 and v0 of the Python nodes).
-        self.register_variable(Real("x", causality=Fmi2Causality.output, initial=Fmi2Initial.exact))
-        self.register_variable(Real("v", causality=Fmi2Causality.output, initial=Fmi2Initial.exact))
-        self.register_variable(Real("Fl", causality=Fmi2Causality.output, initial=Fmi2Initial.exact,
-                                    getter=lambda: self.kl * (self.x - self.xl)))
-        self.register_variable(Real("Fr", causality=Fmi2Causality.output, initial=Fmi2Initial.exact,
-                                    getter=lambda: self.kr * (self.x - self.xr)))
 
-    def _force(self, s, x, v):
-        kick = 0.0
-        if self.pulse and self.pulse_at <= s <= self.pulse_at + self.pulse_width:
-            kick = self.pulse * math.sin(math.pi * (s - self.pulse_at) / self.pulse_width)
-        return (-self.k * x - self.c * v + self.F + kick - self.kl * (x - self.xl) - self.kr * (x - self.xr)) / self.m
+def build(out_dir: Path) -> Path:
+    """Compile benchmarks/_mass_fmu.c and zip it with its model description into ``out_dir/Mass.fmu``."""
+    import fmpy
 
-    def do_step(self, current_time, step_size):
-        n = max(int(self.substeps), math.ceil(step_size / self.max_dt))
-        dt = step_size / n
-        x, v = self.x, self.v
-        for i in range(n):
-            s = current_time + i * dt
-            a1 = self._force(s, x, v)
-            x2, v2 = x + 0.5 * dt * v, v + 0.5 * dt * a1
-            a2 = self._force(s + 0.5 * dt, x2, v2)
-            x3, v3 = x + 0.5 * dt * v2, v + 0.5 * dt * a2
-            a3 = self._force(s + 0.5 * dt, x3, v3)
-            x4, v4 = x + dt * v3, v + dt * a3
-            a4 = self._force(s + dt, x4, v4)
-            x, v = x + dt / 6 * (v + 2 * v2 + 2 * v3 + v4), v + dt / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
-        self.x, self.v = x, v
-        return True
+    if platform.system() != "Linux":
+        raise RuntimeError("the benchmark's mass FMU is built for linux64 only")
+    cc = shutil.which("gcc") or shutil.which("cc")
+    if cc is None:
+        raise RuntimeError("building the mass FMU needs a C compiler (gcc or cc) on PATH")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    headers = Path(fmpy.__file__).parent / "c-code"
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        binary = root / "binaries" / "linux64" / f"{IDENT}.so"
+        binary.parent.mkdir(parents=True)
+        res = subprocess.run([cc, "-shared", "-fPIC", "-O2", "-std=c99", "-Wall", "-Wextra", "-Werror",
+                              f"-I{headers}", "-o", str(binary), str(SOURCE), "-lm"],
+                             capture_output=True, text=True)
+        if res.returncode:
+            raise RuntimeError(f"compiling {SOURCE.name} failed:\n{res.stderr.strip()}")
+        (root / "modelDescription.xml").write_text(model_description())
+        path = out_dir / f"{IDENT}.fmu"
+        with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zf:
+            for f in sorted(root.rglob("*")):
+                if f.is_file():
+                    zf.write(f, f.relative_to(root).as_posix())
+    return path

@@ -1,8 +1,9 @@
 """Accuracy and cost of the master algorithms, against the monolithic solution.
 
-The reference problems, each split across FMUs the benchmark builds (benchmarks/_mass_fmu.py,
-packaged with pythonfmu: one FMU, an instance per mass, each in its own node process; every
-mass integrates its own ODE finely, so that the error is the coupling's):
+The reference problems, each split across FMUs the benchmark builds (benchmarks/_mass_fmu.c,
+a native FMI 2 FMU that can interpolate its inputs: one FMU, an instance per mass, each in its
+own node process; every mass integrates its own ODE finely, so that the error is the
+coupling's):
 
 * the two-mass oscillator coupled through a spring (force–displacement coupling: mass 1 gives
   its displacement, mass 2 holds the coupling spring and gives back the force it puts on mass 1;
@@ -16,7 +17,11 @@ per run: the global error (max |x − x_ref| of the first and second mass over t
 energy drift |E(T) − E(0)| / E(0), macro steps, takes (every iteration counted) and wall time.
 
 Iterative coupling (Jacobi, each step taken again until its inputs stop changing) beside
-Jacobi and Gauss-Seidel. The error-controlled step on a case with one sharp transient (the
+Jacobi and Gauss-Seidel: with the inputs held at the step's end value (``iterative``), and
+following polynomials of degree 1 to 3 over the step (``interpolated-n``: FMI input
+derivatives). Beside them the whole system as one model integrated by RK4 at H (the
+monolithic solution's order of accuracy), and each scheme's observed order between
+consecutive H. The error-controlled step on a case with one sharp transient (the
 damped two-mass system at rest, mass 1 struck by a 20 ms pulse): fixed H = 1 ms against the
 controlled step at several tolerances, with the exact solution around the pulse as reference.
 
@@ -54,10 +59,10 @@ X10 = 0.1
 
 
 def build_mass_fmu(dir_: Path) -> Path:
-    """The mass FMU (benchmarks/_mass_fmu.py through pythonfmu), with its state saved and restored."""
-    from fmu_bridge.model_fmu import build_model_fmu
+    """The mass FMU (benchmarks/_mass_fmu.c, compiled): its state saved and restored, its inputs interpolated."""
+    import _mass_fmu
 
-    return build_model_fmu(HERE / "_mass_fmu.py", dir_ / "fmu", can_get_and_set_state=True)
+    return _mass_fmu.build(dir_ / "fmu")
 
 
 def _run(cfg: Path, runs: Path, timeout: float = 600) -> tuple[Path, float]:
@@ -80,7 +85,9 @@ def _columns(run_dir: Path) -> dict[str, np.ndarray]:
 # the masses that take a force go first (on the force at the step's start), then the one holding
 # the springs, on their new displacements.
 SCHEMES = {"jacobi": {"coupling": "jacobi"}, "gauss-seidel": {"coupling": "gauss-seidel"},
-           "iterative": {"coupling": "jacobi", "iterate": {"tolerance": 1e-9, "maxIterations": 30}}}
+           "iterative": {"coupling": "jacobi", "iterate": {"tolerance": 1e-9, "maxIterations": 30}},
+           **{f"interpolated-{n}": {"coupling": "jacobi", "iterate": {"tolerance": 1e-10, "maxIterations": 30,
+                                                                      "interpolate": n}} for n in (1, 2, 3)}}
 ORDER = {"two": ["m1", "m2"], "three": ["m1", "m3", "m2"]}
 
 
@@ -174,6 +181,41 @@ def pulse_reference(t: np.ndarray, c: float, at: float, width: float, peak: floa
         out[inside, j] = np.interp(t[inside], at + dt * np.arange(n + 1), grid[:, j])
     after = t > at + width
     out[after] = _free(a, grid[-1], t[after] - at - width)
+    return out
+
+
+def monolithic_rk4(h: float, stop: float, problem: str = "two") -> dict:
+    """The whole system as one model, integrated by RK4 at the macro step h (one RK4 step a macro
+    step, as a monolithic tool would): the order of accuracy iterative coupling is set against."""
+    a = _system(problem)
+    y = np.zeros(len(a))
+    y[0] = X10
+    n = int(round(stop / h))
+    t = h * np.arange(n + 1)
+    path = [y]
+    for _ in range(n):
+        k1 = a @ y
+        k2 = a @ (y + h / 2 * k1)
+        k3 = a @ (y + h / 2 * k2)
+        k4 = a @ (y + h * k3)
+        y = y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        path.append(y)
+    path, ref = np.array(path), reference(t, problem)
+    return {"problem": problem, "H": h, "macro_steps": n, "error_x1": float(np.max(np.abs(path[:, 0] - ref[:, 0]))),
+            "error_x2": float(np.max(np.abs(path[:, 2] - ref[:, 2])))}
+
+
+def observed_orders(rows: list[dict], key: str = "coupling") -> dict[str, dict[str, list[float]]]:
+    """Per problem and coupling, log(e1 / e2) / log(H1 / H2) of x1's error between consecutive H."""
+    out: dict[str, dict[str, list[float]]] = {}
+    for r in rows:
+        out.setdefault(r["problem"], {}).setdefault(r.get(key, "monolithic RK4"), [])
+    for problem, by in out.items():
+        for scheme in by:
+            mine = sorted((r for r in rows if r["problem"] == problem and r.get(key, "monolithic RK4") == scheme),
+                          key=lambda r: -r["H"])
+            by[scheme] = [round(math.log(a["error_x1"] / b["error_x1"]) / math.log(a["H"] / b["H"]), 2)
+                          for a, b in zip(mine, mine[1:])]
     return out
 
 
@@ -271,36 +313,49 @@ def multirate(dir_: Path, stop: float) -> dict:
     return out
 
 
-def plot(rows: list[dict], sharp: list[dict], out: Path) -> Path:
-    """Global error and energy drift against macro steps taken (every take counted), one line per
-    coupling and problem; the sharp transient's fixed and controlled steps beside them."""
+def plot(rows: list[dict], sharp: list[dict], out: Path, monolithic: list[dict] | None = None) -> Path:
+    """Global error and energy drift against steps taken (every take counted): a colour per
+    coupling, solid for two masses and dashed for three, the monolithic RK4 at H in black;
+    the sharp transient's fixed and controlled steps beside them."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
     from matplotlib.ticker import NullFormatter
 
-    fig, axes = plt.subplots(1, 3 if sharp else 2, figsize=(15 if sharp else 10, 4.5))
+    fig, axes = plt.subplots(1, 3 if sharp else 2, figsize=(15 if sharp else 10, 5.2))
+    colours = {scheme: f"C{i}" for i, scheme in enumerate(SCHEMES)}
+    styles = {"two": "-o", "three": "--s"}
     for problem in dict.fromkeys(r["problem"] for r in rows):
         for scheme in SCHEMES:
             mine = sorted((r for r in rows if r["problem"] == problem and r["coupling"] == scheme),
                           key=lambda r: r["takes"])
-            style = "-o" if problem == "two" else "--s"
-            label = f"{scheme}, {problem} masses"
-            axes[0].loglog([r["takes"] for r in mine], [r["error_x1"] for r in mine], style, label=label)
-            axes[1].loglog([r["takes"] for r in mine], [r["energy_drift"] for r in mine], style, label=label)
+            for ax, key in ((axes[0], "error_x1"), (axes[1], "energy_drift")):
+                ax.loglog([r["takes"] for r in mine], [r[key] for r in mine], styles[problem], color=colours[scheme],
+                          markersize=4)
+    for problem in dict.fromkeys(r["problem"] for r in monolithic or []):
+        mine = sorted((r for r in monolithic if r["problem"] == problem), key=lambda r: r["macro_steps"])
+        axes[0].loglog([r["macro_steps"] for r in mine], [r["error_x1"] for r in mine], styles[problem], color="k",
+                       markersize=4)
     axes[0].set(xlabel="steps taken (every take counted)", ylabel="global error in x1 (m)")
     axes[1].set(xlabel="steps taken (every take counted)", ylabel="energy drift |E(T) − E(0)| / E(0)")
     if sharp:
         for r in sharp:
             axes[2].loglog(r["takes"], r["error_x1"], "o", label=r["step"])
         axes[2].set(xlabel="steps taken (every take counted)", ylabel="global error in x1 (m)", title="sharp transient, Jacobi")
+        axes[2].legend(fontsize=7)
     for ax in axes:
         ax.xaxis.set_minor_formatter(NullFormatter())
-        ax.yaxis.set_minor_formatter(NullFormatter())
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7)
-    fig.tight_layout()
+    for ax in axes[:2]:
+        ax.yaxis.set_minor_formatter(NullFormatter())
+    handles = [Line2D([], [], color=colours[s], label=s) for s in SCHEMES]
+    handles += [Line2D([], [], color="k", label="monolithic RK4 at H")]
+    handles += [Line2D([], [], color="grey", linestyle=styles[p][:-1], marker=styles[p][-1], label=f"{p} masses")
+                for p in styles]
+    fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return out
@@ -327,20 +382,29 @@ def main() -> None:
     by = {(r["problem"], r["coupling"], r["H"]): r for r in rows}
     ratios = {problem: {f"{h:g}": by[(problem, "gauss-seidel", h)]["error_x1"] / by[(problem, "jacobi", h)]["error_x1"]
                         for h in args.h} for problem in args.problems}
-    result = {"oscillator": rows, "gs_over_jacobi_error": ratios, "multirate": rates, "transient": sharp}
+    monolithic = [monolithic_rk4(h, args.stop, problem) for problem in args.problems for h in args.h]
+    orders = observed_orders(rows + monolithic)
+    result = {"oscillator": rows, "gs_over_jacobi_error": ratios, "monolithic_rk4": monolithic, "orders": orders,
+              "multirate": rates, "transient": sharp}
     if args.plot:
-        result["plot"] = str(plot(rows, sharp, args.plot))
+        result["plot"] = str(plot(rows, sharp, args.plot, monolithic))
     if args.json:
         print(json.dumps(result, indent=1))
         return
-    print(f"{'masses':<8}{'coupling':<14}{'H (s)':>8}{'steps':>8}{'takes':>8}{'wall (s)':>10}{'err x1 (m)':>13}"
+    print(f"{'masses':<8}{'coupling':<17}{'H (s)':>8}{'steps':>8}{'takes':>8}{'wall (s)':>10}{'err x1 (m)':>13}"
           f"{'err x2 (m)':>13}{'energy drift':>14}")
     for r in rows:
-        print(f"{r['problem']:<8}{r['coupling']:<14}{r['H']:>8g}{r['macro_steps']:>8}{r['takes']:>8}"
+        print(f"{r['problem']:<8}{r['coupling']:<17}{r['H']:>8g}{r['macro_steps']:>8}{r['takes']:>8}"
               f"{r['wall_s']:>10.2f}{r['error_x1']:>13.3e}{r['error_x2']:>13.3e}{r['energy_drift']:>14.3e}")
+    for r in monolithic:
+        print(f"{r['problem']:<8}{'monolithic RK4':<17}{r['H']:>8g}{r['macro_steps']:>8}{'':>8}{'':>10}"
+              f"{r['error_x1']:>13.3e}{r['error_x2']:>13.3e}")
     for problem, by_h in ratios.items():
         print(f"Gauss-Seidel / Jacobi global error at the same H, {problem} masses: "
               + ", ".join(f"H={h}: {v:.2f}" for h, v in by_h.items()))
+    for problem, by_scheme in orders.items():
+        print(f"observed order in H (x1's error between consecutive H), {problem} masses: "
+              + "; ".join(f"{scheme} {', '.join(f'{o:.2f}' for o in got)}" for scheme, got in by_scheme.items()))
     s, m = rates["single_rate"], rates["multi_rate"]
     print(f"multi-rate 1 kHz / 100 Hz / 1 Hz against all at 1 kHz: {m['messages']:,} vs {s['messages']:,} frames "
           f"(ratio {rates['message_ratio']:.3f}; {rates['unbatched_message_ratio']:.2f} with one release per base "

@@ -152,7 +152,8 @@ def forgery(tmp: Path, n_forged: int, stop_time: float) -> dict:
             which = i % 7
             if which == 0:
                 key, payload, kind = keys.down, frames.encode(frames.STEP, k, k * 0.01, 0.01, "free",
-                                                              {"clock": [], "g": [99.0], "h": [99.0]}, []), "down STEP"
+                                                              {"clock": [], "g": [99.0], "h": [99.0]}, [], {}),
+                                   "down STEP"
             elif which == 1:
                 key, payload, kind = keys.down, frames.encode(frames.STOP, k, "forged"), "down STOP"
             elif which == 2:

@@ -41,6 +41,7 @@ class FmuNode(Node):
         self.path = path
         self.fmu: FmuInstance | None = None
         self._checkpoint: Any = None
+        self._derivatives: dict[str, list[float]] = {}  # for the next step's inputs
 
     def setup(self, ctx: NodeContext) -> None:
         with _node_errors():
@@ -55,6 +56,15 @@ class FmuNode(Node):
     def can_vary_step(self) -> bool:
         return bool(self.fmu and self.fmu.variable_step)
 
+    @property
+    def can_interpolate(self) -> bool:
+        return bool(self.fmu and self.fmu.can_interpolate)
+
+    def set_input_derivatives(self, derivatives: dict[str, list[float]]) -> None:
+        # Given to the FMU after the inputs' values, in step: FMI 2 calls set the derivatives of
+        # the values set last, and an FMU may take a new value as one held over the step.
+        self._derivatives = derivatives
+
     def outputs(self) -> dict[str, Any]:
         with _node_errors():
             return self.fmu.get_outputs()
@@ -62,6 +72,9 @@ class FmuNode(Node):
     def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
         with _node_errors():
             self.fmu.set_inputs(inputs)
+            if self._derivatives:
+                self.fmu.set_input_derivatives(self._derivatives)
+                self._derivatives = {}
             self.fmu.do_step(t, h)
         events = getattr(self.fmu, "events", None)  # a Model Exchange FMU's, inside the step
         if events:

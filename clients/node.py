@@ -116,6 +116,18 @@ class Node(ABC):
     def can_vary_step(self) -> bool:
         return True
 
+    # Interpolated inputs, for iterative coupling (coSimulation.iterate.interpolate): a node that
+    # can make its Real inputs follow a polynomial over a step says so, and the server then
+    # sends it their derivatives at the step's start with each release.
+    @property
+    def can_interpolate(self) -> bool:
+        return False
+
+    def set_input_derivatives(self, derivatives: dict[str, list[float]]) -> None:
+        """Over the next step, each input named here follows the Taylor polynomial from its value
+        at the step's start with these time derivatives (orders 1, 2, …); any other is held."""
+        raise NotImplementedError
+
     def get_state(self) -> Any:
         """A snapshot of everything the node's step reads (called before a step that may be
         retried, and for checkpoints): bytes, for a node that can serialize."""

@@ -255,14 +255,15 @@ class NodeRuntime:
                 self._release_for not in frame.fields[4 if kind == frames.STEP else 3]:
             return None  # a release of other nodes (this one is not due, or not yet in Gauss-Seidel order)
         if kind in (frames.START, frames.STEP, frames.STEPS):
-            return frames.check_release(frame, self._release_for, self._in_types)
+            return frames.check_release(frame, self._release_for, self._in_types, self._interpolates())
         if kind == frames.REPLAY:
             if frame.fields[0] != self.name:
                 return None
             inner = frames.decode(frame.fields[1])
             if inner.kind not in (frames.START, frames.STEP, frames.STEPS):
                 raise frames.FrameError(f"a replay of a {frames.KIND_NAMES[inner.kind]} frame")
-            return frames.Frame(frames.REPLAY, (self.name, frames.check_release(inner, self._release_for, self._in_types)))
+            return frames.Frame(frames.REPLAY, (self.name, frames.check_release(inner, self._release_for, self._in_types,
+                                                                                self._interpolates())))
         if kind == frames.ROLLBACK:
             k, t = frame.fields
             if not (0 <= k < frames.MAX_STEP and math.isfinite(t)):
@@ -473,7 +474,7 @@ class NodeRuntime:
             if frame.kind == frames.STEPS:
                 k, times, new_mode, inputs, driven_nodes = frame.fields
             elif frame.kind == frames.STEP:
-                k, t, h, new_mode, inputs, driven_nodes = frame.fields
+                k, t, h, new_mode, inputs, driven_nodes, slopes = frame.fields
             else:  # a START: this run has started already
                 self.drops.drop("not a release", "a START while the run is under way", self.steps)
                 continue
@@ -493,6 +494,8 @@ class NodeRuntime:
                 continue
             if self._rate > 1:  # its own step, the last one cut at stopTime as the base's is
                 h = min(self._rate * self.cosim.stepSize, self.cosim.stopTime - t)
+            if self.name in slopes:  # iterative coupling's interpolated inputs (check_release checked them)
+                impl.set_input_derivatives({n: d for n, d in zip(self._in_names, slopes[self.name]) if d})
             out = self._step_model(impl, k, t, h, values)
             if out is None:
                 return
@@ -528,11 +531,15 @@ class NodeRuntime:
                               error=f"{type(exc).__name__}: {exc}")
             return None
 
+    def _interpolates(self) -> bool:
+        return isinstance(self.impl, Node) and self.impl.can_interpolate
+
     def _hello(self, rollback: bool, restart: bool = False) -> bytes:
         stepping = isinstance(self.impl, Node)
         return frames.encode(frames.HELLO, self.spec.UID, {
             "rollback": rollback, "serialize": stepping and self.impl.can_serialize,
             "variableStep": stepping and self.impl.can_vary_step, "restart": restart, "batches": stepping,
+            "interpolates": self._interpolates(),
             "ports": self.spec.wire_ports(), "host": socket.gethostname()[:64]})
 
     def _on_stop(self, frame: frames.Frame) -> None:

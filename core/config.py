@@ -172,6 +172,11 @@ class Iterate(_Strict):
     # Each retry steps on old + relaxation·(new − old): below 1 it damps a loop that overshoots.
     relaxation: float = Field(default=1.0, gt=0, le=1)
     onFailure: Literal["continue", "stop"] = "continue"
+    # The degree of the polynomial each Real input of a node that can interpolate its inputs
+    # (an FMI 2 FMU with canInterpolateInputs) follows over a step: through the end value the
+    # iteration solves for and the values at the points before. 0 holds the end value over the
+    # step (the implicit scheme, first order); n gives order n + 1, and 3 an RK4's fourth.
+    interpolate: int = Field(default=0, ge=0, le=3)
 
 
 class StepControl(_Strict):

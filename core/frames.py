@@ -10,12 +10,16 @@ Kinds and layouts (after version and kind):
 * ``SAMPLE``   async node → server: ``uid, seq, t, values``
 * ``START``    server → nodes: ``run_id, t0, H, wall_t0, real_time_factor, options``
   (options: ``{"checkpoint": bool}``: save state before each step, for rollback)
-* ``STEP``     server → nodes: ``step, t, H, mode, inputs {node: [values]}, driven [nodes]``
+* ``STEP``     server → nodes: ``step, t, H, mode, inputs {node: [values]}, driven [nodes], slopes``
+  (``slopes {node: [None or [d1, …, dn]]}``: for a node that interpolates its inputs, per input
+  its time derivatives at ``t``, orders 1 to MAX_SLOPE_ORDER; None holds it. Empty but for
+  iterative coupling with ``interpolate``)
 * ``STOP``     server → nodes: ``step, reason`` (``completed`` or ``stopped`` for a run that ended
   as asked, else why it failed: a node reports that failure as its own end)
 * ``LIVE``     local only, server: ``node, alive`` (liveliness changes fed into the inbox)
 * ``HELLO``    node → server, before its first outputs: ``uid, capabilities`` (``{"rollback": bool,
-  "variableStep": bool, "ports": {"input": [...], "output": [...]}}``, the ports as its project file has them)
+  "variableStep": bool, "interpolates": bool, "ports": {"input": [...], "output": [...]}}``, the ports as its
+  project file has them)
 * ``ROLLBACK`` server → nodes: ``step, t``: restore the state saved before that step
 * ``REPLAY``   server → one node: ``node, release``: the last START/STEP again, for a node that
   came back after a link cut (it may have missed the release, or the server its outputs)
@@ -91,6 +95,8 @@ MAX_CHUNKS = 1 << 13
 # A batched release (STEPS) spans at most this many base steps: its answers carry a value list
 # per step of the fastest node, and a frame must fit the low-latency transport.
 MAX_BATCH = 100
+# The highest time derivative of an input a STEP gives (a cubic over the step).
+MAX_SLOPE_ORDER = 3
 
 _NUM = (int, float)  # exact types: msgpack yields bool for booleans, never an int subclass
 
@@ -114,8 +120,8 @@ _SHAPES: dict[int, tuple[int, Callable[[tuple], bool]]] = {
     SAMPLE: (4, lambda f: type(f[0]) is int and type(f[1]) is int and type(f[2]) in _NUM and type(f[3]) is list),
     START: (6, lambda f: _str(f[0]) and _num(f[1]) and _num(f[2]) and _num(f[3]) and (f[4] is None or _num(f[4]))
             and type(f[5]) is dict),
-    STEP: (6, lambda f: type(f[0]) is int and type(f[1]) in _NUM and type(f[2]) in _NUM and type(f[3]) is str
-           and type(f[4]) is dict and type(f[5]) is list),
+    STEP: (7, lambda f: type(f[0]) is int and type(f[1]) in _NUM and type(f[2]) in _NUM and type(f[3]) is str
+           and type(f[4]) is dict and type(f[5]) is list and type(f[6]) is dict),
     STOP: (2, lambda f: _int(f[0]) and _str(f[1])),
     LIVE: (2, lambda f: _str(f[0]) and type(f[1]) is bool),
     HELLO: (2, lambda f: _int(f[0]) and type(f[1]) is dict),
@@ -182,16 +188,18 @@ def decode(payload: bytes) -> Frame:
     return Frame(kind, fields)
 
 
-def check_release(frame: Frame, node: str | None = None, input_types: tuple[tuple[type, ...], ...] | None = None
-                  ) -> Frame:
+def check_release(frame: Frame, node: str | None = None, input_types: tuple[tuple[type, ...], ...] | None = None,
+                  interpolates: bool = False) -> Frame:
     """Return a START, STEP or STEPS frame a node can act on; raise FrameError otherwise.
 
     :func:`decode` has checked the field types. Here: times finite, a step size above zero
     (STEPS: 2 to MAX_BATCH + 1 times, each a number, rising), a step number in range, and
     with ``node``, a STEP or STEPS that gives that node its inputs, exactly
     ``len(input_types)`` of them, each of one of its port's types (``input_types``: per input,
-    the Python types msgpack yields for it). A release anyone on an unsecured network may have
-    written is checked before a node acts on it.
+    the Python types msgpack yields for it). A STEP's slopes for that node only if it
+    ``interpolates``: one entry per input, None or 1 to MAX_SLOPE_ORDER finite numbers, and
+    numbers only for an input that takes floats. A release anyone on an unsecured network may
+    have written is checked before a node acts on it.
     """
     f = frame.fields
     isfinite = math.isfinite
@@ -207,9 +215,11 @@ def check_release(frame: Frame, node: str | None = None, input_types: tuple[tupl
                 and all(isfinite(x) for x in times) and all(a < b for a, b in zip(times, times[1:]))):
             raise FrameError(f"STEPS frame with step {short(k)}, times {short(times)}: out of range or not rising")
     elif frame.kind == STEP:
-        k, t, h, _, inputs, _ = f
+        k, t, h, _, inputs, _, slopes = f
         if not (0 <= k < MAX_STEP and isfinite(t) and isfinite(h) and h > 0):
             raise FrameError(f"STEP frame with step {short(k)}, t {short(t)}, h {short(h)}: out of range")
+        if node is not None and node in slopes:
+            _check_slopes(k, node, slopes[node], input_types, interpolates)
     else:
         raise FrameError(f"a {KIND_NAMES.get(frame.kind, frame.kind)} frame is not a release")
     if node is not None:
@@ -223,6 +233,24 @@ def check_release(frame: Frame, node: str | None = None, input_types: tuple[tupl
                 if type(value) not in types:
                     raise FrameError(f"STEP {k} gives node {node!r} a {type(value).__name__} for input {i}")
     return frame
+
+
+def _check_slopes(k: int, node: str, mine: Any, input_types: tuple[tuple[type, ...], ...] | None,
+                  interpolates: bool) -> None:
+    if not interpolates:
+        raise FrameError(f"STEP {k} gives node {node!r} input derivatives; it holds its inputs over a step")
+    if type(mine) is not list or (input_types is not None and len(mine) != len(input_types)):
+        raise FrameError(f"STEP {k} gives node {node!r} input derivatives that are not one entry per input: "
+                         f"{short(mine)}")
+    for i, d in enumerate(mine):
+        if d is None:
+            continue
+        if not (type(d) is list and 1 <= len(d) <= MAX_SLOPE_ORDER and all(type(x) in _NUM for x in d)
+                and all(math.isfinite(x) for x in d)):
+            raise FrameError(f"STEP {k} gives node {node!r} input {i} derivatives that are not 1 to "
+                             f"{MAX_SLOPE_ORDER} finite numbers: {short(d)}")
+        if input_types is not None and float not in input_types[i]:
+            raise FrameError(f"STEP {k} gives node {node!r} derivatives for input {i}, which takes no floats")
 
 
 def state_chunks(data: bytes) -> list[bytes]:

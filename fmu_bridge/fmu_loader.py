@@ -276,6 +276,8 @@ class FmuInstance:
         self.variable_step = mapping.variable_step
         self.event_mode = bool(self.fmi3 and getattr(cs, "hasEventMode", False))
         self.early_return = bool(self.fmi3 and getattr(cs, "canReturnEarlyAfterIntermediateUpdate", False))
+        # FMI 2 only: FMI 3 co-simulation has no input derivatives.
+        self.can_interpolate = not self.fmi3 and bool(getattr(cs, "canInterpolateInputs", False))
         self._variables = {v.name: v for v in self.md.modelVariables}
         self._starts = {p.variable or p.name: p.start for p in node.input if p.start is not None}
         self._parameters = parameters
@@ -350,6 +352,23 @@ class FmuInstance:
         for m in self.inputs:
             if m.port in values:
                 self._set(self._variables[m.variable], values[m.port])
+
+    def set_input_derivatives(self, derivatives: dict[str, list[float]]) -> None:
+        """Give Real inputs (by port) their time derivatives at the next step's start, orders 1,
+        2, …: over that step each follows the Taylor polynomial from the value set_inputs gave
+        (fmi2SetRealInputDerivatives; the FMU must declare canInterpolateInputs)."""
+        vrs, orders, values = [], [], []
+        for m in self.inputs:
+            for order, value in enumerate(derivatives.get(m.port, ()), start=1):
+                vrs.append(m.vr)
+                orders.append(order)
+                values.append(float(value))
+        if not vrs:
+            return
+        try:
+            self.fmu.setRealInputDerivatives(vrs, orders, values)
+        except FMICallException as exc:
+            raise FmuError(f"node {self.node!r}: setting input derivatives failed ({exc})") from None
 
     def get_outputs(self) -> dict[str, Any]:
         try:

@@ -72,9 +72,9 @@ def translate_release(payload: bytes, conns: list[_Connection]) -> dict[_Connect
         _, t0, h, _, _, _ = frames.check_release(frame).fields
         return {c: gp.start(t0, h) for c in conns}
     if frame.kind == frames.STEP:
-        k, t, h, _, inputs, driven = frame.fields
+        k, t, h, _, inputs, driven, _ = frame.fields
         data = {}
-        for c in conns:  # the whole release checked for each, its own inputs included
+        for c in conns:  # the whole release checked for each, its own inputs included (a bridge FMU holds them)
             frames.check_release(frame, c.node.nodeName, c.input_types)
             data[c] = gp.step(k, t, h, c.node.nodeName in driven, [float(v) for v in inputs[c.node.nodeName]])
         return data

@@ -38,6 +38,7 @@ from server.async_sources import SampleHistory
 from server.coordinator import Coordinator, GuardEvaluationError
 from server.gateway import Gateway, GatewayError
 from server.intake import Dropped, Intake
+from server.interpolation import STARTUP_SPLIT, InputTrack
 from server.recorder import Recorder, RecordError
 from server.retakes import IterationLog, StepSizer, input_change, relaxed
 from server.routing import OutputView, Router
@@ -107,6 +108,9 @@ class Relay:
         # Iterative coupling and the error-controlled step, once the nodes said they can take part.
         self.iteration: IterationLog | None = None
         self.sizer: StepSizer | None = None
+        # Iterative coupling's interpolated inputs, and how many short steps start the run for them.
+        self.track: InputTrack | None = None
+        self._short_steps = 0
         self.intake = Intake(self.project.nodeLists)
         self.stepping = [n.nodeName for n in self.project.stepping_nodes()]
         self.coupling = loaded.coupling
@@ -490,7 +494,8 @@ class Relay:
                   "outputs": {n: list(v) for n, v in self.outputs.items()},
                   "inputs": {n: list(v) for n, v in self.router.inputs.items()},
                   "histories": {n: h.snapshot() for n, h in self.histories.items()},
-                  "records": self.recorder.positions(k), "localised": localised, "h": float(h)}
+                  "records": self.recorder.positions(k), "localised": localised, "h": float(h),
+                  "track": self.track.snapshot() if self.track is not None else None}
         self._pending = _PendingCheckpoint(k, server)
         self.release.put(frames.encode(frames.CHECKPOINT, k))
 
@@ -542,8 +547,15 @@ class Relay:
         self.recorder.meta["recoveries"] = (earlier if type(earlier) is list else []) + [entry]
         self.recorder.write_meta()
 
+    def _saves_states(self) -> bool:
+        """Whether nodes save their state before each step, so that a step can be taken again."""
+        cosim = self.cosim
+        return cosim.eventTolerance is not None or cosim.iterate is not None or cosim.stepControl is not None
+
     def _send_restore(self, cp: checkpoints.Checkpoint) -> None:
-        options = {"checkpoint": self.cosim.eventTolerance is not None}
+        # As START's: a node started again must save its state before each step as the others do,
+        # or the retakes of iterative coupling and step control would step it on from where it was.
+        options = {"checkpoint": self._saves_states()}
         for node in self.paced:  # no state: a played source goes on from the checkpoint's point
             self.release.put(frames.encode(frames.RESTORE, node, cp.step, cp.server["t"], 0, 1, b"", options))
         for node in self.stepping:
@@ -568,6 +580,15 @@ class Relay:
         for node, values in self.outputs.items():
             if not self.project.node(node).asynchronous and values != s["outputs"][node]:
                 self._log.warning("restored outputs differ from the checkpoint's", node=node, step=cp.step)
+        if self.track is not None:  # the points before the checkpoint's, so its next steps are as they were
+            try:
+                self.track.restore(s.get("track"))
+            except ValueError as exc:
+                raise RunError(f"checkpoint {cp.path}: {exc}") from None
+            ours = self.router.inputs
+            if any(set(values) != set(ours) or any(len(values[n]) != len(ours[n]) for n in ours)
+                   for _, values in self.track.snapshot()["points"]):
+                raise RunError(f"checkpoint {cp.path} does not fit the project: its interpolated inputs differ")
         self.coordinator.mode = s["mode"]
         self.coordinator.disarmed = set(s["disarmed"])
         for node in self.outputs:
@@ -736,7 +757,8 @@ class Relay:
                 meta["iteration"] = (f"up to {it.maxIterations} takes of each step until the inputs change by at most "
                                      f"{it.tolerance:g}·max(1, |value|)"
                                      + (f", relaxation {it.relaxation:g}" if it.relaxation != 1.0 else "")
-                                     + f"; a step that does not converge: {it.onFailure}")
+                                     + f"; a step that does not converge: {it.onFailure}"
+                                     + self._interpolation_plan(it.interpolate))
         if cosim.stepControl is not None:
             sc = cosim.stepControl
             why = self._cannot_retake(variable=True)
@@ -748,6 +770,24 @@ class Relay:
                 meta["step_control"] = (f"steps of {sc.minStep:g} to {sc.maxStep:g} s, each held input's error over a "
                                         f"step (its change × step / 2) at most {sc.tolerance:g}·max(1, |value|) s")
 
+    def _interpolation_plan(self, degree: int) -> str:
+        """Which nodes' inputs follow polynomials over a step; the words for the metadata."""
+        if degree == 0:
+            return "; inputs held at the step's end value"
+        said = {n: self.capabilities.get(n, {}) for n in self.stepping}
+        takes = sorted(n for n in self.stepping if said[n].get("interpolates") is True)
+        holds = sorted(n for n in self.stepping if n not in takes and self._input_labels.get(n))
+        held = f"; {', '.join(holds)} cannot interpolate its inputs and holds the step's end value" if holds else ""
+        if not takes:
+            self._log.warning("no interpolated inputs", nodes=holds)
+            return held
+        self.track = InputTrack(degree, takes)
+        self._short_steps = (degree - 1) * STARTUP_SPLIT
+        short = (f" (the first {degree - 1} macro steps taken as {STARTUP_SPLIT} each, until there are "
+                 f"points enough)" if degree > 1 else "")
+        return (f"; inputs of {', '.join(takes)} interpolated over each step by polynomials of degree {degree} "
+                f"(FMI input derivatives){short}{held}")
+
     def _change(self, mode: str, used: dict[str, list[Any]], tolerance: float) -> tuple[dict[str, list[Any]], float, str, float]:
         """The inputs routed from the outputs now, and their change from ``used`` (input_change)."""
         candidate = self.router.candidate(mode, self.outputs)
@@ -757,17 +797,30 @@ class Relay:
         """Take step k until the inputs routed from its end stop changing; return arrivals, wait
         and takes. The inputs it was last taken on stay in the router (they are point k's record)."""
         it = self.iteration.settings
+        track = self.track
+        start: dict[str, list[Any]] = {}
+        if track is not None:
+            # The routed inputs are point k's; the step is taken on its end values (first guessed
+            # from the points before), which the interpolating nodes reach along a polynomial.
+            track.add(t, mode, self.router.inputs)
+            start = track.start()
+            self.router.inputs = track.first_guess(t, h)
         takes = 1
-        arrivals, wait = self._release(k, t, h, mode)
-        while True:
-            used = self.router.inputs
-            candidate, change, port, absolute = self._change(mode, used, it.tolerance)
-            if change <= 1.0 or takes >= it.maxIterations:
-                break
-            self.release.put(frames.encode(frames.ROLLBACK, k, t))
-            self.router.inputs = relaxed(candidate, used, it.relaxation)
-            arrivals, wait = self._release(k, t, h, mode)
-            takes += 1
+        try:
+            arrivals, wait = self._release(k, t, h, mode, **self._moving(start, t, h))
+            while True:
+                used = self.router.inputs
+                candidate, change, port, absolute = self._change(mode, used, it.tolerance)
+                if change <= 1.0 or takes >= it.maxIterations:
+                    break
+                self.release.put(frames.encode(frames.ROLLBACK, k, t))
+                self.router.inputs = relaxed(candidate, used, it.relaxation)
+                arrivals, wait = self._release(k, t, h, mode, **self._moving(start, t, h))
+                takes += 1
+        finally:
+            for n in start:  # point k's record: what each interpolating node had at t
+                if track is not None and n in track.nodes:
+                    self.router.inputs[n] = start[n]
         self.iteration.add(k, t, takes, change, port, absolute)
         self.recorder.meta["iterations"] = self.iteration.record()  # in the meta however the run ends
         if change > 1.0:
@@ -776,6 +829,15 @@ class Relay:
                 raise RunError(f"step {k} (t={t:g} s) did not converge in {takes} takes: input {port} still changed "
                                f"by {absolute:g} (tolerance {it.tolerance:g}·max(1, |value|))")
         return arrivals, wait, takes
+
+    def _moving(self, start: dict[str, list[Any]], t: float, h: float) -> dict[str, Any]:
+        """The release's inputs and slopes when inputs are interpolated: an interpolating node
+        gets the value at the step's start and the derivatives there; any other the end value."""
+        if self.track is None:
+            return {}
+        end = self.router.inputs
+        inputs = {n: start[n] if n in self.track.nodes else end[n] for n in end}
+        return {"inputs": inputs, "slopes": self.track.slopes(t, h, end)}
 
     def _controlled(self, k: int, t: float, h: float, mode: str,
                     record: Callable[[], None]) -> tuple[float, dict[str, float], float, int]:
@@ -798,7 +860,8 @@ class Relay:
 
     def _release(self, k: int, t: float, h: float, mode: str,
                  meanwhile: Callable[[], None] | None = None,
-                 times: list[float] | None = None) -> tuple[dict[str, float], float]:
+                 times: list[float] | None = None, inputs: dict[str, list[Any]] | None = None,
+                 slopes: dict[str, Any] | None = None) -> tuple[dict[str, float], float]:
         """Release step k (t → t+h) and gather the outputs due at t+h; return arrivals and wait.
 
         Jacobi: one release for every node due at k, on the inputs routed at t. Gauss-Seidel:
@@ -806,13 +869,14 @@ class Relay:
         outputs at t+h. ``meanwhile`` runs once the (first) release is sent, while the nodes
         integrate: work there (recording the point) is off the barrier's critical path.
         ``times``: a batched release (STEPS) over these base points, gathered at the last.
+        ``inputs`` and ``slopes``: the release's, for interpolated inputs (else the router's).
         """
         released_at = time.perf_counter()
         if self.coupling.scheme == "gauss-seidel":
             return self._release_in_order(k, t, h, mode, released_at, meanwhile)
         due = self.coupling.due(k) if self.coupling.multirate else self.stepping
         try:
-            self._put_release(k, t, h, mode, due, released_at, times)
+            self._put_release(k, t, h, mode, due, released_at, times, inputs, slopes)
         finally:
             if meanwhile is not None:
                 meanwhile()  # a release that could not be sent still leaves its point recorded
@@ -820,14 +884,16 @@ class Relay:
         return arrivals, time.perf_counter() - released_at
 
     def _put_release(self, k: int, t: float, h: float, mode: str, nodes: list[str], released_at: float,
-                     times: list[float] | None = None) -> None:
+                     times: list[float] | None = None, inputs: dict[str, list[Any]] | None = None,
+                     slopes: dict[str, Any] | None = None) -> None:
         """Send the release of step k to ``nodes``: each owes its outputs, labelled k + 1, at the
         end of its own step (k + its rate, or the last point). ``times``: a batched release
         over these base points, after which a node as fast as the batch or faster owes its
         outputs (one BATCH, with those of its steps before the last)."""
-        inputs = {n: self.router.inputs[n] for n in nodes}
+        inputs = {n: (inputs or self.router.inputs)[n] for n in nodes}
         if times is None:
-            self._last_release = frames.encode(frames.STEP, k, t, h, mode, inputs, self.coordinator.driven_nodes())
+            self._last_release = frames.encode(frames.STEP, k, t, h, mode, inputs, self.coordinator.driven_nodes(),
+                                               slopes or {})
         else:
             self._last_release = frames.encode(frames.STEPS, k, times, mode, inputs, self.coordinator.driven_nodes())
         try:
@@ -925,8 +991,7 @@ class Relay:
         H = cosim.stepSize
         rt = cosim.real_time_factor()
         wall0 = time.time()
-        # Whether nodes save their state before each step, so that a step can be taken again.
-        checkpoint = cosim.eventTolerance is not None or cosim.iterate is not None or cosim.stepControl is not None
+        checkpoint = self._saves_states()
         every = cosim.checkpointEvery
         # Points lie on a grid origin + j·H; a located event starts a new grid at its time.
         origin, j, k, t = cosim.startTime, 0, 0, cosim.startTime
@@ -1029,7 +1094,10 @@ class Relay:
                 record()
                 break
             times = None
-            if self.sizer is not None:
+            short = k < self._short_steps
+            if short:  # interpolated inputs' start-up: steps of H / STARTUP_SPLIT until there are points enough
+                next_t = min(cosim.startTime + (k + 1) * H / STARTUP_SPLIT, cosim.stopTime)
+            elif self.sizer is not None:
                 next_t = min(t + self.sizer.h, cosim.stopTime)
             elif self._span > 1:  # a batched release: its base points as single releases would have them
                 times = [min(origin + (j + i) * H, cosim.stopTime)
@@ -1070,6 +1138,8 @@ class Relay:
                 continue
             if h_used != h:  # a located event, or a controlled step taken shorter
                 origin, j, next_t = t + h_used, -1, t + h_used
+            elif short:  # the grid of H starts where the short steps end
+                origin, j = next_t, -1
             t = next_t
             step_count = 1 if times is None else len(times) - 1
             j += step_count

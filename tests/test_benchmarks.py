@@ -149,9 +149,16 @@ def test_accuracy_benchmark_compares_the_couplings_with_the_exact_solution_and_c
     r = json.loads(res.stdout)
     for problem in ("two", "three"):  # each split across FMUs, one node process a mass
         by = {row["coupling"]: row for row in r["oscillator"] if row["problem"] == problem}
-        assert set(by) == {"jacobi", "gauss-seidel", "iterative"} and all(row["macro_steps"] == 50 for row in by.values())
+        assert set(by) == {"jacobi", "gauss-seidel", "iterative", "interpolated-1", "interpolated-2", "interpolated-3"}
+        # Polynomials of degree n start on n − 1 macro steps taken as 8 each.
+        assert [by[s]["macro_steps"] for s in by] == [50, 50, 50, 50, 57, 64]
         assert 0 < by["gauss-seidel"]["error_x1"] < by["jacobi"]["error_x1"] < 0.2  # x1 swings ±0.1 m
         assert 0 < by["iterative"]["error_x1"] < by["jacobi"]["error_x1"] and by["iterative"]["takes"] > 50
+        # Inputs moving over the step: each degree better; a cubic's as good as RK4 on the whole system.
+        errors = [by[f"interpolated-{n}"]["error_x1"] for n in (1, 2, 3)]
+        assert 0 < errors[2] < errors[1] < errors[0] < by["iterative"]["error_x1"] / 10
+        mono = next(m for m in r["monolithic_rk4"] if m["problem"] == problem)
+        assert mono["macro_steps"] == 50 and errors[2] < 3 * mono["error_x1"]
         assert r["gs_over_jacobi_error"][problem]["0.01"] == by["gauss-seidel"]["error_x1"] / by["jacobi"]["error_x1"]
     fixed, controlled = r["transient"]
     assert fixed["macro_steps"] == 550 and fixed["takes"] == 550

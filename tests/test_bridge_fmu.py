@@ -272,8 +272,8 @@ def test_gateway_drops_forged_releases_and_passes_only_the_servers(tmp_path):
     assert kind == gp.WELCOME and gp.read_frame(sock)[0] == gp.START
     sock.sendall(gp.outputs(0, 0.0, [0.0]))
     assert gp.read_frame(sock)[0] == gp.STEP
-    forged = [frames.encode(frames.STEP, 1, "0.1", 0.1, "free", {"tool": [1.0]}, []),
-              frames.encode(frames.STEP, 1, 0.1, 0.1, "free", {"clock": 5}, [])]
+    forged = [frames.encode(frames.STEP, 1, "0.1", 0.1, "free", {"tool": [1.0]}, [], {}),
+              frames.encode(frames.STEP, 1, 0.1, 0.1, "free", {"clock": 5}, [], {})]
     with zenoh.open(client_config(json.loads(cfg.read_text())["serverIP"])) as session:
         for payload in forged:
             session.put(ProjectKeys("bridge").down, payload, congestion_control=zenoh.CongestionControl.BLOCK)

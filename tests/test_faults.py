@@ -188,7 +188,7 @@ def test_forged_releases_with_wrong_contents_are_dropped_by_every_node(tmp_path)
     """Well-formed frames whose contents are not a release a node can act on: a replay carrying
     garbage, an integer, a STOP or a mistyped STEP (one of each per node), and a STEP whose
     fields have the wrong types."""
-    mistyped_step = frames.encode(frames.STEP, "7", 0.1, 0.01, "free", {"g": 3.0}, 5)
+    mistyped_step = frames.encode(frames.STEP, "7", 0.1, 0.01, "free", {"g": 3.0}, 5, {})
     replays = [frames.encode(frames.REPLAY, name, inner) for name in ("sensor", "g")
                for inner in (os.urandom(24), 7, frames.encode(frames.STOP, 3, "forged"), mistyped_step)]
     # A node ignores replays addressed to the other, so each drops its own four and the STEP.

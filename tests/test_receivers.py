@@ -145,10 +145,44 @@ def test_a_node_acts_only_on_releases_that_give_it_exactly_its_inputs(loaded, no
         assert all(type(v) in WIRE_TYPES[p.type] for v, p in zip(mine, spec.input))
     if release.kind == frames.STEP:
         assert math.isfinite(release.fields[1]) and release.fields[2] > 0
+        assert node not in release.fields[6]  # this node holds its inputs: derivatives for it are refused
     if release.kind == frames.STEPS:  # base points a node can step between, in order, a bounded number
         times = release.fields[1]
         assert 2 <= len(times) <= frames.MAX_BATCH + 1 and all(math.isfinite(x) for x in times)
         assert all(a < b for a, b in zip(times, times[1:]))
+
+
+@given(data=st.data())
+def test_a_node_that_interpolates_takes_only_finite_derivatives_of_its_float_inputs(data):
+    # Per input the types msgpack yields for it: a Real, an Integer and a String port.
+    types = ((float, int), (int,), (str,))
+    payload = data.draw(payloads | frame_arrays([frames.STEP]).map(frames.msgpack.packb))
+    try:
+        frame = frames.check_release(frames.decode(payload), "g", types, interpolates=True)
+    except frames.FrameError:
+        return
+    mine = frame.fields[6].get("g")
+    if mine is None:
+        return
+    assert type(mine) is list and len(mine) == len(types)
+    for d, allowed in zip(mine, types):
+        assert d is None or (float in allowed and 1 <= len(d) <= frames.MAX_SLOPE_ORDER
+                             and all(type(x) in (int, float) and math.isfinite(x) for x in d))
+
+
+def test_a_node_that_interpolates_takes_a_step_with_its_derivatives_and_refuses_them_otherwise():
+    step = frames.decode(frames.encode(frames.STEP, 3, 0.3, 0.1, "free", {"g": [1.0, 2, "s"]}, [],
+                                       {"g": [[0.5, -1.0, 2.0], None, None]}))
+    types = ((float, int), (int,), (str,))
+    assert frames.check_release(step, "g", types, interpolates=True) is step
+    with pytest.raises(frames.FrameError, match="holds its inputs over a step"):
+        frames.check_release(step, "g", types)
+    for bad, why in (([[0.5], None], "not one entry per input"), ([None, [1.0], None], "takes no floats"),
+                     ([[1.0, 2.0, 3.0, 4.0], None, None], "not 1 to 3 finite numbers"),
+                     ([[math.inf], None, None], "not 1 to 3 finite numbers"), ([[], None, None], "not 1 to 3")):
+        forged = frames.decode(frames.encode(frames.STEP, 3, 0.3, 0.1, "free", {"g": [1.0, 2, "s"]}, [], {"g": bad}))
+        with pytest.raises(frames.FrameError, match=why):
+            frames.check_release(forged, "g", types, interpolates=True)
 
 
 def test_only_this_process_can_speak_as_the_local_key(loaded):

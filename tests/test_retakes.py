@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import math
 import json
 from pathlib import Path
 
@@ -183,3 +184,91 @@ def test_the_step_size_control_and_the_change_it_reads():
     assert sizer.judge(0.02, 50.0) is None and sizer.h == pytest.approx(0.02 * 1.6 ** 0.5)
     assert sizer.judge(0.02, 0.5) is None and sizer.h == pytest.approx(0.04)  # at most twice as long
     assert sizer.judge(0.001, 9000.0) is None and sizer.forced == 1  # minStep stands over the tolerance
+
+
+def _two_masses(tmp_path: Path, fmu: Path, h: float, degree: int, extra: list[dict] | None = None, **cosim) -> Path:
+    """benchmarks/accuracy.py's two-mass oscillator on its native mass FMU: m1 gives its
+    displacement, m2 holds the coupling spring (100 N/m) and gives back its force."""
+    masses = [
+        {"nodeName": "m1", "UID": 1, "fmu": str(fmu), "input": ["F"], "output": ["x", "v"], "parameters": {"x": 0.1}},
+        {"nodeName": "m2", "UID": 2, "fmu": str(fmu), "input": ["xl"], "output": ["x", "v", "Fl"],
+         "parameters": {"kl": 100.0, "xl": 0.1}},
+    ]
+    links = [{"from": "m1.x", "to": "m2.xl"}, {"from": "m2.Fl", "to": "m1.F"}]
+    for i, node in enumerate(extra or []):
+        masses.append(node)
+        links.append({"from": "m1.x", "to": f"{node['nodeName']}.u"})
+    cosim = {"stepSize": h, "stopTime": 0.4,
+             "iterate": {"tolerance": 1e-11, "maxIterations": 30, "interpolate": degree}, **cosim}
+    return write_project(tmp_path / f"osc-{degree}-{h:g}.json", masses, links, cosim=cosim)
+
+
+def _exact_x1(t: list[float]) -> list[float]:
+    """x1 of the two-mass system (m = 1 kg, k = 10 N/m to the walls, 100 N/m between) from x1 = 0.1 m."""
+    import numpy as np
+
+    a = np.array([[0, 1, 0, 0], [-110, 0, 100, 0], [0, 0, 0, 1], [100, 0, -110, 0]], dtype=float)
+    w, v = np.linalg.eig(a)
+    c = np.linalg.solve(v, np.array([0.1, 0, 0, 0], dtype=complex))
+    return [float(np.real(v[0] @ (c * np.exp(w * s)))) for s in t]
+
+
+def test_inputs_interpolated_over_the_step_raise_the_order_of_iterative_coupling_to_the_polynomials(tmp_path):
+    """Held at the end value the coupled inputs make iterative coupling first order; following
+    a line over the step (FMI input derivatives) second, a cubic fourth, as RK4 on the whole
+    system is. Measured on two native FMUs, the error halving H."""
+    from benchmarks._mass_fmu import build
+
+    fmu = build(tmp_path / "fmu")
+    errors: dict[int, list[float]] = {}
+    for degree in (0, 1, 3):
+        for h in (0.02, 0.01):
+            rows = read_rows(run_project(_two_masses(tmp_path, fmu, h, degree), tmp_path / f"r{degree}-{h:g}"))
+            t, x1 = column(rows, "t"), column(rows, "m1.x")
+            errors.setdefault(degree, []).append(max(abs(a - b) for a, b in zip(x1, _exact_x1(t))))
+    order = {d: math.log2(e[0] / e[1]) for d, e in errors.items()}
+    assert 0.6 < order[0] < 1.4 and 1.7 < order[1] < 2.3 and order[3] > 3.5, (order, errors)
+    assert errors[3][1] < errors[1][1] / 20 < errors[0][1] / 200
+
+
+def test_a_node_that_cannot_interpolate_holds_the_end_value_and_the_start_up_steps_are_short(tmp_path):
+    from benchmarks._mass_fmu import build
+
+    fmu = build(tmp_path / "fmu")
+    probe = {"nodeName": "probe", "UID": 3, "model": "gain", "parameters": {"k": 1.0}, "input": ["u"], "output": ["y"]}
+    run = run_project(_two_masses(tmp_path, fmu, 0.02, 3, [probe]), tmp_path / "r")
+    said = meta(run)["iteration"]
+    assert "inputs of m1, m2 interpolated over each step by polynomials of degree 3" in said
+    assert "probe cannot interpolate its inputs and holds the step's end value" in said
+    rows = read_rows(run)
+    t = column(rows, "t")
+    # Two macro steps of 20 ms as 8 of 2.5 ms each, then 20 ms on: 16 + 18 steps to 0.4 s.
+    assert t[:3] == pytest.approx([0.0, 0.0025, 0.005]) and t[16] == pytest.approx(0.04)
+    assert t[17] == pytest.approx(0.06) and len(t) == 16 + 18 + 1 and t[-1] == pytest.approx(0.4)
+    # Recorded at each point: what each node had there, m1's x at m2.xl (m2 interpolates), and
+    # for the probe the end value its step was taken on: m1's x at the next point.
+    x1, xl, u = column(rows, "m1.x"), column(rows, "m2.xl"), column(rows, "probe.u")
+    assert all(a == pytest.approx(b, abs=1e-12) for a, b in zip(x1, xl))
+    assert all(a == pytest.approx(b, abs=1e-9) for a, b in zip(x1[1:-1], u[:-2]))
+
+
+def test_a_node_killed_under_interpolated_inputs_is_restored_to_what_the_run_records_unkilled(tmp_path):
+    """The points the polynomials go through are in the checkpoint: after m2 is killed and the
+    run goes back to a checkpoint, its steps are taken on the same polynomials as before."""
+    from benchmarks._mass_fmu import build
+    from tests.helpers import run_killing
+
+    fmu = build(tmp_path / "fmu")
+    slow = {"nodeName": "probe", "UID": 3, "model": "gain", "parameters": {"k": 1.0, "work_s": 0.002},
+            "input": ["u"], "output": ["y"]}
+
+    def project(where: Path) -> Path:
+        where.mkdir()
+        return _two_masses(where, fmu, 0.01, 3, [slow], stopTime=2.0, checkpointEvery=0.3, attachTimeout=20.0)
+
+    reference = (run_project(project(tmp_path / "ref"), tmp_path / "ref-runs", timeout=240) / "values.csv").read_bytes()
+    code, err = run_killing(project(tmp_path / "killed"), tmp_path / "runs", [("node m2", 100)])
+    assert code == 0, err
+    run = next((tmp_path / "runs").iterdir())
+    assert [r["node"] for r in meta(run)["recoveries"]] == ["m2"]
+    assert (run / "values.csv").read_bytes() == reference

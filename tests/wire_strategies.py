@@ -28,6 +28,9 @@ uids = st.integers(-1, 5)
 steps = st.integers(-2, 6) | st.integers(-(2 ** 63), 2 ** 64 - 1)
 times = st.floats(allow_nan=True, allow_infinity=True) | st.integers(-2, 2)
 port_values = st.lists(scalars, max_size=4)
+# A STEP's input derivatives per node: per input None or a few numbers (sometimes too many, or not finite).
+slopes = st.dictionaries(names, st.lists(st.none() | st.lists(times, max_size=frames.MAX_SLOPE_ORDER + 1) | scalars,
+                                         max_size=4), max_size=3)
 
 
 def _or_any(strategy: st.SearchStrategy) -> st.SearchStrategy:
@@ -40,7 +43,7 @@ _PLAUSIBLE: dict[int, tuple[st.SearchStrategy, ...]] = {
     frames.START: (names, times, times, times, st.none() | times,
                    st.fixed_dictionaries({"checkpoint": st.booleans()}) | values),
     frames.STEP: (steps, times, times, names, st.dictionaries(names, port_values, max_size=3),
-                  st.lists(names, max_size=3)),
+                  st.lists(names, max_size=3), st.just({}) | slopes),
     frames.STOP: (steps, st.sampled_from(list(frames.CLEAN_STOPS)) | st.text(max_size=20)),
     frames.LIVE: (names, st.booleans()),
     frames.HELLO: (uids, st.fixed_dictionaries({"rollback": values, "restart": st.booleans() | values,
