@@ -193,6 +193,30 @@ def why_no_retake(spec: NodeSpec, project_dir: Path, variable: bool) -> str | No
     return None
 
 
+def why_no_interpolation(spec: NodeSpec, project_dir: Path) -> str | None:
+    """Why the node cannot make its inputs follow a polynomial over a step (iterative
+    coupling's ``interpolate``), or None if it can. The node must load."""
+    if spec.fmu:
+        from fmu_bridge.fmu_loader import check_fmu
+
+        from fmu_bridge.fmu_loader import MODEL_EXCHANGE
+
+        mapping = check_fmu(_fmu_path(spec, project_dir), spec)
+        if mapping.interface == MODEL_EXCHANGE:
+            return "a Model Exchange FMU's node holds its inputs over a step"
+        if mapping.md.fmiVersion.startswith("3"):
+            return "FMI 3 co-simulation has no input derivatives"
+        if not getattr(mapping.capabilities, "canInterpolateInputs", False):
+            return "its FMU does not declare canInterpolateInputs"
+        return None
+    if spec.model and not spec.replay:
+        cls = model_class(spec, project_dir)
+        if cls.set_input_derivatives is Node.set_input_derivatives:
+            return f"its model {cls.__name__} has no set_input_derivatives"
+        return None
+    return "a recording or a bridge FMU holds its inputs"
+
+
 def feedthrough_of(spec: NodeSpec, project_dir: Path) -> dict[str, set[str]]:
     """Each output port of the node → the input ports it depends on directly (an FMU's model
     structure, a Python model's FEEDTHROUGH); empty for a node that does not say (a bridge FMU,

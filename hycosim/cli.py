@@ -194,6 +194,13 @@ def _check_retakes(file: Path, loaded: Any) -> None:
             for name, why in unable:
                 err.print(f"  node {name!r}: {why}", highlight=False, markup=False)
             raise typer.Exit(2)
+    if cosim.iterate is not None and cosim.iterate.interpolate:
+        from clients.loader import why_no_interpolation
+
+        for n in loaded.project.stepping_nodes():
+            if n.input and (why := why_no_interpolation(n, loaded.path.parent)):
+                err.print(f"[yellow]warning:[/yellow] {file}: coSimulation.iterate.interpolate: node "
+                          f"{n.nodeName!r} holds its inputs at the step's end value: {why}", highlight=False)
 
 
 def _warn_algebraic_loops(file: Path, loaded: Any) -> None:

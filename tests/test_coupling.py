@@ -220,7 +220,8 @@ def _coupled_projects(draw) -> dict:
     numbers = st.sampled_from([0.001, 0.1, 0.0, -1.0, 2.0, 1e308]) | st.integers(-2, 3) | st.text(max_size=2)
     if draw(st.booleans()):
         cosim["iterate"] = draw(st.fixed_dictionaries({"tolerance": numbers}, optional={
-            "maxIterations": numbers, "relaxation": numbers, "onFailure": st.sampled_from(["continue", "stop", "x"])}))
+            "maxIterations": numbers, "relaxation": numbers, "onFailure": st.sampled_from(["continue", "stop", "x"]),
+            "interpolate": numbers}))
     if draw(st.booleans()):
         cosim["stepControl"] = draw(st.fixed_dictionaries({}, optional={
             "tolerance": numbers, "minStep": numbers, "maxStep": numbers}) | st.integers())
@@ -241,6 +242,8 @@ def test_coupling_keys_give_a_plan_or_errors_that_name_them(doc):
         assert 0 < cosim.stepControl.minStep <= cosim.stepControl.maxStep and cosim.iterate is None
     if cosim.iterate is not None or cosim.stepControl is not None:  # steps taken again: single-rate Jacobi
         assert c.scheme == "jacobi" and not c.multirate and cosim.eventTolerance is None
+    if cosim.iterate is not None:
+        assert type(cosim.iterate.interpolate) is int and 0 <= cosim.iterate.interpolate <= 3
     assert sorted(c.rates) == ["a", "b", "c"] and sorted(c.order) == ["a", "b", "c"]
     for node in doc["nodeLists"][:3]:
         m = c.rates[node["nodeName"]]

@@ -137,6 +137,8 @@ def test_retakes_refuse_what_cannot_take_a_step_again_by_name(tmp_path):
     ({"iterate": {"tolerance": 0}}, "coSimulation.iterate.tolerance"),
     ({"iterate": {"tolerance": 1e-6, "relaxation": 1.5}}, "coSimulation.iterate.relaxation"),
     ({"iterate": {"tolerance": 1e-6, "maxIterations": 1}}, "coSimulation.iterate.maxIterations"),
+    ({"iterate": {"tolerance": 1e-6, "interpolate": 4}}, "coSimulation.iterate.interpolate"),
+    ({"iterate": {"tolerance": 1e-6, "interpolate": -1}}, "coSimulation.iterate.interpolate"),
     ({"stepControl": {"tolerance": -1, "minStep": 0.001, "maxStep": 0.1}}, "coSimulation.stepControl.tolerance"),
     ({"stepControl": {"tolerance": 1e-3, "minStep": 0.2, "maxStep": 0.1}},
      "coSimulation.stepControl: minStep 0.2 s is above maxStep 0.1 s"),
@@ -236,7 +238,12 @@ def test_a_node_that_cannot_interpolate_holds_the_end_value_and_the_start_up_ste
 
     fmu = build(tmp_path / "fmu")
     probe = {"nodeName": "probe", "UID": 3, "model": "gain", "parameters": {"k": 1.0}, "input": ["u"], "output": ["y"]}
-    run = run_project(_two_masses(tmp_path, fmu, 0.02, 3, [probe]), tmp_path / "r")
+    cfg = _two_masses(tmp_path, fmu, 0.02, 3, [probe])
+    res = hycosim("validate", str(cfg))
+    assert res.returncode == 0 and "'m1'" not in res.stderr and "'m2'" not in res.stderr
+    assert ("coSimulation.iterate.interpolate: node 'probe' holds its inputs at the step's end value: its model "
+            "Gain has no set_input_derivatives") in " ".join(res.stderr.split())
+    run = run_project(cfg, tmp_path / "r")
     said = meta(run)["iteration"]
     assert "inputs of m1, m2 interpolated over each step by polynomials of degree 3" in said
     assert "probe cannot interpolate its inputs and holds the step's end value" in said
