@@ -293,17 +293,18 @@ class NodeRuntime:
             return
         try:
             self._send(frames.encode(frames.END, self.spec.UID, self.steps + 1, 0.0, False,
-                                     f"node {self.name!r} {signals.describe(exc)} after step {self.steps}"))
+                                     f"node {self.name!r} {signals.describe(exc)} after step {self.steps}", []))
         except Exception:  # on its way out: the token's loss still tells the server
             pass
 
-    def _end(self, step: int, t: float, clean: bool, message: str) -> None:
+    def _end(self, step: int, t: float, clean: bool, message: str, earlier: list[list[Any]] | None = None) -> None:
         """Tell the server this node's model ended the run (``clean``) or failed, in place of its
-        outputs for ``step``, and wait for the server's STOP (so that it hears this first, not
-        that the node's token went). A failure is raised as this node's own."""
+        outputs for ``step`` (``earlier``: those of its steps inside a batch before that), and
+        wait for the server's STOP (so that it hears this first, not that the node's token
+        went). A failure is raised as this node's own."""
         message = message[:2000]
         try:
-            self._send(frames.encode(frames.END, self.spec.UID, step, t, clean, message))
+            self._send(frames.encode(frames.END, self.spec.UID, step, t, clean, message, earlier or []))
             deadline = time.monotonic() + min(10.0, self.cosim.stepTimeout)
             while (left := deadline - time.monotonic()) > 0:
                 frame = self._next_frame(left)
@@ -330,11 +331,12 @@ class NodeRuntime:
             self._step_failed(exc, k, t)
             return None  # the model ended the simulation (_step_failed raises for a failure)
 
-    def _step_failed(self, exc: Exception, k: int, t: float) -> None:
+    def _step_failed(self, exc: Exception, k: int, t: float, earlier: list[list[Any]] | None = None) -> None:
         """Tell the server, in place of the outputs of the release at point k (from t), how the
-        model's step ended: a model that ended the simulation returns; a failure is raised."""
+        model's step ended: a model that ended the simulation returns (with ``earlier``, the
+        outputs of its steps before inside a batch); a failure is raised."""
         if isinstance(exc, SimulationEnded):
-            self._end(k + 1, exc.t, True, f"{exc}")
+            self._end(k + 1, exc.t, True, f"{exc}", earlier)
         elif isinstance(exc, NodeRunError):
             self._end(k + 1, t, False, str(exc))
         elif isinstance(exc, NodeModelError):
@@ -363,7 +365,7 @@ class NodeRuntime:
             self._send(frame)
             return frame
         except Exception as exc:
-            self._step_failed(exc, k, t)
+            self._step_failed(exc, k, t, outs)
             return None  # the model ended the simulation (_step_failed raises for a failure)
 
     def _await_restore(self, step: int) -> frames.Frame | None:

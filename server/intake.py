@@ -81,23 +81,29 @@ class Intake:
         if frame.kind == frames.END:
             if spec.asynchronous:
                 raise Dropped("wrong kind", f"{node} is asynchronous: it does not end a run")
+            self._check_batch(node, frame, t, frame.fields[5], last=None)
             return frame
         if frame.kind == frames.BATCH:
             if spec.asynchronous:
                 raise Dropped("wrong kind", f"{node} is asynchronous: it takes no batched steps")
-            earlier = frame.fields[4]
-            if len(earlier) >= frames.MAX_BATCH:
-                raise Dropped("wrong step", f"from {node}: {len(earlier) + 1} steps' outputs in one batch, "
-                                               f"at most {frames.MAX_BATCH}")
-            for values in earlier:
-                self._check_values(node, frame, t, values)
-            self._check_values(node, frame, t, frame.fields[3])
+            self._check_batch(node, frame, t, frame.fields[4], last=frame.fields[3])
             return frame
         # A played asynchronous node also sends OUTPUTS: its word that a point's samples are all sent.
         if (frame.kind == frames.SAMPLE) != spec.asynchronous and not (spec.replay and spec.asynchronous):
             raise Dropped("wrong kind", f"{node} is {'' if spec.asynchronous else 'not '}asynchronous")
         self._check_values(node, frame, t, frame.fields[3])
         return frame
+
+    def _check_batch(self, node: str, frame: frames.Frame, t: float, earlier: list[Any], last: object) -> None:
+        """Dropped unless a batch's outputs (``earlier`` steps', then the ``last`` step's unless
+        None) are each one value of its port's type for each output, fewer than MAX_BATCH."""
+        if len(earlier) >= frames.MAX_BATCH:
+            raise Dropped("wrong step", f"from {node}: {len(earlier) + 1} steps' outputs in one batch, "
+                                           f"at most {frames.MAX_BATCH}")
+        for values in earlier:
+            self._check_values(node, frame, t, values)
+        if last is not None:
+            self._check_values(node, frame, t, last)
 
     def _check_values(self, node: str, frame: frames.Frame, t: float, values: object) -> None:
         """Dropped unless ``values`` are one value of its port's type for each of ``node``'s outputs."""

@@ -150,6 +150,10 @@ class Relay:
         self.lost: dict[str, float] = {}  # node → when its token went, while within linkGrace
         self.reattached: dict[str, int] = {}
         self.ended_by: dict[str, Any] | None = None  # the node whose model ended the run, when, and why
+        # The nodes whose models ended the run inside a batched release, and the batch's
+        # arrivals: the points their steps before reached are recorded once all batches are in.
+        self._ended_inside: set[str] = set()
+        self._ended_arrivals: dict[str, float] = {}
         self.switches: collections.deque[dict[str, Any]] = collections.deque(maxlen=200)  # the latest mode switches
         # The latest points as (time, holder, wait, arrivals): the status answer's last second.
         self._recent: collections.deque[tuple[float, str, float, dict[str, float]]] = collections.deque(maxlen=4096)
@@ -686,9 +690,16 @@ class Relay:
                 reason = "step already past" if frame_step < label else "wrong step"
                 self.intake.drop(reason, f"{node} sent step {frame_step} while collecting {step}", step, node)
                 continue
-            if frame.kind == frames.END:
-                self._on_end(node, step, frame)
             batched = self._batch_steps.get(node)
+            if frame.kind == frames.END:
+                self._on_end(node, step, frame, inside=batched is not None)
+                # Inside a batch: the others' batches hold the points its earlier steps reached.
+                pending.discard(node)
+                self._earlier[node] = frame.fields[5]
+                arrivals[node] = time.perf_counter() - self._released_at.get(node, released_at)
+                self._ended_inside.add(node)
+                self._ended_arrivals = arrivals
+                continue
             if (frame.kind == frames.BATCH) != (batched is not None):
                 self.intake.drop("wrong kind", f"{node} sent a {frames.KIND_NAMES[frame.kind]} frame for step "
                                  f"{frame_step}, which it was released for {'in' if batched is None else 'as'} "
@@ -704,20 +715,26 @@ class Relay:
                 self.intake.drop("duplicate", f"{node} sent step {frame_step} twice", step, node)
             else:  # a slower node's outputs, for a later point
                 self._early[node] = frame
+        if self._ended_inside:
+            raise _ModelEnded
         return arrivals
 
-    def _on_end(self, node: str, step: int, frame: frames.Frame) -> None:
-        """A node's END instead of its outputs for ``step``: its model ended the run, or failed."""
-        _, _, t, clean, message = frame.fields
+    def _on_end(self, node: str, step: int, frame: frames.Frame, inside: bool = False) -> None:
+        """A node's END instead of its outputs for ``step``: its model ended the run, or failed.
+        ``inside`` a batched release the caller gathers the others' batches before it ends."""
+        _, _, t, clean, message, _ = frame.fields
         # The point the run's records end at (inside a batched release: its first point).
         message, k = message[:_MESSAGE_MAX], self._point
         if not clean:
             # The node's runtime names itself and the step; a message that does not is prefixed.
             raise RunError(message if message.startswith(f"node {node!r}")
                            else f"node {node!r} failed at step {k} (t={self._time(k):g} s): {message}")
+        if inside and self._ended_inside:
+            return  # another node ended inside this batch first: the run ends by its word
         self.ended_by = {"node": node, "step": k, "t": t, "message": message}
         self._log.info("node ended the simulation", node=node, step=k, t=t, message=message)
-        raise _ModelEnded
+        if not inside:
+            raise _ModelEnded
 
     def _localisation_plan(self) -> bool:
         """Whether steps may be rolled back to locate guard crossings; say why not in the metadata."""
@@ -959,6 +976,16 @@ class Relay:
             self.recorder.row(k + i, times[i], mode, outputs, self.router.inputs, self.coupling.due(k + i))
             self.recorder.timing(k + i, times[i], 0.0, holder, None, came, {})
 
+    def _end_inside(self, k: int, times: list[float], mode: str, at_k: dict[str, list[Any]]) -> None:
+        """A node's model ended the run inside the batched release from point k: record the
+        points inside it that its steps before reached (every other node's batch reached
+        them too), as one release per base point would have."""
+        assert self.ended_by is not None
+        reached = min([len(self._earlier[n]) * self.coupling.rates[n] for n in self._ended_inside] + [len(times) - 2])
+        if reached > 0:
+            self._record_inside(k, times[:reached + 2], mode, at_k, self._ended_arrivals)
+            self.ended_by["step"] = k + reached
+
     def _localise(self, k: int, t: float, h: float, mode: str, watched_at_start: bool,
                   arrivals: dict[str, float], wait: float) -> tuple[float, dict[str, float], float, dict[str, Any]]:
         """Shrink step k until a guard crossing inside it lies within eventTolerance of its end.
@@ -1123,7 +1150,9 @@ class Relay:
                 if localise:
                     h_used, arrivals, wait, localised = self._localise(k, t, h, mode, watched, arrivals, wait)
             except _ModelEnded:
-                break  # point k, the last that every node reached, is recorded
+                if self._ended_inside and times is not None:
+                    self._end_inside(k, times, mode, at_k)
+                break  # point k, or the last inside a batch that every node reached, is recorded
             except _Recover as cause:
                 # Back to the last checkpoint: its point is taken again from the top, as it was.
                 point, arrivals, wait = self._restore(cause)

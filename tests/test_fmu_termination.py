@@ -91,19 +91,26 @@ def test_a_discard_without_termination_is_a_failure_whose_headline_names_the_dis
     assert len(read_rows(run)) == 3
 
 
-def test_an_fmu_ending_inside_a_batched_release_ends_the_records_at_the_batch_start(tmp_path, fmus):
+@pytest.mark.parametrize("end_at, points", [(0.25, 2), (0.72, 7), (0.05, 0)])
+def test_an_fmu_ending_inside_a_batched_release_ends_the_records_where_one_release_a_step_would(
+        tmp_path, fmus, end_at, points):
     """The clock steps every 5 base steps and nothing links the two, so releases span 5 base
-    steps; the FMU ends at 0.25 s, inside the first: the run ends cleanly, naming it, and the
-    records and ended_by stop at the batch's first point (its inside was never gathered)."""
-    cfg = write_project(tmp_path / "p.json", [
-        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"], "stepSize": 0.5},
-        {"nodeName": "e", "UID": 2, "fmu": str(fmus["2"]), "parameters": {"end_at": 0.25}, "output": ["x"]},
-    ], cosim={"stepSize": 0.1, "stopTime": 1.0, "stepTimeout": 10.0})
-    res = hycosim("run", str(cfg), "--runs-dir", str(tmp_path / "runs"), "--no-progress")
-    assert res.returncode == 0, res.stderr
-    assert "node 'e' ended the simulation at t=0.25 s" in res.stdout
-    run = next((tmp_path / "runs").iterdir())
-    m = meta(run)
+    steps; the FMU ends inside one: the run ends cleanly, naming it, and the records and
+    ended_by stop at the last point it reached (its steps before the last came with its END),
+    exactly as with one release per base step."""
+    runs = {}
+    for batch in (True, False):
+        cfg = write_project(tmp_path / f"p-{batch}.json", [
+            {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"], "stepSize": 0.5},
+            {"nodeName": "e", "UID": 2, "fmu": str(fmus["2"]), "parameters": {"end_at": end_at}, "output": ["x"]},
+        ], cosim={"stepSize": 0.1, "stopTime": 1.0, "stepTimeout": 10.0, "batchReleases": batch})
+        res = hycosim("run", str(cfg), "--runs-dir", str(tmp_path / f"runs-{batch}"), "--no-progress")
+        assert res.returncode == 0, res.stderr
+        assert f"node 'e' ended the simulation at t={end_at:g} s" in res.stdout
+        runs[batch] = next((tmp_path / f"runs-{batch}").iterdir())
+    m = meta(runs[True])
     assert m["coupling"].endswith("releases batched over 5 base steps")
-    assert m["status"] == "completed" and m["ended_by"]["node"] == "e" and m["ended_by"]["step"] == 0
-    assert column(read_rows(run), "t") == pytest.approx([0.0])
+    assert m["status"] == "completed" and m["ended_by"]["node"] == "e" and m["ended_by"]["step"] == points
+    assert column(read_rows(runs[True]), "t") == pytest.approx([0.1 * i for i in range(points + 1)])
+    assert (runs[True] / "values.csv").read_bytes() == (runs[False] / "values.csv").read_bytes()
+    assert meta(runs[False])["ended_by"]["step"] == points
