@@ -151,9 +151,9 @@ def forgery(tmp: Path, n_forged: int, stop_time: float) -> dict:
             k = 60 + i // 7
             which = i % 7
             if which == 0:
-                key, payload, kind = keys.down, frames.encode(frames.STEP, k, k * 0.01, 0.01, "free",
-                                                              {"clock": [], "g": [99.0], "h": [99.0]}, [], {}),
-                                   "down STEP"
+                payload = frames.encode(frames.STEP, k, k * 0.01, 0.01, "free",
+                                        {"clock": [], "g": [99.0], "h": [99.0]}, [], {})
+                key, kind = keys.down, "down STEP"
             elif which == 1:
                 key, payload, kind = keys.down, frames.encode(frames.STOP, k, "forged"), "down STOP"
             elif which == 2:
