@@ -11,8 +11,8 @@ the polynomial as its derivatives at t (orders 1 to n, the Taylor coefficients t
 factorials), the FMI form.
 
 Points come from one mode: a mode switch changes what the inputs are (a driven node's), so the
-history starts again there, as it does after a restore. Until it holds n points the degree is
-lower; the relay takes the first steps of a run shorter (STARTUP_SPLIT) so that those
+history starts again there. A checkpoint keeps the points (snapshot, restore), so that a run
+taken back to it steps as it did. Until the history holds n points the degree is lower; the relay takes the first steps of a run shorter (STARTUP_SPLIT) so that those
 low-degree steps do not spoil the order.
 """
 

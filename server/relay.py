@@ -551,6 +551,20 @@ class Relay:
         self.recorder.meta["recoveries"] = (earlier if type(earlier) is list else []) + [entry]
         self.recorder.write_meta()
 
+    def _restore_track(self, s: dict[str, Any], what: str) -> None:
+        """The interpolated inputs' points before a checkpoint's (its server state ``s``), so that
+        the steps from it are taken on the polynomials they were taken on before."""
+        if self.track is None:
+            return  # not yet planned (a resume plans it once the nodes are back) or no interpolation
+        try:
+            self.track.restore(s.get("track"))
+        except ValueError as exc:
+            raise RunError(f"{what}: {exc}") from None
+        ours = self.router.inputs
+        if any(set(values) != set(ours) or any(len(values[n]) != len(ours[n]) for n in ours)
+               for _, values in self.track.snapshot()["points"]):
+            raise RunError(f"{what} does not fit the project: its interpolated inputs differ")
+
     def _saves_states(self) -> bool:
         """Whether nodes save their state before each step, so that a step can be taken again."""
         cosim = self.cosim
@@ -584,15 +598,7 @@ class Relay:
         for node, values in self.outputs.items():
             if not self.project.node(node).asynchronous and values != s["outputs"][node]:
                 self._log.warning("restored outputs differ from the checkpoint's", node=node, step=cp.step)
-        if self.track is not None:  # the points before the checkpoint's, so its next steps are as they were
-            try:
-                self.track.restore(s.get("track"))
-            except ValueError as exc:
-                raise RunError(f"checkpoint {cp.path}: {exc}") from None
-            ours = self.router.inputs
-            if any(set(values) != set(ours) or any(len(values[n]) != len(ours[n]) for n in ours)
-                   for _, values in self.track.snapshot()["points"]):
-                raise RunError(f"checkpoint {cp.path} does not fit the project: its interpolated inputs differ")
+        self._restore_track(s, f"checkpoint {cp.path}")
         self.coordinator.mode = s["mode"]
         self.coordinator.disarmed = set(s["disarmed"])
         for node in self.outputs:
@@ -723,7 +729,8 @@ class Relay:
         """A node's END instead of its outputs for ``step``: its model ended the run, or failed.
         ``inside`` a batched release the caller gathers the others' batches before it ends."""
         _, _, t, clean, message, _ = frame.fields
-        # The point the run's records end at (inside a batched release: its first point).
+        # The point the run's records end at (inside a batched release: its first, until the
+        # points its steps before reached are recorded).
         message, k = message[:_MESSAGE_MAX], self._point
         if not clean:
             # The node's runtime names itself and the step; a message that does not is prefixed.
@@ -835,9 +842,8 @@ class Relay:
                 arrivals, wait = self._release(k, t, h, mode, **self._moving(start, t, h))
                 takes += 1
         finally:
-            for n in start:  # point k's record: what each interpolating node had at t
-                if track is not None and n in track.nodes:
-                    self.router.inputs[n] = start[n]
+            for n in track.nodes if track is not None else ():  # point k's record: what each had at t
+                self.router.inputs[n] = start[n]
         self.iteration.add(k, t, takes, change, port, absolute)
         self.recorder.meta["iterations"] = self.iteration.record()  # in the meta however the run ends
         if change > 1.0:
@@ -1051,6 +1057,8 @@ class Relay:
             wait = time.perf_counter() - released_at
         localise = self._localisation_plan()
         self._retake_plan()
+        if self._resume is not None:
+            self._restore_track(point, f"the checkpoint at step {point['step']} resumed")
         if self.sizer is not None and self._resume is not None:
             self.sizer.h = resumed_h
         # A bridge FMU through the gateway takes one release at a time (its node says no HELLO).

@@ -259,9 +259,11 @@ def test_a_node_that_cannot_interpolate_holds_the_end_value_and_the_start_up_ste
     assert all(a == pytest.approx(b, abs=1e-9) for a, b in zip(x1[1:-1], u[:-2]))
 
 
-def test_a_node_killed_under_interpolated_inputs_is_restored_to_what_the_run_records_unkilled(tmp_path):
-    """The points the polynomials go through are in the checkpoint: after m2 is killed and the
-    run goes back to a checkpoint, its steps are taken on the same polynomials as before."""
+@pytest.mark.parametrize("victim", ["node m2", "server"])
+def test_a_process_killed_under_interpolated_inputs_is_recovered_to_what_the_run_records_unkilled(tmp_path, victim):
+    """The points the polynomials go through are in the checkpoint: after m2 is killed, or the
+    server and the run is resumed, the steps from the checkpoint are taken on the same
+    polynomials as before."""
     from benchmarks._mass_fmu import build
     from tests.helpers import run_killing
 
@@ -274,8 +276,13 @@ def test_a_node_killed_under_interpolated_inputs_is_restored_to_what_the_run_rec
         return _two_masses(where, fmu, 0.01, 3, [slow], stopTime=2.0, checkpointEvery=0.3, attachTimeout=20.0)
 
     reference = (run_project(project(tmp_path / "ref"), tmp_path / "ref-runs", timeout=240) / "values.csv").read_bytes()
-    code, err = run_killing(project(tmp_path / "killed"), tmp_path / "runs", [("node m2", 100)])
-    assert code == 0, err
+    cfg = project(tmp_path / "killed")
+    code, err = run_killing(cfg, tmp_path / "runs", [(victim, 100)])
     run = next((tmp_path / "runs").iterdir())
-    assert [r["node"] for r in meta(run)["recoveries"]] == ["m2"]
+    if victim == "server":
+        assert code == 3 and "--resume" in err
+        res = hycosim("run", str(cfg), "--resume", str(run), "--no-progress", timeout=120)
+        code, err = res.returncode, res.stderr
+    assert code == 0, err
+    assert [r["node"] for r in meta(run)["recoveries"]] == [victim.split()[-1]]
     assert (run / "values.csv").read_bytes() == reference
