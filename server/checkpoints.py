@@ -26,6 +26,8 @@ from typing import Any
 
 import msgpack
 
+from server.interpolation import MAX_DEGREE, InputTrack
+
 KEEP = 2
 FOLDER = "checkpoints"
 SERVER_FILE = "server.msgpack"
@@ -135,6 +137,11 @@ def read(path: Path, config_sha256: str | None = None) -> Checkpoint:
     for name in ("outputs", "inputs"):
         if not all(type(v) is list for v in server[name].values()):
             raise CheckpointError(f"{path / SERVER_FILE} holds {name} that are not lists")
+    if server.get("track") is not None:  # iterative coupling's interpolated inputs (server.interpolation)
+        try:
+            InputTrack(MAX_DEGREE, []).restore(server["track"])
+        except ValueError as exc:
+            raise CheckpointError(f"{path / SERVER_FILE}: {exc}") from None
     states = {}
     for node in manifest["nodes"]:
         if type(node) is not str or f"{node}.state" not in data:

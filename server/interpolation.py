@@ -26,6 +26,7 @@ from typing import Any
 # The first (degree − 1) macro steps of a run are taken as this many steps each: a step on a
 # polynomial of degree m < n errs by O(h^(m+2)), STARTUP_SPLIT^(m+1) times less at h / STARTUP_SPLIT.
 STARTUP_SPLIT = 8
+MAX_DEGREE = 3  # coSimulation.iterate.interpolate's highest (frames.MAX_SLOPE_ORDER derivatives)
 
 
 def _coefficients(taus: list[float], values: list[float]) -> list[float]:

@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 from core import frames
 from server import checkpoints
+from server.interpolation import MAX_DEGREE, InputTrack
 from tests.helpers import REPO, hycosim, meta, run_killing, run_project, write_project
 
 from clients.node import NodeContext
@@ -205,7 +206,11 @@ def _checkpoint_folders(draw):
         "histories": st.dictionaries(st.text(max_size=3), _json_values, max_size=2),
         "records": st.dictionaries(st.sampled_from(sorted(checkpoints.RECORD_FILES)) | st.text(max_size=4),
                                    st.integers(-2, 100) | _json_values, max_size=4),
-        "localised": _json_values, "h": st.floats() | st.integers(0, 2)}) | _json_values)
+        "localised": _json_values, "h": st.floats() | st.integers(0, 2)}, optional={
+        # Iterative coupling's interpolated inputs: the points before the checkpoint's.
+        "track": st.none() | _json_values | st.fixed_dictionaries({"mode": st.none() | st.text(max_size=3), "points": st.lists(
+            st.lists(st.floats() | st.dictionaries(st.text(max_size=3), _json_values, max_size=2), max_size=3),
+            max_size=5)})}) | _json_values)
     files = {"server.msgpack": draw(st.just(msgpack.packb(server, use_bin_type=True)) | st.binary(max_size=40))}
     files.update(draw(st.dictionaries(_file_names, st.binary(max_size=20), max_size=3)))
     honest = draw(st.booleans())
@@ -236,6 +241,8 @@ def test_a_checkpoint_folder_is_read_whole_or_refused_with_its_name(tmp_path, fo
         return
     assert set(cp.server["records"]) == checkpoints.RECORD_FILES and 0 <= cp.step
     assert all(type(data) is bytes for data in cp.states.values())
+    if cp.server.get("track") is not None:  # points a run can step on again
+        InputTrack(MAX_DEGREE, []).restore(cp.server["track"])
 
 
 @settings(suppress_health_check=[HealthCheck.function_scoped_fixture], max_examples=40)
