@@ -197,9 +197,7 @@ def why_no_interpolation(spec: NodeSpec, project_dir: Path) -> str | None:
     """Why the node cannot make its inputs follow a polynomial over a step (iterative
     coupling's ``interpolate``), or None if it can. The node must load."""
     if spec.fmu:
-        from fmu_bridge.fmu_loader import check_fmu
-
-        from fmu_bridge.fmu_loader import MODEL_EXCHANGE
+        from fmu_bridge.fmu_loader import MODEL_EXCHANGE, check_fmu
 
         mapping = check_fmu(_fmu_path(spec, project_dir), spec)
         if mapping.interface == MODEL_EXCHANGE:
