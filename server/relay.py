@@ -807,10 +807,10 @@ class Relay:
             return held
         self.track = InputTrack(degree, takes)
         self._short_steps = (degree - 1) * STARTUP_SPLIT
-        short = (f" (the first {degree - 1} macro steps taken as {STARTUP_SPLIT} each, until there are "
-                 f"points enough)" if degree > 1 else "")
+        short = (f"; the first {degree - 1} macro steps taken as {STARTUP_SPLIT} each, until there are "
+                 f"points enough" if degree > 1 else "")
         return (f"; inputs of {', '.join(takes)} interpolated over each step by polynomials of degree {degree} "
-                f"(FMI input derivatives){short}{held}")
+                f"(FMI input derivatives{short}){held}")
 
     def _change(self, mode: str, used: dict[str, list[Any]], tolerance: float) -> tuple[dict[str, list[Any]], float, str, float]:
         """The inputs routed from the outputs now, and their change from ``used`` (input_change)."""
