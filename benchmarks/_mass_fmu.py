@@ -104,3 +104,9 @@ def build(out_dir: Path) -> Path:
                 if f.is_file():
                     zf.write(f, f.relative_to(root).as_posix())
     return path
+
+
+if __name__ == "__main__":
+    import sys
+
+    print(build(Path(sys.argv[1] if len(sys.argv) > 1 else ".")))
