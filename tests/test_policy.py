@@ -80,6 +80,18 @@ def test_reward_terms_from_constructed_states_in_the_env():
             break
     assert info["success"] and rewards[-1] == 100.0
     assert any(0 < r < 100 for r in rewards)  # 0.1/D while the rod approached
+    # The same grasp off the grasp point by more than the tolerance is a near miss.
+    assert 0 < info["distance"] <= env.grasp_tolerance
+    env.grasp_tolerance = info["distance"] / 2
+    env.reset(seed=1, options={"angle_deg": 40, "phase": 0.3})
+    env.scene.set_state(catch.q, kr6.GRIPPER_OPEN, env.rod.angle)
+    env.pending = catch.q.copy()
+    env.out = env.scene.outputs(False)
+    for _ in range(120):
+        _, r, term, trunc, off = env.step(choice_action(0))
+        if term or trunc:
+            break
+    assert off["success"] and off["distance"] == info["distance"] and r == -1.0
     # Out of bounds: an axis at its limit.
     env.reset(seed=2)
     q = kr6.READY.copy()
@@ -512,3 +524,23 @@ def test_a_training_folder_whose_history_is_malformed_is_named_before_any_episod
                                               r"\(evals.0.per_angle.30.time_s: Field required\).*remove it"):
         train(tmp_path, config, lambda d: phases.append(d["phase"]))
     assert phases == [] and not (tmp_path / "best.pt").exists()
+
+
+def test_a_choice_of_a_turning_point_whose_ik_did_not_converge_goes_to_the_other():
+    # Cloned policies kept going for an unconverged pose after a missed grasp and ran out of
+    # time at 60°; the choice is masked to the point the robot can reach.
+    env = GraspEnv()
+    env.reset(seed=10086, options={"angle_deg": 60})
+    masked = kept = 0
+    for _ in range(120):
+        points = list(env.predictor.points)
+        _, _, term, trunc, _ = env.step(choice_action(0))
+        if len(points) == 2 and not points[0].ok and points[1].ok:
+            assert env.aim == points[1].t
+            masked += 1
+        elif points:
+            assert env.aim == points[0].t
+            kept += 1
+        if term or trunc:
+            break
+    assert masked > 0 and kept > 0

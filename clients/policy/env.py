@@ -8,7 +8,9 @@ or after 256 steps.
 
 Reward, the paper's Equation 6, first matching case:
 −2 collision; −1 out of bounds (an axis within 1° of its limit, or the TCP below 5 cm);
-−1 near miss; +100 on reaching the object (the jaws closed on the rod); −10 past 256 steps;
+−1 near miss (also the jaws closed on the rod farther than ``GRASP_TOLERANCE`` from the grasp
+point); +100 on reaching the object (the jaws closed on the rod at the grasp point, within
+``GRASP_TOLERANCE``); −10 past 256 steps;
 0.1/D when the distance D from the TCP to the grasp point shrank (D floored at 1 cm so one
 step cannot outweigh the grasp); −0.01 otherwise.
 """
@@ -31,6 +33,11 @@ from clients.rod.model import RodModel, RodParams, pendulum_period
 MAX_STEPS = 256
 H = 0.01
 KEEP_WITHIN = 0.1  # s: a re-predicted turning point is the same point when its time moved less
+# m: the object to reach is the grasp point (D is the distance to it), so a grasp farther off
+# is paid as a near miss: paid +100 as any grasp, the DDPG phase traded precise grasps at 60°
+# for quicker ones 17–20 mm off. 3 mm is what the evaluation counts as precise; 1 mm (Table
+# 2's target for the mean error) gave no more precise policies (docs/scenario.md).
+GRASP_TOLERANCE = 0.003
 
 
 def reward(collision: bool, out_of_bounds: bool, near_miss: bool, grasped: bool, step: int, distance: float,
@@ -53,6 +60,7 @@ def reward(collision: bool, out_of_bounds: bool, near_miss: bool, grasped: bool,
 
 class GraspEnv(gym.Env):
     metadata = {"render_modes": []}
+    grasp_tolerance = GRASP_TOLERANCE
 
     def __init__(self, rod: RodParams | None = None, angle_range_deg: tuple[float, float] = (30.0, 60.0)):
         self.rod_params = rod or RodParams()
@@ -113,7 +121,9 @@ class GraspEnv(gym.Env):
         o = self.out
         out_of_bounds = bool(np.any(np.abs(o.q - kr6.LIMITS[:, 0]) < math.radians(1))
                              or np.any(np.abs(o.q - kr6.LIMITS[:, 1]) < math.radians(1)) or o.tcp[2] < 0.05)
-        r = reward(o.collision, out_of_bounds, o.near_miss, o.grasped, self.steps, o.distance, self.previous_distance)
+        on_point = o.grasped and o.distance <= self.grasp_tolerance
+        r = reward(o.collision, out_of_bounds, o.near_miss or (o.grasped and not on_point), on_point, self.steps,
+                   o.distance, self.previous_distance)
         self.previous_distance = o.distance
         terminated = bool(o.grasped or o.collision)
         truncated = self.steps >= MAX_STEPS and not terminated
@@ -131,7 +141,10 @@ class GraspEnv(gym.Env):
         It keeps the turning point its command in flight aims at while that point is still
         predicted, reachable by IK, ahead, and reachable in time (slack ≥ −0.05 s); otherwise
         (and for the first command) it picks the first predicted point the robot reaches in
-        time (margin 0.15 s). Choosing afresh at every step, as it once did, switched between
+        time (margin 0.15 s). It once also took a point less than 0.3 s ahead that it would
+        reach just late: at 60° those grasps closed 17 mm from the grasp point, and one hit
+        the rod (99 % (97) at 60° on 100 episodes; without it, 100 % (100) at every angle on
+        two sets of 100, 0.1 s slower at 30°, which the DDPG phase wins back). Choosing afresh at every step, as it once did, switched between
         the two points as their slack crossed the margin, and the switches carried the arm
         through the rod's sweep: 14 collisions in 100 episodes at 60° (86 % success), against
         none in 200 fresh episodes at every angle with the choice kept. It reads only what the
@@ -143,7 +156,7 @@ class GraspEnv(gym.Env):
                     return choice_action(i)
         for i, p in enumerate(points):
             slack = self._slack(p)
-            if p.ok and (slack >= 0.15 or (p.t - t < 0.3 and slack >= -0.05)):
+            if p.ok and slack >= 0.15:
                 return choice_action(i)
         return choice_action(len(points) - 1 if points else 0)
 

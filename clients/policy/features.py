@@ -18,7 +18,8 @@ Observation (34 numbers, normalised by the agent's running statistics):
 
 Action (7 numbers in [-1, 1]): the robot's joint targets (the paper's "angular positions of
 the robot's motion axes"), expressed in the frame the observation offers: the first number
-picks the turning point to catch (≤ 0 the next, > 0 the one after), the other six offset
+picks the turning point to catch (≤ 0 the next, > 0 the one after; a point whose IK did not
+converge is masked when the other's did), the other six offset
 each axis from that point's IK pose by up to ±``RESIDUAL`` rad. Joint targets in absolute
 terms proved too coarse for a 1 cm grasp after minutes of training; this keeps the policy's
 output in joint space while the network only has to learn choices and corrections.
@@ -63,10 +64,18 @@ def action_to_targets(action: np.ndarray, points: list["TurningPoint"], q: np.nd
 
 
 def aimed_point(action: np.ndarray, points: list["TurningPoint"]) -> "TurningPoint | None":
-    """The predicted turning point an action goes for (None when none is predicted)."""
+    """The predicted turning point an action goes for (None when none is predicted).
+
+    A choice of a point whose IK did not converge goes to the other point when that one's
+    did (action masking): the pose of an unconverged point does not put the jaws across the
+    rod, so going there cannot end in a grasp. Cloned policies kept choosing such a point
+    after a missed grasp and ran out of time (see docs/scenario.md)."""
     if not points:
         return None
-    return points[0] if action[0] <= 0 or len(points) < 2 else points[1]
+    chosen, other = (points[0], points[1:]) if action[0] <= 0 or len(points) < 2 else (points[1], points[:1])
+    if not chosen.ok and other and other[0].ok:
+        return other[0]
+    return chosen
 
 
 def aim_time(action: np.ndarray, points: list["TurningPoint"]) -> float | None:

@@ -21,11 +21,11 @@ import numpy as np
 import torch
 
 from clients.policy.ddpg import DDPG, CheckpointError, DDPGConfig, ReplayBuffer, acting_part
-from clients.policy.env import GraspEnv
+from clients.policy.env import GRASP_TOLERANCE, GraspEnv
 from clients.policy.history import ResumeError, check_resumable
 
 EVAL_ANGLES = (30.0, 40.0, 50.0, 60.0)
-PRECISE_MM = 3.0  # the trials' target for the grasp distance error
+PRECISE_MM = 1000 * GRASP_TOLERANCE  # a precise grasp, as reported and as the reward pays it
 SELECTION_SEED = 20_000  # episodes the final choice of checkpoint is made on (evaluations use 10_000 on)
 
 
