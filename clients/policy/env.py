@@ -144,10 +144,12 @@ class GraspEnv(gym.Env):
         time (margin 0.15 s). It once also took a point less than 0.3 s ahead that it would
         reach just late: at 60° those grasps closed 17 mm from the grasp point, and one hit
         the rod (99 % (97) at 60° on 100 episodes; without it, 100 % (100) at every angle on
-        two sets of 100, 0.1 s slower at 30°, which the DDPG phase wins back). Choosing afresh at every step, as it once did, switched between
-        the two points as their slack crossed the margin, and the switches carried the arm
-        through the rod's sweep: 14 collisions in 100 episodes at 60° (86 % success), against
-        none in 200 fresh episodes at every angle with the choice kept. It reads only what the
+        two sets of 100, 0.1 s slower at 30°, which the DDPG phase wins back).
+
+        Choosing afresh at every step, as it once did, switched between the two points as
+        their slack crossed the margin, and the switches carried the arm through the rod's
+        sweep: 14 collisions in 100 episodes at 60° (86 % success), against none in 200
+        fresh episodes at every angle with the choice kept. It reads only what the
         observation holds (the points, their slack, the aimed point's time), so it can be cloned."""
         t, points = self.rod.time, self.predictor.points
         if self.aim is not None:
