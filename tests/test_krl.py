@@ -11,11 +11,13 @@ import socket
 import threading
 import xml.etree.ElementTree as ET
 
+import numpy as np
 import pytest
 
-from clients.krl.controller import MAX_FRAME_BYTES, EmulatedController, parse_ack, stream_program
+from clients.krl.controller import MAX_FRAME_BYTES, EmulatedController, Program, parse_ack, stream_program
 from clients.krl.eki import AXES, EkiConfig, EkiError, frame, parse_frame
 from clients.krl.export import ExportError, export, read_path
+from clients.robot.scene import SceneParams
 from clients.rod.model import RodParams
 from tests.helpers import REPO, hycosim, run_project
 
@@ -74,9 +76,35 @@ def test_frame_stream_round_trip_through_the_controller(grasp_run, controller):
     answer = parse_ack(stream_program("127.0.0.1", controller.address[1], files["frames"].read_text()))
     n = len(files["frames"].read_text().splitlines()) - 1
     assert answer["frames"] == n and answer["rejected"] == 0
-    # The controller's rod is the twin itself here: the exported path grasps it, as in the simulation.
-    assert answer["grasped"] and answer["grasp_error_mm"] < 5.0
+    # The controller's rod is the twin itself here: the exported path grasps it as the
+    # simulation did, at the same step and as far from the grasp point (a path replayed one
+    # step behind closed at the same time but elsewhere).
+    with open(run / "values.csv", newline="") as f:
+        grasp = next(r for r in csv.DictReader(f) if float(r["robot.grasped"]) > 0.5)
+    offset = math.dist([float(grasp[f"robot.tcp_{c}"]) for c in "xyz"], [float(grasp[f"rod.grasp_{c}"]) for c in "xyz"])
+    assert answer["grasped"] and answer["grasp_time_s"] == pytest.approx(float(grasp["t"]), abs=1e-6)
+    assert answer["grasp_error_mm"] == pytest.approx(1000 * offset, abs=0.01)
     assert len(controller.results) == 1
+
+
+def test_the_controller_is_where_the_twin_was_at_every_step(grasp_run):
+    run, files = grasp_run
+    recorded = read_path(run)
+    program = Program(TWIN, SceneParams())
+    frames = [parse_frame(line, EkiConfig()) for line in files["frames"].read_text().splitlines()[:-1]]
+    worst = 0.0
+    for k, f in enumerate(frames[1:]):
+        program.run_until(f.t)
+        assert f.t == pytest.approx(recorded.t[k])
+        worst = max(worst, max(abs(a - b) for a, b in zip(np.degrees(program.scene.q), recorded.q_deg[k])))
+        program.accept(f.q_deg, f.t, f.close)
+    program.run_until(recorded.t[-1])
+    last = max(abs(a - b) for a, b in zip(np.degrees(program.scene.q), recorded.q_deg[-1]))
+    # Each frame's move, started at its T, ends where the twin's robot was a step later; a
+    # frame holding the point of its own time would leave the robot a whole step behind.
+    # (Frames carry 4 decimals of a degree.)
+    assert max(worst, last) < 1e-4 and len(frames) == len(recorded.t)
+    assert program.result.grasped and program.result.grasp_time_s == pytest.approx(recorded.t[-1])
 
 
 def test_the_gripper_follows_every_frame_so_a_path_may_reopen_after_closing_on_nothing(grasp_run, controller):
@@ -171,6 +199,10 @@ def test_short_trials_run_produces_the_table_and_files(tmp_path):
     assert {r["nodes"] for r in rows} == {"fmu"}  # the paper's design: the rod and robot scene as FMUs
     project = json.loads(next(out.glob("30deg-00/project.json")).read_text())
     assert [n["nodeName"] for n in project["nodeLists"] if "fmu" in n] == ["rod", "robot"]
+    # The trials' twin is the paper scenario's: the camera corrects it at the same rate.
+    paper = json.loads((REPO / "configs" / "grasp-paper.json").read_text())
+    gains = [doc["nodeLists"][0]["parameters"]["observer_gain"] for doc in (project, paper)]
+    assert gains[0] == gains[1] > 0
     assert all(r["success"] == "True" for r in rows)  # the shipped policy grasps every trial at 30–50°
     assert (out / "trials.png").stat().st_size > 20_000
     one = next(out.glob("30deg-00/krl/frames.xml"))

@@ -3,8 +3,15 @@
 Writes ``<name>.xml`` (the EKI configuration), ``<name>.src`` (the KRL program of the
 paper's Table 1) and ``frames.xml`` (the frame stream, one frame a line, ending with the
 empty-A1 frame). The path is the robot's recorded joint angles up to the grasp (when
-``robot.grasped`` first holds), one frame per macro step, with the gripper command that was
-routed to the robot at that step.
+``robot.grasped`` first holds), one frame per macro step.
+
+A frame is a move the controller starts at its T (Table 1's loop waits for T, then moves
+towards the frame's point). The twin's robot started the move of step k at t_k and was at
+its recorded point at t_(k+1), so the frame sent at t_k carries the point recorded at t_(k+1)
+and the gripper command routed at step k: the controller is then where the twin was at
+every step point. (Sent at its own time, each point left the robot a step behind: replayed
+against the twin's own rod, one 60° trial closed 1.25 mm from the grasp point where the
+co-simulation had closed 0.54 mm.) The first frame is the reset point, the program's XP1.
 """
 
 from __future__ import annotations
@@ -65,7 +72,8 @@ def export(run_dir: Path, out: Path, config: EkiConfig | None = None) -> dict[st
     files = {"eki": out / f"{config.name}.xml", "krl": out / f"{config.name}.src", "frames": out / "frames.xml"}
     files["eki"].write_text(config.to_xml())
     files["krl"].write_text(krl_program(config, tuple(jp.q_deg[0]) if jp.q_deg else kr6.READY_DEG))
-    lines = [frame(q, t, close) for t, q, close in zip(jp.t, jp.q_deg, jp.close)]
+    lines = [frame(jp.q_deg[0], jp.t[0], jp.close[0])]
+    lines += [frame(q_next, t, close) for t, close, q_next in zip(jp.t, jp.close, jp.q_deg[1:])]
     lines.append(frame(None))
     files["frames"].write_text("\n".join(lines) + "\n")
     return files
