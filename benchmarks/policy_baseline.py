@@ -10,6 +10,10 @@ from the training folders given with ``--ours`` (``hycosim train -o DIR`` writes
 evaluations over its training time, its cloned start as a dashed line.
 
     python benchmarks/policy_baseline.py [--minutes 20] [--seeds 0] [--ours DIR ...] [--plot FILE] [--json]
+                                         [--save FILE | --paper-from FILE]
+
+``--save`` keeps the curves as JSON; ``--paper-from`` redraws with the paper's curves from
+such a file instead of training it again (20 minutes a seed).
 
 Reported, not tuned to a target.
 """
@@ -29,10 +33,11 @@ sys.path.insert(0, str(REPO))
 from clients.policy.paper import plot_against, train_paper  # noqa: E402
 
 
-def ours_history(folder: Path) -> list[dict]:
-    """The evaluations of an engineered training run, from its ``last.pt``."""
+def ours_history(folder: Path) -> tuple[str, list[dict]]:
+    """The label (its seed) and the evaluations of an engineered training run, from its ``last.pt``."""
     state = torch.load(folder / "last.pt", map_location="cpu", weights_only=True)
-    return state["history"]["evals"]
+    seed = (state.get("train_config") or {}).get("seed")
+    return (folder.name if seed is None else f"seed {seed}"), state["history"]["evals"]
 
 
 def main() -> None:
@@ -44,10 +49,17 @@ def main() -> None:
     parser.add_argument("--ours", type=Path, nargs="*", default=[])
     parser.add_argument("--plot", type=Path, default=Path("policy_baseline.png"))
     parser.add_argument("--json", action="store_true")
+    parser.add_argument("--save", type=Path, help="write the curves (paper's and ours) to this JSON file")
+    parser.add_argument("--paper-from", type=Path, help="the paper's curves from a --save file: no training")
     args = parser.parse_args()
 
     paper = {}
-    for seed in args.seeds:
+    if args.paper_from:
+        try:
+            paper = json.loads(args.paper_from.read_text())["paper"]
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            sys.exit(f"{args.paper_from}: not a file of curves written by --save ({exc})")
+    for seed in [] if args.paper_from else args.seeds:
         result = train_paper(60 * args.minutes, seed, args.eval_every, args.eval_trials)
         paper[f"seed {seed}"] = result["evals"]
         last = result["evals"][-1]
@@ -57,14 +69,16 @@ def main() -> None:
               f"(after {best['seconds'] / 60:.1f} min)")
     ours = {}
     for folder in args.ours:
-        evals = ours_history(folder)
-        ours[folder.name] = evals
+        label, evals = ours_history(folder)
+        ours[label] = evals
         best = max(evals, key=lambda e: e["mean_success"])
-        print(f"engineered ({folder.name}): cloned start {_angles(_rates(evals[0]))} after "
+        print(f"engineered ({folder.name}, {label}): cloned start {_angles(_rates(evals[0]))} after "
               f"{evals[0].get('seconds', 0) / 60:.1f} min; best {_angles(_rates(best))} "
               f"(after {best.get('seconds', 0) / 60:.1f} min, episode {best['episode']})")
     plot_against(ours, paper, args.plot)
     print(f"wrote {args.plot}")
+    if args.save:
+        args.save.write_text(json.dumps({"paper": paper, "ours": ours}))
     if args.json:
         print(json.dumps({"paper": paper, "ours": ours}))
 
