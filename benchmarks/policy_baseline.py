@@ -26,11 +26,38 @@ import sys
 from pathlib import Path
 
 import torch
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 from clients.policy.paper import plot_against, train_paper  # noqa: E402
+
+
+class Evaluation(BaseModel):
+    """One point of a learning curve: training time (s) and mean success over the angles."""
+
+    model_config = ConfigDict(extra="allow")
+    seconds: float = Field(ge=0, allow_inf_nan=False)
+    mean_success: float = Field(ge=0, le=1)
+
+
+class SavedCurves(BaseModel):
+    """What ``--save`` writes; only the paper's curves are read back."""
+
+    model_config = ConfigDict(extra="allow")
+    paper: dict[str, list[Evaluation]]
+
+
+def parse_paper_curves(data: bytes, source: str) -> dict[str, list[dict]]:
+    """The paper's curves from the bytes of a ``--save`` file; ValueError naming ``source``."""
+    try:
+        saved = SavedCurves.model_validate_json(data)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(p) for p in first["loc"]) or "the file"
+        raise ValueError(f"{source}: not a file of curves written by --save ({where}: {first['msg']})") from None
+    return {label: [e.model_dump() for e in run] for label, run in saved.paper.items()}
 
 
 def ours_history(folder: Path) -> tuple[str, list[dict]]:
@@ -56,9 +83,11 @@ def main() -> None:
     paper = {}
     if args.paper_from:
         try:
-            paper = json.loads(args.paper_from.read_text())["paper"]
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            sys.exit(f"{args.paper_from}: not a file of curves written by --save ({exc})")
+            paper = parse_paper_curves(args.paper_from.read_bytes(), str(args.paper_from))
+        except OSError as exc:
+            sys.exit(f"{args.paper_from}: cannot read ({exc.strerror})")
+        except ValueError as exc:
+            sys.exit(str(exc))
     for seed in [] if args.paper_from else args.seeds:
         result = train_paper(60 * args.minutes, seed, args.eval_every, args.eval_trials)
         paper[f"seed {seed}"] = result["evals"]

@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 import time
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from tests.helpers import REPO, env
 from tests.netns import netns_available
@@ -173,3 +176,48 @@ def test_accuracy_benchmark_compares_the_couplings_with_the_exact_solution_and_c
     assert m["single_rate"]["points"] == m["multi_rate"]["points"] == 301
     assert m["multi_rate"]["messages"] < m["multi_rate_unbatched"]["messages"] < m["single_rate"]["messages"]
     assert m["message_ratio"] <= 1 / 3 and m["fast_node_identical"] and m["batching_changes_nothing"]
+
+
+_odd = st.sampled_from([float("nan"), float("inf"), -1.0, 1.0000001, "1", "x", None, True, [], {}])
+_point = st.fixed_dictionaries({"seconds": st.floats(0, 1e4), "mean_success": st.floats(0, 1)},
+                               optional={"episode": st.integers(0, 10**6),
+                                         "per_angle": st.dictionaries(st.sampled_from("3456"), st.floats(0, 1))})
+_curves = st.dictionaries(st.text(max_size=8), st.lists(_point, max_size=4), max_size=3)
+# A file --save wrote, and at most one fault put into it.
+_fault = st.none() | st.tuples(st.integers(0, 20), st.sampled_from(["seconds", "mean_success"]), _odd | st.just(...)) \
+    | st.sampled_from(["no paper", "paper a list", "a list", "cut", "not UTF-8"])
+
+
+@given(paper=_curves, ours=_curves, fault=_fault)
+def test_the_baselines_saved_curves_are_read_back_whole_or_refused_by_name(paper, ours, fault):
+    import copy
+
+    from benchmarks.policy_baseline import parse_paper_curves
+
+    doc = {"paper": copy.deepcopy(paper), "ours": ours}
+    points = [p for run in doc["paper"].values() for p in run]
+    if isinstance(fault, tuple) and points:
+        point = points[fault[0] % len(points)]
+        if fault[2] is ...:
+            del point[fault[1]]
+        else:
+            point[fault[1]] = fault[2]
+    elif fault == "no paper":
+        del doc["paper"]
+    elif fault == "paper a list":
+        doc["paper"] = points
+    data = json.dumps([doc] if fault == "a list" else doc).encode()
+    data = data[: len(data) // 2] if fault == "cut" else b"\xff" + data if fault == "not UTF-8" else data
+    try:
+        curves = parse_paper_curves(data, "saved.json")
+    except ValueError as exc:
+        assert str(exc).startswith("saved.json: not a file of curves written by --save (")
+        assert fault is not None and (not isinstance(fault, tuple) or points)
+        return
+    # What is read back is the file's curves, every point one the plot can draw.
+    assert not isinstance(fault, str)
+    assert list(curves) == list(doc["paper"])
+    for label, run in curves.items():
+        assert [(e["seconds"], e["mean_success"]) for e in run] == [
+            (float(p["seconds"]), float(p["mean_success"])) for p in doc["paper"][label]]
+        assert all(math.isfinite(e["seconds"]) and e["seconds"] >= 0 and 0 <= e["mean_success"] <= 1 for e in run)

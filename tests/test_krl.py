@@ -77,8 +77,7 @@ def test_frame_stream_round_trip_through_the_controller(grasp_run, controller):
     n = len(files["frames"].read_text().splitlines()) - 1
     assert answer["frames"] == n and answer["rejected"] == 0
     # The controller's rod is the twin itself here: the exported path grasps it as the
-    # simulation did, at the same step and as far from the grasp point (a path replayed one
-    # step behind closed at the same time but elsewhere).
+    # simulation did, at the same step and as far from the grasp point.
     with open(run / "values.csv", newline="") as f:
         grasp = next(r for r in csv.DictReader(f) if float(r["robot.grasped"]) > 0.5)
     offset = math.dist([float(grasp[f"robot.tcp_{c}"]) for c in "xyz"], [float(grasp[f"rod.grasp_{c}"]) for c in "xyz"])
