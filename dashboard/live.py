@@ -6,7 +6,7 @@ second, the mode switches with their guard values) and watches the liveliness to
 not subscribe to the releases and outputs themselves: on a small machine, taking every frame
 of a fast run cost the run a third of its steps (benchmarks/dashboard_cost.py), where five answers
 a second cost it 1–3 %. The server keeps its latest 4,096 points for the answers, and sends at
-most 256 of those after the step asked for (evenly thinned): a slow run is plotted point by
+most 64 of those after the step asked for (evenly thinned): a slow run is plotted point by
 point, a fast one thinned; ``hycosim dashboard RUN_DIR`` shows every step once recorded.
 
 The status answer is checked before use (:func:`_checked_status`); anything else is left out.

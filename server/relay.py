@@ -42,10 +42,9 @@ from server.interpolation import STARTUP_SPLIT, InputTrack
 from server.recorder import Recorder, RecordError
 from server.retakes import IterationLog, StepSizer, input_change, relaxed
 from server.routing import OutputView, Router
+from server.status_view import Recent, barrier_window, points_since
 
-
-# A status answer holds at most this many of the points asked for (a dashboard's plots).
-STATUS_POINTS = 256
+RECENT_KEPT = 4096  # the latest points kept for the status answers
 
 
 class RunError(RuntimeError):
@@ -156,10 +155,10 @@ class Relay:
         self._ended_arrivals: dict[str, float] = {}
         self.switches: collections.deque[dict[str, Any]] = collections.deque(maxlen=200)  # the latest mode switches
         # The latest points as (time, holder, wait, arrivals): the status answer's last second.
-        self._recent: collections.deque[tuple[float, str, float, dict[str, float]]] = collections.deque(maxlen=4096)
+        self._recent: collections.deque[Recent] = collections.deque(maxlen=RECENT_KEPT)
         self._shown: tuple[int, float, str, dict[str, list[Any]], dict[str, list[Any]], float | None] = (
             0, self.cosim.startTime, FREE_MODE, {}, {}, None)
-        self._history: collections.deque[tuple] = collections.deque(maxlen=4096)  # the latest points, for the dashboard
+        self._history: collections.deque[tuple] = collections.deque(maxlen=RECENT_KEPT)  # the latest points, for the dashboard
         self._ages: dict[str, float | None] = {}  # each asynchronous value's age at the latest point
         self._last_release: bytes | None = None
         self._start_frame: bytes | None = None
@@ -202,7 +201,7 @@ class Relay:
     def status(self, since: int | None = None) -> dict[str, Any]:
         """Who is attached and where the run is, for ``hycosim status`` and the dashboard (read
         from Zenoh's thread: copies of what the loop changes, each taken at once under the GIL).
-        ``since``: also the recent points after that step (at most STATUS_POINTS, evenly thinned)."""
+        ``since``: also the recent points after that step (server.status_view)."""
         restarts: dict[str, int] = {}
         for r in list(self.recoveries):
             restarts[r["node"]] = restarts.get(r["node"], 0) + 1
@@ -213,32 +212,14 @@ class Relay:
                           "input": n.input_names(), "output": n.output_names(),
                           "host": host if type(host) is str else None, "restarts": restarts.get(n.nodeName, 0)})
         shown = self._shown
-        now = time.perf_counter()
-        recent = [p for p in list(self._recent) if now - p[0] <= 1.0]  # the points of the last second
-        held: dict[str, float] = {}
-        arrived: dict[str, list[float]] = {}
-        for _, holder, wait, arrivals in recent:
-            if holder:
-                held[holder] = held.get(holder, 0.0) + wait
-            for node, at in arrivals.items():
-                arrived.setdefault(node, []).append(at)
-        total = sum(held.values())
-        window = {"steps": len(recent), "held": {n: w / total for n, w in held.items()} if total > 0 else {},
-                  "arrival_ms": {n: 1000 * sum(a) / len(a) for n, a in arrived.items()}}
+        window = barrier_window(list(self._recent), time.perf_counter(), RECENT_KEPT)
         return {"project": self.project.projectName, "attached": sorted(self.alive), "lost": sorted(self.lost),
                 "expected": [n.nodeName for n in self.project.nodeLists], "nodes": nodes,
                 "run": self.recorder.run_dir.name, "step": shown[0], "t": shown[1],
                 "mode": shown[2], "stopTime": self.cosim.stopTime, "lateness_s": self.progress.lateness_s,
                 "dropped": dict(self.intake.dropped), "switches": list(self.switches), "window": window,
                 "outputs": shown[3], "inputs": shown[4], "point_wall": shown[5], "ages": dict(self._ages),
-                **({} if since is None else {"points": self._points_since(since)})}
-
-    def _points_since(self, since: int) -> list[list[Any]]:
-        """``[step, t, outputs, inputs]`` of the kept points after step ``since``, thinned."""
-        points = [p for p in list(self._history) if p[0] > since]
-        stride = -(-len(points) // STATUS_POINTS)
-        kept = points[::-1][::stride][::-1] if stride > 1 else points  # the latest point always among them
-        return [[k, t, outputs, inputs] for k, t, _, outputs, inputs, _ in kept]
+                **({} if since is None else {"points": points_since(list(self._history), since)})}
 
     def request_stop(self) -> None:
         """Ask the loop to stop at the next macro-step point (thread-safe)."""

@@ -336,3 +336,34 @@ def test_the_feed_pushes_a_page_when_the_source_changes_and_only_then():
         server.should_exit = True
         serving.join(timeout=10)
     assert not serving.is_alive()
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is installed by `make test`")
+def test_a_plot_whose_values_barely_differ_draws_at_once_in_a_real_browser():
+    """A series converging (values a few parts in 10^9 apart) is drawn as if flat: uPlot alone
+    lays out such an axis for seconds, the page's updates held meanwhile. Each span is drawn
+    on a fresh plot in the page of a dashboard (whose server is not there: the page is served)."""
+    from playwright.sync_api import sync_playwright
+
+    port = _free_port()
+    board = spawn("dashboard", f"tcp/127.0.0.1:{_free_port()}", "--port", str(port), "--retry", "5")
+    try:
+        _page_up(f"http://127.0.0.1:{port}/")
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
+            page = browser.new_page()
+            page.goto(f"http://127.0.0.1:{port}/")
+            page.wait_for_function("typeof draw === 'function'")
+            for i, (base, spread) in enumerate([(2.0, 7.5e-9), (-5.0, 1e-7), (2.0, 1e-10), (2.0, 0.0), (1.0, 0.5)]):
+                took, y_min, y_max = page.evaluate("""async ([port, base, spread]) => {
+                    const t = performance.now();
+                    draw(port, [[0.27, 0.28, 0.29], [base - spread, base - spread / 2, base]]);
+                    await new Promise((r) => setTimeout(r, 0));  // uPlot lays out in a microtask
+                    const s = window.hycosim.plots[port].chart.scales.y;
+                    return [performance.now() - t, s.min, s.max]; }""", [f"probe{i}", base, spread])
+                assert took < 1000, (base, spread, took)
+                assert y_min <= base - spread and base <= y_max, (base, spread, y_min, y_max)
+                assert y_max - y_min < 10 * max(abs(base), 1)
+            browser.close()
+    finally:
+        reap(board)

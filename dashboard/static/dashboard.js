@@ -48,14 +48,7 @@ function render(s) {
   text($("dropped"), drops.length ? drops.map(([r, n]) => `${r}: ${n}`).join(", ") : "none");
   const ages = Object.entries(s.ages || {});
   text($("ages"), ages.length ? ages.map(([p, a]) => `${p}: ${fmt(a, 3)}`).join(", ") : "–");
-  const body = $("nodes").tBodies[0];
-  const rows = s.nodes.map((n) => {
-    const status = n.attached === null ? "" : n.lost ? "lost" : n.attached ? "attached" : "not attached";
-    return `<tr data-node="${esc(n.name)}"><td>${esc(n.name)}</td><td class="${status.replace(" ", "-")}">${status}</td>` +
-      `<td>${esc(n.host || "")}</td><td>${n.held_share === null ? "–" : fmt(100 * n.held_share, 1) + " %"}</td>` +
-      `<td>${fmt(n.mean_arrival_ms, 3)}</td><td>${n.restarts ?? "–"}</td></tr>`;
-  }).join("");
-  if (body.dataset.html !== rows) { body.innerHTML = rows; body.dataset.html = rows; }
+  nodeRows(s.nodes);
   const list = $("switches");
   const items = (s.switches || []).map((e) =>
     `<li>t=${fmt(e.t, 4)} s: <b>${esc(e.event)}</b> ${esc(e.from)} → ${esc(e.to)} <code>${esc(e.guard)}</code> ` +
@@ -71,6 +64,26 @@ function render(s) {
     state.data[port] = held;
     draw(port, held);
   }
+}
+
+function nodeRows(nodes) {
+  // The rows are made once per set of nodes and their cells' text changed in place after:
+  // rebuilding the table five times a second is the page's work the run pays for on a small machine.
+  const body = $("nodes").tBodies[0], names = nodes.map((n) => n.name).join("\n");
+  if (body.dataset.names !== names) {
+    body.innerHTML = nodes.map((n) => `<tr data-node="${esc(n.name)}"><td>${esc(n.name)}</td>` +
+      "<td></td><td></td><td></td><td></td><td></td></tr>").join("");
+    body.dataset.names = names;
+  }
+  nodes.forEach((n, i) => {
+    const cells = body.rows[i].cells;
+    const status = n.attached === null ? "" : n.lost ? "lost" : n.attached ? "attached" : "not attached";
+    const cls = status.replace(" ", "-");
+    if (cells[1].className !== cls) cells[1].className = cls;
+    text(cells[1], status); text(cells[2], n.host || "");
+    text(cells[3], n.held_share === null ? "–" : fmt(100 * n.held_share, 1) + " %");
+    text(cells[4], fmt(n.mean_arrival_ms, 3)); text(cells[5], n.restarts ?? "–");
+  });
 }
 
 const COLOURS = ["#8e5b2e", "#2a62c9", "#27ae60", "#c0392b", "#7f8c8d"];
@@ -98,6 +111,16 @@ function scene(nodes) {  // the twin, side view: each node's points joined in or
 
 function esc(v) { return String(v).replace(/[&<>"']/g, (c) => `&#${c.charCodeAt(0)};`); }
 
+// uPlot 1.6.32 (the latest release) takes seconds to lay out an axis whose span is a few parts in
+// 10^10 to 10^7 of its values (a series converging: 1.9999999925 … 1.9999999999; uPlot issues
+// #1084, #1135), and the page stops meanwhile (up to 8 s, one paced benchmark run in four): such a
+// span is drawn as if flat. Otherwise the ranges are uPlot's own (x: the data's; y: padded by a tenth).
+const TINY = 1e-6;
+const tiny = (min, max) => max - min <= TINY * Math.max(Math.abs(min), Math.abs(max));
+const flat = (min, max) => uPlot.rangeNum((min + max) / 2, (min + max) / 2, 0.1, true);
+const X_RANGE = (u, min, max) => (min == null ? [null, null] : tiny(min, max) ? flat(min, max) : [min, max]);
+const Y_RANGE = (u, min, max) => (min == null ? [null, null] : tiny(min, max) ? flat(min, max) : uPlot.rangeNum(min, max, 0.1, true));
+
 function draw(port, data) {
   let p = state.plots[port];
   if (!p) {
@@ -106,7 +129,7 @@ function draw(port, data) {
     $("plots").appendChild(box);
     const opts = {
       width: Math.max(400, $("plots").clientWidth - 20), height: 200,
-      scales: { x: { time: false } }, series: [{ label: "t (s)" }, { label: port, stroke: "#2a62c9", width: 1.5 }],
+      scales: { x: { time: false, range: X_RANGE }, y: { range: Y_RANGE } }, series: [{ label: "t (s)" }, { label: port, stroke: "#2a62c9", width: 1.5 }],
       hooks: { draw: [(u) => marks(u, state.markers || [])] },
     };
     p = state.plots[port] = { chart: new uPlot(opts, data, box), box, drawn: 0 };

@@ -1,0 +1,103 @@
+"""The status answer's view of the latest points: the barrier's last second from samples of it,
+and the points after a step, thinned, checked against reckoning every point."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from server.status_view import STATUS_POINTS, WINDOW_SAMPLES, barrier_window, points_since
+
+NODES = ["a", "b", "c"]
+
+
+@st.composite
+def recents(draw, most: int = 600):
+    """Points in time order: gaps from 0 to 20 ms, random holders, waits and arrivals."""
+    gaps = draw(st.lists(st.floats(0.0, 0.02), min_size=0, max_size=most))
+    t, points = 100.0, []
+    for gap in gaps:
+        t += gap
+        arrivals = draw(st.dictionaries(st.sampled_from(NODES), st.floats(0.0, 0.01), max_size=3))
+        points.append((t, draw(st.sampled_from(["", *NODES])), draw(st.floats(0.0, 0.01)), arrivals))
+    return points, t + draw(st.floats(0.0, 0.5))
+
+
+def _every_point(recent, now):
+    """The window as reckoned from every point of the second (what the server did before)."""
+    second = [p for p in recent if p[0] >= now - 1.0]
+    held, arrived = {}, {}
+    for _, holder, wait, arrivals in second:
+        if holder:
+            held[holder] = held.get(holder, 0.0) + wait
+        for node, at in arrivals.items():
+            arrived.setdefault(node, []).append(at)
+    return second, held, arrived
+
+
+@given(recents())
+def test_window_counts_the_second_and_samples_within_it(drawn):
+    recent, now = drawn
+    window = barrier_window(recent, now, kept=10_000)
+    second, held, arrived = _every_point(recent, now)
+    assert window["steps"] == len(second)
+    assert set(window["held"]) <= set(held) and set(window["arrival_ms"]) <= set(arrived)
+    if window["held"]:
+        assert math.isclose(sum(window["held"].values()), 1.0)
+    for node, mean in window["arrival_ms"].items():  # a mean of samples lies within all of them
+        assert 1000 * min(arrived[node]) - 1e-9 <= mean <= 1000 * max(arrived[node]) + 1e-9
+    if len(second) <= WINDOW_SAMPLES:  # few enough points: every one is reckoned
+        total = sum(held.values())
+        assert window["held"] == ({n: w / total for n, w in held.items()} if total > 0 else {})
+        assert window["arrival_ms"] == pytest.approx({n: 1000 * sum(a) / len(a) for n, a in arrived.items()})
+
+
+@pytest.mark.parametrize("period", [2, 3, 12, 24, 64])
+def test_window_samples_a_busy_second_without_aliasing(period):
+    # 3,000 points in the second, node a held the barrier on every period-th: its share is
+    # 1/period whatever the period (every k-th point would see a alone, or never).
+    now = 10.0
+    recent = [(now - 1.0 + (i + 0.5) / 3000, "a" if i % period == 0 else "b", 1e-3, {"a": 2e-3, "b": 1e-3})
+              for i in range(3000)]
+    window = barrier_window(recent, now, kept=4096)
+    assert window["steps"] == 3000
+    assert abs(window["held"]["a"] - 1 / period) < 0.1
+    assert window["arrival_ms"] == {"a": pytest.approx(2.0), "b": pytest.approx(1.0)}
+
+
+def test_window_reckons_the_rate_when_the_kept_points_span_less_than_a_second():
+    # 4,096 points kept at 10,000 steps/s span 0.41 s: the steps of a second are their rate.
+    now = 50.0
+    recent = [(now - (4095 - i) / 10_000, "a", 1e-4, {}) for i in range(4096)]
+    assert barrier_window(recent, now, kept=4096)["steps"] == 10_000
+    assert barrier_window(recent, now, kept=8192)["steps"] == 4096  # not full: all there were
+
+
+@st.composite
+def histories(draw):
+    """Kept points (step, t, mode, outputs, inputs, wall); steps rise, or go back once (a restore)."""
+    steps = list(range(draw(st.integers(0, 2000))))
+    back = draw(st.integers(0, len(steps)))
+    steps += list(range(back, back + draw(st.integers(0, 300))))
+    return [(k, 0.01 * k, "free", {"a": [float(k)]}, {"b": [float(-k)]}, None) for k in steps]
+
+
+@given(histories(), st.integers(-5, 2500))
+def test_points_since_are_after_the_step_thinned_with_the_latest(history, since):
+    points = points_since(history, since)
+    after = [p for p in history if p[0] > since]
+    assert len(points) <= STATUS_POINTS
+    assert all(k > since for k, *_ in points)
+    if after:
+        assert points[-1] == [after[-1][0], after[-1][1], after[-1][3], after[-1][4]]
+    if len(after) <= STATUS_POINTS:
+        assert points == [[k, t, o, i] for k, t, _, o, i, _ in after]
+    else:  # evenly thinned: no gap between those sent is much wider than the rest
+        index = {id(p[3]): j for j, p in enumerate(after)}
+        at = [index[id(p[2])] for p in points]
+        stride = -(-len(after) // STATUS_POINTS)
+        assert {b - a for a, b in zip(at, at[1:])} == {stride}
+        assert len(points) == -(-len(after) // stride)
