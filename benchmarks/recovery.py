@@ -43,6 +43,8 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(REPO))
 
+from server import checkpoints  # noqa: E402
+
 
 def project(dir_: Path, stop: float, every: float) -> Path:
     """The grasp scenario on FMUs plus a pendulum: four nodes, FMU and Python, checkpoints on."""
@@ -157,9 +159,17 @@ def node_kills(cfg: Path, runs: Path, names: list[str], kills: int, span: float,
 def server_kills(cfg: Path, runs: Path, kills: int, after: float) -> tuple[Path, dict]:
     proc = subprocess.Popen([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", str(runs), "--no-progress"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO)
-    run = None
+    run, before = None, set(runs.iterdir()) if runs.is_dir() else set()
     for i in range(kills):
-        time.sleep(after)
+        started = time.monotonic()
+        # A server killed before its run's first checkpoint leaves nothing to resume: on a loaded
+        # machine (the tests in two processes) the first one may come later than ``after``.
+        while time.monotonic() - started < 120:
+            made = [p for p in runs.iterdir() if p.is_dir() and p not in before] if runs.is_dir() else []
+            if made and checkpoints.latest(made[0])[0] is not None:
+                break
+            time.sleep(0.1)
+        time.sleep(max(0.0, after - (time.monotonic() - started)))
         for pid in pids(f"hycosim server {cfg}"):
             os.kill(pid, signal.SIGKILL)
         proc.communicate(timeout=120)

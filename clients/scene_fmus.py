@@ -6,6 +6,7 @@ their resources, so they run in any FMI importer whose Python has mujoco and num
 
 from __future__ import annotations
 
+import os
 import shutil
 import tempfile
 from pathlib import Path
@@ -21,15 +22,23 @@ _PACKAGED = ("__init__.py", "rod/__init__.py", "rod/model.py", "robot/__init__.p
 def build_scene_fmus(out_dir: Path) -> dict[str, Path]:
     """Write ``Rod.fmu`` and ``RobotScene6.fmu`` into ``out_dir``; return their paths."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory() as tmp:
+    # Built beside the destination and renamed into it: two builds at once (two trials
+    # commands, two test processes on a fresh clone) each leave a whole FMU, and one that
+    # reads the FMU meanwhile never opens half a zip.
+    with tempfile.TemporaryDirectory() as tmp, tempfile.TemporaryDirectory(dir=out_dir, prefix=".build-") as fresh:
         staged = Path(tmp) / "clients"
         for rel in _PACKAGED:
             (staged / rel).parent.mkdir(parents=True, exist_ok=True)
             shutil.copy(HERE / rel, staged / rel)
-        return {
-            "rod": build_model_fmu(HERE / "rod" / "rod_fmu.py", out_dir, resources=[staged]),
-            "robot": build_model_fmu(HERE / "robot" / "robot_fmu.py", out_dir, resources=[staged]),
+        built = {
+            "rod": build_model_fmu(HERE / "rod" / "rod_fmu.py", Path(fresh), resources=[staged]),
+            "robot": build_model_fmu(HERE / "robot" / "robot_fmu.py", Path(fresh), resources=[staged]),
         }
+        placed = {}
+        for name, fmu in built.items():
+            placed[name] = out_dir / fmu.name
+            os.replace(fmu, placed[name])
+        return placed
 
 
 def _sources() -> list[Path]:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 import math
 import shutil
+import threading
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -78,6 +80,44 @@ def test_scene_fmus_run_in_plain_fmpy_and_as_nodes(tmp_path):
     assert "nodeLists[1]: node 'robot': RobotScene6.fmu has no variable for output 'q1' (variable 'q_1')" in res.stderr
     run = run_project(cfg, tmp_path / "runs")
     _check_grasp(run, read_rows(run))
+
+
+def test_scene_fmus_rebuilt_while_read_and_twice_at_once_are_always_whole(tmp_path):
+    """Rebuilding the FMUs a run may be opening (two trials commands, two test workers on a fresh
+    clone): a reader meanwhile sees whole FMUs only, and two builds at once leave nothing beside them."""
+    out = tmp_path / "build" / "fmus"
+    build_scene_fmus(out)
+    broken, reads, errors, stop = [], [0], [], threading.Event()
+
+    def read() -> None:
+        while not stop.is_set():
+            for fmu in ("Rod.fmu", "RobotScene6.fmu"):
+                try:
+                    with zipfile.ZipFile(out / fmu) as z:
+                        if z.testzip() is not None:
+                            broken.append(f"{fmu}: bad CRC")
+                except (OSError, zipfile.BadZipFile) as exc:
+                    broken.append(f"{fmu}: {exc}")
+                reads[0] += 1
+
+    def build() -> None:
+        try:
+            build_scene_fmus(out)
+        except Exception as exc:  # noqa: BLE001 - the assertion below names it
+            errors.append(exc)
+
+    reader = threading.Thread(target=read)
+    builders = [threading.Thread(target=build) for _ in range(2)]
+    reader.start()
+    for b in builders:
+        b.start()
+    for b in builders:
+        b.join(120)
+    stop.set()
+    reader.join(10)
+    assert not errors and reads[0] > 0 and broken == [], broken[:3]
+    assert sorted(p.name for p in out.iterdir()) == ["RobotScene6.fmu", "Rod.fmu"]
+    assert all(validate_fmu(str(out / fmu)) == [] for fmu in ("Rod.fmu", "RobotScene6.fmu"))
 
 
 def test_the_papers_scenario_config_validates_runs_and_names_a_missing_or_old_fmu(tmp_path):
