@@ -36,7 +36,7 @@ baseline: $(STAMP)
 	$(PY) benchmarks/policy_baseline.py --minutes 20 --ours runs/train --plot runs/policy_baseline.png
 
 # Two test processes, each taking whole files (a file's module fixtures are built once): most
-# tests wait on processes and sockets, so on 2 cores the suite took 12.5 minutes instead of 19.
+# tests wait on processes and sockets, so on 2 cores the suite took 12.5–14 minutes instead of 19.
 TEST_WORKERS ?= 2
 test: $(STAMP) chromium
 	$(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile --durations=25
