@@ -9,17 +9,24 @@ for every step, the time from its point at the server (all its outputs in: the s
 clock, in the status answer) to the first snapshot reaching the page that shows it or a later
 step (points are 10 ms apart, so a step's time is the shown point's less the steps between).
 
+What watching takes: during the paced run, the CPU of the browser's processes and of the
+dashboard's, as a share of one core and per update the page received; and, for scale, the same
+browser showing a page that changes one line of text as often (the least any page updated at
+that rate costs the browser). When a run keeps every core busy, what they take of the machine
+comes out of the run's share.
+
 A big finished run: a run directory of ``--big`` steps (two nodes, written as the recorder
 writes them) opened with ``hycosim dashboard RUN_DIR``: seconds until the page lists the nodes
 (usable), and until a chosen port's plot has drawn.
 
-    python benchmarks/dashboard_cost.py [--n 2] [--steps 20000] [--repeat 3] [--paced-s 10] [--big 1000000] [--json]
+    python benchmarks/dashboard_cost.py [--n 2] [--steps 20000] [--repeat 3] [--paced-s 20] [--big 1000000] [--json]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import statistics
 import subprocess
@@ -27,6 +34,7 @@ import sys
 import tempfile
 import threading
 import time
+import urllib.parse
 import urllib.request
 from pathlib import Path
 
@@ -35,6 +43,7 @@ from _procs import free_port, kill_group, start
 from barrier import ring_config
 
 REPO = Path(__file__).resolve().parent.parent
+CORES = len(os.sched_getaffinity(0))
 
 
 def _page_up(url: str, timeout: float = 60) -> None:
@@ -48,29 +57,97 @@ def _page_up(url: str, timeout: float = 60) -> None:
     raise RuntimeError(f"no dashboard at {url}")
 
 
+def _cpu_by_kind() -> dict[str, float]:
+    """CPU seconds used so far by this process's descendants, by kind: ``browser`` (chromium's
+    processes) and ``dashboard`` (``hycosim dashboard``); the rest (the run, Playwright's driver)
+    is left out."""
+    parent: dict[int, int] = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                parent[int(entry)] = int(open(f"/proc/{entry}/stat").read().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+    ours, todo = set(), [os.getpid()]
+    while todo:
+        pid = todo.pop()
+        kids = [c for c, p in parent.items() if p == pid and c not in ours]
+        ours.update(kids)
+        todo += kids
+    used = {"browser": 0.0, "dashboard": 0.0}
+    for pid in ours:
+        try:
+            argv = open(f"/proc/{pid}/cmdline").read().split("\0")
+            fields = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue  # gone meanwhile
+        command = argv[argv.index("hycosim") + 1:argv.index("hycosim") + 2] if "hycosim" in argv else []
+        kind = ("browser" if "chromium" in os.path.basename(argv[0])
+                else "dashboard" if command == ["dashboard"] else None)
+        if kind:
+            used[kind] += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    return used
+
+
+def _sample_cpu(seconds: float, out: dict) -> None:
+    """Once the dashboard has run for six seconds (the page loaded and fed), the CPU of the
+    browser and the dashboard over ``seconds`` into ``out``, with the window's wall-clock ends
+    (the page's reports of its snapshots reach the harness only when it closes the page)."""
+    deadline = time.monotonic() + 120
+    while not _cpu_by_kind()["dashboard"] and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(6.0)  # a page's first seconds (loading, compiling, first layout) take a core's quarter
+    before, began, wall0 = _cpu_by_kind(), time.monotonic(), time.time()
+    time.sleep(seconds)
+    after, took = _cpu_by_kind(), time.monotonic() - began
+    out.update({kind: (after[kind] - before[kind]) / took for kind in after}, window=(wall0, time.time()))
+
+
+def browser_floor(rate_hz: float, seconds: float = 8.0) -> float:
+    """The share of one core headless chromium takes to show a page that changes one line of
+    text ``rate_hz`` times a second (its own work per update, whatever the page)."""
+    from playwright.sync_api import sync_playwright
+
+    line = ("<p id=n>0</p><script>let i = 0; setInterval(() => "
+            f"{{ document.getElementById('n').textContent = ++i; }}, {1000 / rate_hz:.0f});</script>")
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=shutil.which("chromium"), args=["--no-sandbox"])
+        page = browser.new_page()
+        page.goto("data:text/html," + urllib.parse.quote(line))
+        time.sleep(2.0)
+        before, began = _cpu_by_kind()["browser"], time.monotonic()
+        time.sleep(seconds)
+        share = (_cpu_by_kind()["browser"] - before) / (time.monotonic() - began)
+        browser.close()
+    return share
+
+
 def _watch(url: str, launched: threading.Event, until: threading.Event, seen: list | None) -> None:
     """Launch headless chromium (before the run starts: its start-up is no part of what the run
     pays), then open the page, plotting ``n0.y``, and keep it open until told. ``seen``: also
-    report every snapshot the page receives (the latency run only: each report is a call from
-    the page through Playwright's driver into this process, the harness's work, not a browser's)."""
+    record every snapshot the page receives, as (step, the point's wall time) and the wall time
+    it arrived (the latency run only; kept in the page and read when it closes, so that the
+    harness adds only a parse and an append to the page's work at each snapshot)."""
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=shutil.which("chromium"), args=["--no-sandbox"])
         page = browser.new_page()
         if seen is not None:
-            page.expose_function("hycosimSeen", lambda step, at: seen.append((step, at)))
             page.add_init_script("""
+            window.hycosimSeen = [];
             const Real = WebSocket;
             window.WebSocket = function (...a) { const ws = new Real(...a);
               ws.addEventListener('message', (ev) => { const m = JSON.parse(ev.data);
-                if (m.state === 'running' && m.point_wall) hycosimSeen([m.step, m.point_wall], Date.now() / 1000); });
+                if (m.state === 'running' && m.point_wall) window.hycosimSeen.push([[m.step, m.point_wall], Date.now() / 1000]); });
               return ws; };""")
         page.goto("about:blank")
         launched.set()
         _page_up(url)
         page.goto(url + "?ports=n0.y")
         until.wait()
+        if seen is not None:
+            seen += [((step, point), at) for (step, point), at in page.evaluate("window.hycosimSeen")]
         browser.close()
 
 
@@ -181,7 +258,7 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=2)
     ap.add_argument("--steps", type=int, default=20000)
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--paced-s", type=float, default=10.0)
+    ap.add_argument("--paced-s", type=float, default=20.0)
     ap.add_argument("--big", type=int, default=1_000_000, help="steps of the finished run opened (0: none)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
@@ -199,7 +276,15 @@ def main() -> None:
         doc["coSimulation"].update(stepSize=0.01, stopTime=args.paced_s, realTime=True)
         cfg.write_text(json.dumps(doc))
         seen: list = []
+        taken: dict = {}
+        sampler = threading.Thread(target=_sample_cpu, args=(max(1.0, args.paced_s - 8.0), taken), daemon=True)
+        sampler.start()
         run(cfg, tmp / "runs-paced", True, seen)
+        sampler.join(timeout=10)
+        if "window" in taken:
+            wall0, wall1 = taken.pop("window")
+            taken["updates_per_s"] = sum(wall0 <= at <= wall1 for _, at in seen) / (wall1 - wall0)
+        floor = browser_floor(taken["updates_per_s"]) if taken.get("updates_per_s") else None
         big = open_big(big_run(tmp / "big", args.big)) if args.big else None
     lat = sorted(latencies(seen, 0.01))
     plain, board = statistics.median(rates["plain"]), statistics.median(rates["dashboard"])
@@ -208,6 +293,7 @@ def main() -> None:
               "median_dashboard": board, "ratio": board / plain, "ratio_90": [low, high],
               "latency_ms": {"steps": len(lat), "median": 1000 * statistics.median(lat) if lat else None,
                              "p95": 1000 * lat[int(0.95 * (len(lat) - 1))] if lat else None},
+              "watching": {**taken, "browser_floor": floor, "cores": CORES} if taken else None,
               "big_run": big}
     if args.json:
         print(json.dumps(result, indent=1))
@@ -219,6 +305,15 @@ def main() -> None:
     if lat:
         print(f"release to page, paced run of {args.paced_s:g} s ({la['steps']} steps shown): "
               f"median {la['median']:.0f} ms, 95th percentile {la['p95']:.0f} ms")
+    if taken.get("updates_per_s"):
+        per = 1000 / taken["updates_per_s"]
+        machine = (taken["browser"] + taken["dashboard"]) / CORES
+        print(f"what watching takes, paced run ({taken['updates_per_s']:.1f} updates/s): the browser "
+              f"{100 * taken['browser']:.1f} % of a core ({per * taken['browser']:.1f} ms an update; a page changing "
+              f"one line as often: {100 * floor:.1f} %, {per * floor:.1f} ms), the dashboard "
+              f"{100 * taken['dashboard']:.1f} %; together {100 * machine:.1f} % of the machine's {CORES} cores")
+    else:
+        print("what watching takes: not measured (the page got no snapshot while the CPU was sampled)")
     if big:
         print(f"a finished run of {args.big:,} steps: the page usable after {big['usable_s']:.2f} s, the plot drawn "
               f"after {big['plot_s']:.2f} s ({big['points_sent']:,} points sent)")

@@ -221,3 +221,21 @@ def test_the_baselines_saved_curves_are_read_back_whole_or_refused_by_name(paper
         assert [(e["seconds"], e["mean_success"]) for e in run] == [
             (float(p["seconds"]), float(p["mean_success"])) for p in doc["paper"][label]]
         assert all(math.isfinite(e["seconds"]) and e["seconds"] >= 0 and 0 <= e["mean_success"] <= 1 for e in run)
+
+
+def test_dashboard_cost_benchmark_reports_the_cost_the_latency_and_what_watching_takes():
+    res = subprocess.run([sys.executable, "benchmarks/dashboard_cost.py", "--steps", "500", "--repeat", "1",
+                          "--paced-s", "10", "--big", "2000", "--json"],
+                         capture_output=True, text=True, timeout=400, cwd=REPO, env=env())
+    assert res.returncode == 0, res.stderr
+    got = json.loads(res.stdout)
+    assert got["ratio"] == got["median_dashboard"] / got["median_plain"] > 0
+    # The paced run's 1,000 steps reach the page, each within seconds of its point at the server.
+    lat = got["latency_ms"]
+    assert lat["steps"] >= 900 and 0 < lat["median"] <= lat["p95"] < 5000
+    w = got["watching"]
+    assert 3 <= w["updates_per_s"] <= 21  # the page is pushed 5 to 20 times a second
+    assert w["browser"] > 0 and w["dashboard"] > 0 and w["browser_floor"] > 0
+    assert w["cores"] >= 1
+    big = got["big_run"]
+    assert 0 < big["usable_s"] <= big["plot_s"] and big["points_sent"] > 100

