@@ -66,3 +66,29 @@ def wait_all(lead: subprocess.Popen, others: list[subprocess.Popen], timeout: fl
         return out
     finally:
         stop_all(lead, *others)
+
+
+def children() -> dict[int, list[int]]:
+    """Every running process's children, by parent pid (from /proc)."""
+    kids: dict[int, list[int]] = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                stat = f.read()
+        except OSError:
+            continue
+        ppid = int(stat[stat.rfind(")") + 2:].split()[1])
+        kids.setdefault(ppid, []).append(int(entry))
+    return kids
+
+
+def descendants(pid: int) -> list[int]:
+    """The pids of every process below ``pid`` in the process tree, now."""
+    kids, found, todo = children(), [], [pid]
+    while todo:
+        below = kids.get(todo.pop(), [])
+        found += below
+        todo += below
+    return found

@@ -38,7 +38,7 @@ import urllib.parse
 import urllib.request
 from pathlib import Path
 
-from _procs import free_port, kill_group, start
+from _procs import descendants, free_port, kill_group, start
 
 from barrier import ring_config
 
@@ -61,21 +61,8 @@ def _cpu_by_kind() -> dict[str, float]:
     """CPU seconds used so far by this process's descendants, by kind: ``browser`` (chromium's
     processes) and ``dashboard`` (``hycosim dashboard``); the rest (the run, Playwright's driver)
     is left out."""
-    parent: dict[int, int] = {}
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                parent[int(entry)] = int(open(f"/proc/{entry}/stat").read().rsplit(")", 1)[1].split()[1])
-            except (OSError, IndexError, ValueError):
-                continue
-    ours, todo = set(), [os.getpid()]
-    while todo:
-        pid = todo.pop()
-        kids = [c for c, p in parent.items() if p == pid and c not in ours]
-        ours.update(kids)
-        todo += kids
     used = {"browser": 0.0, "dashboard": 0.0}
-    for pid in ours:
+    for pid in descendants(os.getpid()):
         try:
             argv = open(f"/proc/{pid}/cmdline").read().split("\0")
             fields = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()

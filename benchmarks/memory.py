@@ -28,26 +28,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from _procs import free_port, kill_group, start
+from _procs import children, free_port, kill_group, start
 from barrier import ring_config
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 SAMPLE_EVERY_S = 0.02
-
-
-def _children() -> dict[int, list[int]]:
-    kids: dict[int, list[int]] = {}
-    for entry in os.listdir("/proc"):
-        if not entry.isdigit():
-            continue
-        try:
-            stat = Path(f"/proc/{entry}/stat").read_text()
-        except OSError:
-            continue
-        ppid = int(stat[stat.rfind(")") + 2:].split()[1])
-        kids.setdefault(ppid, []).append(int(entry))
-    return kids
 
 
 def _peak_rss_and_argv(pid: int) -> tuple[float, list[str]] | None:
@@ -75,7 +61,7 @@ def peak_rss_by_process(cmd: list[str], timeout: float) -> dict[int, tuple[float
         while proc.poll() is None:
             if time.monotonic() > deadline:
                 raise RuntimeError(f"timed out after {timeout:g} s (--timeout): {' '.join(cmd[:4])} ...")
-            kids, todo = _children(), [proc.pid]
+            kids, todo = children(), [proc.pid]
             while todo:
                 pid = todo.pop()
                 todo.extend(kids.get(pid, []))

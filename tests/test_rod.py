@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import example, given
+from hypothesis import strategies as st
 
 from clients.rod.model import RodModel, RodParams, pendulum_period
 
@@ -137,6 +139,29 @@ def test_the_observer_stays_on_the_rod_with_frames_in_flight(delay_s):
     # Corrected once per frame in flight the twin swung off (98° at 50 ms) or away (at 100 ms);
     # uncorrected it is 10° off. Late frames leave it 0.4-0.5° off here.
     assert sum(errors[-50:]) / 50 < math.radians(1.0), [round(math.degrees(e), 2) for e in errors[::25]]
+
+
+_times = st.floats(allow_nan=True, allow_infinity=True)
+
+
+@given(last=_times, pending=st.lists(_times, max_size=8))
+@example(last=-1.0, pending=[0.0, 0.0])  # a queued frame that pulls the twin the other way first
+def test_a_saved_state_with_any_measurement_times_restores_only_an_ordered_queue(last, pending):
+    rod = RodModel(RodParams(initial_angle=math.radians(40), observer_gain=12.0))
+    rod.advance(0.05)
+    snap = {**rod.snapshot(), "last_measurement": last, "pending": pending}
+    try:
+        rod.restore(snap)
+    except ValueError:
+        return
+    times = [rod._last_measurement, *(t for t, _ in rod._pending)]
+    assert not math.isnan(times[0]) and all(math.isfinite(t) for t in times[1:])
+    assert all(a < b for a, b in zip(times, times[1:]))
+    # And the observer goes on: a frame of the twin's present is used, after those queued,
+    # unless one as late or later was had.
+    rod.correct(rod.angle + 0.1, 0.01, measured_at=rod.time)
+    assert rod._last_measurement == rod.time or times[-1] >= rod.time
+    assert not rod._pending or rod._pending[0][0] > rod.time
 
 
 def test_grasp_and_tip_positions_follow_the_angle():

@@ -199,15 +199,20 @@ class RodModel:
         spec = mujoco.mjtState.mjSTATE_INTEGRATION
         state = np.asarray(snap["mujoco"], dtype=float)
         history = [float(v) for v in snap["history"]]
+        last = float(snap["last_measurement"])
         pending = [float(v) for v in snap.get("pending", [])]  # none in a state saved before it was kept
+        times = [last, *pending[0::2]]
+        # A NaN time would never be reached and hold every later frame back; a time out of order
+        # would be applied over a negative interval, pushing the twin away from the rod.
         if (state.shape != (mujoco.mj_stateSize(self.model, spec),) or not history or len(history) % 2
-                or len(pending) % 2):
+                or len(pending) % 2 or math.isnan(last) or not all(map(math.isfinite, pending))
+                or any(b <= a for a, b in zip(times, times[1:]))):
             raise ValueError("not a state of this rod model")
         mujoco.mj_setState(self.model, self.data, state, spec)
         mujoco.mj_kinematics(self.model, self.data)
         self._history.clear()
         self._history.extend(zip(history[0::2], history[1::2]))
-        self._last_measurement = float(snap["last_measurement"])
+        self._last_measurement = last
         self._pending.clear()
         self._pending.extend(zip(pending[0::2], pending[1::2]))
 
