@@ -164,6 +164,21 @@ def test_a_saved_state_with_any_measurement_times_restores_only_an_ordered_queue
     assert not rod._pending or rod._pending[0][0] > rod.time
 
 
+_bad = st.sampled_from([math.nan, math.inf, -math.inf])
+
+
+@given(frames=st.lists(st.one_of(st.tuples(_bad, st.one_of(st.none(), _times)), st.tuples(_times, _bad)),
+                       min_size=1, max_size=12))
+def test_a_nan_or_infinite_measurement_leaves_the_twin_as_if_it_had_not_come(frames):
+    twin = RodModel(RodParams(initial_angle=math.radians(40), observer_gain=12.0))
+    free = RodModel(RodParams(initial_angle=math.radians(40)))
+    for angle, at in frames:
+        twin.correct(angle, 0.01, measured_at=at)
+        for m in (twin, free):
+            m.advance(0.01)
+        assert (twin.angle, twin.omega) == (free.angle, free.omega), (angle, at)
+
+
 def test_grasp_and_tip_positions_follow_the_angle():
     rod = RodModel(RodParams(initial_angle=math.radians(30)))
     o = rod.outputs()

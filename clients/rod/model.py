@@ -145,8 +145,8 @@ class RodModel:
         over the time since the previous measurement.
         """
         l = self.p.observer_gain
-        if l <= 0:
-            return
+        if l <= 0 or not math.isfinite(measured_angle) or (measured_at is not None and not math.isfinite(measured_at)):
+            return  # a NaN or infinite measurement (any node's output may be one) would make the twin NaN
         if measured_at is None:
             self._nudge(measured_angle - self.angle, h)
             return
