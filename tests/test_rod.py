@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import mujoco
 import numpy as np
 import pytest
 from hypothesis import example, given
@@ -164,6 +165,18 @@ def test_a_saved_state_with_any_measurement_times_restores_only_an_ordered_queue
     assert not rod._pending or rod._pending[0][0] > rod.time
 
 
+@given(where=st.integers(min_value=0), value=st.one_of(st.sampled_from([math.nan, math.inf, -math.inf]),
+                                                      st.floats(min_value=1e10, exclude_min=True),
+                                                      st.floats(max_value=-1e10, exclude_max=True)))
+def test_a_saved_state_with_a_value_mujoco_would_reset_is_refused(where, value):
+    rod = RodModel(RodParams(initial_angle=math.radians(40), observer_gain=12.0))
+    rod.advance(0.05)
+    snap = rod.snapshot()
+    snap["mujoco"][where % len(snap["mujoco"])] = value
+    with pytest.raises(ValueError, match="not a state of this rod"):
+        rod.restore(snap)
+
+
 _bad = st.sampled_from([math.nan, math.inf, -math.inf])
 
 
@@ -177,6 +190,31 @@ def test_a_nan_or_infinite_measurement_leaves_the_twin_as_if_it_had_not_come(fra
         for m in (twin, free):
             m.advance(0.01)
         assert (twin.angle, twin.omega) == (free.angle, free.omega), (angle, at)
+
+
+_finite = st.floats(allow_nan=False, allow_infinity=False)
+
+
+@given(frames=st.lists(st.tuples(_finite, _finite), min_size=1, max_size=6))
+@example(frames=[(1e300, 0.0)])              # an angle MuJoCo would call unstable and reset
+@example(frames=[(0.0, 1e300), (0.0, 0.0)])  # a frame from far in the future, then good ones
+def test_after_any_finite_frames_the_camera_brings_the_twin_onto_the_rod(frames):
+    """Whatever finite angles and capture times a node sends first, the twin is never reset
+    (MuJoCo resets a state it finds unstable, and time with it) and later good frames bring it
+    onto the rod: an angle error counts modulo a turn, and a frame stamped in the future does
+    not hold back those after it."""
+    truth = RodModel(RodParams(length=0.63, initial_angle=math.radians(43)))
+    twin = RodModel(RodParams(initial_angle=math.radians(40), observer_gain=12.0))
+    h, errors = 0.01, []
+    for k in range(300):
+        angle, at = frames[k] if k < len(frames) else (truth.angle, twin.time)
+        twin.correct(angle, h, measured_at=at)
+        for m in (twin, truth):
+            m.advance(h)
+        errors.append(abs(math.remainder(twin.angle - truth.angle, 2 * math.pi)))
+    assert twin.time == pytest.approx(truth.time)
+    assert twin.data.warning[mujoco.mjtWarning.mjWARN_BADQPOS].number == 0
+    assert max(errors[-50:]) < math.radians(1.0), [round(math.degrees(e), 2) for e in errors[::25]]
 
 
 def test_grasp_and_tip_positions_follow_the_angle():

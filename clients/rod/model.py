@@ -11,7 +11,8 @@ at both switches (only the forces change). A measurement of the real rod's angle
 corrects the twin through a Luenberger observer on (φ, ω) with error dynamics
 ë + 2l·ė + l²·e = 0 (critically damped, rate ``observer_gain`` l in 1/s; 0 turns it off).
 A measurement carries its capture time: it is compared with the twin's own angle at that
-time (kept for the last second), so camera latency does not bias the correction.
+time (kept for the last second), so camera latency does not bias the correction. Any finite
+sample is taken (the error modulo a turn); later good ones bring the twin onto the rod.
 """
 
 from __future__ import annotations
@@ -148,10 +149,17 @@ class RodModel:
         if l <= 0 or not math.isfinite(measured_angle) or (measured_at is not None and not math.isfinite(measured_at)):
             return  # a NaN or infinite measurement (any node's output may be one) would make the twin NaN
         if measured_at is None:
-            self._nudge(measured_angle - self.angle, h)
+            self._nudge(_wrapped(measured_angle - self.angle), h)
             return
         newest = self._pending[-1][0] if self._pending else self._last_measurement
         if measured_at > newest:
+            self._pending.append((measured_at, measured_angle))
+        elif measured_at > self._last_measurement and measured_at != newest:
+            # Frames come in the order they were captured, so one captured before a frame that
+            # waits means the waiting frames' times were wrong (a bad frame, or a camera whose
+            # clock went back): trust the newest arrival. Kept, one frame stamped far in the
+            # future would hold back every later frame for the rest of the run.
+            self._pending.clear()
             self._pending.append((measured_at, measured_angle))
         # A measurement captured at a time the twin has not reached (the co-simulation fell
         # behind the wall clock the camera lives on) waits until the twin gets there: compared
@@ -164,7 +172,7 @@ class RodModel:
             # measurement) apply at most a quarter of the error's remaining time constant.
             dt = min(at - self._last_measurement, 0.25 / l)
             self._last_measurement = at
-            moved = self._nudge(angle - self.angle_at(at), dt)
+            moved = self._nudge(_wrapped(angle - self.angle_at(at)), dt)
             # The twin's past since the capture is what this correction amends. A frame captured
             # meanwhile and still in flight must be compared with it amended, or the same error
             # is corrected once per such frame: with 100 ms of frames in flight on a loaded
@@ -204,7 +212,9 @@ class RodModel:
         times = [last, *pending[0::2]]
         # A NaN time would never be reached and hold every later frame back; a time out of order
         # would be applied over a negative interval, pushing the twin away from the rod.
-        if (state.shape != (mujoco.mj_stateSize(self.model, spec),) or not history or len(history) % 2
+        # MuJoCo resets a state past mjMAXVAL (time too) at the next step, as it does a NaN one.
+        if (state.shape != (mujoco.mj_stateSize(self.model, spec),) or not np.all(np.abs(state) <= mujoco.mjMAXVAL)
+                or not history or len(history) % 2
                 or len(pending) % 2 or math.isnan(last) or not all(map(math.isfinite, pending))
                 or any(b <= a for a, b in zip(times, times[1:]))):
             raise ValueError("not a state of this rod model")
@@ -236,6 +246,12 @@ class RodModel:
         """World position of the point s metres down the rod, at the given (or current) angle."""
         a = self.angle if angle is None else angle
         return np.asarray(self.p.pivot) + s * np.array([0.0, math.sin(a), -math.cos(a)])
+
+
+def _wrapped(e: float) -> float:
+    """An angle error in [-π, π]: the rod at φ + 2π is the rod at φ, and a huge measured angle
+    (any finite value a node may send) must not kick the twin until MuJoCo resets it."""
+    return math.remainder(e, 2 * math.pi)
 
 
 def pendulum_period(p: RodParams, amplitude: float) -> float:
