@@ -7,6 +7,7 @@ import math
 import time
 import warnings
 
+import mujoco
 import numpy as np
 import pytest
 import torch
@@ -433,6 +434,26 @@ def test_a_policy_node_state_restores_a_finite_aim_or_is_refused(policy_node, ai
         assert not (aim is None or type(aim) is float and math.isfinite(aim))
         return
     assert policy_node.aim == aim and (aim is None or math.isfinite(policy_node.aim))
+
+
+_SWING = {**{f"q{i + 1}": float(v) for i, v in enumerate(kr6.READY)}, "tcp_x": 0.47, "tcp_y": 0.0, "tcp_z": 0.75,
+          "grasp_x": 0.62, "grasp_y": 0.4 * math.sin(0.7), "grasp_z": 1.0 - 0.4 * math.cos(0.7),
+          "rod_angle": 0.7, "rod_omega": 0.0, "gap": kr6.GRIPPER_OPEN, "grasped": 0.0}
+
+
+@given(bad=st.dictionaries(st.sampled_from(sorted(set(_SWING) - {"grasped"})),
+                           st.floats(allow_nan=True, allow_infinity=True), min_size=1, max_size=4))
+def test_a_policy_node_given_any_input_values_commands_a_finite_pose_within_limits(policy_node, bad):
+    """Its inputs are other nodes' outputs: with NaN, infinite or huge values among them the
+    command stays a pose within the limits (a NaN went through the actor to the robot), and its
+    prediction rod is never one MuJoCo resets."""
+    for t, inputs in ((0.0, {**_SWING, **bad}), (0.01, _SWING)):
+        policy_node.step(t, 0.01, inputs)
+        warned = policy_node.predictor.rod.data.warning  # a later prediction resets the rod, and these
+        assert not warned[mujoco.mjtWarning.mjWARN_BADQPOS].number + warned[mujoco.mjtWarning.mjWARN_BADQVEL].number
+        q_cmd = np.array([policy_node.outputs()[f"q_cmd{i + 1}"] for i in range(6)])
+        assert np.all(np.isfinite(q_cmd)), (inputs, q_cmd)
+        assert np.all(q_cmd >= kr6.LIMITS[:, 0] - 1e-9) and np.all(q_cmd <= kr6.LIMITS[:, 1] + 1e-9)
 
 
 _CHECKPOINT_KEYS = ["version", "obs_dim", "act_dim", "hidden", "residual_deg", "actor", "critic", "critic2", "anchor",

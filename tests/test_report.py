@@ -16,7 +16,9 @@ def test_report_names_the_node_that_holds_the_barrier_and_plot_draws(tmp_path):
     cfg = write_project(tmp_path / "p.json", [
         {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
         {"nodeName": "fast", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
-        {"nodeName": "slow", "UID": 3, "model": "gain", "parameters": {"work_s": 0.004}, "input": ["u"], "output": ["y"]},
+        # 8 ms of work a step: with 4 ms, a preempted "fast" node held a quarter of the steps
+        # once, on a machine running two test processes and a third load.
+        {"nodeName": "slow", "UID": 3, "model": "gain", "parameters": {"work_s": 0.008}, "input": ["u"], "output": ["y"]},
     ], [{"from": "clock.y", "to": "fast.u"}, {"from": "clock.y", "to": "slow.u"}],
         events=[{"name": "late", "when": "clock.y >= 0.5 and clock.y < 0.8", "drives": "fast", "until": "clock.y >= 0.8"}],
         cosim={"stepSize": 0.01, "stopTime": 1.0})

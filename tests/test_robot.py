@@ -4,10 +4,16 @@ from __future__ import annotations
 
 import math
 
+import mujoco
 import numpy as np
 import pytest
+from hypothesis import example, given
+from hypothesis import strategies as st
 
+from clients.node import NodeContext, NodeModelError
 from clients.robot import kr6
+from clients.robot.controller import ReferenceController
+from clients.robot.node import initial_pose
 from clients.robot.reach import analyse_reach
 from clients.robot.scene import RobotScene, SceneParams, grasp_rotation
 
@@ -135,3 +141,73 @@ def test_reach_analysis_finds_the_reachable_part_of_the_swing():
     assert report.fraction_of_swing(60) == 1.0
     far = analyse_reach(SceneParams(pivot=(0.9, 0.0, 1.0), check_reach=False), max_deg=60, step_deg=10)
     assert far.reachable_range() is None or far.fraction_of_swing(60) < 0.5
+
+
+_any = st.floats(allow_nan=True, allow_infinity=True)
+
+
+@given(steps=st.lists(st.tuples(st.lists(_any, min_size=6, max_size=6), st.booleans(), _any), min_size=1, max_size=6))
+@example(steps=[([math.nan] * 6, False, math.nan)])  # a NaN command stayed in the pose for good
+def test_any_commands_and_rod_angles_leave_a_finite_pose_that_good_commands_still_move(steps):
+    """The scene's inputs come from other nodes: a command or rod angle that is NaN, infinite or
+    huge holds that axis (or the rod) where it was; the pose stays finite and within limits, and
+    the robot still goes where a good command sends it."""
+    scene = RobotScene(SceneParams(check_reach=False))
+    for q_cmd, close, rod_angle in steps:
+        o = scene.step(0.01, np.array(q_cmd), close, rod_angle)
+        assert np.all(np.isfinite(scene.q)) and math.isfinite(scene.rod_angle) and math.isfinite(o.distance)
+        assert np.all(scene.q >= kr6.LIMITS[:, 0]) and np.all(scene.q <= kr6.LIMITS[:, 1])
+    for _ in range(400):
+        scene.step(0.01, kr6.READY, False, 0.3)
+    assert np.allclose(scene.q, kr6.READY) and scene.rod_angle == 0.3
+
+
+@given(q=st.lists(_any, min_size=6, max_size=6), gap=_any, rod_angle=_any, which=st.integers(0, 2))
+def test_a_saved_scene_state_restores_only_a_finite_pose_within_limits(q, gap, rod_angle, which):
+    scene = RobotScene(SceneParams(check_reach=False))
+    snap = scene.snapshot()
+    # One part changed at a time, so that a good value in the others is not masked.
+    snap.update([{"q": q}, {"gap": gap}, {"rod_angle": rod_angle}][which])
+    try:
+        scene.restore(snap)
+    except ValueError:
+        return
+    assert np.all(scene.q >= kr6.LIMITS[:, 0]) and np.all(scene.q <= kr6.LIMITS[:, 1])
+    assert 0.0 <= scene.gap <= kr6.GRIPPER_OPEN and math.isfinite(scene.rod_angle)
+    assert math.isfinite(scene.step(0.01, kr6.READY, False, 0.0).distance)
+
+
+@given(angle=_any, omega=_any, q=st.lists(_any, min_size=6, max_size=6))
+@example(angle=1e300, omega=0.0, q=list(kr6.READY))  # MuJoCo reset the planning rod, which then hung still
+@example(angle=0.7, omega=math.nan, q=list(kr6.READY))
+def test_the_reference_controller_given_any_inputs_plans_only_from_a_swing(tmp_path_factory, angle, omega, q):
+    """Its inputs are other nodes' outputs: the planning rod is never given a state MuJoCo
+    resets, the commands stay finite and within limits, and a good swing afterwards is planned."""
+    node = ReferenceController()
+    node.setup(NodeContext("controller", 3, [], [], {}, 0.01, 0.0, tmp_path_factory.mktemp("ctrl")))
+    inputs = {**{f"q{i + 1}": v for i, v in enumerate(q)}, "rod_angle": angle, "rod_omega": omega, "grasped": 0.0}
+    node.step(0.0, 0.01, inputs)
+    warned = node.rod.data.warning  # the next plan resets the rod, and these with it
+    assert not warned[mujoco.mjtWarning.mjWARN_BADQPOS].number + warned[mujoco.mjtWarning.mjWARN_BADQVEL].number
+    node.step(0.2, 0.01, {**{f"q{i + 1}": float(v) for i, v in enumerate(kr6.READY)},
+                          "rod_angle": math.radians(40), "rod_omega": 0.0, "grasped": 0.0})
+    q_cmd = np.array([node.outputs()[f"q_cmd{i + 1}"] for i in range(6)])
+    assert np.all(np.isfinite(q_cmd)) and np.all(q_cmd >= kr6.LIMITS[:, 0]) and np.all(q_cmd <= kr6.LIMITS[:, 1])
+    assert node.plan is not None and node.plan.t_turn > 0.2
+
+
+@given(q0=st.lists(_any, min_size=6, max_size=6) | st.lists(st.floats(-400, 400), max_size=8) | st.text(max_size=3)
+       | st.none() | st.lists(st.text(max_size=2), min_size=6, max_size=6))
+@example(q0=[0, -90, 90, 0, 0, 0])
+@example(q0=[171, -90, 90, 0, 0, 0])
+def test_a_robot_nodes_initial_pose_is_six_angles_within_limits_or_an_error_naming_it(q0):
+    try:
+        q = initial_pose("arm", q0)
+    except NodeModelError as exc:
+        assert "'arm'" in str(exc) and "q0_deg" in str(exc)
+        return
+    assert np.all(q >= kr6.LIMITS[:, 0]) and np.all(q <= kr6.LIMITS[:, 1])
+    assert np.allclose(np.degrees(q), np.asarray(q0, dtype=float))
+    scene = RobotScene(SceneParams(check_reach=False))
+    scene.set_state(q, kr6.GRIPPER_OPEN, 0.0)
+    scene.restore(scene.snapshot())  # a checkpoint of the start restores

@@ -217,6 +217,28 @@ def test_after_any_finite_frames_the_camera_brings_the_twin_onto_the_rod(frames)
     assert max(errors[-50:]) < math.radians(1.0), [round(math.degrees(e), 2) for e in errors[::25]]
 
 
+@given(grips=st.lists(st.tuples(_times, _times, _times), min_size=1, max_size=5),
+       goal=st.floats(min_value=-math.radians(80), max_value=math.radians(80)))
+@example(grips=[(0.62, 1e3, 1.0)], goal=0.0)   # a kilometre off: the equality spun the rod
+@example(grips=[(0.62, 1e300, 1.0)], goal=0.0)  # the force overflowed and MuJoCo reset the rod
+def test_a_driven_rod_given_any_gripper_positions_is_never_reset_and_still_follows(grips, goal):
+    rod = RodModel(RodParams(initial_angle=math.radians(40)))
+    rod.advance(0.1)
+    rod.set_driven(True)
+    for grip in grips:
+        rod.set_gripper(np.array(grip))
+        for _ in range(5):
+            rod.advance(0.01)
+    rod.set_gripper(rod.point(rod.p.grasp_distance, goal))
+    for _ in range(100):
+        rod.advance(0.01)
+    assert rod.time == pytest.approx(0.1 + 0.05 * len(grips) + 1.0)  # MuJoCo resets time with the state
+    assert not any(rod.data.warning[w].number for w in (mujoco.mjtWarning.mjWARN_BADQPOS,
+                                                         mujoco.mjtWarning.mjWARN_BADQVEL,
+                                                         mujoco.mjtWarning.mjWARN_BADQACC))
+    assert abs(math.remainder(rod.angle - goal, 2 * math.pi)) < math.radians(1.0)
+
+
 def test_grasp_and_tip_positions_follow_the_angle():
     rod = RodModel(RodParams(initial_angle=math.radians(30)))
     o = rod.outputs()

@@ -60,6 +60,14 @@ class PolicyNode(Node):
         tcp = np.array([float(inputs[k]) for k in ("tcp_x", "tcp_y", "tcp_z")])
         grasp = np.array([float(inputs[k]) for k in ("grasp_x", "grasp_y", "grasp_z")])
         angle, omega = float(inputs["rod_angle"]), float(inputs["rod_omega"])
+        gap = float(inputs["gap"])
+        values = np.array([*q, *tcp, *grasp, angle, omega, gap])
+        if not np.all(np.abs(values) <= np.finfo(np.float32).max):
+            # Other nodes' outputs: a NaN would come out of the actor (which works in float32, so
+            # a larger value is infinite there) as the robot's command. The command in flight is
+            # held until the inputs are a state again.
+            self.infer_ms = 1000 * (time.perf_counter() - started)
+            return
         if float(inputs.get("grasped", 0.0)) > 0.5:
             self.grip = True  # hold what we have
         else:
@@ -68,7 +76,6 @@ class PolicyNode(Node):
             action = self.agent.act(obs)
             self.q_cmd = action_to_targets(action, points, q)
             self.aim = aim_time(action, points)
-            gap = float(inputs["gap"])
             if self.grip and missed(gap, self.rod_radius):
                 self.grip = False
             # Decided on the values at t, the command reaches the robot at t + h: one step late.

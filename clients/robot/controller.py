@@ -27,6 +27,11 @@ from clients.rod.model import RodModel
 from clients.rod.node import rod_params
 
 
+# Ten times the rod's speed at the bottom of a fall from upright (about 10 rad/s): the inputs
+# are another node's outputs, and no state of a swinging rod is faster.
+MAX_OMEGA = 100.0
+
+
 @dataclass
 class Plan:
     t_turn: float      # absolute time of the turning point
@@ -35,8 +40,11 @@ class Plan:
 
 
 def turning_points(rod: RodModel, angle: float, omega: float, horizon: float) -> list[tuple[float, float]]:
-    """(time from now, angle) of the rod's turning points within ``horizon`` seconds."""
-    rod.reset(angle, omega)
+    """(time from now, angle) of the rod's turning points within ``horizon`` seconds; none from a
+    state no rod swings in (a NaN or infinite value, or faster than MAX_OMEGA)."""
+    if not (math.isfinite(angle) and abs(omega) <= MAX_OMEGA):
+        return []  # MuJoCo would reset the rod to its start, and predict from there
+    rod.reset(math.remainder(angle, 2 * math.pi), omega)
     dt = rod.model.opt.timestep
     found = []
     w_prev = omega

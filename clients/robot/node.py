@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from clients.node import Node, NodeContext, pack_state, unpack_state
+from clients.node import Node, NodeContext, NodeModelError, pack_state, unpack_state
 from clients.robot import kr6
 from clients.robot.scene import RobotScene, SceneOutputs, SceneParams, euler_zyx, outputs_restore, outputs_snapshot
 from clients.rod.node import ROD_PARAMETERS, rod_params
@@ -40,6 +40,23 @@ def scene_output_dict(o: SceneOutputs) -> dict[str, Any]:
     return out
 
 
+def initial_pose(node: str, q0_deg: Any) -> np.ndarray:
+    """The parameter ``q0_deg`` as a pose (rad); NodeModelError naming the node, the parameter
+    and the axis unless it is six numbers within the axis limits (a pose outside them is no
+    robot's, and a state saved from it would not restore)."""
+    try:
+        q = np.asarray(q0_deg, dtype=float)
+    except (TypeError, ValueError):
+        q = np.empty(0)
+    if q.shape != (6,):
+        raise NodeModelError(f"robot node {node!r}: parameters.q0_deg must be six joint angles in degrees, not {q0_deg!r}")
+    for i, (v, (lo, hi)) in enumerate(zip(q, kr6.LIMITS_DEG)):
+        if not lo <= v <= hi:
+            raise NodeModelError(f"robot node {node!r}: parameters.q0_deg: A{i + 1} = {v:g}° is outside its "
+                                 f"limits [{lo}, {hi}]°")
+    return np.clip(np.radians(q), kr6.LIMITS[:, 0], kr6.LIMITS[:, 1])  # radians() may round past a limit
+
+
 class RobotNode(Node):
     PARAMETERS = SCENE_PARAMETERS | {"q0_deg"}
     INPUTS = frozenset({f"q_cmd{i + 1}" for i in range(6)} | {"grip_cmd", "rod_angle"})
@@ -51,7 +68,7 @@ class RobotNode(Node):
         self.scene = RobotScene(scene_params(ctx.parameters))
         q0 = ctx.parameters.get("q0_deg")
         if q0 is not None:
-            self.scene.set_state(np.radians(np.asarray(q0, dtype=float)), kr6.GRIPPER_OPEN, 0.0)
+            self.scene.set_state(initial_pose(ctx.name, q0), kr6.GRIPPER_OPEN, 0.0)
         self.last = self.scene.outputs(False)
 
     def outputs(self) -> dict[str, Any]:

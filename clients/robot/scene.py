@@ -102,9 +102,15 @@ class RobotScene:
 
     def step(self, h: float, q_cmd: np.ndarray, grip_close: bool, rod_angle: float) -> SceneOutputs:
         """Advance the servos and jaws by h towards their commands, with the rod at ``rod_angle``."""
-        target = np.clip(np.asarray(q_cmd, dtype=float), kr6.LIMITS[:, 0], kr6.LIMITS[:, 1])
-        self.q = self.q + np.clip(target - self.q, -kr6.SPEEDS * h, kr6.SPEEDS * h)
-        self.rod_angle = float(rod_angle)
+        # Commands and the rod's angle are other nodes' outputs: a NaN or infinite one holds its
+        # axis (or the rod) where it was, since a NaN taken into the pose stays there for good.
+        cmd = np.asarray(q_cmd, dtype=float)
+        target = np.clip(np.where(np.isfinite(cmd), cmd, self.q), kr6.LIMITS[:, 0], kr6.LIMITS[:, 1])
+        # Clipped again: q + (limit − q) can land an ulp past the limit, and restore refuses that.
+        self.q = np.clip(self.q + np.clip(target - self.q, -kr6.SPEEDS * h, kr6.SPEEDS * h),
+                         kr6.LIMITS[:, 0], kr6.LIMITS[:, 1])
+        if math.isfinite(rod_angle):
+            self.rod_angle = float(rod_angle)
         self._set_pose()
         within, _, _ = self._rod_between_jaws()
         rod_gap = 2 * self.p.rod_radius
@@ -128,10 +134,13 @@ class RobotScene:
     def restore(self, snap: dict) -> None:
         """Set the state :meth:`snapshot` gave; ValueError if it is not a state of this scene."""
         q, reach_q = np.asarray(snap["q"], dtype=float), np.asarray(snap["reach_q"], dtype=float)
-        if q.shape != (6,) or reach_q.shape != (6,):
+        gap, rod_angle = float(snap["gap"]), float(snap["rod_angle"])
+        if (q.shape != (6,) or reach_q.shape != (6,) or not np.all(np.isfinite(reach_q))
+                or not np.all((q >= kr6.LIMITS[:, 0]) & (q <= kr6.LIMITS[:, 1]))
+                or not 0.0 <= gap <= kr6.GRIPPER_OPEN or not math.isfinite(rod_angle)):
             raise ValueError("not a state of this robot scene")
         self.q, self._reach_q = q, reach_q
-        self.gap, self.holding, self.rod_angle = float(snap["gap"]), bool(snap["holding"]), float(snap["rod_angle"])
+        self.gap, self.holding, self.rod_angle = gap, bool(snap["holding"]), rod_angle
         self._update()
 
     def set_state(self, q: np.ndarray, gap: float, rod_angle: float) -> None:

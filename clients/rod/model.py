@@ -125,8 +125,25 @@ class RodModel:
         """Switch between free swinging and following the gripper; the state is untouched."""
         self.data.eq_active[self._eq] = 1 if driven else 0
 
-    def set_gripper(self, position: np.ndarray) -> None:
-        self.data.mocap_pos[0] = position
+    def set_gripper(self, position) -> None:
+        """Place the gripper the driven rod follows; a position that is no gripper's is bounded.
+
+        A non-finite one is ignored (the gripper stays). One farther from the pivot than twice
+        the rod's length is brought back to that distance along its direction: the rod still
+        turns towards it, where the equality's force from a gripper metres away spun the rod
+        (1 km) or overflowed until MuJoCo reset it.
+        """
+        pos = np.asarray(position, dtype=float)
+        if pos.shape != (3,) or not np.all(np.isfinite(pos)):
+            return
+        pivot = np.asarray(self.p.pivot)
+        d = pos - pivot
+        reach = 2 * self.p.length
+        dist = float(np.linalg.norm(d)) if np.all(np.abs(d) < 1e150) else math.inf
+        if dist > reach:
+            d = d / np.max(np.abs(d))  # scaled first, so that its norm cannot overflow
+            pos = pivot + d * (reach / float(np.linalg.norm(d)))
+        self.data.mocap_pos[0] = pos
 
     def angle_at(self, t: float) -> float:
         """The twin's angle at a recent time t (linear between macro-step points)."""
