@@ -138,11 +138,11 @@ class RodModel:
             return
         pivot = np.asarray(self.p.pivot)
         d = pos - pivot
+        big = float(np.max(np.abs(d)))
+        u = d / big if big > 0 else d  # scaled, so that its norm cannot overflow
         reach = 2 * self.p.length
-        dist = float(np.linalg.norm(d)) if np.all(np.abs(d) < 1e150) else math.inf
-        if dist > reach:
-            d = d / np.max(np.abs(d))  # scaled first, so that its norm cannot overflow
-            pos = pivot + d * (reach / float(np.linalg.norm(d)))
+        if big * float(np.linalg.norm(u)) > reach:
+            pos = pivot + u * (reach / float(np.linalg.norm(u)))
         self.data.mocap_pos[0] = pos
 
     def angle_at(self, t: float) -> float:
