@@ -299,8 +299,9 @@ def main() -> int:
         print(f"reference: {r['reference']['rows']} steps in {r['reference']['wall_s']} s")
         if "node_kills" in r:
             n = r["node_kills"]
+            med, top = (("–" if v is None else f"{v:.2f}") for v in (n["recovery_s"]["median"], n["recovery_s"]["max"]))
             print(f"{n['kills']} node kills, {n['restores']} restores: values.csv identical: {n['identical']}; "
-                  f"recovery median {n['recovery_s']['median']} s, max {n['recovery_s']['max']} s")
+                  f"recovery median {med} s, max {top} s")
         if "server_kills" in r:
             s = r["server_kills"]
             print(f"{s['resumes']} server kills and resumes: values.csv identical: {s['identical']}")
