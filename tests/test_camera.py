@@ -166,8 +166,12 @@ def test_camera_correction_over_zenoh_brings_the_twin_onto_the_emulated_rod(tmp_
         m = meta(run)
         # 60 frames/s over 2.5 s is 150 at most; a camera behind on a loaded machine skips some
         assert m["samples_received"]["camera"] > 50
+        # Recorded for every sample, and short enough for the correction: the twin keeps its
+        # angles for a second, and a frame detected later could not be compared with it. How
+        # fast the pipeline is, benchmarks/camera.py measures (frames/s on one core); a bound
+        # of 50 ms here read 57 and 63 ms with two test processes on two cores.
         latency = column(rows, "camera.latency")
-        assert 0 < max(latency) < 0.05
+        assert 0 < max(latency) < 1.0
     # 0.15° on an idle machine; 0.3-0.5° with both cores busy, where frames arrive up to 0.1 s
     # after their capture (tests/test_rod.py: frames in flight). Uncorrected: 10°.
     assert errors[12.0] < math.radians(1.0)
