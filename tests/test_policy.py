@@ -485,7 +485,7 @@ def _valid_history() -> st.SearchStrategy:
     evaluation = st.fixed_dictionaries({"episode": st.integers(0, 400), "mean_success": share,
                                         "per_angle": st.fixed_dictionaries({a: figures for a in ("30", "40", "50", "60")})})
     episode = st.fixed_dictionaries({"episode": st.integers(1, 400), "return": st.floats(-50.0, 150.0),
-                                     "success": st.booleans(), "angle": st.floats(30.0, 60.0)})
+                                     "success": st.booleans(), "angle": st.none() | st.floats(30.0, 60.0)})
     return st.fixed_dictionaries({"returns": st.lists(episode, max_size=4), "evals": st.lists(evaluation, min_size=1,
                                                                                               max_size=3)})
 
@@ -534,6 +534,27 @@ def test_a_resumed_training_history_of_any_shape_is_gone_on_from_or_refused_by_n
         assert all(math.isfinite(x) for x in score)
     focus_options(np.random.default_rng(0), got["returns"][-50:], 1.0)
     plot_learning_curve(got, tmp_path_factory.mktemp("curve") / "c.png")
+
+
+def test_a_resumed_history_is_read_as_it_was_checked(tmp_path):
+    """Two histories the check takes that the trainer could not use as they were written (found
+    by exploring the test above afresh): a figure that is a one-element tensor (the check takes
+    it as a float) and an episode whose angle is null (the record allows one)."""
+    from clients.policy.history import check_resumable
+    from clients.policy.train import EVAL_ANGLES, _score, plot_learning_curve
+
+    figures = {f"{a:g}": {"success": 1.0, "precise": 0.5, "time_s": 0.7} for a in EVAL_ANGLES}
+    figures["40"]["time_s"] = torch.tensor([0.9])
+    history = {"returns": [{"episode": 1, "return": 3.0, "success": False, "angle": None},
+                           {"episode": 2, "return": 5.0, "success": True, "angle": 45.0}],
+               "evals": [{"episode": 0, "mean_success": 1.0, "per_angle": figures}]}
+    got, _, _ = check_resumable({"history": history, "episodes": 2}, EVAL_ANGLES)
+    assert type(got["evals"][0]["per_angle"]["40"]["time_s"]) is float
+    assert _score(got["evals"][0]) == pytest.approx((0.5, 1.0, -0.75))
+    # The unplaced episode counts in no band: the 40–50° band, one success in one, is drawn least.
+    drawn = [focus_options(np.random.default_rng(seed), got["returns"], 1.0)["angle_deg"] for seed in range(300)]
+    assert sum(40 <= a <= 50 for a in drawn) < min(sum(30 <= a < 40 for a in drawn), sum(50 < a <= 60 for a in drawn))
+    assert plot_learning_curve(got, tmp_path / "c.png").stat().st_size > 0
 
 
 def test_a_training_folder_whose_history_is_malformed_is_named_before_any_episode(tmp_path):

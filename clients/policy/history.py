@@ -56,12 +56,14 @@ def check_resumable(state: dict, angles: tuple[float, ...]) -> tuple[dict, int, 
     each checked; every evaluation must hold figures for each of ``angles``. ResumeError
     says which entry is wrong."""
     try:
-        TrainingHistory.model_validate(state["history"])
+        checked = TrainingHistory.model_validate(state["history"])
     except ValidationError as exc:
         first = exc.errors()[0]
         where = ".".join(str(p) for p in first["loc"])
         raise ResumeError(f"its history does not hold a training record ({where or 'history'}: {first['msg']})") from None
-    history = state["history"]
+    # What was checked, not what was read: a figure the check took as a number (a one-element
+    # tensor passes as a float) is a number from here on.
+    history = checked.model_dump(by_alias=True)
     for evaluation in history["evals"]:
         missing = [f"{a:g}" for a in angles if f"{a:g}" not in evaluation["per_angle"]]
         if missing:

@@ -163,7 +163,8 @@ def focus_options(rng: np.random.Generator, recent: list[dict], share: float) ->
         return None
     weights = []
     for lo, hi in BANDS:
-        outcomes = [r["success"] for r in recent if "angle" in r and lo <= r["angle"] <= hi]
+        # An episode without its angle (a record from before angles were kept) is in no band.
+        outcomes = [r["success"] for r in recent if r.get("angle") is not None and lo <= r["angle"] <= hi]
         weights.append((len(outcomes) - sum(outcomes) + 1) / (len(outcomes) + 2))
     band = BANDS[int(rng.choice(len(BANDS), p=np.array(weights) / sum(weights)))]
     return {"angle_deg": float(rng.uniform(*band))}
