@@ -149,8 +149,8 @@ def test_a_secured_run_watched_by_two_browsers_through_a_monitors_credentials(tm
         name="secure", security={"credentials": "creds.txt"})
     # linkGrace: in one make test, beside the other worker's tests and this test's browser, node g
     # was lost 4 s into the run (its liveliness token gone after some 2 s without its outputs, as
-    # when its 1 s link lease lapses), and the pages waited for nodes that had gone. What this test watches is
-    # the dashboard, so the run rides over a lapse as a deployment with a grace would.
+    # when its 1 s link lease lapses), and the pages waited for nodes that had gone. What this
+    # test watches is the dashboard, so the run rides over a lapse as a deployment with a grace would.
     endpoint = json.loads(cfg.read_text())["serverIP"]
     run_dir = tmp_path / "run"
     server = spawn("server", str(cfg), "--run-dir", str(run_dir))
