@@ -44,6 +44,20 @@ def exit_code(exc: BaseException) -> int:
     return 128 + signal_of(exc)
 
 
+def stop_behind(exc: BaseException) -> KeyboardInterrupt | None:
+    """The KeyboardInterrupt (Ctrl-C or a :class:`Stopped`) an exception was raised in the
+    handling of, if any: Typer ends every interrupted command with exit status 130, and the
+    signal that stopped it is found behind that."""
+    seen: set[int] = set()
+    link: BaseException | None = exc
+    while link is not None and id(link) not in seen:
+        if isinstance(link, KeyboardInterrupt):
+            return link
+        seen.add(id(link))
+        link = link.__cause__ or link.__context__
+    return None
+
+
 def _raise(signum: int, frame: Any) -> None:
     raise Stopped(signum)
 

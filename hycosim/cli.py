@@ -23,6 +23,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
+from core import signals
 from core.config import ConfigError, LoadedProject, load_project
 from core.endpoints import GATEWAY_PORT, EndpointError, parse_address, parse_endpoint
 from core.signals import ignore_stops
@@ -881,13 +882,13 @@ def train(
 
         try:
             result = run_training(output, config, report)
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:
             progress.stop()
             saved = output / "last.pt"
-            err.print("interrupted by Ctrl-C; " + (
+            err.print(f"{signals.describe(exc)}; " + (
                 f"the same command resumes from {saved}" if saved.exists() else
                 "no checkpoint yet (the first is written after the cloning phase)"), highlight=False)
-            raise typer.Exit(130) from None
+            raise typer.Exit(signals.exit_code(exc)) from None
         except (ValueError, CheckpointError) as exc:
             err.print(f"[red]error:[/red] {exc}", highlight=False)
             raise typer.Exit(2) from None
@@ -976,7 +977,7 @@ def krl_controller(
     host: Annotated[str, typer.Option(help="address to listen on")] = "127.0.0.1",
     length: Annotated[float, typer.Option(min=0.05, help="physical rod length (m)")] = 0.6,
     angle: Annotated[float, typer.Option(help="physical rod release angle (deg)")] = 40.0,
-    programs: Annotated[int, typer.Option(min=0, help="stop after this many programs (0: run until Ctrl-C)")] = 0,
+    programs: Annotated[int, typer.Option(min=0, help="stop after this many programs (0: run until stopped)")] = 0,
 ) -> None:
     """Listen as the robot's EKI endpoint and execute programs against the emulated physical rod."""
     import math
@@ -1012,8 +1013,8 @@ def krl_controller(
                           f"{result.frames} frames, {len(result.rejected)} rejected", highlight=False)
             else:
                 err.print(f"rejected: {controller.errors[-1]}", highlight=False)
-    except KeyboardInterrupt:
-        pass
+    except KeyboardInterrupt as exc:
+        raise typer.Exit(signals.exit_code(exc)) from None
     finally:
         controller.stop()
 
@@ -1080,7 +1081,7 @@ def trials(
     out.print(f"wrote {csv_path} and {png}", highlight=False)
     if interrupted is not None:
         err.print(f"[red]error:[/red] {interrupted} of {len(angle_list) * n}: the table holds those", highlight=False)
-        raise typer.Exit(130)
+        raise typer.Exit(signals.exit_code(interrupted.stop))
     failed = [r for r in results if r.error]
     if failed:
         err.print(f"[red]error:[/red] {len(failed)} of {len(results)} trials could not be run (counted as missed): "
@@ -1113,15 +1114,22 @@ def main() -> None:
     import faulthandler
 
     from core.session import prefer_shared_runtime
-    from core.signals import raise_on_stop
 
     # A model that crashes in native code (an FMU's binary, an extension) kills the process
     # without a word from Python; the fault handler at least prints the stack it was at.
     faulthandler.enable()
-    raise_on_stop()  # SIGTERM and SIGHUP (a supervisor, a closed terminal) are ways out like Ctrl-C
+    signals.raise_on_stop()  # SIGTERM and SIGHUP (a supervisor, a closed terminal) are ways out like Ctrl-C
     prefer_shared_runtime()  # before any session opens; the server and nodes it starts inherit it
     try:
         app(args=_join_multi_value_options(sys.argv[1:]), prog_name="hycosim")
+    except SystemExit as exc:
+        # Typer ends a command a stop signal interrupted with 130 whatever the signal; a
+        # supervisor's SIGTERM (143) or a closed terminal's SIGHUP (129) is told apart, as
+        # the server, the nodes and the launcher tell it.
+        stop = signals.stop_behind(exc) if exc.code == 130 else None
+        if stop is not None:
+            sys.exit(signals.exit_code(stop))
+        raise
     except OSError as exc:
         # The last resort for a file a command could not read or write (an output folder
         # that cannot be made, a PNG path in a missing folder): name it instead of a traceback.

@@ -27,6 +27,7 @@ from clients.krl.controller import EmulatedController, parse_ack, stream_program
 from clients.krl.eki import EkiConfig
 from clients.krl.export import export
 from clients.rod.model import RodParams
+from core import signals
 from core.config import parse_project
 
 PAPER = {30: (3.2, 14.8, 95), 40: (3.8, 15.6, 95), 50: (5.0, 15.4, 90), 60: (5.8, 16.6, 80)}
@@ -238,11 +239,13 @@ def plot(results: list[TrialResult], path: Path) -> Path:
 
 
 class TrialsInterrupted(Exception):
-    """Ctrl-C during the trials: ``results`` holds the trials finished before it (in ``trials.csv``)."""
+    """Ctrl-C (or SIGTERM, SIGHUP) during the trials: ``results`` holds the trials finished
+    before it (in ``trials.csv``), ``stop`` the interruption."""
 
-    def __init__(self, results: list[TrialResult]):
-        super().__init__(f"interrupted by Ctrl-C after {len(results)} trial{'' if len(results) == 1 else 's'}")
+    def __init__(self, results: list[TrialResult], stop: KeyboardInterrupt):
+        super().__init__(f"{signals.describe(stop)} after {len(results)} trial{'' if len(results) == 1 else 's'}")
         self.results = results
+        self.stop = stop
 
 
 def run_trials(angles: list[float], trials: int, out: Path, correction: bool = True, driver: str = "policy",
@@ -263,8 +266,8 @@ def run_trials(angles: list[float], trials: int, out: Path, correction: bool = T
         for i in range(trials):
             try:
                 r = run_trial(angle, i, out, correction, driver, nodes=nodes)
-            except KeyboardInterrupt:
-                raise TrialsInterrupted(results) from None
+            except KeyboardInterrupt as stop:
+                raise TrialsInterrupted(results, stop) from None
             except (RuntimeError, OSError, ValueError) as exc:
                 physical = physical_rod(angle, trial_seed(angle, i))
                 r = TrialResult(angle, i, correction, False, None, None, False, str(out / f"{angle:g}deg-{i:02d}"),

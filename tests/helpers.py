@@ -17,10 +17,14 @@ REPO = Path(__file__).resolve().parents[1]
 HYCOSIM = [sys.executable, "-m", "hycosim"]
 
 
-def free_endpoint() -> str:
+def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+        return s.getsockname()[1]
+
+
+def free_endpoint() -> str:
+    return f"tcp/127.0.0.1:{free_port()}"
 
 
 def write_project(path: Path, nodes: list[dict], links: list[dict] | None = None, events: list[dict] | None = None,

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import http.client
 import json
+import os
 import shutil
-import socket
 import time
 import urllib.request
 from pathlib import Path
@@ -18,16 +18,10 @@ from hypothesis import strategies as st
 from dashboard.app import check_selection, finite
 from dashboard.live import LiveFeed, _checked_status
 from dashboard.series import ThinnedSeries
-from tests.helpers import hycosim, reap, spawn, write_project
+from tests.helpers import free_port, hycosim, reap, spawn, wait_for, write_project
 from tests.wire_strategies import values
 
 CHROMIUM = shutil.which("chromium")
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _page_up(url: str, timeout: float = 40) -> None:
@@ -71,7 +65,7 @@ def _get(port: int, path: str) -> int:
 def test_a_run_watched_live_and_then_opened_finished_in_a_real_browser(tmp_path):
     from playwright.sync_api import sync_playwright
 
-    port = _free_port()
+    port = free_port()
     run = spawn("run", str(_catch(tmp_path)), "--runs-dir", str(tmp_path / "runs"), "--no-progress",
                 "--dashboard", "--dashboard-port", str(port))
     board = None
@@ -107,7 +101,7 @@ def test_a_run_watched_live_and_then_opened_finished_in_a_real_browser(tmp_path)
             assert f"dashboard: http://127.0.0.1:{port}/" in err
 
             run_dir = next((tmp_path / "runs").iterdir())
-            port2 = _free_port()
+            port2 = free_port()
             board = spawn("dashboard", str(run_dir), "--port", str(port2))
             _page_up(f"http://127.0.0.1:{port2}/")
             page.goto(f"http://127.0.0.1:{port2}/?ports=ball.h,ball.hh")
@@ -127,8 +121,39 @@ def test_a_run_watched_live_and_then_opened_finished_in_a_real_browser(tmp_path)
                      f"/static/{run_dir}/meta.json", "/meta.json", "/values.csv"):
             assert _get(port2, path) == 404, path
         assert _get(port2, "/static/dashboard.js") == 200
+        # The plot was read in a process of its own. Killed, the dashboard takes it along (and
+        # the forkserver it came from): they had stayed behind for good, waiting for work.
+        readers = _descendants(board.pid)
+        assert readers, "the finished run was not read in a process of its own"
+        board.kill()
+        board.wait(timeout=10)
+        wait_for(lambda: not any(_running(pid) for pid in readers), 10, "the dashboard's reader processes to end")
     finally:
         reap(run, *([board] if board else []))
+
+
+def _descendants(pid: int) -> list[int]:
+    parents = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                parents[int(entry)] = int(Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+    found, todo = [], [pid]
+    while todo:
+        of = todo.pop()
+        children = [c for c, parent in parents.items() if parent == of]
+        found += children
+        todo += children
+    return found
+
+
+def _running(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is installed by `make test`")
@@ -155,7 +180,7 @@ def test_a_secured_run_watched_by_two_browsers_through_a_monitors_credentials(tm
     run_dir = tmp_path / "run"
     server = spawn("server", str(cfg), "--run-dir", str(run_dir))
     nodes = [spawn("node", n, str(cfg)) for n in ("clock", "g")]  # passwords from the credentials file
-    good, bad = _free_port(), _free_port()
+    good, bad = free_port(), free_port()
     boards = [spawn("dashboard", endpoint, "--project", "secure", "--user", "watcher", "--password-file",
                     str(tmp_path / f), "--port", str(port)) for f, port in (("w.txt", good), ("bad.txt", bad))]
     try:
@@ -191,7 +216,7 @@ def test_a_secured_run_watched_by_two_browsers_through_a_monitors_credentials(tm
 
 
 def test_a_dashboard_that_cannot_reach_its_server_says_so_and_keeps_trying():
-    feed = LiveFeed(f"tcp/127.0.0.1:{_free_port()}", "nothing", retry_s=0.2)
+    feed = LiveFeed(f"tcp/127.0.0.1:{free_port()}", "nothing", retry_s=0.2)
     feed.start()
     try:
         deadline = time.monotonic() + 20
@@ -349,8 +374,8 @@ def test_a_plot_whose_values_barely_differ_draws_at_once_in_a_real_browser():
     on a fresh plot in the page of a dashboard (whose server is not there: the page is served)."""
     from playwright.sync_api import sync_playwright
 
-    port = _free_port()
-    board = spawn("dashboard", f"tcp/127.0.0.1:{_free_port()}", "--port", str(port), "--retry", "5")
+    port = free_port()
+    board = spawn("dashboard", f"tcp/127.0.0.1:{free_port()}", "--port", str(port), "--retry", "5")
     try:
         _page_up(f"http://127.0.0.1:{port}/")
         with sync_playwright() as p:

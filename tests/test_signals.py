@@ -1,5 +1,6 @@
-"""SIGTERM and SIGHUP are ways out like Ctrl-C for the server, a node and the launcher; a node
-process that ends before the run starts is reported at once by the launcher."""
+"""SIGTERM and SIGHUP are ways out like Ctrl-C for the server, a node, the launcher and every other
+command, each with its own exit status; a node process that ends before the run starts is
+reported at once by the launcher."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import time
 
 import pytest
 
-from tests.helpers import HYCOSIM, REPO, env, meta, read_rows, reap, spawn, wait_for, write_project
+from tests.helpers import HYCOSIM, REPO, env, free_port, meta, read_rows, reap, spawn, wait_for, write_project
 from tests.test_faults import _pair as fault_pair
 
 
@@ -125,3 +126,35 @@ def test_a_node_process_that_ends_before_it_attaches_is_reported_at_once(tmp_pat
     assert f"q: {expected}" in res.stderr
     m = meta(next((tmp_path / "runs").iterdir()))  # the run directory says what the user was told
     assert m["status"] == "failed" and expected in m["reason"]
+
+
+def _dashboard(tmp_path) -> list[str]:
+    # A dashboard of a server that is not there: it serves its page and keeps retrying.
+    return ["dashboard", f"tcp/127.0.0.1:{free_port()}", "--port", "0", "--retry", "5"]
+
+
+def _controller(tmp_path) -> list[str]:
+    from clients.krl.eki import EkiConfig
+
+    eki = tmp_path / "eki.xml"
+    eki.write_text(EkiConfig().to_xml())
+    return ["krl", "controller", "--eki", str(eki), "--port", str(free_port())]
+
+
+@pytest.mark.parametrize("command, ready", [(_dashboard, "dashboard: http://"),
+                                            (_controller, "emulated KUKA controller listening")],
+                         ids=["dashboard", "krl controller"])
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT])
+def test_every_command_a_signal_stops_exits_with_that_signals_status(tmp_path, command, ready, sig):
+    """Not only the server, the nodes and the launcher: a dashboard or an emulated controller
+    that a supervisor stops says which signal did it (Typer alone gave 130 for all three)."""
+    proc = spawn(*command(tmp_path))
+    try:
+        line = proc.stdout.readline()  # the command's first word: it is serving
+        assert ready in line, (line, proc.stderr.read() if proc.poll() is not None else "")
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=30)
+        assert proc.returncode == 128 + sig, err
+        assert "Traceback" not in err, err
+    finally:
+        reap(proc)
