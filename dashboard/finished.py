@@ -15,13 +15,13 @@ import math
 import multiprocessing
 import os
 import queue
-import select
 import threading
 from array import array
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
+from core.lifetime import end_with
 from core.run_files import RunFileError, finished_lines
 from dashboard.changes import Watchers
 from server.report import RunDirError, envelope, read_columns, read_events, read_meta, summarise
@@ -45,26 +45,6 @@ def _column(run_dir: Path, port: str) -> tuple[array, array]:
     except (ValueError, StopIteration, csv.Error, RunFileError):
         columns = read_columns(run_dir, [port])
         return columns["t"], columns[port]
-
-
-def _leave_with(pid: int) -> None:
-    """The reader process's start: it ends when the dashboard process ``pid`` ends, however
-    that ends. A pool's worker learns of a clean exit from its pool, but one killed (SIGKILL,
-    the OOM killer, a crash in native code) leaves it waiting on its queue for ever, and the
-    forkserver with it: the worker holds the write end of the pipe whose closing tells the
-    forkserver that the dashboard has gone."""
-    try:
-        watched = os.pidfd_open(pid)
-    except ProcessLookupError:
-        os._exit(0)
-    except OSError:  # no pidfd (Linux before 5.3, an old container's seccomp): as a plain pool
-        return
-
-    def watch() -> None:
-        select.select([watched], [], [])  # readable once the process has ended
-        os._exit(0)
-
-    threading.Thread(target=watch, name="dashboard-watch", daemon=True).start()
 
 
 def read_points(run_dir: Path, port: str) -> Any:
@@ -106,9 +86,10 @@ class FinishedRun:
         self.watchers = Watchers()  # the pages' feeds, woken at each
         # One reader, plots first: reading a million rows takes seconds, and the page is usable
         # meanwhile. It reads in a process of its own: a thread reading beside the web server's
-        # would hold the interpreter and leave the page's requests waiting for seconds.
+        # would hold the interpreter and leave the page's requests waiting for seconds. The
+        # reader ends with this process, however it ends.
         self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("forkserver"),
-                                         initializer=_leave_with, initargs=(os.getpid(),))
+                                         initializer=end_with, initargs=(os.getpid(),))
         self._jobs: queue.PriorityQueue[tuple[int, str]] = queue.PriorityQueue()
         threading.Thread(target=self._work, name="dashboard-reader", daemon=True).start()
         self._timer: threading.Timer | None = None  # the figures' turn: set when a page first looks

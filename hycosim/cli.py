@@ -1013,9 +1013,7 @@ def krl_controller(
                           f"{result.frames} frames, {len(result.rejected)} rejected", highlight=False)
             else:
                 err.print(f"rejected: {controller.errors[-1]}", highlight=False)
-    except KeyboardInterrupt as exc:
-        raise typer.Exit(signals.exit_code(exc)) from None
-    finally:
+    finally:  # Ctrl-C, SIGTERM or SIGHUP: main() ends with the signal's status
         controller.stop()
 
 

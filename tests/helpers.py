@@ -105,6 +105,31 @@ def pids(pattern: str) -> list[int]:
     return found
 
 
+def descendants(pid: int) -> list[int]:
+    """The processes ``pid`` started, and theirs, to the last generation."""
+    parents = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                parents[int(entry)] = int(Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+    found, todo = [], [pid]
+    while todo:
+        of = todo.pop()
+        children = [c for c, parent in parents.items() if parent == of]
+        found += children
+        todo += children
+    return found
+
+
+def running(pid: int) -> bool:
+    """Whether ``pid`` is a process that has not ended (a zombie has)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
 def recorded_rows(runs: Path) -> int:
     try:
         run = next(runs.iterdir())

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import http.client
 import json
-import os
 import shutil
 import time
 import urllib.request
@@ -18,7 +17,7 @@ from hypothesis import strategies as st
 from dashboard.app import check_selection, finite
 from dashboard.live import LiveFeed, _checked_status
 from dashboard.series import ThinnedSeries
-from tests.helpers import free_port, hycosim, reap, spawn, wait_for, write_project
+from tests.helpers import descendants, free_port, hycosim, reap, running, spawn, wait_for, write_project
 from tests.wire_strategies import values
 
 CHROMIUM = shutil.which("chromium")
@@ -123,37 +122,14 @@ def test_a_run_watched_live_and_then_opened_finished_in_a_real_browser(tmp_path)
         assert _get(port2, "/static/dashboard.js") == 200
         # The plot was read in a process of its own. Killed, the dashboard takes it along (and
         # the forkserver it came from): they had stayed behind for good, waiting for work.
-        readers = _descendants(board.pid)
+        readers = descendants(board.pid)
         assert readers, "the finished run was not read in a process of its own"
         board.kill()
         board.wait(timeout=10)
-        wait_for(lambda: not any(_running(pid) for pid in readers), 10, "the dashboard's reader processes to end")
+        wait_for(lambda: not any(running(pid) for pid in readers), 10, "the dashboard's reader processes to end")
     finally:
         reap(run, *([board] if board else []))
 
-
-def _descendants(pid: int) -> list[int]:
-    parents = {}
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                parents[int(entry)] = int(Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[1].split()[1])
-            except (OSError, IndexError, ValueError):
-                continue
-    found, todo = [], [pid]
-    while todo:
-        of = todo.pop()
-        children = [c for c, parent in parents.items() if parent == of]
-        found += children
-        todo += children
-    return found
-
-
-def _running(pid: int) -> bool:
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
-    except OSError:
-        return False
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is installed by `make test`")

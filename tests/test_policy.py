@@ -24,7 +24,7 @@ from clients.policy.paper import PaperGraspEnv, joint_targets, plot_against, tra
 from clients.policy.train import (SELECTION_SEED, TrainConfig, _episode, evaluate, evaluate_checkpoint, focus_options,
                                   train, wilson)
 from clients.robot import kr6
-from tests.helpers import REPO, column, hycosim, read_rows, reap, run_project
+from tests.helpers import REPO, column, descendants, hycosim, read_rows, reap, run_project, running, spawn, wait_for
 
 
 def test_gymnasium_env_checker_passes_and_episodes_are_reproducible():
@@ -203,6 +203,20 @@ def test_evaluation_spreads_episodes_over_processes_with_intervals_and_matches_i
     assert res.returncode == 2 and "--json: cannot write" in res.stderr and "Traceback" not in res.stderr
 
 
+
+def test_an_evaluation_killed_takes_its_worker_processes_along():
+    """Its pool's workers had gone on through every episode queued and then waited for good."""
+    proc = spawn("evaluate", str(PRETRAINED), "--trials", "40", "--workers", "2")
+    try:
+        wait_for(lambda: len(descendants(proc.pid)) >= 2, 60, "the evaluation's worker processes")
+        workers = descendants(proc.pid)
+        time.sleep(1.0)  # at work on their episodes
+        proc.kill()
+        proc.wait(timeout=10)
+        wait_for(lambda: not any(running(pid) for pid in workers), 10, "the workers to end with their parent")
+    finally:
+        reap(proc)
+
 def test_the_papers_formulation_trains_from_scratch_and_plots_beside_ours(short_training, tmp_path):
     out, _ = short_training
     env = PaperGraspEnv()
@@ -374,8 +388,6 @@ def test_missing_or_incompatible_checkpoint_gives_a_clear_error(tmp_path):
     # Ctrl-C (a terminal's reaches the whole group) before the first checkpoint: said, status 130.
     import os
     import signal
-
-    from tests.helpers import spawn
 
     fresh = tmp_path / "fresh"
     proc = spawn("train", "-o", str(fresh), "--demos", "1", start_new_session=True)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -23,6 +24,7 @@ import torch
 from clients.policy.ddpg import DDPG, CheckpointError, DDPGConfig, ReplayBuffer, acting_part
 from clients.policy.env import GRASP_TOLERANCE, GraspEnv
 from clients.policy.history import ResumeError, check_resumable
+from core.lifetime import end_with
 
 EVAL_ANGLES = (30.0, 40.0, 50.0, 60.0)
 PRECISE_MM = 1000 * GRASP_TOLERANCE  # a precise grasp, as reported and as the reward pays it
@@ -104,7 +106,7 @@ def evaluate_checkpoint(path: Path, trials: int, workers: int = 1, seed: int = 1
 
     chunk = max(1, -(-trials // max(1, workers)))
     parts = [(angle, (seed + i, seed + min(i + chunk, trials))) for angle in angles for i in range(0, trials, chunk)]
-    with ProcessPoolExecutor(max_workers=workers) as pool:
+    with ProcessPoolExecutor(max_workers=workers, initializer=end_with, initargs=(os.getpid(),)) as pool:
         done = list(pool.map(_evaluate_part, [str(path)] * len(parts), [a for a, _ in parts], [s for _, s in parts]))
     results = {}
     for angle in angles:
