@@ -130,6 +130,7 @@ def running(pid: int) -> bool:
     except OSError:
         return False
 
+
 def recorded_rows(runs: Path) -> int:
     try:
         run = next(runs.iterdir())
