@@ -40,6 +40,11 @@ _COERCE = {
 }
 
 
+# How long a node a supervisor stops (SIGTERM, SIGHUP) waits for the server to read its END:
+# well inside the 10 s a supervisor (docker, systemd) gives before it kills.
+_STOPPED_WAIT = 2.0
+
+
 class NodeRunError(RuntimeError):
     """The node cannot go on; the message names the node and the step."""
 
@@ -294,6 +299,14 @@ class NodeRuntime:
         try:
             self._send(frames.encode(frames.END, self.spec.UID, self.steps + 1, 0.0, False,
                                      f"node {self.name!r} {signals.describe(exc)} after step {self.steps}", []))
+            # The token goes as this process leaves, and the server can learn that before it
+            # reads the END (it did on a loaded machine, and named a lost token): wait for its
+            # STOP, which says it has read it. A second signal ends the wait.
+            deadline = time.monotonic() + _STOPPED_WAIT
+            while (left := deadline - time.monotonic()) > 0:
+                frame = self._next_frame(left)
+                if frame is None or frame.kind == frames.STOP:
+                    break
         except Exception:  # on its way out: the token's loss still tells the server
             pass
 

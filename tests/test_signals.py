@@ -4,12 +4,17 @@ reported at once by the launcher."""
 
 from __future__ import annotations
 
+import json
 import signal
 import subprocess
 import time
 
 import pytest
+import zenoh
 
+from core import frames
+from core.keys import SERVER_TOKEN, ProjectKeys
+from core.session import open_session, router_config
 from tests.helpers import HYCOSIM, REPO, env, free_port, meta, read_rows, reap, spawn, wait_for, write_project
 from tests.test_faults import _pair as fault_pair
 
@@ -72,6 +77,57 @@ def test_a_node_sent_sigterm_leaves_and_the_server_names_it(tmp_path):
     assert "node 'g' stopped by SIGTERM" in meta(run_dir)["reason"]
     _contiguous(run_dir)
 
+
+
+@pytest.mark.parametrize("answered", [True, False], ids=["the server answers", "no answer"])
+def test_a_node_stopped_by_sigterm_holds_its_token_until_the_server_has_read_its_end(tmp_path, answered):
+    """The END of a node a supervisor stops and the going of its token race to the server: in
+    one loaded make test the token won and the server named a lost token. The node waits for
+    the STOP that says the END was read (a bounded wait: without an answer it leaves all the
+    same). The test plays the server, on a real router."""
+    cfg = _pair(tmp_path)
+    endpoint = json.loads(cfg.read_text())["serverIP"]
+    keys = ProjectKeys("faults")
+    with open_session(router_config(endpoint), endpoint) as router:
+        up = router.declare_subscriber(keys.up("g"), zenoh.handlers.FifoChannel(64))
+        server_token = router.liveliness().declare_token(keys.alive(SERVER_TOKEN))
+
+        def g_holds_its_token() -> bool:
+            return any(r.ok is not None for r in router.liveliness().get(keys.alive("g"), timeout=1.0))
+
+        def next_from_g(kind: int) -> frames.Frame:
+            deadline = time.monotonic() + 30
+            while time.monotonic() < deadline:
+                sample = up.try_recv()
+                if sample is None:
+                    time.sleep(0.01)
+                    continue
+                frame = frames.decode(sample.payload.to_bytes())
+                if frame.kind == kind:
+                    return frame
+            raise AssertionError(f"no {frames.KIND_NAMES[kind]} from node g within 30 s")
+
+        node = spawn("node", "g", str(cfg))
+        try:
+            wait_for(g_holds_its_token, 30, "node g's token")
+            router.put(keys.down, frames.encode(frames.START, "run", 0.0, 0.01, time.time(), None, {"checkpoint": False}))
+            assert next_from_g(frames.OUTPUTS).fields[1] == 0
+            router.put(keys.down, frames.encode(frames.STEP, 0, 0.0, 0.01, "free", {"g": [1.5]}, [], {}))
+            assert next_from_g(frames.OUTPUTS).fields[1] == 1
+            node.send_signal(signal.SIGTERM)
+            end = next_from_g(frames.END)
+            assert end.fields[3] is False and "node 'g' stopped by SIGTERM after step 1" in end.fields[4]
+            time.sleep(0.5)
+            assert g_holds_its_token() and node.poll() is None  # waiting for the server's word
+            if answered:
+                router.put(keys.down, frames.encode(frames.STOP, 1, end.fields[4]))
+            _, err = node.communicate(timeout=20)
+            assert node.returncode == 143 and "node 'g' stopped by SIGTERM" in err
+            wait_for(lambda: not g_holds_its_token(), 10, "node g's token to go")
+        finally:
+            reap(node)
+            server_token.undeclare()
+            up.undeclare()
 
 def test_the_launcher_sent_sigterm_stops_the_run_and_keeps_its_records(tmp_path):
     cfg = _pair(tmp_path)
