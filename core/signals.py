@@ -58,15 +58,21 @@ def stop_behind(exc: BaseException) -> KeyboardInterrupt | None:
     return None
 
 
-def _raise(signum: int, frame: Any) -> None:
-    raise Stopped(signum)
+def raise_on_stop(heard: list[int] | None = None) -> None:
+    """Every stop signal raises :class:`Stopped`: SIGTERM and SIGHUP (a supervisor, a closed
+    terminal) as Ctrl-C does (called once per process, early). ``heard`` gets each signal's
+    number as it comes: a stop can surface as another error (an extension module whose
+    initialisation it interrupted raises ImportError), and the signal is still what ended it."""
+    if threading.current_thread() is not threading.main_thread():
+        return
 
+    def interrupt(signum: int, frame: Any) -> None:
+        if heard is not None:
+            heard.append(signum)
+        raise Stopped(signum)
 
-def raise_on_stop() -> None:
-    """SIGTERM and SIGHUP raise :class:`Stopped` like Ctrl-C (called once per process, early)."""
-    if threading.current_thread() is threading.main_thread():
-        for signum in STOP_SIGNALS[1:]:
-            signal.signal(signum, _raise)
+    for signum in STOP_SIGNALS:
+        signal.signal(signum, interrupt)
 
 
 def ignore_stops() -> None:

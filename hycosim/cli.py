@@ -1116,7 +1116,8 @@ def main() -> None:
     # A model that crashes in native code (an FMU's binary, an extension) kills the process
     # without a word from Python; the fault handler at least prints the stack it was at.
     faulthandler.enable()
-    signals.raise_on_stop()  # SIGTERM and SIGHUP (a supervisor, a closed terminal) are ways out like Ctrl-C
+    heard: list[int] = []  # the stop signals that came
+    signals.raise_on_stop(heard)  # SIGTERM and SIGHUP (a supervisor, a closed terminal) are ways out like Ctrl-C
     prefer_shared_runtime()  # before any session opens; the server and nodes it starts inherit it
     try:
         app(args=_join_multi_value_options(sys.argv[1:]), prog_name="hycosim")
@@ -1128,11 +1129,15 @@ def main() -> None:
         if stop is not None:
             sys.exit(signals.exit_code(stop))
         raise
-    except OSError as exc:
+    except Exception as exc:
+        if heard:  # Ctrl-C while MuJoCo's or torch's extension initialised surfaces as an ImportError
+            stop = signals.Stopped(heard[0])
+            err.print(signals.describe(stop), highlight=False)
+            sys.exit(signals.exit_code(stop))
+        if not isinstance(exc, OSError) or exc.filename is None:
+            raise
         # The last resort for a file a command could not read or write (an output folder
         # that cannot be made, a PNG path in a missing folder): name it instead of a traceback.
-        if exc.filename is None:
-            raise
         err.print(f"[red]error:[/red] {exc.filename}: {exc.strerror or exc}", highlight=False)
         sys.exit(2)
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import signal
 import subprocess
+import sys
 import time
 
 import pytest
@@ -214,3 +215,47 @@ def test_every_command_a_signal_stops_exits_with_that_signals_status(tmp_path, c
         assert "Traceback" not in err, err
     finally:
         reap(proc)
+
+
+# Runs the console entry point with a Ctrl-C that comes exactly as a module is first imported:
+# while the command line itself is imported, or while an extension initialises, which turns the
+# interrupt into an ImportError of its own (MuJoCo's said "initialization failed" when Ctrl-C
+# came as `hycosim train` started).
+_INTERRUPTED_IMPORT = '''
+import os, signal, sys, time
+from importlib.abc import MetaPathFinder
+
+class At(MetaPathFinder):
+    def __init__(self, module, as_import_error):
+        self.module, self.as_import_error = module, as_import_error
+    def find_spec(self, name, path, target=None):
+        if name != self.module:
+            return None
+        sys.meta_path.remove(self)
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(5)
+        except KeyboardInterrupt:
+            if self.as_import_error:
+                raise ImportError("initialization failed") from None
+            raise
+        return None
+
+module, how = sys.argv[1], sys.argv[2]
+sys.argv = ["hycosim", *sys.argv[3:]]
+sys.meta_path.insert(0, At(module, how == "import-error"))
+from hycosim.__main__ import main
+main()
+'''
+
+
+@pytest.mark.parametrize("module, how, command", [
+    ("typer", "interrupt", ["--help"]),  # the command line's own imports
+    ("mujoco", "import-error", ["train", "-o", "{tmp}/t", "--demos", "1"]),
+], ids=["during the command line's imports", "as an extension initialises"])
+def test_ctrl_c_as_a_command_starts_exits_130_without_a_traceback(tmp_path, module, how, command):
+    res = subprocess.run([sys.executable, "-c", _INTERRUPTED_IMPORT, module, how,
+                          *(c.format(tmp=tmp_path) for c in command)],
+                         capture_output=True, text=True, env=env(), cwd=REPO, timeout=120)
+    assert res.returncode == 130, res.stderr
+    assert "interrupted by Ctrl-C" in res.stderr and "Traceback" not in res.stderr, res.stderr
