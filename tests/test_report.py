@@ -29,7 +29,9 @@ def test_report_names_the_node_that_holds_the_barrier_and_plot_draws(tmp_path):
     assert s["steps"] == 101 and s["status"] == "completed"
     assert max(s["holder_share"], key=s["holder_share"].get) == "slow"
     assert s["holder_share"]["slow"] > 0.8
-    assert s["mean_arrival_ms"]["slow"] > 4.0 > s["mean_arrival_ms"]["fast"]
+    # The slow node's 8 ms of work a step (the start has none); the fast node answers sooner. Only
+    # the order is held to: in one make test a loaded machine made the fast one's mean 5.3 ms.
+    assert s["mean_arrival_ms"]["slow"] > 7.0 and s["mean_arrival_ms"]["fast"] < s["mean_arrival_ms"]["slow"]
     assert [e["to"] for e in s["mode_switches"]] == ["late", "free"]
     # the ranking is the report's; who held each step is the scheduler's, so a stray
     # preemption of another node may own one of them on a loaded machine
