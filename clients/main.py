@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import signal
-import threading
 from pathlib import Path
-from typing import Any
 
 from core import logs, signals
 from core.config import LoadedProject, server_endpoint
@@ -37,13 +35,7 @@ def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
     except EndpointError as exc:
         return 2, f"{'--connect' if connect else 'serverIP'}: {exc}"
     interrupted: list[int] = []  # the stop signal that came, if any
-
-    def on_stop(signum: int, frame: Any) -> None:
-        interrupted.append(signum)
-        raise signals.Stopped(signum)
-
-    previous = {s: signal.signal(s, on_stop) for s in signals.STOP_SIGNALS} \
-        if threading.current_thread() is threading.main_thread() else {}
+    previous = signals.raise_on_stop(interrupted)
     try:
         password = node_password(loaded, name, password_file)
         impl = load_node(spec, loaded.path.parent if loaded.path else Path.cwd(), loaded.project.coSimulation)

@@ -58,21 +58,21 @@ def stop_behind(exc: BaseException) -> KeyboardInterrupt | None:
     return None
 
 
-def raise_on_stop(heard: list[int] | None = None) -> None:
+def raise_on_stop(heard: list[int] | None = None) -> dict[int, Any]:
     """Every stop signal raises :class:`Stopped`: SIGTERM and SIGHUP (a supervisor, a closed
-    terminal) as Ctrl-C does (called once per process, early). ``heard`` gets each signal's
-    number as it comes: a stop can surface as another error (an extension module whose
-    initialisation it interrupted raises ImportError), and the signal is still what ended it."""
+    terminal) as Ctrl-C does. ``heard`` gets each signal's number as it comes: a stop can
+    surface as another error (an extension module whose initialisation it interrupted raises
+    ImportError), and the signal is still what ended it. Returns the handlers it replaced
+    (none off the main thread, where signals cannot be handled)."""
     if threading.current_thread() is not threading.main_thread():
-        return
+        return {}
 
     def interrupt(signum: int, frame: Any) -> None:
         if heard is not None:
             heard.append(signum)
         raise Stopped(signum)
 
-    for signum in STOP_SIGNALS:
-        signal.signal(signum, interrupt)
+    return {signum: signal.signal(signum, interrupt) for signum in STOP_SIGNALS}
 
 
 def ignore_stops() -> None:
