@@ -79,7 +79,6 @@ def test_a_node_sent_sigterm_leaves_and_the_server_names_it(tmp_path):
     _contiguous(run_dir)
 
 
-
 @pytest.mark.parametrize("answered", [True, False], ids=["the server answers", "no answer"])
 def test_a_node_stopped_by_sigterm_holds_its_token_until_the_server_has_read_its_end(tmp_path, answered):
     """The END of a node a supervisor stops and the going of its token race to the server: in
@@ -129,6 +128,7 @@ def test_a_node_stopped_by_sigterm_holds_its_token_until_the_server_has_read_its
             reap(node)
             server_token.undeclare()
             up.undeclare()
+
 
 def test_the_launcher_sent_sigterm_stops_the_run_and_keeps_its_records(tmp_path):
     cfg = _pair(tmp_path)
