@@ -294,11 +294,13 @@ class NodeRuntime:
         """A node stopped by SIGTERM or SIGHUP (its supervisor) tells the server, which then names it
         rather than a lost token. Not on Ctrl-C: a terminal's reaches the server too, which
         reports its own interruption."""
-        if signals.signal_of(exc) == signal.SIGINT or isinstance(self.impl, AsyncSource):
+        if signals.signal_of(exc) == signal.SIGINT:
             return
+        source = isinstance(self.impl, AsyncSource)
+        what = "(an asynchronous source) " if source else ""
         try:
             self._send(frames.encode(frames.END, self.spec.UID, self.steps + 1, 0.0, False,
-                                     f"node {self.name!r} {signals.describe(exc)} after step {self.steps}", []))
+                                     f"node {self.name!r} {what}{signals.describe(exc)} after step {self.steps}", []))
             # The token goes as this process leaves, and the server can learn that before it
             # reads the END (it did on a loaded machine, and named a lost token): wait for its
             # STOP, which says it has read it. A second signal ends the wait.
@@ -573,9 +575,12 @@ class NodeRuntime:
         sim_now, seq = t0, 0
         period = 1.0 / float(self.spec.rate or 30.0)
         while True:
-            for ts, values in impl.samples_until(sim_now):
-                self._send(frames.encode(frames.SAMPLE, self.spec.UID, seq, ts, self._pack_outputs(values)))
-                seq += 1
+            try:
+                for ts, values in impl.samples_until(sim_now):
+                    self._send(frames.encode(frames.SAMPLE, self.spec.UID, seq, ts, self._pack_outputs(values)))
+                    seq += 1
+            except Exception as exc:
+                self._source_failed(exc, sim_now)
             if clock is not None:
                 # Real time: sample by the clock, and look for STOP in between. While the
                 # server is away (within linkGrace) samples go nowhere; sampling goes on.
@@ -593,6 +598,19 @@ class NodeRuntime:
             if frame is not None and frame.kind == frames.STOP:
                 self._on_stop(frame)
                 return
+
+    def _source_failed(self, exc: Exception, sim_now: float) -> None:
+        """Tell the server how an asynchronous source failed (it would otherwise learn only that
+        its token went, and with a link grace wait that long to say so), then raise it."""
+        if isinstance(exc, NodeRunError):
+            message = str(exc)
+        elif isinstance(exc, NodeModelError):
+            message = f"{exc} (at t={sim_now:g} s)"
+        else:
+            self._log.exception("source failed", t=sim_now)
+            message = (f"node {self.name!r} (an asynchronous source): its model failed at t={sim_now:g} s: "
+                       f"{type(exc).__name__}: {exc}")
+        self._end(self.steps + 1, sim_now, False, message)
 
     def _run_played(self, frame: frames.Frame, restart: bool) -> None:
         """An asynchronous node played from a recording, paced by the releases: before the server

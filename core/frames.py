@@ -27,7 +27,8 @@ Kinds and layouts (after version and kind):
   model ended the simulation at ``t`` (``clean``: an FMU that asked to terminate) or failed (the
   message says how); the server stops the run with the node's own words. ``earlier``: inside a
   batched release (STEPS), the outputs after each of its steps before the one it ended in, as
-  a BATCH's (the server records the points they reach); otherwise empty
+  a BATCH's (the server records the points they reach); otherwise empty. An asynchronous source
+  sends one only to say it failed or was stopped (``clean`` false, ``earlier`` empty)
 * ``CHECKPOINT`` server → nodes, just before a release: ``step``: serialise the state at this
   macro-step point (before integrating ``step``) and send it after the step's outputs
 * ``STATE``    node → server: ``uid, step, index, count, chunk``: chunk ``index`` of ``count`` of

@@ -79,8 +79,10 @@ class Intake:
             # An infinite sample time would outrank every later sample (held for ever); NaN breaks the order.
             raise Dropped("wrong type", f"from {node}: time {t!r} is not finite")
         if frame.kind == frames.END:
-            if spec.asynchronous:
-                raise Dropped("wrong kind", f"{node} is asynchronous: it does not end a run")
+            # A source never ends a run cleanly (it has no end of its own), but it says that it
+            # was stopped or failed; it steps in no batch.
+            if spec.asynchronous and (frame.fields[3] or frame.fields[5]):
+                raise Dropped("wrong kind", f"{node} is asynchronous: it does not end a run, only fails")
             self._check_batch(node, frame, t, frame.fields[5], last=None)
             return frame
         if frame.kind == frames.BATCH:

@@ -668,6 +668,8 @@ class Relay:
             if got is None:
                 continue
             node, frame = got
+            if frame.kind == frames.END and self.project.node(node).asynchronous:
+                self._on_end(node, step, frame)  # a source stopped or failed (never clean: the intake)
             frame_step = frame.fields[1]
             label = step if node in self.paced else self._label.get(node, step)
             if frame.kind == frames.END and frame_step == label + 1 and not frame.fields[3]:

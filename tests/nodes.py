@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from clients.node import Node, NodeContext
+from clients.node import AsyncSource, Node, NodeContext
 
 
 class Text(Node):
@@ -35,3 +35,23 @@ class Clock(Node):
 
     def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
         self.t = t + h
+
+
+class FailingSource(AsyncSource):
+    """An asynchronous source sampling y = t at 20 Hz whose sensor fails once t passes ``fail_at``."""
+
+    OUTPUTS = frozenset({"y"})
+    PARAMETERS = frozenset({"fail_at"})
+
+    def setup(self, ctx: NodeContext) -> None:
+        self.fail_at = float(ctx.parameter("fail_at", 1.0))
+        self.t0, self.next_index = ctx.start_time, 0
+
+    def samples_until(self, t: float) -> list[tuple[float, dict[str, Any]]]:
+        if t > self.fail_at:
+            raise OSError("the sensor stopped answering")
+        out = []
+        while self.t0 + self.next_index / 20.0 <= t:
+            out.append((self.t0 + self.next_index / 20.0, {"y": self.t0 + self.next_index / 20.0}))
+            self.next_index += 1
+        return out

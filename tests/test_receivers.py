@@ -88,7 +88,9 @@ def test_the_servers_intake_accepts_only_frames_it_can_use(loaded, node, payload
         assert not spec.asynchronous and 0 <= step < frames.MAX_STEP and 0 <= index < count <= frames.MAX_CHUNKS
         assert len(chunk) <= frames.STATE_CHUNK
     elif frame.kind == frames.END:  # the outputs of its steps inside a batch before it ended, as a BATCH's
-        assert not spec.asynchronous and len(frame.fields[5]) < frames.MAX_BATCH
+        # A source only says that it stopped or failed: it neither ends a run nor steps in a batch.
+        assert not spec.asynchronous or (frame.fields[3] is False and frame.fields[5] == [])
+        assert len(frame.fields[5]) < frames.MAX_BATCH
         for values in frame.fields[5]:
             assert type(values) is list and len(values) == len(spec.output)
             assert all(type(v) in WIRE_TYPES[p.type] for v, p in zip(values, spec.output))

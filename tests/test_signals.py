@@ -79,6 +79,64 @@ def test_a_node_sent_sigterm_leaves_and_the_server_names_it(tmp_path):
     _contiguous(run_dir)
 
 
+def _with_source(tmp_path, model: str, parameters: dict | None = None):
+    """A real-time asynchronous source feeding a stepping node, with a link grace: the run
+    would wait that long for a source whose token went without a word."""
+    return write_project(tmp_path / "p.json", [
+        {"nodeName": "sensor", "UID": 1, "model": model, "async": True, "rate": 20.0, "output": ["y"],
+         "parameters": parameters or {}},
+        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+    ], [{"from": "sensor.y", "to": "g.u"}], cosim={"stepSize": 0.01, "stopTime": 20.0, "realTime": True,
+                                                   "linkGrace": 15.0}, name="faults")
+
+
+def test_an_asynchronous_source_sent_sigterm_is_named_by_the_server_at_once(tmp_path):
+    """A source has no END of its own, but one its supervisor stops says so (it had been
+    named a lost token, and with a link grace only after the grace)."""
+    cfg = _with_source(tmp_path, "ramp_source")
+    run_dir = tmp_path / "run"
+    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
+    nodes = {n: spawn("node", n, str(cfg)) for n in ("sensor", "g")}
+    try:
+        wait_for(lambda: _rows(run_dir) > 30, 30, "30 steps")
+        nodes["sensor"].send_signal(signal.SIGTERM)
+        began = time.monotonic()
+        _, node_err = nodes["sensor"].communicate(timeout=20)
+        assert nodes["sensor"].returncode == 143 and "node 'sensor' stopped by SIGTERM" in node_err
+        _, err = server.communicate(timeout=30)
+        assert time.monotonic() - began < 10  # well inside the link grace of 15 s
+        assert server.returncode == 3
+        assert "node 'sensor' (an asynchronous source) stopped by SIGTERM" in err and "liveliness" not in err
+        assert nodes["g"].wait(timeout=20) == 5
+    finally:
+        reap(server, *nodes.values())
+    assert "node 'sensor' (an asynchronous source) stopped by SIGTERM" in meta(run_dir)["reason"]
+    _contiguous(run_dir)
+
+
+def test_an_asynchronous_source_whose_model_fails_is_named_with_its_error_at_once(tmp_path):
+    cfg = _with_source(tmp_path, "tests.nodes:FailingSource", {"fail_at": 1.0})
+    run_dir = tmp_path / "run"
+    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
+    nodes = {n: spawn("node", n, str(cfg)) for n in ("sensor", "g")}
+    try:
+        _, node_err = nodes["sensor"].communicate(timeout=60)
+        failed = time.monotonic()
+        assert nodes["sensor"].returncode == 3, node_err
+        said = "node 'sensor' (an asynchronous source): its model failed at t="
+        assert said in node_err and "OSError: the sensor stopped answering" in node_err
+        _, err = server.communicate(timeout=30)
+        assert time.monotonic() - failed < 10  # not after the link grace of 15 s
+        assert server.returncode == 3 and said in err and "liveliness" not in err, err
+        assert nodes["g"].wait(timeout=20) == 5
+    finally:
+        reap(server, *nodes.values())
+    rows = _contiguous(run_dir)
+    # The samples the source took before it failed reached g: the run's records keep them.
+    assert 0.5 < float(rows[-1]["t"]) < 3.0 and float(rows[-1]["g.u"]) > 0.5
+    assert said in meta(run_dir)["reason"]
+
+
 @pytest.mark.parametrize("answered", [True, False], ids=["the server answers", "no answer"])
 def test_a_node_stopped_by_sigterm_holds_its_token_until_the_server_has_read_its_end(tmp_path, answered):
     """The END of a node a supervisor stops and the going of its token race to the server: in
