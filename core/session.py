@@ -125,6 +125,10 @@ def client_config(connect: str, *, timeout_s: float = 10.0, lease_ms: int = 1000
         "mode": "client",
         "connect/endpoints": [connect],
         "connect/timeout_ms": int(timeout_s * 1000),
+        # A node usually starts with its server (hycosim run, compose) and so before it listens.
+        # Zenoh's retries (1 s, doubling to 4 s) made every run wait for one: 0.3 s a run on
+        # loopback. A refused connect is cheap, so retry sooner: 50 ms, by 1.5 up to 0.5 s.
+        "connect/retry": {"period_init_ms": 50, "period_max_ms": 500, "period_increase_factor": 1.5},
         "scouting/multicast/enabled": False,
         "transport/link/tx/lease": lease_ms,
         **_transport(low_latency),
