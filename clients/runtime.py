@@ -296,11 +296,12 @@ class NodeRuntime:
         reports its own interruption."""
         if signals.signal_of(exc) == signal.SIGINT:
             return
-        source = isinstance(self.impl, AsyncSource)
-        what = "(an asynchronous source) " if source else ""
+        # A source knows no step (the server adds the run's).
+        said = (f"node {self.name!r} (an asynchronous source) {signals.describe(exc)}"
+                if isinstance(self.impl, AsyncSource) else
+                f"node {self.name!r} {signals.describe(exc)} after step {self.steps}")
         try:
-            self._send(frames.encode(frames.END, self.spec.UID, self.steps + 1, 0.0, False,
-                                     f"node {self.name!r} {what}{signals.describe(exc)} after step {self.steps}", []))
+            self._send(frames.encode(frames.END, self.spec.UID, self.steps + 1, 0.0, False, said, []))
             # The token goes as this process leaves, and the server can learn that before it
             # reads the END (it did on a loaded machine, and named a lost token): wait for its
             # STOP, which says it has read it. A second signal ends the wait.

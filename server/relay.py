@@ -717,7 +717,9 @@ class Relay:
         message, k = message[:_MESSAGE_MAX], self._point
         if not clean:
             # The node's runtime names itself and the step; a message that does not is prefixed.
-            raise RunError(message if message.startswith(f"node {node!r}")
+            # A source lives on the wall clock and knows no step: the run's is added.
+            at = f" (the run at step {k}, t={self._time(k):g} s)" if self.project.node(node).asynchronous else ""
+            raise RunError(message + at if message.startswith(f"node {node!r}")
                            else f"node {node!r} failed at step {k} (t={self._time(k):g} s): {message}")
         if inside and self._ended_inside:
             return  # another node ended inside this batch first: the run ends by its word

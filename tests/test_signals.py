@@ -59,26 +59,6 @@ def test_a_signalled_server_writes_every_row_says_who_stopped_it_and_its_nodes_l
     assert len(rows) >= 30 and int(rows[-1]["step"]) >= m["stopped_by"]["step"] - 1
 
 
-def test_a_node_sent_sigterm_leaves_and_the_server_names_it(tmp_path):
-    cfg = _pair(tmp_path)
-    run_dir = tmp_path / "run"
-    server = spawn("server", str(cfg), "--run-dir", str(run_dir))
-    nodes = {n: spawn("node", n, str(cfg)) for n in ("clock", "g")}
-    try:
-        wait_for(lambda: _rows(run_dir) > 30, 30, "30 steps")
-        nodes["g"].send_signal(signal.SIGTERM)
-        _, node_err = nodes["g"].communicate(timeout=20)
-        assert nodes["g"].returncode == 143 and "node 'g' stopped by SIGTERM" in node_err
-        _, err = server.communicate(timeout=30)
-        assert server.returncode == 3
-        assert "node 'g' stopped by SIGTERM after step" in err and "liveliness" not in err
-        assert nodes["clock"].wait(timeout=20) == 5
-    finally:
-        reap(server, *nodes.values())
-    assert "node 'g' stopped by SIGTERM" in meta(run_dir)["reason"]
-    _contiguous(run_dir)
-
-
 def _with_source(tmp_path, model: str, parameters: dict | None = None):
     """A real-time asynchronous source feeding a stepping node, with a link grace: the run
     would wait that long for a source whose token went without a word."""
@@ -90,27 +70,31 @@ def _with_source(tmp_path, model: str, parameters: dict | None = None):
                                                    "linkGrace": 15.0}, name="faults")
 
 
-def test_an_asynchronous_source_sent_sigterm_is_named_by_the_server_at_once(tmp_path):
-    """A source has no END of its own, but one its supervisor stops says so (it had been
-    named a lost token, and with a link grace only after the grace)."""
-    cfg = _with_source(tmp_path, "ramp_source")
+@pytest.mark.parametrize("stopped, other, said", [
+    ("g", "clock", "node 'g' stopped by SIGTERM after step"),
+    # A source has no END of its own, but one its supervisor stops says so (it had been named a
+    # lost token, and with a link grace only after the grace).
+    ("sensor", "g", "node 'sensor' (an asynchronous source) stopped by SIGTERM (the run at step "),
+], ids=["a stepping node", "an asynchronous source"])
+def test_a_node_sent_sigterm_leaves_and_the_server_names_it_at_once(tmp_path, stopped, other, said):
+    cfg = _pair(tmp_path) if stopped == "g" else _with_source(tmp_path, "ramp_source")
     run_dir = tmp_path / "run"
     server = spawn("server", str(cfg), "--run-dir", str(run_dir))
-    nodes = {n: spawn("node", n, str(cfg)) for n in ("sensor", "g")}
+    nodes = {n: spawn("node", n, str(cfg)) for n in (stopped, other)}
     try:
         wait_for(lambda: _rows(run_dir) > 30, 30, "30 steps")
-        nodes["sensor"].send_signal(signal.SIGTERM)
+        nodes[stopped].send_signal(signal.SIGTERM)
         began = time.monotonic()
-        _, node_err = nodes["sensor"].communicate(timeout=20)
-        assert nodes["sensor"].returncode == 143 and "node 'sensor' stopped by SIGTERM" in node_err
+        _, node_err = nodes[stopped].communicate(timeout=20)
+        assert nodes[stopped].returncode == 143 and f"node {stopped!r} stopped by SIGTERM" in node_err
         _, err = server.communicate(timeout=30)
-        assert time.monotonic() - began < 10  # well inside the link grace of 15 s
+        assert time.monotonic() - began < 10  # a source's link grace is 15 s
         assert server.returncode == 3
-        assert "node 'sensor' (an asynchronous source) stopped by SIGTERM" in err and "liveliness" not in err
-        assert nodes["g"].wait(timeout=20) == 5
+        assert said in err and "liveliness" not in err
+        assert nodes[other].wait(timeout=20) == 5
     finally:
         reap(server, *nodes.values())
-    assert "node 'sensor' (an asynchronous source) stopped by SIGTERM" in meta(run_dir)["reason"]
+    assert said in meta(run_dir)["reason"]
     _contiguous(run_dir)
 
 
@@ -127,7 +111,7 @@ def test_an_asynchronous_source_whose_model_fails_is_named_with_its_error_at_onc
         assert said in node_err and "OSError: the sensor stopped answering" in node_err
         _, err = server.communicate(timeout=30)
         assert time.monotonic() - failed < 10  # not after the link grace of 15 s
-        assert server.returncode == 3 and said in err and "liveliness" not in err, err
+        assert server.returncode == 3 and said in err and "(the run at step " in err and "liveliness" not in err, err
         assert nodes["g"].wait(timeout=20) == 5
     finally:
         reap(server, *nodes.values())
