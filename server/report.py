@@ -18,6 +18,7 @@ from typing import Any, Iterator
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from core.hints import did_you_mean
 from core.run_files import RunFileError, iter_csv_rows, read_jsonl
 
 
@@ -257,7 +258,7 @@ def read_columns(run_dir: Path, ports: list[str]) -> dict[str, array]:
     columns = list(first)
     unknown = [p for p in ports if p not in columns]
     if unknown:
-        raise RunDirError(f"{run_dir}: no recorded port {', '.join(unknown)} "
+        raise RunDirError(f"{run_dir}: no recorded port {', '.join(unknown)}{did_you_mean(unknown, columns[3:])} "
                           f"(recorded: {', '.join(columns[3:])})")
     # By default, the first 8 ports that read as numbers; one that turns out to hold text is left out.
     candidates = ports or [c for c in columns[3:] if isinstance(_number_or_text(first[c]), float)][:8]

@@ -55,6 +55,8 @@ def test_report_names_the_node_that_holds_the_barrier_and_plot_draws(tmp_path):
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
     bad = hycosim("plot", str(run), "clock.nope")
     assert bad.returncode == 2 and "no recorded port clock.nope" in bad.stderr
+    misspelt = hycosim("plot", str(run), "slow.yy")
+    assert misspelt.returncode == 2 and "no recorded port slow.yy; did you mean 'slow.y'?" in misspelt.stderr
     missing = hycosim("report", str(tmp_path / "nowhere"))
     assert missing.returncode == 2 and "not a run directory" in missing.stderr
 
