@@ -158,7 +158,7 @@ def test_link_cut_beyond_the_grace_stops_with_a_clear_message_and_results(tmp_pa
 def test_an_asynchronous_source_rides_out_a_short_link_cut(tmp_path):
     """A remote sensor (a camera, a real robot) whose link drops for less than linkGrace keeps
     sampling and is held at the server meanwhile; its samples resume when the link is back."""
-    # Zenoh's client reconnects a few seconds after the link is back: the run outlasts that.
+    # The source reconnects within half a second of the link coming back: the run outlasts that.
     code, err, nodes, run_dir = _remote_run(tmp_path, grace=6.0, stop=8.0, cut_after=1.0, cut_for=2.0,
                                             project=_sensed)
     assert code == 0, err
