@@ -1,8 +1,8 @@
 """Every receiver is total: property-based tests feed each one what the network may bring.
 
 In process, with hypothesis: frame decoding, the server's intake and side-message handling,
-its gathering of a batched release's answers, a node's release handling, the gateway's framing and its translation of releases, and the
-bounded drop log. Whatever the bytes, each returns something it can act on or drops it with
+its gathering of a batched release's answers and of a source's END, a node's release
+handling, the gateway's framing and its translation of releases, and the bounded drop log. Whatever the bytes, each returns something it can act on or drops it with
 its own exception; nothing else escapes.
 """
 
@@ -310,13 +310,14 @@ def _answers(draw) -> tuple[str, bytes]:
     return f"hycosim/recv/up/{node}", frame
 
 
-@given(st.lists(_answers() | st.tuples(st.sampled_from(["hycosim/recv/up/clock", "hycosim/recv/up/g"]), payloads),
-                max_size=8))
+@given(st.lists(_answers() | st.tuples(st.sampled_from(["hycosim/recv/up/clock", "hycosim/recv/up/g",
+                                                        "hycosim/recv/up/src"]), payloads), max_size=8))
 def test_a_batched_release_is_gathered_whole_from_each_nodes_answer_whatever_else_comes(relay, before):
     """Released at point 20 for 10 base steps, each node owes one BATCH labelled 21 with nine
     steps before its last. Whatever comes first (junk, other labels, other numbers of steps),
     the relay gathers point 30 with ten steps' outputs of each node, each of its ports' types,
-    or stops the run on an END (a forged one cannot be told from a node's on an open network)."""
+    or stops the run on an END (a forged one cannot be told from a node's on an open network),
+    a source's among them (its samples are taken on the way)."""
     from server.relay import RunError, _ModelEnded
 
     relay._early.clear()
@@ -341,3 +342,32 @@ def test_a_batched_release_is_gathered_whole_from_each_nodes_answer_whatever_els
         for values in [*relay._earlier[node], relay.outputs[node]]:
             assert len(values) == len(outputs) and all(type(v) in WIRE_TYPES[p.type] for v, p in zip(values, outputs))
         assert len(relay._earlier[node]) == 9
+
+
+@given(clean=st.booleans(), earlier=st.just([]) | st.lists(st.lists(st.floats(), max_size=2), max_size=2),
+       message=st.text(max_size=40), step=st.integers(-2, 40) | st.integers(-(2 ** 63), 2 ** 64 - 1),
+       t=st.floats(allow_nan=True, allow_infinity=True))
+def test_a_source_stops_a_gathering_only_with_an_unclean_unbatched_end(relay, clean, earlier, message, step, t):
+    """A source's END says it was stopped or failed, whatever point the run is gathering: then
+    the run stops with the source's words and the run's step. Any other END from it (clean, with
+    batch outputs, a step or time out of range) is dropped and counted, and the point is gathered."""
+    from server.relay import RunError
+
+    relay._early.clear()
+    relay._batch_steps.clear()
+    for node in _UIDS:
+        relay._label[node] = relay._due_at[node] = 30
+    genuine = [(f"hycosim/recv/up/{node}", frames.encode(frames.OUTPUTS, uid, 30, 0.3, values))
+               for (node, uid), values in zip(_UIDS.items(), ([0.0, 1.0], [1.0, 2, True, "x", b"y"], [1.0]))]
+    relay.inbox = _Queued([("hycosim/recv/up/src", frames.encode(frames.END, 4, step, t, clean, message, earlier)),
+                           *genuine])
+    dropped = sum(relay.intake.dropped.values())
+    valid = not clean and earlier == [] and 0 <= step < frames.MAX_STEP and math.isfinite(t)
+    try:
+        arrivals = relay._collect(30, 0.0)
+    except RunError as exc:
+        assert valid and str(exc).startswith("node 'src'")
+        assert f"step {relay._point}" in str(exc) and sum(relay.intake.dropped.values()) == dropped
+        return
+    assert not valid and sum(relay.intake.dropped.values()) == dropped + 1
+    assert set(arrivals) == set(_UIDS)
