@@ -2,8 +2,9 @@
 
 In process, with hypothesis: frame decoding, the server's intake and side-message handling,
 its gathering of a batched release's answers and of a source's END, a node's release
-handling, the gateway's framing and its translation of releases, and the bounded drop log. Whatever the bytes, each returns something it can act on or drops it with
-its own exception; nothing else escapes.
+handling, the gateway's framing and its translation of releases, and the bounded drop log.
+Whatever the bytes, each returns something it can act on or drops it with its own exception;
+nothing else escapes.
 """
 
 from __future__ import annotations
