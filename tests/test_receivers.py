@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 
 from core import frames
 from fmu_bridge import gateway_protocol as gp
-from core.config import WIRE_TYPES, load_project
+from core.config import WIRE_TYPES, PortType, load_project
 from core.drops import DropLog
 from server.gateway import _Connection, translate_release
 from server.intake import Dropped, Intake
@@ -29,7 +29,7 @@ from server.recorder import Recorder
 from server.relay import Relay
 from clients.runtime import NodeRuntime
 from tests.helpers import write_project
-from tests.wire_strategies import frame_arrays, gateway_streams, names, payloads
+from tests.wire_strategies import frame_arrays, gateway_streams, names, payloads, values
 
 NODES = [
     {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
@@ -53,6 +53,57 @@ def _quiet() -> None:
     structlog.configure(logger_factory=structlog.ReturnLoggerFactory())
 
 
+_VALUE = {"Real": st.floats(allow_nan=True, allow_infinity=True) | st.integers(-3, 3), "Integer": st.integers(-3, 3),
+          "Boolean": st.booleans(), "String": st.text(max_size=4), "Binary": st.binary(max_size=4)}
+_SENDERS = {n["nodeName"]: (n["UID"], [p["type"] if isinstance(p, dict) else "Real" for p in n["output"]])
+            for n in NODES}
+_ODD = ["1", True, None, b"\x00", [], {}, 1.5, 7]  # each of the wrong type for some port
+_KINDS = {frames.OUTPUTS, frames.SAMPLE, frames.END, frames.BATCH, frames.STATE}
+_WRONGS = [None, "kind", "uid", "step", "t", "value", "ports", "batch", "field"]  # "field": any value in any field
+
+
+@st.composite
+def _from_a_node(draw, wrong: str | None = "any") -> tuple[str, bytes, int, str | None]:
+    """A frame on a node's own key as that node would write it (its UID, a kind it sends, one
+    value of its type for each of its outputs, a step and time in range), with at most one
+    thing wrong: the generic strategies, which draw UIDs and values blind, reach an accepted
+    OUTPUTS, SAMPLE, END or BATCH about once in tens of thousands of frames. Also returns the
+    kind and what is wrong (``wrong``: that, or any of _WRONGS)."""
+    node = draw(st.sampled_from(sorted(_SENDERS)))
+    uid, types = _SENDERS[node]
+    source = node == "src"
+    sends = [frames.SAMPLE, frames.END] if source else [frames.OUTPUTS, frames.END, frames.BATCH, frames.STATE]
+    outputs = st.tuples(*[_VALUE[type_] for type_ in types]).map(list)
+    if wrong == "any":
+        wrong = draw(st.sampled_from([None, *_WRONGS]))
+    kind = draw(st.sampled_from(sorted(_KINDS - set(sends)) if wrong == "kind" else sends))
+    step, t = draw(st.integers(0, 40)), draw(st.floats(0, 10))
+    if wrong == "uid":
+        uid = draw(st.integers(-1, 5).filter(lambda u: u != uid))
+    elif wrong == "step":
+        step = draw(st.sampled_from([-1, -(2 ** 63), frames.MAX_STEP, 2 ** 64 - 1]))
+    elif wrong == "t":
+        t = draw(st.sampled_from([math.nan, math.inf, -math.inf]))
+    elif wrong == "value":  # one port's value of another type
+        at = draw(st.integers(0, len(types) - 1))
+        odd = st.sampled_from([v for v in _ODD if type(v) not in WIRE_TYPES[PortType(types[at])]])
+        outputs = outputs.flatmap(lambda vs: odd.map(lambda v: vs[:at] + [v] + vs[at + 1:]))
+    elif wrong == "ports":  # a value too few or too many
+        outputs = outputs.flatmap(lambda vs: st.sampled_from([vs[:-1], vs + [0.5]]))
+    # A source's END only says it failed or was stopped: unclean, no batch.
+    end = ([st.just(False), st.text(max_size=20), st.just([])] if source else
+           [st.booleans(), st.text(max_size=20), st.just([]) | st.lists(outputs, min_size=1, max_size=3)])
+    tail = {frames.OUTPUTS: [outputs], frames.SAMPLE: [outputs], frames.END: end,
+            frames.BATCH: [outputs, st.lists(outputs, max_size=3)],
+            frames.STATE: [st.integers(0, 2), st.just(3), st.binary(max_size=16)]}[kind]
+    fields = [uid, step] + ([] if kind == frames.STATE else [t]) + [draw(part) for part in tail]
+    if wrong == "batch" and kind in (frames.END, frames.BATCH):  # one step more than a batch may hold
+        fields[-1] = [draw(outputs)] * frames.MAX_BATCH
+    if wrong == "field":
+        fields[draw(st.integers(0, len(fields) - 1))] = draw(values)
+    return node, frames.encode(kind, *fields), kind, wrong
+
+
 @given(payloads)
 def test_decode_returns_a_well_typed_frame_or_raises_frame_error(payload):
     try:
@@ -64,8 +115,10 @@ def test_decode_returns_a_well_typed_frame_or_raises_frame_error(payload):
     assert len(frame.fields) == arity and fits(frame.fields)
 
 
-@given(st.sampled_from(["clock", "g", "h", "src", "nobody", "_local"]) | names, payloads)
-def test_the_servers_intake_accepts_only_frames_it_can_use(loaded, node, payload):
+@given(st.one_of(st.tuples(st.sampled_from(["clock", "g", "h", "src", "nobody", "_local"]) | names, payloads),
+                 _from_a_node(), _from_a_node()))
+def test_the_servers_intake_accepts_only_frames_it_can_use(loaded, sent):
+    node, payload = sent[:2]
     _quiet()
     intake = Intake(loaded.project.nodeLists)
     try:
@@ -99,6 +152,30 @@ def test_the_servers_intake_accepts_only_frames_it_can_use(loaded, node, payload
         assert frame.kind == frames.HELLO
 
 
+@pytest.mark.parametrize("wrong", _WRONGS)
+@given(data=st.data())
+def test_the_intake_takes_a_nodes_own_frame_only_when_nothing_in_it_is_wrong(loaded, wrong, data):
+    """Each thing a frame can have wrong on its own (a kind its sender does not send, the UID, a
+    step or time out of range, a value of another type, a value too few or too many, a batch
+    too long) is caught; a right frame is taken."""
+    node, payload, kind, _ = data.draw(_from_a_node(wrong))
+    _quiet()
+    carries = {"kind": True, "uid": True, "step": True, "t": kind != frames.STATE,
+               "value": kind in (frames.OUTPUTS, frames.SAMPLE, frames.BATCH),
+               "ports": kind in (frames.OUTPUTS, frames.SAMPLE, frames.BATCH),
+               "batch": kind in (frames.END, frames.BATCH)}
+    try:
+        Intake(loaded.project.nodeLists).accept(node, payload)
+    except Dropped:
+        taken = False
+    else:
+        taken = True
+    if carries.get(wrong):
+        assert not taken, f"{node} {frames.KIND_NAMES[kind]} with its {wrong} wrong was taken"
+    elif wrong is None:
+        assert taken, f"{node}'s right {frames.KIND_NAMES[kind]} was dropped"
+
+
 @pytest.fixture(scope="module")
 def relay(loaded, tmp_path_factory):
     # One relay for every example: a stream of hostile frames through one server, as on the wire.
@@ -112,8 +189,10 @@ def relay(loaded, tmp_path_factory):
     recorder.close("done")
 
 
-@given(st.sampled_from(["clock", "g", "h", "src", "nobody", "_local", "*"]), payloads)
-def test_the_relay_drops_what_it_cannot_use_and_never_stops_on_a_payload(relay, node, payload):
+@given(st.one_of(st.tuples(st.sampled_from(["clock", "g", "h", "src", "nobody", "_local", "*"]), payloads),
+                 _from_a_node(), _from_a_node()))
+def test_the_relay_drops_what_it_cannot_use_and_never_stops_on_a_payload(relay, sent):
+    node, payload = sent[:2]
     before = sum(relay.intake.dropped.values())
     got = relay._handle_side_message(f"hycosim/recv/up/{node}", payload, step=5, collecting=True)
     if got is None:
