@@ -57,6 +57,7 @@ _VALUE = {"Real": st.floats(allow_nan=True, allow_infinity=True) | st.integers(-
           "Boolean": st.booleans(), "String": st.text(max_size=4), "Binary": st.binary(max_size=4)}
 _SENDERS = {n["nodeName"]: (n["UID"], [p["type"] if isinstance(p, dict) else "Real" for p in n["output"]])
             for n in NODES}
+_OUTPUTS = {node: st.tuples(*[_VALUE[type_] for type_ in types]).map(list) for node, (_, types) in _SENDERS.items()}
 _ODD = ["1", True, None, b"\x00", [], {}, 1.5, 7]  # each of the wrong type for some port
 _KINDS = {frames.OUTPUTS, frames.SAMPLE, frames.END, frames.BATCH, frames.STATE}
 _WRONGS = [None, "kind", "uid", "step", "t", "value", "ports", "batch", "field"]  # "field": any value in any field
@@ -73,7 +74,7 @@ def _from_a_node(draw, wrong: str | None = "any") -> tuple[str, bytes, int, str 
     uid, types = _SENDERS[node]
     source = node == "src"
     sends = [frames.SAMPLE, frames.END] if source else [frames.OUTPUTS, frames.END, frames.BATCH, frames.STATE]
-    outputs = st.tuples(*[_VALUE[type_] for type_ in types]).map(list)
+    outputs = _OUTPUTS[node]
     if wrong == "any":
         wrong = draw(st.sampled_from([None, *_WRONGS]))
     kind = draw(st.sampled_from(sorted(_KINDS - set(sends)) if wrong == "kind" else sends))
@@ -372,11 +373,7 @@ class _Queued:
         return self.items.pop(0) if self.items else None
 
 
-_UIDS = {"clock": 1, "g": 2, "h": 3}
-_OUTPUTS = {"clock": st.tuples(st.floats(), st.floats()).map(list),
-            "g": st.tuples(st.floats(), st.integers(-3, 3), st.booleans(), st.text(max_size=3),
-                           st.binary(max_size=3)).map(list),
-            "h": st.tuples(st.floats()).map(list)}
+_UIDS = {node: uid for node, (uid, _) in _SENDERS.items() if node != "src"}  # the stepping nodes
 
 
 @st.composite
