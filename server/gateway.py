@@ -50,33 +50,52 @@ class GatewayError(RuntimeError):
 
 
 class _Connection:
-    def __init__(self, sock: socket.socket, node: Node, token: zenoh.LivelinessToken):
+    def __init__(self, sock: socket.socket, node: Node, token: zenoh.LivelinessToken | None, rate: int = 1):
         self.sock = sock
         self.node = node
         self.token = token
+        self.rate = rate  # the node's step in base steps (a multi-rate run)
         self.lock = threading.Lock()
         # Bridge FMUs carry Real, Integer and Boolean ports, all as f64: no value passes for another.
         self.input_types = tuple(WIRE_TYPES[p.type] if p.type in _FROM_WIRE else () for p in node.input)
+        # (STEPs sent, the last one's step k): a bridge FMU counts its own steps, and its outputs
+        # after its n-th step answer the n-th release, labelled as a node labels them, k + 1.
+        # One tuple, so the reader thread never sees a count of one release and a k of another.
+        self.released: tuple[int, int] = (0, -1)
+
+    def label(self, step: int) -> int | None:
+        """The hycosim step label of outputs the bridge FMU sent after its ``step``-th step; None
+        for a count that answers no release sent (outputs out of turn)."""
+        count, k = self.released
+        if step != count:
+            return None
+        return 0 if count == 0 else k + 1
 
     def send(self, data: bytes) -> None:
         with self.lock:
             self.sock.sendall(data)
 
 
-def translate_release(payload: bytes, conns: list[_Connection]) -> dict[_Connection, bytes]:
-    """The gateway frames a message on ``down`` means for each connection (none for a kind that
-    is not for bridge FMUs); FrameError for anything that is not a release every connected
-    bridge FMU can act on, whatever the bytes."""
+def translate_release(payload: bytes, conns: list[_Connection], stop_time: float = math.inf
+                      ) -> dict[_Connection, bytes]:
+    """The gateway frames a message on ``down`` means for each connection: a START or STOP for
+    every one, a STEP for those it releases (in a multi-rate or Gauss-Seidel run, a release
+    leaves out the nodes not due), none for a kind that is not for bridge FMUs. Each gets its own
+    step size (``rate`` base steps, the last cut at ``stop_time``). FrameError for anything that
+    is not a release each bridge FMU it names can act on, whatever the bytes."""
     frame = frames.decode(payload)
     if frame.kind == frames.START:
         _, t0, h, _, _, _ = frames.check_release(frame).fields
-        return {c: gp.start(t0, h) for c in conns}
+        return {c: gp.start(t0, c.rate * h) for c in conns}
     if frame.kind == frames.STEP:
         k, t, h, _, inputs, driven, _ = frame.fields
         data = {}
-        for c in conns:  # the whole release checked for each, its own inputs included (a bridge FMU holds them)
-            frames.check_release(frame, c.node.nodeName, c.input_types)
-            data[c] = gp.step(k, t, h, c.node.nodeName in driven, [float(v) for v in inputs[c.node.nodeName]])
+        for c in conns:
+            if c.node.nodeName not in inputs:
+                continue  # not due at this step
+            frames.check_release(frame, c.node.nodeName, c.input_types)  # its inputs too: a bridge FMU holds them
+            own = h if c.rate == 1 else min(c.rate * h, stop_time - t)
+            data[c] = gp.step(k, t, own, c.node.nodeName in driven, [float(v) for v in inputs[c.node.nodeName]])
         return data
     if frame.kind == frames.STOP:
         return {c: gp.text(gp.STOP, frame.fields[1]) for c in conns}
@@ -85,9 +104,11 @@ def translate_release(payload: bytes, conns: list[_Connection]) -> dict[_Connect
 
 class Gateway:
     def __init__(self, nodes: list[Node], session: zenoh.Session, keys: ProjectKeys, host: str, port: int,
-                 drop: Callable[..., None],
+                 drop: Callable[..., None], rates: dict[str, int] | None = None, stop_time: float = math.inf,
                  hello_timeout: float = 10.0):
         self._nodes = {n.nodeName: n for n in nodes}
+        self._rates = rates or {}
+        self._stop_time = stop_time
         self._session = session
         self._keys = keys
         self._drop = drop
@@ -180,7 +201,7 @@ class Gateway:
                 self._down = self._session.declare_subscriber(self._keys.down, self._on_down)
             # Last: the relay counts the node attached once it sees the token.
             token = self._session.liveliness().declare_token(self._keys.alive(name))
-            self._conns[name] = _Connection(sock, node, token)
+            self._conns[name] = _Connection(sock, node, token, self._rates.get(name, 1))
         return node
 
     def _serve(self, sock: socket.socket, peer: object) -> None:
@@ -191,6 +212,8 @@ class Gateway:
         if node is None:
             return
         name = node.nodeName
+        with self._lock:
+            conn = self._conns[name]
         log = self._log.bind(node=name, peer=str(peer))
         log.info("bridge FMU attached")
         convert = [_FROM_WIRE[p.type] for p in node.output]
@@ -210,15 +233,17 @@ class Gateway:
                     self._drop("unknown ports", f"{name} sent {len(values)} values for {len(convert)} outputs", -1,
                                name)
                     continue
-                if not (0 <= step < frames.MAX_STEP and math.isfinite(t)):
-                    self._drop("wrong step", f"{name} sent step {step} at t={t}", -1, name)
+                label = conn.label(step)
+                if label is None or not math.isfinite(t):
+                    self._drop("wrong step", f"{name} sent the outputs of its step {step} at t={t}; "
+                                             f"it was released {conn.released[0]} times", -1, name)
                     continue
                 try:
                     typed = [c(v) for c, v in zip(convert, values)]
                 except ValueError as exc:
                     self._drop("wrong type", f"{name}: {exc}", -1, name)
                     continue
-                self._session.put(key, frames.encode(frames.OUTPUTS, node.UID, step, t, typed),
+                self._session.put(key, frames.encode(frames.OUTPUTS, node.UID, label, t, typed),
                                   allowed_destination=zenoh.Locality.SESSION_LOCAL,
                                   congestion_control=zenoh.CongestionControl.BLOCK)
         except gp.Truncated as exc:
@@ -251,12 +276,14 @@ class Gateway:
         if not conns:
             return
         try:
-            data = translate_release(sample.payload.to_bytes(), conns)
+            data = translate_release(sample.payload.to_bytes(), conns, self._stop_time)
         except frames.FrameError as exc:
             # The down key is open to anyone on an unsecured network; only the server's releases pass.
             self._drop("malformed release", f"on the release key: {exc}", -1)
             return
         for conn, payload in data.items():
+            if gp.HEADER.unpack_from(payload)[2] == gp.STEP:  # counted before it goes: the answer can come at once
+                conn.released = (conn.released[0] + 1, gp.parse_step(payload[gp.HEADER.size:])[0])
             try:
                 conn.send(payload)
             except OSError:

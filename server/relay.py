@@ -299,7 +299,7 @@ class Relay:
         try:
             self.gateway = Gateway(
                 self.project.stepping_nodes(), self.session, self.keys, host, port,
-                drop=self.intake.drop)
+                drop=self.intake.drop, rates=self.coupling.rates, stop_time=self.cosim.stopTime)
         except GatewayError as exc:
             if self._gateway_required:
                 raise RunError(str(exc)) from None

@@ -258,8 +258,10 @@ def test_gateway_node_disconnecting_mid_step_stops_the_run_naming_it(tmp_path):
 
 def test_gateway_drops_forged_releases_and_passes_only_the_servers(tmp_path):
     """The release key is open to anyone on an unsecured network: a STEP whose fields have the
-    wrong types, or that has no inputs for the bridged node, never reaches the FMU (nor the
-    Python node beside it); it is counted, and the FMU sees exactly the server's steps."""
+    wrong types, or that gives the bridged node an input of the wrong type, never reaches the FMU
+    (nor the Python node beside it); it is counted, and the FMU sees exactly the server's steps.
+    A STEP that leaves the bridged node out is not for it (in a multi-rate or Gauss-Seidel run
+    the server's own do): it does not reach the FMU either, and is no malformed release."""
     import zenoh
 
     from core import frames
@@ -273,6 +275,7 @@ def test_gateway_drops_forged_releases_and_passes_only_the_servers(tmp_path):
     sock.sendall(gp.outputs(0, 0.0, [0.0]))
     assert gp.read_frame(sock)[0] == gp.STEP
     forged = [frames.encode(frames.STEP, 1, "0.1", 0.1, "free", {"tool": [1.0]}, [], {}),
+              frames.encode(frames.STEP, 1, 0.1, 0.1, "free", {"tool": ["1.0"]}, [], {}),
               frames.encode(frames.STEP, 1, 0.1, 0.1, "free", {"clock": 5}, [], {})]
     with zenoh.open(client_config(json.loads(cfg.read_text())["serverIP"])) as session:
         for payload in forged:
@@ -374,6 +377,83 @@ def test_a_malformed_hello_is_named_by_what_is_wrong_with_it():
     for payload, message in cases.items():
         with pytest.raises(gp.ProtocolError, match=message):
             gp.parse_hello(payload)
+
+
+def _importer(fmu: Path, step: float, slope: float) -> subprocess.Popen:
+    """fmpy's simulate_fmu over [0, 1] s with steps of ``step``, setting the FMU's y to
+    slope * t + 1 and printing, after each doStep, the end of the step and the u it read."""
+    script = f"""
+import numpy as np
+from fmpy import simulate_fmu
+sig = np.array([(t, {slope} * t + 1) for t in np.linspace(0, 1, 11)], dtype=[("time", float), ("y", float)])
+r = simulate_fmu({str(fmu)!r}, start_time=0, stop_time=1.0, step_size={step}, output_interval={step}, input=sig,
+                 output=["u"])
+for row in r[1:]:
+    print(repr(float(row["time"])) + "," + repr(float(row["u"])))
+"""
+    return subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env())
+
+
+def test_a_bridge_fmu_slower_than_the_base_step_steps_at_its_own_rate(tmp_path):
+    """A bridge FMU whose node steps every 2 base steps takes the releases of its own steps only
+    (a release that leaves it out, the clock's alone, is not a malformed one), with its own step
+    size, and answers each with the label the server expects. Before, the gateway dropped the
+    clock's releases as malformed, and the run timed out at step 4."""
+    cfg = _project(tmp_path)
+    doc = json.loads(cfg.read_text())
+    doc["nodeLists"][0]["stepSize"] = 0.2
+    cfg.write_text(json.dumps(doc))
+    fmu = build_bridge_fmu(load_project(cfg), "tool", tmp_path / "fmus").path
+    server, clock = _start(cfg, tmp_path / "run")
+    importer = _importer(fmu, 0.2, 2)
+    (out, err), (_, serr), _ = _finish([importer, server, clock])
+    assert importer.returncode == 0, err
+    assert server.returncode == 0, serr
+    assert "but the co-simulation step is" not in err  # START gave the bridge FMU its own step
+    m = meta(tmp_path / "run")
+    assert m["status"] == "completed" and not m.get("dropped_frames")
+    rows = read_rows(tmp_path / "run")
+    t, clock_y, tool_y = column(rows, "t"), column(rows, "clock.y"), column(rows, "tool.y")
+    assert [r["stepped"] for r in rows[:4]] == ["tool clock", "clock", "tool clock", "clock"]
+    # The tool's outputs at the start of each of its steps, held over the base point inside it;
+    # at the last point, what the importer set before its last step (it sets nothing newer).
+    assert tool_y == pytest.approx([2 * t[min(k - k % 2, 8)] + 1 for k in range(11)])
+    # doStep(T) returns the inputs routed at T (the clock there), read by the importer at T + 0.2.
+    u_seen = [float(x) for line in out.split() for x in line.split(",")]
+    assert u_seen == pytest.approx([x for k in range(0, 10, 2) for x in (t[k + 2], clock_y[k])])
+
+
+def test_two_bridge_fmus_step_in_gauss_seidel_order_each_on_the_others_new_outputs(tmp_path):
+    """Gauss-Seidel releases one node at a time; with two bridge FMUs each release leaves the
+    other out. The second steps on the first's outputs at the end of the same macro step. Before,
+    the gateway dropped every release as malformed (each lacked one of them) and the run timed out."""
+    cfg = _project(tmp_path, coupling="gauss-seidel")
+    doc = json.loads(cfg.read_text())
+    doc["nodeLists"].append({"nodeName": "tool2", "UID": 8, "input": ["u"], "output": ["y"]})
+    doc["nodeNum"] = 3
+    doc["linkLists"].append({"from": "tool.y", "to": "tool2.u"})
+    doc["linkNum"] = 2
+    cfg.write_text(json.dumps(doc))
+    loaded = load_project(cfg)
+    assert loaded.coupling.order == ("clock", "tool", "tool2")
+    server, clock = _start(cfg, tmp_path / "run")
+    first = _importer(build_bridge_fmu(loaded, "tool", tmp_path / "fmus").path, 0.1, 2)
+    second = _importer(build_bridge_fmu(loaded, "tool2", tmp_path / "fmus").path, 0.1, 3)
+    (out1, err1), (out2, err2), (_, serr), _ = _finish([first, second, server, clock])
+    assert first.returncode == 0, err1
+    assert second.returncode == 0, err2
+    assert server.returncode == 0, serr
+    m = meta(tmp_path / "run")
+    assert m["status"] == "completed" and not m.get("dropped_frames")
+    seen1 = [float(x) for line in out1.split() for x in line.split(",")]
+    seen2 = [float(x) for line in out2.split() for x in line.split(",")]
+    t = column(read_rows(tmp_path / "run"), "t")
+    # tool steps on the clock's new outputs (y = t), tool2 on tool's (y = 2t + 1), both at T + H
+    # (Jacobi would give each the outputs at T). tool's at the last point: what it set before its
+    # last step, as its importer sets nothing newer.
+    assert seen1 == pytest.approx([x for k in range(10) for x in (t[k + 1], t[k + 1])])
+    assert seen2 == pytest.approx([x for k in range(10) for x in (t[k + 1], 2 * t[min(k + 1, 9)] + 1)])
 
 
 def test_a_multi_rate_run_with_a_bridge_fmu_releases_every_base_point_and_says_why(tmp_path):

@@ -105,6 +105,107 @@ def _from_a_node(draw, wrong: str | None = "any") -> tuple[str, bytes, int, str 
     return node, frames.encode(kind, *fields), kind, wrong
 
 
+_RECEIVERS = {n["nodeName"]: [p["type"] if isinstance(p, dict) else "Real" for p in n.get("input", [])]
+              for n in NODES if not n.get("async")}
+_INPUTS = {node: st.tuples(*[_VALUE[type_] for type_ in types]).map(list) for node, types in _RECEIVERS.items()}
+_NOT_FOR_A_NODE = [frames.OUTPUTS, frames.SAMPLE, frames.HELLO, frames.END, frames.STATE, frames.BATCH, frames.LIVE]
+_RELEASE_WRONGS = [None, "others", "kind", "step", "t", "value", "ports", "slopes", "chunk", "replay", "field"]
+
+
+@st.composite
+def _from_the_server(draw, node: str, wrong: str | None = "any") -> tuple[bytes, int, str | None]:
+    """A frame on ``down`` as this project's server writes it for ``node`` (a release with every
+    stepping node's inputs of their types, times finite and rising, a replay or a state piece
+    for it, a rollback, checkpoint or stop), with at most one thing wrong: the generic
+    strategies reached no release a node acts on in 3,000 frames. ``others``: one meant for
+    other nodes (a release without it, a replay or state piece for another). Also returns the
+    kind and what is wrong (``wrong``: that, or any of _RELEASE_WRONGS)."""
+    if wrong == "any":
+        wrong = draw(st.sampled_from(_RELEASE_WRONGS))
+    only = {"value": [frames.STEP, frames.STEPS, frames.REPLAY], "ports": [frames.STEP, frames.STEPS, frames.REPLAY],
+            "others": [frames.STEP, frames.STEPS, frames.REPLAY, frames.RESTORE],
+            "step": [frames.STEP, frames.STEPS, frames.ROLLBACK, frames.CHECKPOINT, frames.RESTORE, frames.REPLAY],
+            "t": [frames.START, frames.STEP, frames.STEPS, frames.ROLLBACK, frames.RESTORE, frames.REPLAY],
+            "slopes": [frames.STEP], "chunk": [frames.RESTORE], "replay": [frames.REPLAY],
+            "kind": _NOT_FOR_A_NODE}.get(wrong)
+    kind = draw(st.sampled_from(only or [frames.START, frames.STEP, frames.STEPS, frames.STOP, frames.ROLLBACK,
+                                         frames.CHECKPOINT, frames.REPLAY, frames.RESTORE]))
+    if kind in _NOT_FOR_A_NODE:  # its own version and kind, so that it is decoded as one
+        return draw(frame_arrays([kind]).map(lambda a: frames.msgpack.packb([frames.VERSION, kind, *a[2:]]))), \
+            kind, wrong
+    k, t = draw(st.integers(0, 40)), draw(st.floats(0, 10))
+    if wrong == "step":
+        k = draw(st.sampled_from([-1, -(2 ** 63), frames.MAX_STEP, 2 ** 64 - 1]))
+    bad_t = st.sampled_from([math.nan, math.inf, -math.inf])
+    if kind == frames.RESTORE:
+        count = draw(st.integers(1, 4))
+        fields = [node, k, t, draw(st.integers(0, count - 1)), count, draw(st.binary(max_size=16)),
+                  {"checkpoint": draw(st.booleans())}]
+        if wrong == "t":
+            fields[2] = draw(bad_t)
+        elif wrong == "others":
+            fields[0] = draw(st.sampled_from(sorted(set(_RECEIVERS) - {node})))
+        elif wrong == "chunk":  # a piece beyond its count, no pieces, too many, or a piece too long
+            at = draw(st.integers(0, 2))
+            fields[3:6] = [[count, count, fields[5]], [0, draw(st.sampled_from([0, -1])), fields[5]],
+                           [0, frames.MAX_CHUNKS + 1, fields[5]], [0, 1, b"\0" * (frames.STATE_CHUNK + 1)]][at]
+    elif kind in (frames.ROLLBACK, frames.CHECKPOINT, frames.STOP):
+        fields = {frames.ROLLBACK: [k, draw(bad_t) if wrong == "t" else t], frames.CHECKPOINT: [k],
+                  frames.STOP: [k, draw(st.sampled_from(list(frames.CLEAN_STOPS)) | st.text(max_size=20))]}[kind]
+    else:
+        inner = kind
+        if kind == frames.REPLAY:  # of a release with inputs, where what is wrong is in them or its step
+            inner = draw(st.sampled_from([frames.STEP, frames.STEPS] if wrong in ("value", "ports", "step")
+                                         else [frames.START, frames.STEP, frames.STEPS]))
+        released = draw(st.sets(st.sampled_from(sorted(_RECEIVERS)))) | {node}
+        inputs = {n: draw(_INPUTS[n]) for n in sorted(released)}
+        if wrong == "others" and kind != frames.REPLAY:
+            del inputs[node]
+        elif wrong == "value":  # one input's value of another type, or none at all
+            at = draw(st.integers(0, len(_RECEIVERS[node]) - 1))
+            types = WIRE_TYPES[PortType(_RECEIVERS[node][at])]
+            inputs[node][at] = draw(st.sampled_from([v for v in _ODD if type(v) not in types]))
+            if draw(st.booleans()):
+                inputs[node] = draw(st.sampled_from([None, 0.5, "u", {}]))
+        elif wrong == "ports":
+            inputs[node] = draw(st.sampled_from([inputs[node][:-1], inputs[node] + [0.5]]))
+        driven = sorted(draw(st.sets(st.sampled_from(sorted(_RECEIVERS)))))
+        mode = draw(st.sampled_from(["free", "grasped"]))
+        h = draw(st.floats(1e-4, 1.0))
+        if inner == frames.START:
+            fields = [draw(st.text(max_size=8)), t, h, draw(st.floats(0, 2e9)), draw(st.none() | st.floats(0.1, 10)),
+                      {"checkpoint": draw(st.booleans())}]
+            if wrong == "t":  # a time not finite, or a step size or real-time factor not above 0
+                at = draw(st.integers(1, 4))
+                fields[at] = draw(bad_t | st.sampled_from([0.0, -0.1]) if at in (2, 4) else bad_t)
+        elif inner == frames.STEP:
+            others = {n: [draw(st.floats(-1, 1))] for n in draw(st.sets(st.sampled_from(["clock", "src"])))}
+            fields = [k, t, h, mode, inputs, driven, others]  # slopes only for nodes that interpolate
+            if wrong == "t":  # a time not finite, or a step size not above 0
+                at = draw(st.integers(1, 2))
+                fields[at] = draw(bad_t | st.sampled_from([0.0, -0.1]) if at == 2 else bad_t)
+            elif wrong == "slopes":  # this node holds its inputs over a step
+                fields[6] = {**others, node: [None] * len(_RECEIVERS[node])}
+        else:
+            times = sorted(draw(st.sets(st.floats(0, 10), min_size=2, max_size=5)))
+            if wrong == "t":  # not rising, too many, or one not finite
+                times = draw(st.sampled_from([times[::-1], [times[0]] * 2, [0.01 * i for i in range(frames.MAX_BATCH + 2)],
+                                              times[:-1] + [math.nan]]))
+            fields = [k, times, mode, inputs, driven]
+        if kind == frames.REPLAY:
+            release = frames.encode(inner, *fields)
+            fields = [node, release]
+            if wrong == "others":
+                fields[0] = draw(st.sampled_from(sorted(set(_RECEIVERS) - {node})))
+            elif wrong == "replay":  # of a frame that is not a release, or of no frame
+                fields[1] = draw(st.sampled_from([frames.encode(frames.STOP, k, "done"),
+                                                  frames.encode(frames.ROLLBACK, k, t),
+                                                  frames.encode(frames.OUTPUTS, 2, k, t, [0.5]), b"\x00", b""]))
+    if wrong == "field":
+        fields[draw(st.integers(0, len(fields) - 1))] = draw(values)
+    return frames.encode(kind, *fields), kind, wrong
+
+
 @given(payloads)
 def test_decode_returns_a_well_typed_frame_or_raises_frame_error(payload):
     try:
@@ -209,7 +310,9 @@ def test_a_node_acts_only_on_releases_that_give_it_exactly_its_inputs(loaded, no
     _quiet()
     runtime = NodeRuntime(loaded, node, impl=None, endpoint="tcp/127.0.0.1:1")
     payload = data.draw(payloads | frame_arrays([frames.STEP, frames.STEPS, frames.REPLAY, frames.RESTORE,
-                                                 frames.CHECKPOINT]).map(frames.msgpack.packb))
+                                                 frames.CHECKPOINT]).map(frames.msgpack.packb)
+                        | _from_the_server(node).map(lambda sent: sent[0])
+                        | _from_the_server(node).map(lambda sent: sent[0]))
     try:
         frame = runtime._accept(False, payload)
     except frames.FrameError:
@@ -238,6 +341,30 @@ def test_a_node_acts_only_on_releases_that_give_it_exactly_its_inputs(loaded, no
         times = release.fields[1]
         assert 2 <= len(times) <= frames.MAX_BATCH + 1 and all(math.isfinite(x) for x in times)
         assert all(a < b for a, b in zip(times, times[1:]))
+
+
+@pytest.mark.parametrize("wrong", [w for w in _RELEASE_WRONGS if w != "field"])
+@pytest.mark.parametrize("node", ["g", "h"])
+@given(data=st.data())
+def test_a_node_acts_on_its_servers_frame_only_when_nothing_in_it_is_wrong(loaded, node, wrong, data):
+    """Each thing a frame on ``down`` can have wrong on its own (a kind the server does not send,
+    a step or time out of range, an input of another type, an input too few or too many,
+    derivatives for a node that holds its inputs, a state piece out of range, a replay of no
+    release) is refused; one meant for other nodes is passed over; a right one is acted on."""
+    payload, kind, _ = data.draw(_from_the_server(node, wrong))
+    _quiet()
+    runtime = NodeRuntime(loaded, node, impl=None, endpoint="tcp/127.0.0.1:1")
+    frame = None
+    try:
+        frame = runtime._accept(False, payload)
+    except frames.FrameError:
+        got = "refused"
+    else:
+        got = "passed over" if frame is None else "acted on"
+    expected = {None: "acted on", "others": "passed over"}.get(wrong, "refused")
+    assert got == expected, f"{node}: a {frames.KIND_NAMES[kind]} with {wrong or 'nothing'} wrong was {got}"
+    if frame is not None:
+        assert frame.kind == kind
 
 
 @given(data=st.data())
@@ -290,18 +417,51 @@ def _gateway_connections(loaded) -> list[_Connection]:
     return [_Connection(a, loaded.project.node(n), token=None) for n in ("g", "h")]
 
 
-@given(payloads | frame_arrays([frames.START, frames.STEP, frames.STEPS, frames.STOP]).map(frames.msgpack.packb))
-def test_the_gateway_translates_only_releases_every_bridge_fmu_can_take(loaded, payload):
+@given(payloads | frame_arrays([frames.START, frames.STEP, frames.STEPS, frames.STOP]).map(frames.msgpack.packb)
+       | st.sampled_from(["g", "h"]).flatmap(_from_the_server).map(lambda sent: sent[0]))
+def test_the_gateway_translates_only_releases_each_bridge_fmu_can_take(loaded, payload):
     conns = _gateway_connections(loaded)
     try:
         data = translate_release(payload, conns)
     except frames.FrameError:
         return
+    frame = frames.decode(payload)
     for conn, out in data.items():
         magic, version, kind, _, length = gp.HEADER.unpack_from(out)
         assert magic == gp.MAGIC and length == len(out) - gp.HEADER.size
-        if kind == gp.STEP:
-            assert gp.parse_step(out[gp.HEADER.size:])[4].__len__() == len(conn.node.input)
+        if kind == gp.STEP:  # a STEP for a bridge FMU it gives inputs, each of its port's type
+            k, t, h, _, values = gp.parse_step(out[gp.HEADER.size:])
+            mine = frame.fields[4][conn.node.nodeName]
+            assert frame.kind == frames.STEP and len(values) == len(mine) == len(conn.node.input)
+            assert all(type(v) in types for v, types in zip(mine, conn.input_types))
+            assert 0 <= k < frames.MAX_STEP and math.isfinite(t) and h > 0
+
+
+@pytest.mark.parametrize("wrong", [w for w in _RELEASE_WRONGS if w != "field"])
+@given(data=st.data())
+def test_the_gateway_passes_on_the_servers_release_only_when_nothing_in_it_is_wrong(loaded, wrong, data):
+    """What a bridge FMU gets from a frame on ``down``: a right START or STOP goes to each, a right
+    STEP to each bridge FMU it releases (g, or g and h); a frame with one thing wrong for one of
+    them goes to none; other kinds, to none either (the gateway does not carry them)."""
+    node = data.draw(st.sampled_from(["g", "h"]))
+    payload, kind, _ = data.draw(_from_the_server(node, wrong))
+    conns = _gateway_connections(loaded)
+    try:
+        got = {c.node.nodeName for c in translate_release(payload, conns)}
+    except frames.FrameError:
+        got = None
+    if kind in (frames.START, frames.STOP) and wrong is None:
+        assert got == {"g", "h"}
+    elif kind == frames.STEP and wrong is None:
+        assert node in got and got <= {"g", "h"}
+    elif kind == frames.STEP and wrong == "others":
+        assert node not in got
+    elif kind in (frames.START, frames.STEP) and wrong in ("t", "step", "value", "ports", "slopes"):
+        assert got is None, f"a {frames.KIND_NAMES[kind]} with its {wrong} wrong for {node} went to {got}"
+    elif kind in (frames.START, frames.STEP, frames.STOP):
+        raise AssertionError(f"no expectation for a {frames.KIND_NAMES[kind]} with {wrong} wrong")
+    else:
+        assert not got  # not a kind a bridge FMU takes: refused or passed over
 
 
 @given(gateway_streams())
