@@ -63,6 +63,11 @@ class _Connection:
         # One tuple, so the reader thread never sees a count of one release and a k of another.
         self.released: tuple[int, int] = (0, -1)
 
+    def releasing(self, k: int) -> None:
+        """Count a STEP of step ``k`` about to go to the bridge FMU (before it goes: the answer
+        can come at once)."""
+        self.released = (self.released[0] + 1, k)
+
     def label(self, step: int) -> int | None:
         """The hycosim step label of outputs the bridge FMU sent after its ``step``-th step; None
         for a count that answers no release sent (outputs out of turn)."""
@@ -282,8 +287,8 @@ class Gateway:
             self._drop("malformed release", f"on the release key: {exc}", -1)
             return
         for conn, payload in data.items():
-            if gp.HEADER.unpack_from(payload)[2] == gp.STEP:  # counted before it goes: the answer can come at once
-                conn.released = (conn.released[0] + 1, gp.parse_step(payload[gp.HEADER.size:])[0])
+            if gp.HEADER.unpack_from(payload)[2] == gp.STEP:
+                conn.releasing(gp.parse_step(payload[gp.HEADER.size:])[0])
             try:
                 conn.send(payload)
             except OSError:

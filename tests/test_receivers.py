@@ -464,6 +464,21 @@ def test_the_gateway_passes_on_the_servers_release_only_when_nothing_in_it_is_wr
         assert not got  # not a kind a bridge FMU takes: refused or passed over
 
 
+@given(st.lists(st.integers(0, 40), max_size=6), st.integers(-(2 ** 63), 2 ** 64 - 1) | st.integers(-1, 8))
+def test_a_bridge_fmus_outputs_are_labelled_only_as_the_answer_to_its_last_release(loaded, released, step):
+    """A bridge FMU counts its steps; after n releases (STEPs at steps ``released``) only the
+    outputs of its n-th step are taken, labelled as the answer to the last release (k + 1), or
+    the start point's (0) before any release; any other count is out of turn."""
+    conn = _gateway_connections(loaded)[0]
+    for k in released:
+        conn.releasing(k)
+    label = conn.label(step)
+    if step != len(released):
+        assert label is None
+    else:
+        assert label == (released[-1] + 1 if released else 0)
+
+
 @given(gateway_streams())
 def test_the_gateway_framing_reads_a_frame_or_names_what_is_wrong(stream):
     a, b = socket.socketpair()
