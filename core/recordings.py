@@ -22,6 +22,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
+from core import json_text
 from core.config import CoSimulation, Node, PortType, Project
 from core.run_files import RunFileError, finished_lines, iter_csv_rows
 
@@ -89,7 +90,7 @@ class Recording:
         if not run_dir.is_dir():
             raise RecordingError(f"replay: {run_dir} is not a folder (a run directory of hycosim is expected)")
         try:
-            data = json.loads((run_dir / PROJECT_FILE).read_text())
+            data = json_text.loads((run_dir / PROJECT_FILE).read_bytes())
         except (OSError, ValueError) as exc:
             raise RecordingError(f"replay: {run_dir / PROJECT_FILE} cannot be read ({exc}): a run directory holds "
                                  "the project it ran") from None
@@ -171,7 +172,7 @@ class Recording:
         try:
             for number, line in enumerate(finished_lines(path), start=1):
                 try:
-                    record = json.loads(line)
+                    record = json_text.loads(line)
                 except ValueError:
                     raise RecordingError(f"replay: {path}: line {number} is not JSON") from None
                 if type(record) is not dict or record.get("node") != spec.nodeName:

@@ -10,10 +10,11 @@ file and the line, since nothing the server writes looks like that.
 from __future__ import annotations
 
 import csv
-import json
 import math
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator
+
+from core import json_text
 
 
 class RunFileError(RuntimeError):
@@ -99,7 +100,7 @@ def read_jsonl(path: Path) -> list[dict[str, Any]]:
         if not line.strip():
             continue
         try:
-            records.append(json.loads(line))
-        except json.JSONDecodeError as exc:
-            raise RunFileError(f"{path}: line {number} is not JSON ({exc.msg})") from None
+            records.append(json_text.loads(line))
+        except ValueError as exc:
+            raise RunFileError(f"{path}: line {number} is not JSON ({getattr(exc, 'msg', exc)})") from None
     return records

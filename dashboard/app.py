@@ -27,6 +27,7 @@ from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
+from core import json_text
 from dashboard.changes import Watchers
 
 STATIC = Path(__file__).resolve().parent / "static"
@@ -116,7 +117,7 @@ def make_app(source: Source) -> Starlette:
                     text = incoming.result()
                     incoming = asyncio.ensure_future(ws.receive_text())
                     try:
-                        message = json.loads(text)
+                        message = json_text.loads(text)
                     except ValueError:
                         message = None
                     if type(message) is dict and "select" in message:

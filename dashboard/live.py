@@ -14,7 +14,6 @@ The status answer is checked before use (:func:`_checked_status`); anything else
 
 from __future__ import annotations
 
-import json
 import math
 import threading
 from dataclasses import dataclass
@@ -23,6 +22,7 @@ from typing import Any
 import structlog
 import zenoh
 
+from core import json_text
 from core.keys import SERVER_TOKEN, ProjectKeys
 from core.session import ConnectError, client_config, open_session
 from dashboard.changes import Watchers
@@ -62,6 +62,15 @@ def _list(value: Any) -> list:
 
 def _names(value: Any) -> list[str]:
     return [a for a in _list(value) if type(a) is str]
+
+
+def _read_status(payload: bytes) -> dict[str, Any] | None:
+    """A status answer as it came (bytes), checked as by :func:`_checked_status`; None for
+    anything that is not one (anyone may answer on the key)."""
+    try:
+        return _checked_status(json_text.loads(payload))
+    except ValueError:
+        return None
 
 
 def _checked_status(answer: Any) -> dict[str, Any] | None:
@@ -191,10 +200,7 @@ class LiveFeed:
             for reply in session.get(key if since is None else f"{key}?since={since}", timeout=1.0):
                 if reply.ok is None:
                     continue
-                try:
-                    checked = _checked_status(json.loads(reply.ok.payload.to_bytes()))
-                except ValueError:
-                    checked = None  # anyone may answer on the key: not a server's answer
+                checked = _read_status(reply.ok.payload.to_bytes())
                 if checked is not None:
                     return checked
         except zenoh.ZError:

@@ -53,12 +53,13 @@ def _from_ssp(package: Path, project_file: Path, side: Path | None = None, step:
               stop: float | None = None) -> Path:
     """Import the SSP package into ``project_file`` (its FMUs in a folder beside it); exit 2 with
     what is wrong."""
+    from core import json_text
     from fmu_bridge.ssp import SspError, project_from_ssp
 
     side = side or (package.with_name(package.stem + SSP_SIDE_SUFFIX) if
                     package.with_name(package.stem + SSP_SIDE_SUFFIX).is_file() else None)
     try:
-        extra = json.loads(side.read_text()) if side is not None else None
+        extra = json_text.loads(side.read_bytes()) if side is not None else None
         if extra is not None and type(extra) is not dict:
             raise ValueError("it holds no JSON object")
     except (OSError, ValueError) as exc:
@@ -434,6 +435,7 @@ def status(
     tls_ca: Annotated[Optional[Path], typer.Option(help="CA certificate (PEM) for a tls/ endpoint")] = None,
 ) -> None:
     """Ask a running server who is attached."""
+    from core import json_text
     from core.keys import ProjectKeys
     from core.session import ConnectError, client_config, open_session
 
@@ -450,7 +452,7 @@ def status(
         for reply in session.get(ProjectKeys(project).status, timeout=timeout):
             if reply.ok is not None:
                 try:
-                    answer = json.loads(reply.ok.payload.to_bytes())
+                    answer = json_text.loads(reply.ok.payload.to_bytes())
                 except ValueError:
                     continue  # not a hycosim server's answer (anyone may answer on the key)
                 if _is_status(answer):

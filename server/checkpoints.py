@@ -26,6 +26,7 @@ from typing import Any
 
 import msgpack
 
+from core import json_text
 from server.interpolation import MAX_DEGREE, InputTrack
 
 KEEP = 2
@@ -96,7 +97,7 @@ def steps(run_dir: Path) -> list[int]:
 def read(path: Path, config_sha256: str | None = None) -> Checkpoint:
     """The checkpoint in ``path``, every file checked; CheckpointError naming what is wrong."""
     try:
-        manifest = json.loads((path / MANIFEST).read_text())
+        manifest = json_text.loads((path / MANIFEST).read_bytes())
     except (OSError, ValueError) as exc:
         raise CheckpointError(f"{path}: no readable {MANIFEST} ({exc})") from None
     files = manifest.get("files") if type(manifest) is dict else None

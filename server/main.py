@@ -13,7 +13,7 @@ from typing import Any
 
 import structlog
 
-from core import logs, signals
+from core import json_text, logs, signals
 from core.config import LoadedProject, gateway_address, server_endpoint
 from core.endpoints import GATEWAY_PORT, EndpointError, parse_address, parse_endpoint
 from core.security import router_security
@@ -62,7 +62,7 @@ def _project_differences(recorded: Any, given: Any, at: str = "") -> list[str]:
 def _resume_plan(loaded: LoadedProject, run_dir: Path) -> tuple[dict[str, Any], dict[str, int], int]:
     """The meta, record offsets and recorded steps of a run to resume; ValueError saying why it cannot be."""
     try:
-        meta = json.loads((run_dir / "meta.json").read_text())
+        meta = json_text.loads((run_dir / "meta.json").read_bytes())
     except (OSError, ValueError) as exc:
         raise ValueError(f"{run_dir}: not a run directory (no readable meta.json: {exc})") from None
     if type(meta) is not dict:
@@ -70,8 +70,8 @@ def _resume_plan(loaded: LoadedProject, run_dir: Path) -> tuple[dict[str, Any], 
     if meta.get("config_sha256") != loaded.digest:
         differ = ["(the recorded copy is missing)"]
         try:
-            differ = _project_differences(json.loads((run_dir / PROJECT_COPY).read_text()),
-                                          json.loads(loaded.path.read_text()) if loaded.path else {}) or \
+            differ = _project_differences(json_text.loads((run_dir / PROJECT_COPY).read_bytes()),
+                                          json_text.loads(loaded.path.read_bytes()) if loaded.path else {}) or \
                 ["(only in layout)"]
         except (OSError, ValueError):
             pass

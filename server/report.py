@@ -132,6 +132,8 @@ def read_meta(run_dir: Path) -> RunMeta:
         raise RunDirError(f"{path}: unreadable ({exc.msg})") from None
     except UnicodeDecodeError as exc:
         raise RunDirError(f"{path}: not text ({exc.reason} at byte {exc.start})") from None
+    except RecursionError:
+        raise RunDirError(f"{path}: unreadable (nested too deeply)") from None
     if not isinstance(data, dict):
         raise RunDirError(f"{path}: not a run's metadata (a JSON object is expected, it holds a "
                           f"{type(data).__name__})")

@@ -3,19 +3,23 @@ and the correction loop over real Zenoh bringing the twin onto the emulated rod.
 
 from __future__ import annotations
 
+import json
 import math
 
 import cv2
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
-from clients.camera.calibration import Calibration, calibrate_from_image
+from clients.camera.calibration import Calibration, CalibrationError, calibrate_from_image
 from clients.camera.detect import RodDetector
 from clients.camera.emulated import CameraSetup, EmulatedRodCamera
 from clients.camera.sources import CameraError, DeviceSource, VideoFileSource
 from clients.camera.tracker import Tracker
 from clients.rod.model import RodModel, RodParams
 from tests.helpers import column, hycosim, meta, read_rows, run_project, write_project
+from tests.wire_strategies import values
 
 
 @pytest.fixture(scope="module")
@@ -108,6 +112,50 @@ def test_calibration_from_an_image_and_from_a_file(tmp_path, camera):
     again = Calibration.load(tmp_path / "cal.json")
     d = RodDetector(again).detect(camera.render(math.radians(30)))
     assert abs(math.degrees(d.angle) - 30) < 1.0
+
+
+_CALIBRATION = {"fx": st.floats(0.1, 1e4), "fy": st.floats(0.1, 1e4) | st.integers(1, 9), "cx": st.floats(-1e4, 1e4),
+                "cy": st.floats(-1e4, 1e4), "pivot_px": st.lists(st.floats(-1e4, 1e4), min_size=2, max_size=2),
+                "metres_per_px": st.floats(1e-6, 1.0), "flip": st.booleans()}
+
+
+@st.composite
+def _calibration_files(draw) -> tuple[bytes, str | None]:
+    """A calibration file as save() writes it, with at most one thing wrong (a field missing,
+    of another value, an unknown one), or not a calibration at all; and what is wrong."""
+    fields = {name: draw(s) for name, s in _CALIBRATION.items()}
+    wrong = draw(st.sampled_from([None, None, "missing", "value", "unknown", "text"]))
+    if wrong == "missing":
+        del fields[draw(st.sampled_from(sorted(set(_CALIBRATION) - {"flip"})))]
+    elif wrong == "value":  # any value: a string for a number, a NaN, 0 for a scale, a third pivot coordinate...
+        name = draw(st.sampled_from(sorted(_CALIBRATION)))
+        fields[name] = draw(values | st.sampled_from([math.nan, math.inf, 0, -1.0, True, "1", [1.0, 2.0, 3.0]]))
+    elif wrong == "unknown":
+        fields[draw(st.sampled_from(["zoom", "FX", ""]))] = draw(values)
+    if wrong == "text":  # JSON nested deeper than Python's decoder recurses, a list, or not JSON
+        depth = draw(st.sampled_from([1, 900, 3000]))
+        return draw(st.sampled_from([("[" * depth + "]" * depth).encode(), b"[" * depth, b"\xff\xfe", b""])), wrong
+    return json.dumps(fields, default=repr).encode(), wrong
+
+
+@settings(suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(_calibration_files())
+def test_a_calibration_file_is_read_whole_or_refused_by_name(tmp_path, drawn):
+    """A calibration is a user's file: what is read is usable by the detector (every number
+    finite, the focal lengths and scale above 0), or CalibrationError names the file."""
+    text, wrong = drawn
+    path = tmp_path / "cal.json"
+    path.write_bytes(text)
+    try:
+        cal = Calibration.load(path)
+    except CalibrationError as exc:
+        assert str(path) in str(exc) and wrong is not None
+        return
+    numbers = [cal.fx, cal.fy, cal.cx, cal.cy, *cal.pivot_px, cal.metres_per_px]
+    assert all(type(v) is float and math.isfinite(v) for v in numbers) and len(cal.pivot_px) == 2
+    assert cal.fx > 0 and cal.fy > 0 and cal.metres_per_px > 0 and type(cal.flip) is bool
+    if wrong is None:
+        assert Calibration(**{**json.loads(text), "pivot_px": tuple(json.loads(text)["pivot_px"])}) == cal
 
 
 def test_missing_file_or_device_gives_a_clear_error(tmp_path):

@@ -195,6 +195,10 @@ _file_names = (st.sampled_from(["server.msgpack", "a.state", "../a.state", ".", 
                | st.text(max_size=8))
 
 
+# JSON nested deeper than Python's decoder recurses (about 1,000 levels), or not quite.
+_too_deep = st.sampled_from([1, 900, 3000]).flatmap(lambda d: st.sampled_from(["[" * d + "]" * d, '{"a": ' * d + "1" + "}" * d]))
+
+
 @st.composite
 def _checkpoint_folders(draw):
     """A plausible manifest (sizes and hashes right or not) over files of plausible or random bytes."""
@@ -219,7 +223,7 @@ def _checkpoint_folders(draw):
                 "files": {name: {"size": len(data) if honest else draw(_json_values),
                                  "sha256": hashlib.sha256(data).hexdigest() if honest else draw(_json_values)}
                           for name, data in files.items()}}
-    text = draw(st.just(json.dumps(manifest)) | st.text(max_size=30) | _json_values.map(json.dumps))
+    text = draw(st.just(json.dumps(manifest)) | st.text(max_size=30) | _json_values.map(json.dumps) | _too_deep)
     return files, text
 
 
@@ -246,7 +250,7 @@ def test_a_checkpoint_folder_is_read_whole_or_refused_with_its_name(tmp_path, fo
 
 
 @settings(suppress_health_check=[HealthCheck.function_scoped_fixture], max_examples=40)
-@given(st.text(max_size=40) | _json_values.map(json.dumps))
+@given(st.text(max_size=40) | _json_values.map(json.dumps) | _too_deep)
 def test_a_resume_reads_any_meta_json_without_a_traceback(tmp_path, meta_text):
     from core.config import load_project
     from server.main import _resume_plan

@@ -155,7 +155,7 @@ def _sample_lines(draw) -> str:
         point += draw(st.integers(0, 3))
         t = draw(st.floats(0, 100))
         values = list(draw(_VALID))
-        how = draw(st.sampled_from(["ok", "ok", "ok", "value", "point", "t", "width", "node", "text", "torn"]))
+        how = draw(st.sampled_from(["ok", "ok", "ok", "value", "point", "t", "width", "node", "text", "torn", "deep"]))
         if how == "value":
             values[draw(st.integers(0, 3))] = draw(_JUNK | st.integers(-10 ** 400, 10 ** 400))
         line = encode_sample("cam" if how != "node" else draw(st.sampled_from(["other", ""])), point, t, values)
@@ -167,7 +167,10 @@ def _sample_lines(draw) -> str:
         elif how == "width":
             record["values"] = values[:draw(st.integers(0, 3))]
         line = json.dumps(record) + "\n" if how not in ("text", "torn") else line
-        if how == "text":
+        if how == "deep":  # JSON nested deeper than Python's decoder recurses, or not quite
+            depth = draw(st.sampled_from([5, 900, 3000]))
+            line = "[" * depth + "]" * depth + "\n"
+        elif how == "text":
             line = draw(st.text(max_size=20)).replace("\n", " ") + "\n"
         elif how == "torn":
             line = line[:draw(st.integers(0, len(line) - 2))]

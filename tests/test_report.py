@@ -162,6 +162,10 @@ def test_a_hand_edited_run_directory_is_named_cell_by_cell_not_a_traceback(tmp_p
     assert f"{no_t}/values.csv: no column t in its header" in refused("plot", no_t)
     listed = edited("meta.json", lambda t: "[1, 2]")
     assert "not a run's metadata (a JSON object is expected, it holds a list)" in refused("report", listed)
+    deep = edited("meta.json", lambda t: "[" * 5000)  # Python's JSON decoder recurses per level
+    assert f"{deep}/meta.json: unreadable (nested too deeply)" in refused("report", deep)
+    deep_events = edited("events.jsonl", lambda t: "{\"t\": " * 5000 + "\n" + t)
+    assert "events.jsonl: line 1 is not JSON (nested too deeply to read)" in refused("plot", deep_events)
     typed = edited("meta.json", lambda t: json.dumps({**json.loads(t), "steps": "many"}))
     assert "not a run's metadata (steps: Input should be a valid integer" in refused("report", typed)
     undated = edited("events.jsonl", lambda t: t.replace('"t": ', '"time": ', 1))
@@ -255,7 +259,7 @@ def _timing_files(draw) -> str:
 @settings(suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(timing=_timing_files(), meta_text=st.sampled_from(
     ['{"status": "completed", "steps": 3, "step_control": "steps of 0.001 to 0.1 s", "iteration": "up to 5 takes"}',
-     '{"status": "running"}', '[]', '{"steps": "many"}', 'not json']))
+     '{"status": "running"}', '[]', '{"steps": "many"}', 'not json', "[" * 3000 + "]" * 3000]))
 def test_a_run_directory_read_back_is_figures_or_a_named_error(tmp_path, timing, meta_text):
     """A run directory is a user's to edit: report, plot's step panels and the columns read it
     back, or say which file is wrong; never a traceback."""

@@ -12,8 +12,12 @@ import json
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Annotated
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from core import json_text
 
 
 class CalibrationError(ValueError):
@@ -42,11 +46,40 @@ class Calibration:
 
     @staticmethod
     def load(path: Path) -> "Calibration":
+        """A calibration :meth:`save` wrote; CalibrationError naming the file and the first field
+        that is wrong (a user's file: each number finite, the focal lengths and scale above 0)."""
         try:
-            d = json.loads(Path(path).read_text())
-            return Calibration(**{**d, "pivot_px": tuple(d["pivot_px"])})
-        except (OSError, json.JSONDecodeError, TypeError, KeyError) as exc:
-            raise CalibrationError(f"{path}: not a camera calibration ({exc})") from None
+            d = _CalibrationFile.model_validate(json_text.loads(Path(path).read_bytes()))
+        except (OSError, ValueError) as exc:  # ValidationError is a ValueError
+            raise CalibrationError(f"{path}: not a camera calibration ({_first_problem(exc)})") from None
+        return Calibration(fx=d.fx, fy=d.fy, cx=d.cx, cy=d.cy, pivot_px=(d.pivot_px[0], d.pivot_px[1]),
+                           metres_per_px=d.metres_per_px, flip=d.flip)
+
+
+_Finite = Annotated[float, Field(allow_inf_nan=False)]
+_Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+
+
+class _CalibrationFile(BaseModel):
+    """A calibration file's fields, as :meth:`Calibration.save` writes them (strict: no "1" for 1)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+    fx: _Positive
+    fy: _Positive
+    cx: _Finite
+    cy: _Finite
+    pivot_px: Annotated[list[_Finite], Field(min_length=2, max_length=2)]
+    metres_per_px: _Positive
+    flip: bool = False
+
+
+def _first_problem(exc: Exception) -> str:
+    if isinstance(exc, ValidationError):
+        e = exc.errors()[0]
+        if not e["loc"]:
+            return "a JSON object is expected"
+        return f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']}"
+    return getattr(exc, "strerror", None) or str(exc)
 
 
 def calibrate_from_image(image: np.ndarray, detector_factory, known_angle: float = 0.0,
