@@ -20,7 +20,11 @@ type       direction   payload
 7 STOP     server→FMU  reason (UTF-8)
 =========  ==========  ==============================================================
 
-"outputs" and "inputs" are the node's, as in the project JSON. Integer and Boolean
+"outputs" and "inputs" are the node's, as in the project JSON. START's H is the node's own
+step (its ``stepSize``, a multiple of the run's in a multi-rate run). OUTPUTS's step is the
+FMU's count of its own steps: 0 at the start, n after its n-th STEP; the gateway takes it
+only as the answer to the n-th STEP it sent (a node is sent only the STEPs of its own steps).
+STEP's step and t are the server's, at the start of the node's step. Integer and Boolean
 ports travel as f64 (exact up to 2^53). A payload is at most 1 MiB. The C side of this
 file is ``fmu_bridge/templates/bridge_fmu.c``; keep the two in step.
 """
