@@ -25,7 +25,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
-from core.config import LoadedProject, Node, PortType, gateway_endpoint
+from core.config import CoSimulation, LoadedProject, Node, PortType, gateway_endpoint
 
 TEMPLATE = Path(__file__).with_name("templates") / "bridge_fmu.c"
 _TYPE_CODE = {PortType.REAL: "R", PortType.INTEGER: "I", PortType.BOOLEAN: "B"}
@@ -89,8 +89,11 @@ static const double HY_START[] = {{{starts}}};
 """
 
 
-def model_description(node: Node, guid: str, server: str, timeout_s: float, project: str) -> str:
-    """The FMU's ``modelDescription.xml``: exactly the node's ports, then the bridge parameters."""
+def model_description(node: Node, guid: str, server: str, timeout_s: float, project: str,
+                      cosim: CoSimulation) -> str:
+    """The FMU's ``modelDescription.xml``: exactly the node's ports, then the bridge parameters;
+    its default experiment is the run's (``cosim``): an importer that takes it (fmpy's
+    ``simulate_fmu`` with no times given) steps as the run does, the node's own step each time."""
     ident = model_identifier(node.nodeName)
     lines = []
     vr = 0
@@ -165,7 +168,7 @@ def model_description(node: Node, guid: str, server: str, timeout_s: float, proj
     <Category name="logStatusError"/>
     <Category name="logAll"/>
   </LogCategories>
-  <DefaultExperiment startTime="0.0" stepSize="0.01"/>
+  {_default_experiment(node, cosim)}
   <ModelVariables>
 {chr(10).join(lines)}
   </ModelVariables>
@@ -210,6 +213,12 @@ def _compile(sources: Path, out: Path, node: str) -> None:
         raise BridgeBuildError(f"node {node!r}: compiling the bridge FMU failed:\n{res.stderr.strip()}")
 
 
+def _default_experiment(node: Node, cosim: CoSimulation) -> str:
+    step = node.stepSize or cosim.stepSize
+    return (f'<DefaultExperiment startTime="{float(cosim.startTime)!r}" stopTime="{float(cosim.stopTime)!r}" '
+            f'stepSize="{float(step)!r}"/>')
+
+
 def build_bridge_fmu(loaded: LoadedProject, node_name: str, out_dir: Path, server: str | None = None,
                      timeout_s: float | None = None) -> BuiltFmu:
     """Generate, compile and zip the bridge FMU of one node into ``out_dir/<node>.fmu``."""
@@ -233,7 +242,7 @@ def build_bridge_fmu(loaded: LoadedProject, node_name: str, out_dir: Path, serve
         (sources / "CMakeLists.txt").write_text(_CMAKE.format(ident=ident))
         _compile(sources, root / "binaries" / "linux64" / f"{ident}.so", node.nodeName)
         (root / "modelDescription.xml").write_text(
-            model_description(node, guid, server, timeout_s, project.projectName))
+            model_description(node, guid, server, timeout_s, project.projectName, project.coSimulation))
         path = out_dir / f"{node.nodeName}.fmu"
         with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zf:
             for f in sorted(root.rglob("*")):

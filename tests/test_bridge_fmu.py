@@ -379,15 +379,16 @@ def test_a_malformed_hello_is_named_by_what_is_wrong_with_it():
             gp.parse_hello(payload)
 
 
-def _importer(fmu: Path, step: float, slope: float) -> subprocess.Popen:
-    """fmpy's simulate_fmu over [0, 1] s with steps of ``step``, setting the FMU's y to
-    slope * t + 1 and printing, after each doStep, the end of the step and the u it read."""
+def _importer(fmu: Path, step: float | None, slope: float) -> subprocess.Popen:
+    """fmpy's simulate_fmu over [0, 1] s with steps of ``step`` (None: the times of the FMU's
+    default experiment), setting the FMU's y to slope * t + 1 and printing, after each doStep,
+    the end of the step and the u it read."""
+    times = "" if step is None else f"start_time=0, stop_time=1.0, step_size={step}, output_interval={step},"
     script = f"""
 import numpy as np
 from fmpy import simulate_fmu
 sig = np.array([(t, {slope} * t + 1) for t in np.linspace(0, 1, 11)], dtype=[("time", float), ("y", float)])
-r = simulate_fmu({str(fmu)!r}, start_time=0, stop_time=1.0, step_size={step}, output_interval={step}, input=sig,
-                 output=["u"])
+r = simulate_fmu({str(fmu)!r}, {times} input=sig, output=["u"])
 for row in r[1:]:
     print(repr(float(row["time"])) + "," + repr(float(row["u"])))
 """
@@ -399,14 +400,17 @@ def test_a_bridge_fmu_slower_than_the_base_step_steps_at_its_own_rate(tmp_path):
     """A bridge FMU whose node steps every 2 base steps takes the releases of its own steps only
     (a release that leaves it out, the clock's alone, is not a malformed one), with its own step
     size, and answers each with the label the server expects. Before, the gateway dropped the
-    clock's releases as malformed, and the run timed out at step 4."""
+    clock's releases as malformed, and the run timed out at step 4. The importer is given no
+    times: the FMU's default experiment is the run's, with the node's step."""
     cfg = _project(tmp_path)
     doc = json.loads(cfg.read_text())
     doc["nodeLists"][0]["stepSize"] = 0.2
     cfg.write_text(json.dumps(doc))
     fmu = build_bridge_fmu(load_project(cfg), "tool", tmp_path / "fmus").path
     server, clock = _start(cfg, tmp_path / "run")
-    importer = _importer(fmu, 0.2, 2)
+    experiment = read_model_description(str(fmu)).defaultExperiment
+    assert (experiment.startTime, experiment.stopTime, experiment.stepSize) == ("0.0", "1.0", "0.2")
+    importer = _importer(fmu, None, 2)
     (out, err), (_, serr), _ = _finish([importer, server, clock])
     assert importer.returncode == 0, err
     assert server.returncode == 0, serr
