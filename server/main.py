@@ -73,7 +73,7 @@ def _resume_plan(loaded: LoadedProject, run_dir: Path) -> tuple[dict[str, Any], 
             differ = _project_differences(json_text.loads((run_dir / PROJECT_COPY).read_bytes()),
                                           json_text.loads(loaded.path.read_bytes()) if loaded.path else {}) or \
                 ["(only in layout)"]
-        except (OSError, ValueError):
+        except (OSError, ValueError, RecursionError):  # a hint only; the comparison recurses per level too
             pass
         raise ValueError(f"{run_dir} was run with another project file than {loaded.path}: "
                          f"{'; '.join(differ[:5])}{' …' if len(differ) > 5 else ''}")
