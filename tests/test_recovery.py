@@ -17,6 +17,7 @@ from core import frames
 from server import checkpoints
 from server.interpolation import MAX_DEGREE, InputTrack
 from tests.helpers import REPO, hycosim, meta, run_killing, run_project, write_project
+from tests.wire_strategies import deep_json
 
 from clients.node import NodeContext
 
@@ -195,10 +196,6 @@ _file_names = (st.sampled_from(["server.msgpack", "a.state", "../a.state", ".", 
                | st.text(max_size=8))
 
 
-# JSON nested deeper than Python's decoder recurses (about 1,000 levels), or not quite.
-_too_deep = st.sampled_from([1, 900, 3000]).flatmap(lambda d: st.sampled_from(["[" * d + "]" * d, '{"a": ' * d + "1" + "}" * d]))
-
-
 @st.composite
 def _checkpoint_folders(draw):
     """A plausible manifest (sizes and hashes right or not) over files of plausible or random bytes."""
@@ -223,7 +220,7 @@ def _checkpoint_folders(draw):
                 "files": {name: {"size": len(data) if honest else draw(_json_values),
                                  "sha256": hashlib.sha256(data).hexdigest() if honest else draw(_json_values)}
                           for name, data in files.items()}}
-    text = draw(st.just(json.dumps(manifest)) | st.text(max_size=30) | _json_values.map(json.dumps) | _too_deep)
+    text = draw(st.just(json.dumps(manifest)) | st.text(max_size=30) | _json_values.map(json.dumps) | deep_json)
     return files, text
 
 
@@ -250,7 +247,7 @@ def test_a_checkpoint_folder_is_read_whole_or_refused_with_its_name(tmp_path, fo
 
 
 @settings(suppress_health_check=[HealthCheck.function_scoped_fixture], max_examples=40)
-@given(st.text(max_size=40) | _json_values.map(json.dumps) | _too_deep)
+@given(st.text(max_size=40) | _json_values.map(json.dumps) | deep_json)
 def test_a_resume_reads_any_meta_json_without_a_traceback(tmp_path, meta_text):
     from core.config import load_project
     from server.main import _resume_plan

@@ -17,6 +17,7 @@ from core.config import CoSimulation, Node
 from core.recordings import Recording, RecordingError, Sample, encode_sample
 from clients.scene_fmus import build_scene_fmus
 from tests.helpers import REPO, hycosim, meta, read_rows, run_killing, run_project
+from tests.wire_strategies import deep_json
 
 
 def _with_replay(src: Path, dst: Path, node: str, run_dir: Path | str, **cosim) -> Path:
@@ -168,8 +169,7 @@ def _sample_lines(draw) -> str:
             record["values"] = values[:draw(st.integers(0, 3))]
         line = json.dumps(record) + "\n" if how not in ("text", "torn") else line
         if how == "deep":  # JSON nested deeper than Python's decoder recurses, or not quite
-            depth = draw(st.sampled_from([5, 900, 3000]))
-            line = "[" * depth + "]" * depth + "\n"
+            line = draw(deep_json) + "\n"
         elif how == "text":
             line = draw(st.text(max_size=20)).replace("\n", " ") + "\n"
         elif how == "torn":
