@@ -428,6 +428,58 @@ def test_a_bridge_fmu_slower_than_the_base_step_steps_at_its_own_rate(tmp_path):
     assert u_seen == pytest.approx([x for k in range(0, 10, 2) for x in (t[k + 2], clock_y[k])])
 
 
+def test_a_bridge_fmus_last_step_cut_at_the_stop_time_is_the_releases_step(tmp_path):
+    """A node stepping 0.3 s in a 1.0 s run: the server's last release of it is 0.1 s long, and
+    an importer stepping to the same stop time cuts its last doStep to 0.1 s too. The FMU checks
+    doStep's h against the release's, not START's 0.3 s, and its last successful time is where
+    the release ended. Before, it warned "doStep h=0.1 but the co-simulation step is 0.3" and
+    said 1.2 s."""
+    cfg = _project(tmp_path)
+    doc = json.loads(cfg.read_text())
+    doc["nodeLists"][0]["stepSize"] = 0.3
+    cfg.write_text(json.dumps(doc))
+    fmu = build_bridge_fmu(load_project(cfg), "tool", tmp_path / "fmus").path
+    server, clock = _start(cfg, tmp_path / "run")
+    script = f"""
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave, fmi2LastSuccessfulTime
+md = read_model_description({str(fmu)!r})
+vr = {{v.name: v.valueReference for v in md.modelVariables}}
+fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract({str(fmu)!r}),
+                modelIdentifier=md.coSimulation.modelIdentifier, instanceName="tool")
+fmu.instantiate()
+fmu.setupExperiment(startTime=0.0, stopTime=1.0)
+fmu.enterInitializationMode()
+fmu.exitInitializationMode()
+t = 0.0
+while t < 1.0 - 1e-9:
+    h = min(0.3, 1.0 - t)
+    fmu.setReal([vr["y"]], [2 * t + 1])
+    fmu.doStep(t, h)
+    t += h
+    print("step", repr(h), repr(fmu.getRealStatus(fmi2LastSuccessfulTime)), repr(fmu.getReal([vr["u"]])[0]))
+fmu.terminate()
+fmu.freeInstance()
+"""
+    importer = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, env=env())
+    (out, err), (_, serr), _ = _finish([importer, server, clock])
+    assert importer.returncode == 0, err
+    assert server.returncode == 0, serr
+    assert "co-simulation step" not in out + err  # fmpy's logger prints the FMU's warnings
+    steps = [tuple(map(float, line.split()[1:])) for line in out.splitlines() if line.startswith("step ")]
+    assert [h for h, _, _ in steps] == pytest.approx([0.3, 0.3, 0.3, 0.1])
+    assert [done for _, done, _ in steps] == pytest.approx([0.3, 0.6, 0.9, 1.0])
+    rows = read_rows(tmp_path / "run")
+    t, clock_y = column(rows, "t"), column(rows, "clock.y")
+    assert [u for _, _, u in steps] == pytest.approx([clock_y[k] for k in (0, 3, 6, 9)])
+    m = meta(tmp_path / "run")
+    assert m["status"] == "completed" and not m.get("dropped_frames")
+    # The outputs the importer set before each step, held over the base points inside it; at
+    # the last point (1.0 s), what it set before its last step.
+    assert column(rows, "tool.y") == pytest.approx([2 * t[min(k - k % 3, 9)] + 1 for k in range(11)])
+
+
 def test_two_bridge_fmus_step_in_gauss_seidel_order_each_on_the_others_new_outputs(tmp_path):
     """Gauss-Seidel releases one node at a time; with two bridge FMUs each release leaves the
     other out. The second steps on the first's outputs at the end of the same macro step. Before,

@@ -63,7 +63,8 @@ typedef struct {
     int started;   /* START received */
     int stopped;   /* STOP received: the co-simulation is over */
     long long step;
-    double t0, H;
+    double t0;
+    double t_done; /* end of the last released step: a node's last step may be cut at the stop time */
     int driven;
 } Bridge;
 
@@ -283,7 +284,7 @@ FMI2_Export fmi2Status fmi2Terminate(fmi2Component c) {
     Bridge *b = (Bridge *)c;
     /* N doSteps report the points T_0..T_N-1; the server also wants T_N. The tool has set
        nothing newer than its last inputs, so those stand for the final point. */
-    if (b->started && !b->stopped && b->sock != HY_BAD_SOCKET && send_outputs(b, b->t0 + b->H * (double)b->step) == 0) {
+    if (b->started && !b->stopped && b->sock != HY_BAD_SOCKET && send_outputs(b, b->t_done) == 0) {
         unsigned char *reply;
         uint32_t len;
         if (recv_frame(b, &reply, &len) == F_STOP) b->stopped = 1;
@@ -437,7 +438,7 @@ FMI2_Export fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2B
         if (type == F_STOP) { b->stopped = 1; logf_(b, fmi2Warning, "logStatusWarning", "server stopped: %s", reply ? (char *)reply : ""); free(reply); return fmi2Discard; }
         if (type != F_START || len < 16) { free(reply); return lost(b, "no START from the server within the timeout"); }
         b->t0 = get_f64(reply);
-        b->H = get_f64(reply + 8);
+        b->t_done = b->t0; /* START's H is the node's step; each release carries its own h */
         free(reply);
         b->started = 1;
     }
@@ -454,12 +455,16 @@ FMI2_Export fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2B
     if (type != F_STEP || len < 27) { free(reply); return lost(b, "no release from the server within the timeout"); }
     {
         uint16_t n = get_u16(reply + 25);
+        double released = get_f64(reply + 16), tol = 1e-9 * (released > 1.0 ? released : 1.0);
         if (n != HY_N_IN || len != 27u + 8u * n) { free(reply); return lost(b, "release with a wrong number of inputs"); }
         b->driven = reply[24];
         for (int i = 0; i < HY_N_IN; i++) b->values[HY_N_OUT + i] = get_f64(reply + 27 + 8 * i);
+        /* The release's h, not START's H: the server cuts a node's last step at the stop time,
+           as an importer stepping to the same stop time does. */
+        if (h - released > tol || released - h > tol) logf_(b, fmi2Warning, "logStatusWarning", "doStep h=%g but the co-simulation step is %g", h, released);
+        b->t_done = get_f64(reply + 8) + released;
     }
     free(reply);
-    if (h - b->H > 1e-9 * (b->H > 1.0 ? b->H : 1.0) || b->H - h > 1e-9 * (b->H > 1.0 ? b->H : 1.0)) logf_(b, fmi2Warning, "logStatusWarning", "doStep h=%g but the co-simulation step is %g", h, b->H);
     b->step++;
     return fmi2OK;
 }
@@ -469,7 +474,7 @@ FMI2_Export fmi2Status fmi2CancelStep(fmi2Component c) { (void)c; return fmi2Err
 FMI2_Export fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind k, fmi2Status *v) { (void)c; (void)k; (void)v; return fmi2Discard; }
 FMI2_Export fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *v) {
     Bridge *b = (Bridge *)c;
-    if (k == fmi2LastSuccessfulTime) { *v = b->t0 + b->H * (double)b->step; return fmi2OK; }
+    if (k == fmi2LastSuccessfulTime) { *v = b->t_done; return fmi2OK; }
     return fmi2Discard;
 }
 FMI2_Export fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind k, fmi2Integer *v) { (void)c; (void)k; (void)v; return fmi2Discard; }
