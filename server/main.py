@@ -77,7 +77,7 @@ def _resume_plan(loaded: LoadedProject, run_dir: Path) -> tuple[dict[str, Any], 
             pass
         raise ValueError(f"{run_dir} was run with another project file than {loaded.path}: "
                          f"{'; '.join(differ[:5])}{' …' if len(differ) > 5 else ''}")
-    cp, passed = checkpoints.latest(run_dir, loaded.digest)
+    cp, passed = checkpoints.latest(run_dir, loaded.digest, project=loaded.project)
     if cp is None:
         raise ValueError(f"{run_dir}: no checkpoint to resume from"
                          + (f" ({'; '.join(passed)})" if passed else " (was coSimulation.checkpointEvery set?)"))
@@ -86,8 +86,9 @@ def _resume_plan(loaded: LoadedProject, run_dir: Path) -> tuple[dict[str, Any], 
             recorded = max(sum(1 for _ in f) - 1, 0)
     except OSError:
         recorded = cp.step
-    earlier = meta.get("checkpoints_passed_over")
-    meta["checkpoints_passed_over"] = (earlier if type(earlier) is list else []) + passed
+    earlier = meta.get("checkpoints_passed_over")  # the relay adds what it passes over on restoring
+    if earlier is not None and type(earlier) is not list:
+        del meta["checkpoints_passed_over"]
     return meta, cp.server["records"], recorded
 
 

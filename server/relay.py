@@ -490,7 +490,7 @@ class Relay:
         server takes its own state back. Return the server's state, arrivals and wait."""
         began = time.monotonic()
         while True:
-            cp, passed = checkpoints.latest(self.recorder.run_dir, self.loaded.digest)
+            cp, passed = checkpoints.latest(self.recorder.run_dir, self.loaded.digest, project=self.project)
             for reason in passed:
                 self._log.warning("checkpoint passed over", reason=reason)
                 self.recorder.meta.setdefault("checkpoints_passed_over", []).append(reason)
@@ -566,16 +566,9 @@ class Relay:
                                                chunk, options))
 
     def _apply(self, cp: checkpoints.Checkpoint) -> dict[str, Any]:
-        """The server's own state at the checkpoint, and its records cut back to it."""
+        """The server's own state at the checkpoint (read as fitting the project), and its
+        records cut back to it."""
         s = cp.server
-        for name in ("outputs", "inputs"):
-            ours = self.outputs if name == "outputs" else self.router.inputs
-            theirs = s[name]
-            if set(theirs) != set(ours) or any(type(theirs[n]) is not list or len(theirs[n]) != len(ours[n])
-                                               for n in ours):
-                raise RunError(f"checkpoint {cp.path} does not fit the project: its {name} differ")
-        if s["mode"] not in self.project.modes():
-            raise RunError(f"checkpoint {cp.path} is in mode {s['mode']!r}, which the project does not have")
         for node, values in self.outputs.items():
             if not self.project.node(node).asynchronous and values != s["outputs"][node]:
                 self._log.warning("restored outputs differ from the checkpoint's", node=node, step=cp.step)
