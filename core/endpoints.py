@@ -22,8 +22,10 @@ PROTOCOLS = ("tcp", "tls")
 FORMS = "HOST, HOST:PORT, tcp/HOST:PORT or tls/HOST:PORT"
 
 # Host names (RFC 1123 labels, with _ as Docker allows), IPv4 and, in brackets, IPv6.
-_HOST = re.compile(r"^[A-Za-z0-9_]([A-Za-z0-9_\-]*[A-Za-z0-9_])?(\.[A-Za-z0-9_]([A-Za-z0-9_\-]*[A-Za-z0-9_])?)*\.?$")
-_IPV6 = re.compile(r"^[0-9A-Fa-f:.]+(%[A-Za-z0-9_.\-]+)?$")
+# Matched whole (fullmatch): "$" would let a trailing newline through.
+_HOST = re.compile(r"[A-Za-z0-9_]([A-Za-z0-9_\-]*[A-Za-z0-9_])?(\.[A-Za-z0-9_]([A-Za-z0-9_\-]*[A-Za-z0-9_])?)*\.?")
+_IPV6 = re.compile(r"[0-9A-Fa-f:.]+(%[A-Za-z0-9_.\-]+)?")
+_DIGITS = re.compile(r"[0-9]+")  # ASCII: str.isdigit() holds for "²", which int() refuses
 
 
 class EndpointError(ValueError):
@@ -83,16 +85,16 @@ def _address(rest: str, default_port: int, text: str) -> Address:
         if not sep or (after and not after.startswith(":")):
             raise EndpointError(f"{text!r}: an IPv6 address is written [ADDRESS]:PORT")
         port_text = after[1:] if after else None
-        if not _IPV6.match(host):
+        if not _IPV6.fullmatch(host):
             raise EndpointError(f"{text!r}: {host!r} is not an IPv6 address")
     elif rest.count(":") > 1:  # a bare IPv6 address: no room for a port
         host, port_text = rest, None
-        if not _IPV6.match(host):
+        if not _IPV6.fullmatch(host):
             raise EndpointError(f"{text!r} is not an address; write {FORMS} ([IPv6]:PORT for IPv6)")
     else:
         host, sep, port_text = rest.partition(":")
         port_text = port_text if sep else None
-        if len(host) > 253 or not _HOST.match(host):
+        if len(host) > 253 or not _HOST.fullmatch(host):
             raise EndpointError(f"{text!r}: {host!r} is not a host name or IP address; write {FORMS}")
     return Address(host, _port(text, port_text, default_port))
 
@@ -108,11 +110,13 @@ def gateway_beside(server: Endpoint) -> Address:
 def _port(text: str, port_text: str | None, default_port: int) -> int:
     if port_text is None:
         return default_port
-    if not port_text.isdigit():
+    if not _DIGITS.fullmatch(port_text):
         raise EndpointError(f"{text!r}: port {port_text!r} is not a number")
-    port = int(port_text)
+    # int() refuses more than 4,300 digits; no port has more than 5 (leading zeros aside).
+    port = int(port_text) if len(port_text) <= 12 else 0
     if not 1 <= port <= 65535:
-        raise EndpointError(f"{text!r}: port {port} is outside 1-65535")
+        shown = port_text if len(port_text) <= 12 else port_text[:12] + "…"
+        raise EndpointError(f"{text!r}: port {shown} is outside 1-65535")
     return port
 
 

@@ -787,7 +787,7 @@ def camera(
                 err.print("[red]error:[/red] a real source needs --calibration FILE", highlight=False)
                 raise typer.Exit(2)
             cal = Calibration.load(calibration)
-            src = DeviceSource(int(source)) if source.isdigit() else VideoFileSource(Path(source))
+            src = DeviceSource(int(source)) if source.isascii() and source.isdigit() else VideoFileSource(Path(source))
             frames = []
             for frame in src.frames():
                 if frame.t > seconds:

@@ -7,10 +7,12 @@ import json
 from pathlib import Path
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from core.config import (ConfigError, gateway_address, load_project, parse_project, polls_before_blocking,
                                server_endpoint)
-from core.endpoints import Address, EndpointError, parse_address, parse_endpoint
+from core.endpoints import PROTOCOLS, Address, EndpointError, parse_address, parse_endpoint
 from core.session import zenoh_message
 from tests.helpers import REPO, hycosim, write_project
 
@@ -236,6 +238,50 @@ def test_unusable_endpoints_are_named_with_the_reason(text, reason):
     with pytest.raises(EndpointError) as exc:
         parse_endpoint(text)
     assert repr(text) in str(exc.value) and reason in str(exc.value)
+
+
+# Addresses as people write them, right or with one part wrong: hosts, IPv4 and IPv6, ports
+# in and out of range or not ASCII digits ("²".isdigit() holds), stray whitespace, suffixes.
+_hosts = (st.from_regex(r"[a-z][a-z0-9\-]{0,12}[a-z0-9](\.[a-z]{2,5}){0,2}", fullmatch=True)
+          | st.sampled_from(["127.0.0.1", "10.0.0.5", "localhost", "compose_server", "host."])
+          | st.sampled_from(["[::1]", "[fe80::1%eth0]", "::1", "[::1", "::1]"])
+          | st.text(max_size=8))
+_ports = (st.none() | st.integers(0, 70000).map(str) | st.sampled_from(["", "²", "٧٤٤٧", "7447 ", "+80", "0x50", "9" * 5000])
+          | st.text(max_size=4))
+_endings = st.sampled_from(["", "", "\n", " ", "\t\n"])
+
+
+@st.composite
+def _written_addresses(draw) -> str:
+    protocol = draw(st.sampled_from(["", "", "tcp/", "tls/", "udp/", "TCP/", "tcp//"]))
+    port = draw(_ports)
+    suffix = draw(st.sampled_from(["", "", "?prio=1", "#iface=eth0"]) | st.text(max_size=4))
+    text = protocol + draw(_hosts) + draw(_endings) + ("" if port is None else ":" + port) + suffix
+    return draw(st.sampled_from(["", " "])) + text + draw(_endings)
+
+
+@given(_written_addresses())
+def test_any_endpoint_a_user_writes_is_read_or_named_with_what_is_wrong(text):
+    """An endpoint read is one Zenoh can take (TCP or TLS, an ASCII host with no space, a port
+    in range) and reads back the same; any other is refused as EndpointError quoting it. Before,
+    a port of "²" raised int()'s ValueError, "٧٤٤٧" was taken as 7447, and a host ending in a
+    newline passed ("$" matches before one)."""
+    try:
+        endpoint = parse_endpoint(text)
+    except EndpointError as exc:
+        assert repr(text) in str(exc)
+    else:
+        host = endpoint.address.host
+        assert endpoint.protocol in PROTOCOLS and 1 <= endpoint.address.port <= 65535
+        assert host.isascii() and host.isprintable() and not any(c.isspace() for c in host)
+        assert parse_endpoint(str(endpoint)) == endpoint
+    try:
+        address = parse_address(text, 7448)
+    except EndpointError as exc:
+        assert repr(text) in str(exc)
+    else:
+        assert address.host.isascii() and not any(c.isspace() for c in address.host)
+        assert 1 <= address.port <= 65535 and parse_address(str(address), 7448) == address
 
 
 def test_gateway_address_defaults_beside_the_server():

@@ -142,6 +142,9 @@ def test_checkpoints_are_written_whole_kept_two_deep_and_checked_when_read(tmp_p
         checkpoints.write(tmp_path, step, {**server, "step": step}, {"a": bytes([step]) * 100}, "hash")
     assert checkpoints.steps(tmp_path) == [20, 30]
     assert not any(p.name.startswith(".") for p in (tmp_path / "checkpoints").iterdir())
+    for stray in ("²", "٣", "1e3", ".40.partial"):  # "²".isdigit() holds, and int() refuses it
+        (tmp_path / "checkpoints" / stray).mkdir()
+    assert checkpoints.steps(tmp_path) == [20, 30]
     cp, passed = checkpoints.latest(tmp_path, "hash")
     assert cp.step == 30 and cp.states == {"a": bytes([30]) * 100} and passed == []
     (tmp_path / "checkpoints" / "30" / "a.state").write_bytes(bytes([31]) * 100)  # same size, other bytes

@@ -67,7 +67,7 @@ class CameraNode(AsyncSource):
             if not cal_file:
                 raise CameraError(f"camera node {ctx.name!r}: a real source needs 'calibration' (a JSON file)")
             calibration = Calibration.load(ctx.project_dir / cal_file)
-            if source.isdigit():
+            if source.isascii() and source.isdigit():  # "²".isdigit() holds, and int() refuses it
                 if ctx.real_time is None:
                     raise CameraError(f"camera node {ctx.name!r}: camera device {source} is live, so the run must be "
                                       'paced by the clock: set "realTime" in the project\'s coSimulation')
