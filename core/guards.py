@@ -3,14 +3,20 @@
 A guard reads outputs as ``node.port`` and may use numbers, arithmetic, comparisons,
 ``and``/``or``/``not`` and ``abs``/``min``/``max``. It is parsed with Python's ``ast``
 and evaluated by walking that tree against a fixed whitelist, so a config file can never
-run code.
+run code. It is evaluated at every macro-step point, so nothing in it may take long: its
+text and nesting are bounded, and ``**`` is a float power (``9**9**9`` on ints would compute
+for hours; as floats it overflows at once).
 """
 
 from __future__ import annotations
 
 import ast
+import math
 import operator
 from typing import Any, Mapping
+
+MAX_TEXT = 1000  # characters: a guard is a short expression over a few ports
+MAX_DEPTH = 64  # levels of the expression's tree: Python's parser and _check recurse per level
 
 _BINARY = {
     ast.Add: operator.add,
@@ -18,7 +24,7 @@ _BINARY = {
     ast.Mult: operator.mul,
     ast.Div: operator.truediv,
     ast.Mod: operator.mod,
-    ast.Pow: operator.pow,
+    ast.Pow: math.pow,  # float: an int power of ints may take hours (see above)
 }
 _UNARY = {ast.USub: operator.neg, ast.UAdd: operator.pos, ast.Not: operator.not_}
 _COMPARE = {
@@ -30,6 +36,7 @@ _COMPARE = {
     ast.NotEq: operator.ne,
 }
 _FUNCTIONS = {"abs": abs, "min": min, "max": max}
+_ARGUMENTS = {"abs": (1, 1), "min": (2, 32), "max": (2, 32)}  # min(x) would iterate over x
 
 
 class GuardError(ValueError):
@@ -41,15 +48,22 @@ class Guard:
 
     def __init__(self, text: str):
         self.text = text
+        if len(text) > MAX_TEXT:
+            raise GuardError(f"guard {text[:40]!r}… is {len(text)} characters; a guard has at most {MAX_TEXT}")
         try:
             tree = ast.parse(text, mode="eval")
         except SyntaxError as exc:
             raise GuardError(f"guard {text!r} does not parse: {exc.msg}") from None
+        except (ValueError, RecursionError, MemoryError) as exc:  # NUL bytes; nesting the parser gives up on
+            raise GuardError(f"guard {text!r} does not parse: {exc or 'nested too deeply'}") from None
         self._tree = tree.body
         self.references: list[tuple[str, str]] = []
-        self._check(self._tree)
+        self._check(self._tree, 1)
 
-    def _check(self, node: ast.AST) -> None:
+    def _check(self, node: ast.AST, depth: int) -> None:
+        if depth > MAX_DEPTH:
+            raise GuardError(f"guard {self.text!r} nests deeper than {MAX_DEPTH} levels")
+        depth += 1
         if isinstance(node, ast.Attribute):
             if not isinstance(node.value, ast.Name):
                 raise GuardError(f"guard {self.text!r}: write ports as node.port")
@@ -60,21 +74,25 @@ class Guard:
             if not isinstance(node.value, (int, float, bool)):
                 raise GuardError(f"guard {self.text!r}: only numbers and booleans are allowed as constants")
         elif isinstance(node, ast.BinOp) and type(node.op) in _BINARY:
-            self._check(node.left)
-            self._check(node.right)
+            self._check(node.left, depth)
+            self._check(node.right, depth)
         elif isinstance(node, ast.UnaryOp) and type(node.op) in _UNARY:
-            self._check(node.operand)
+            self._check(node.operand, depth)
         elif isinstance(node, ast.BoolOp):
             for v in node.values:
-                self._check(v)
+                self._check(v, depth)
         elif isinstance(node, ast.Compare) and all(type(op) in _COMPARE for op in node.ops):
-            self._check(node.left)
+            self._check(node.left, depth)
             for c in node.comparators:
-                self._check(c)
+                self._check(c, depth)
         elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
               and node.func.id in _FUNCTIONS and not node.keywords):
+            least, most = _ARGUMENTS[node.func.id]
+            if not least <= len(node.args) <= most:
+                raise GuardError(f"guard {self.text!r}: {node.func.id} takes "
+                                 + (f"{least} argument" if least == most else f"{least} to {most} arguments"))
             for a in node.args:
-                self._check(a)
+                self._check(a, depth)
         elif isinstance(node, ast.Name):
             raise GuardError(f"guard {self.text!r}: bare name {node.id!r}; write ports as node.port")
         else:
