@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -330,3 +331,70 @@ def test_wait_strategy_polls_only_where_the_processes_fit_the_cores(tmp_path):
     doc["coSimulation"] = {"waitStrategy": "auto"}
     project = load_project(_write(tmp_path, doc)).project
     assert project.polls_before_blocking(1) is False and project.polls_before_blocking(2) is True
+
+
+# Project files as a hand leaves them: a project this suite or the repository ships, with up
+# to three edits anywhere in its tree (a value replaced by one of another kind or range, a key
+# deleted or added, a list entry repeated), none at all a third of the time.
+_BASES = [GOOD, *(json.loads(p.read_text()) for p in sorted((REPO / "configs").glob("*.json")))]
+_JUNK = st.sampled_from([None, -1, 0, 1, 2.5, -0.0, 1e308, float("nan"), float("inf"), "", "x", "a.y", "free", "é²",
+                         "0", [], {}, [1], {"a": 1}, True, False, "x" * 300, 2 ** 70, "..", "/etc/passwd",
+                         "a.y >= 0.3", "__import__('os')", "1 +", "a.b.c", "tcp/127.0.0.1:²", "hold"])
+_KEYS = st.sampled_from(["extra", "async", "stepSize", "fmu", "model", "activeIn", "rate", "pairs", "order",
+                         "coupling", "events", "gatewayIP", "checkpointEvery", "replay", "until"])
+
+
+def _paths(value, at=()):
+    yield at
+    children = value.items() if type(value) is dict else enumerate(value) if type(value) is list else ()
+    for key, child in children:
+        yield from _paths(child, (*at, key))
+
+
+@st.composite
+def _edited_projects(draw) -> dict:
+    doc = copy.deepcopy(draw(st.sampled_from(_BASES)))
+    for _ in range(draw(st.sampled_from([0, 1, 1, 2, 3]))):
+        path = draw(st.sampled_from([p for p in _paths(doc) if p]))
+        parent = doc
+        for key in path[:-1]:
+            parent = parent[key]
+        how = draw(st.sampled_from(["replace", "replace", "delete", "add", "repeat"]))
+        if how == "delete" and type(parent) is dict:
+            del parent[path[-1]]
+        elif how == "add" and type(parent) is dict:
+            parent[draw(_KEYS)] = draw(_JUNK)
+        elif how == "repeat" and type(parent) is list:
+            parent.append(copy.deepcopy(parent[path[-1]]))
+        else:
+            parent[path[-1]] = draw(_JUNK | st.sampled_from([copy.deepcopy(parent[path[-1]])]))
+    return doc
+
+
+@given(_edited_projects())
+def test_any_edited_project_file_is_a_project_the_run_can_use_or_named_errors(tmp_path_factory, doc):
+    """What the loader accepts, the server and nodes can use as it is: the counts match, names
+    and UIDs are unique, every route joins an output to an input of nodes that exist in modes
+    that exist, every event drives a node and has compiled guards, times are finite and in
+    order, the addresses parse and the coupling plans. What it refuses is a ConfigError naming
+    the file and, for each problem, where in it."""
+    path = tmp_path_factory.mktemp("edited") / "project.json"
+    path.write_text(json.dumps(doc))
+    try:
+        loaded = load_project(path)
+    except ConfigError as exc:
+        assert str(path) in str(exc) and exc.issues and all(i.path and i.message for i in exc.issues)
+        return
+    p, cosim = loaded.project, loaded.project.coSimulation
+    assert p.nodeNum == len(p.nodeLists) and p.linkNum == len(p.linkLists)
+    nodes = {n.nodeName: n for n in p.nodeLists}
+    assert len(nodes) == len(p.nodeLists) and len({n.UID for n in p.nodeLists}) == len(p.nodeLists)
+    for r in loaded.routes:
+        assert r.src_port in nodes[r.src_node].output_names() and r.dst_port in nodes[r.dst_node].input_names()
+        assert r.active_in is None or r.active_in <= set(p.modes())
+    for e in p.events:
+        assert e.drives in nodes and e.name in loaded.guards
+    assert math.isfinite(cosim.startTime) and math.isfinite(cosim.stopTime) and cosim.startTime < cosim.stopTime
+    server_endpoint(p.serverIP)
+    gateway_address(p)
+    assert set(loaded.coupling.rates) >= {n.nodeName for n in p.nodeLists if not n.asynchronous}
