@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import re
 import time
 import socket
 import threading
@@ -13,10 +14,13 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from clients.krl.controller import MAX_FRAME_BYTES, EmulatedController, Program, parse_ack, stream_program
 from clients.krl.eki import AXES, EkiConfig, EkiError, frame, parse_frame
 from clients.krl.export import ExportError, export, read_path
+from clients.robot import kr6
 from clients.robot.scene import SceneParams
 from clients.rod.model import RodParams
 from tests.helpers import REPO, hycosim, run_project
@@ -262,3 +266,71 @@ def test_ctrl_c_stops_the_trials_and_tabulates_the_finished_ones(tmp_path):
         assert (out / "trials.png").stat().st_size > 10_000
     finally:
         reap(proc)
+
+
+# Frame streams as a PC sends them, each frame right or with one thing wrong, the whole
+# stream ended by the empty-A1 frame or by the connection closing.
+_FRAME_WRONGS = ["axis", "time", "element", "root", "xml", "bytes", "entity"]
+
+
+@st.composite
+def _frame_streams(draw) -> tuple[bytes, int, int, bool]:
+    """A stream, the number of its frames the controller executes and rejects, and whether it ends."""
+    parts, executed, rejected = [], 0, 0
+    for _ in range(draw(st.integers(0, 5))):
+        q = [draw(st.floats(lo, hi)) for lo, hi in kr6.LIMITS_DEG]
+        t = draw(st.floats(0, 0.05))
+        text = frame(q, t, draw(st.booleans()))
+        wrong = draw(st.sampled_from([None, None, *_FRAME_WRONGS]))
+        if wrong == "axis":
+            axis = draw(st.sampled_from(AXES))
+            text = re.sub(f'{axis}="[^"]*"', f'{axis}="{draw(st.sampled_from(["x", "nan", "inf", "1e9", "-400", ""]))}"',
+                          text)
+            if axis == "A1" and 'A1=""' in text:  # an empty A1 is the end frame, not a wrong one
+                text = text.replace('A1=""', 'A1="?"')
+        elif wrong == "time":
+            text = re.sub(r'T="[^"]*"', f'T="{draw(st.sampled_from(["-1", "1e300", "nan", "", "t"]))}"', text)
+        elif wrong == "element":  # (a frame without Pos has no A1: EKI_GetReal finds none, the program EXITs)
+            text = text.replace("<Gripper ", "<Other ")
+        elif wrong == "root":
+            text = text.replace("<Robot>", "<Robot2>", 1)
+        elif wrong == "xml":
+            # (inside the frame: what comes before its <Robot is skipped as noise between frames)
+            cut = draw(st.integers(len("<Robot>") + 1, len(text) - len("</Robot>") - 1))
+            text = text[:cut] + draw(st.sampled_from(["<", "&", '"', "<x>", "\x00"])) + text[cut:]
+        data = text.encode()
+        if wrong == "bytes":
+            data = data.replace(b'A2="', b'A2="\xff\xfe')
+        elif wrong == "entity":  # entities expanded a thousandfold: expat's limit, no blow-up
+            data = (b'<!DOCTYPE Robot [<!ENTITY a "aaaaaaaaaa"><!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;">'
+                    b'<!ENTITY c "&b;&b;&b;&b;&b;&b;&b;&b;&b;&b;">]>' + data.replace(b'A3="', b'A3="&c;'))
+        parts.append(data + draw(st.sampled_from([b"", b"\n", b"\r\n  "])))
+        executed, rejected = executed + (wrong is None), rejected + (wrong is not None)
+    ends = draw(st.booleans())
+    if ends:
+        parts.append(frame(None).encode())
+    return b"".join(parts), executed, rejected, ends
+
+
+@settings(max_examples=40)
+@given(_frame_streams())
+def test_the_controller_executes_each_right_frame_and_rejects_each_wrong_one(stream):
+    """Over a real socket: every right frame is executed, every wrong one rejected with a reason
+    (the program goes on), the end frame gives the Ack, a connection closed before it is named;
+    nothing a PC sends stops the controller with an exception."""
+    data, executed, rejected, ends = stream
+    controller = EmulatedController(EkiConfig(), TWIN, port=0)
+    ours, theirs = socket.socketpair()
+    try:
+        theirs.sendall(data)
+        theirs.shutdown(socket.SHUT_WR)
+        result = controller.handle(ours, "the test")
+    finally:
+        ours.close(), theirs.close(), controller.stop()
+    assert (result is not None) == ends
+    if ends:
+        assert result.frames == executed and len(result.rejected) == rejected
+        assert controller.errors == result.rejected
+    else:
+        assert len(controller.errors) == rejected + 1 and "dropped before the program ended" in controller.errors[-1]
+        assert f"({executed} frames executed)" in controller.errors[-1]
