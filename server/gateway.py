@@ -25,6 +25,7 @@ import zenoh
 from core import frames
 from fmu_bridge import gateway_protocol as gp
 from core.config import WIRE_TYPES, Node, PortType
+from core.endpoints import Address
 from core.keys import ProjectKeys
 from core.session import token_held
 
@@ -124,11 +125,13 @@ class Gateway:
         self._started = threading.Event()  # START sent: a bridge FMU attaching now is too late
         self._handshakes = threading.BoundedSemaphore(_MAX_HANDSHAKES)
         self._log = structlog.get_logger("server.gateway")
+        # An IPv6 address (endpoints.Address keeps it without brackets) needs its family said.
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
         try:
-            self._listener = socket.create_server((host, port), reuse_port=False)
+            self._listener = socket.create_server((host, port), family=family, reuse_port=False)
         except OSError as exc:
-            raise GatewayError(f"cannot listen for bridge FMUs on {host}:{port}: {exc.strerror or exc}") from None
-        self.address = f"{host}:{self._listener.getsockname()[1]}"
+            raise GatewayError(f"cannot listen for bridge FMUs on {Address(host, port)}: {exc.strerror or exc}") from None
+        self.address = str(Address(host, self._listener.getsockname()[1]))
         # Declared when the first bridge FMU attaches: a callback subscriber on ``down`` runs
         # inside every release the relay puts, which cost a gateway-less run ~40 µs a step.
         self._down: zenoh.Subscriber | None = None

@@ -167,6 +167,29 @@ print(" ".join(str(int(row["hycosim_driven"])) for row in r))
     assert driven[1:] == [m == "follow" for m in modes[:10]]
 
 
+def test_a_bridge_fmu_reaches_a_server_and_gateway_on_ipv6(tmp_path):
+    """serverIP and gatewayIP as [IPv6]:PORT, as the project file allows. Before, the gateway could
+    not listen there (the socket was made for IPv4: "Address family for hostname not supported")
+    and the FMU took "[::1]" with its brackets for a host name it could not resolve."""
+    cfg = _project(tmp_path)
+    doc = json.loads(cfg.read_text())
+    ports = []
+    for _ in range(2):
+        with socket.socket(socket.AF_INET6) as s:
+            s.bind(("::1", 0))
+            ports.append(s.getsockname()[1])
+    doc["serverIP"], doc["gatewayIP"] = f"[::1]:{ports[0]}", f"[::1]:{ports[1]}"
+    cfg.write_text(json.dumps(doc))
+    fmu = build_bridge_fmu(load_project(cfg), "tool", tmp_path / "fmus").path
+    server, clock = _start(cfg, tmp_path / "run")
+    importer = _importer(fmu, 0.1, 2)
+    (out, err), (_, serr), _ = _finish([importer, server, clock])
+    assert importer.returncode == 0, err + out
+    assert server.returncode == 0, serr
+    assert meta(tmp_path / "run")["gateway"] == f"[::1]:{ports[1]}"
+    _check_exchange(tmp_path / "run", [tuple(map(float, line.split(","))) for line in out.split()])
+
+
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
 def test_bridge_fmu_in_a_c_only_importer(tmp_path):
     cfg = _project(tmp_path)

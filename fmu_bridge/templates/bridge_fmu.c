@@ -152,15 +152,27 @@ static void set_timeout(hy_socket s, double seconds) {
 #endif
 }
 
-/* "tcp/HOST:PORT", "HOST:PORT" or "HOST" (port 7448). */
+/* "tcp/HOST:PORT", "HOST:PORT", "[IPv6]:PORT", "HOST" or a bare IPv6 address (port 7448). */
 static int connect_server(Bridge *b) {
     char host[256], port[16] = "7448";
     const char *spec = strncmp(b->server, "tcp/", 4) == 0 ? b->server + 4 : b->server;
     const char *colon = strrchr(spec, ':');
+    const char *start = spec;
     struct addrinfo hints, *res = NULL, *ai;
-    size_t hn = colon ? (size_t)(colon - spec) : strlen(spec);
+    size_t hn;
+    if (spec[0] == '[') {  /* [IPv6]:PORT or [IPv6] */
+        const char *close = strchr(spec, ']');
+        start = spec + 1;
+        hn = close ? (size_t)(close - start) : strlen(start);
+        colon = close && close[1] == ':' ? close + 1 : NULL;
+    } else if (colon && strchr(spec, ':') != colon) {  /* a bare IPv6 address: no room for a port */
+        hn = strlen(spec);
+        colon = NULL;
+    } else {
+        hn = colon ? (size_t)(colon - spec) : strlen(spec);
+    }
     if (hn >= sizeof host) hn = sizeof host - 1;
-    memcpy(host, spec, hn);
+    memcpy(host, start, hn);
     host[hn] = 0;
     if (colon) { strncpy(port, colon + 1, sizeof port - 1); port[sizeof port - 1] = 0; }
 #ifdef _WIN32
