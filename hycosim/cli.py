@@ -25,7 +25,7 @@ from rich.table import Table
 
 from core import signals
 from core.config import ConfigError, LoadedProject, load_project
-from core.endpoints import GATEWAY_PORT, EndpointError, parse_address, parse_endpoint
+from core.endpoints import GATEWAY_PORT, Address, EndpointError, parse_address, parse_endpoint
 from core.signals import ignore_stops
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
@@ -989,7 +989,7 @@ def krl_controller(
     from clients.rod.model import RodParams
 
     try:
-        config = EkiConfig.parse(eki.read_text(), str(eki))
+        config = EkiConfig.parse(eki.read_bytes(), str(eki))
     except OSError as exc:
         err.print(f"[red]error:[/red] {eki}: cannot read ({exc.strerror or exc})", highlight=False)
         raise typer.Exit(2) from None
@@ -1000,10 +1000,11 @@ def krl_controller(
         controller = EmulatedController(config, RodParams(length=length, initial_angle=math.radians(angle)),
                                         host=host, port=port)
     except OSError as exc:
-        err.print(f"[red]error:[/red] cannot listen on {host}:{port or config.port} ({exc.strerror or exc})",
+        err.print(f"[red]error:[/red] cannot listen on {Address(host, port or config.port)} ({exc.strerror or exc})",
                   highlight=False)
         raise typer.Exit(3) from None
-    out.print(f"emulated KUKA controller listening on {host}:{controller.address[1]} ({eki.name})", highlight=False)
+    out.print(f"emulated KUKA controller listening on {Address(host, controller.address[1])} ({eki.name})",
+              highlight=False)
     try:
         while programs == 0 or len(controller.results) < programs:
             conn, peer = controller.listener.accept()

@@ -176,6 +176,12 @@ def test_export_and_controller_cli_errors(tmp_path):
     (tmp_path / "bad.xml").write_text("<NOT/>")
     res = hycosim("krl", "controller", "--eki", str(tmp_path / "bad.xml"))
     assert res.returncode == 2 and "expected <ETHERNETKRL>" in res.stderr
+    # Each once a traceback: a flag that is no number, a file that is no UTF-8 text.
+    (tmp_path / "flag.xml").write_text(EkiConfig().to_xml().replace('Set_Flag="1"', 'Set_Flag="one"'))
+    (tmp_path / "latin.xml").write_bytes(EkiConfig().to_xml().replace("Client", "Cli\xe9nt").encode("latin-1"))
+    for name, says in (("flag.xml", "has Set_Flag 'one', not a flag number (1-1024)"), ("latin.xml", "not XML")):
+        res = hycosim("krl", "controller", "--eki", str(tmp_path / name))
+        assert res.returncode == 2 and says in res.stderr and "Traceback" not in res.stderr, res.stderr
 
 
 @pytest.mark.parametrize("args, message", [
@@ -334,3 +340,64 @@ def test_the_controller_executes_each_right_frame_and_rejects_each_wrong_one(str
     else:
         assert len(controller.errors) == rejected + 1 and "dropped before the program ended" in controller.errors[-1]
         assert f"({executed} frames executed)" in controller.errors[-1]
+
+
+@st.composite
+def _eki_files(draw) -> bytes:
+    """An EKI configuration as export writes it, with at most one thing edited: the port, a flag,
+    an element's Tag or Type, a line dropped, or text that is no XML."""
+    text = EkiConfig().to_xml()
+    lines = text.splitlines()
+    what = draw(st.sampled_from([None, "port", "flag", "tag", "type", "line", "text", "bytes"]))
+    junk = st.sampled_from(["", "x", "-1", "0", "65536", "99999999", "²", "1e3", " 7 ", "1025", "9" * 40]) \
+        | st.text(alphabet=st.characters(blacklist_characters='"<>&', blacklist_categories=("Cs",)), max_size=8)
+    if what == "port":
+        text = text.replace("<PORT>54600</PORT>", f"<PORT>{draw(junk)}</PORT>")
+    elif what == "flag":
+        text = text.replace('Set_Flag="1"', f'Set_Flag="{draw(junk)}"')
+    elif what in ("tag", "type"):
+        elements = [i for i, line in enumerate(lines) if "Type=" in line and "RECEIVE" not in line]
+        i = draw(st.sampled_from(elements))
+        key = "Tag" if what == "tag" else "Type"
+        value = draw(st.sampled_from(["Foo/@x", "Robot", "Robot/Pos[", "Robot/Pos/@", "Robot/@T", "Robot//@A1",
+                                      "Robot/Pos/@A7", "REAL", "INT", "BOOL", "DOUBLE"]) | junk)
+        lines[i] = re.sub(f'{key}="[^"]*"', f'{key}="{value}"', lines[i])
+        text = "\n".join(lines)
+    elif what == "line":
+        del lines[draw(st.integers(1, len(lines) - 2))]
+        text = "\n".join(lines)
+    elif what == "text":
+        text = draw(st.text(max_size=40))
+    data = text.encode()
+    if what == "bytes":
+        data = data.replace(b"<IP>", b"<IP>\xff", 1)
+    return data
+
+
+_ANY_FRAME = st.one_of(
+    st.builds(frame, st.lists(st.floats(-400, 400), min_size=6, max_size=6), st.floats(0, 1), st.booleans()),
+    st.just(frame(None)), st.text(max_size=30).map(lambda t: f"<Robot>{t}</Robot>"),
+    st.sampled_from(['<Robot><Pos A1="1"/></Robot>', "<Robot/>", '<Robot><Foo x="1"/></Robot>', "<Robot", "x"]))
+
+
+@given(_eki_files(), st.lists(_ANY_FRAME, max_size=3))
+def test_an_eki_file_is_read_whole_or_refused_by_name_and_its_frames_read_or_rejected(data, frames_text):
+    """What the controller's configuration holds is checked before a frame is read by it: a port
+    and a flag in range, each element an attribute of the frame, with A1-A6 among them; then any
+    frame is read or refused as EkiError (the controller's reason). Before, a Set_Flag or port
+    that was no number, or a file that was no UTF-8 text, ended `hycosim krl controller` in a
+    traceback, and a Tag outside Robot/ raised IndexError out of every frame's reading."""
+    try:
+        config = EkiConfig.parse(data, "cell.eki")
+    except EkiError as exc:
+        assert "cell.eki" in str(exc)
+        return
+    assert 1 <= config.port <= 65535 and 1 <= config.flag <= 1024
+    assert all(typ in ("REAL", "INT", "BOOL", "STRING") and tag.startswith("Robot/") and "/@" in tag
+               for tag, typ in config.elements)
+    assert {f"Robot/Pos/@{a}" for a in AXES} <= {tag for tag, _ in config.elements}
+    for text in frames_text:
+        try:
+            parse_frame(text, config)
+        except EkiError:
+            pass

@@ -116,7 +116,8 @@ class EmulatedController:
         self.scene = scene or SceneParams(rod_length=rod.length, rod_radius=rod.radius, pivot=rod.pivot,
                                           grasp_distance=rod.grasp_distance)
         self.log = structlog.get_logger("krl.controller")
-        self.listener = socket.create_server((host, config.port if port is None else port))
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET  # an IPv6 address needs its family said
+        self.listener = socket.create_server((host, config.port if port is None else port), family=family)
         self.address = self.listener.getsockname()
         self.results: list[ProgramResult] = []
         self.errors: list[str] = []

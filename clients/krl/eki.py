@@ -12,11 +12,16 @@ point is due. A frame whose A1 is empty ends the program, as in the paper's Tabl
 
 from __future__ import annotations
 
+import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
 AXES = ("A1", "A2", "A3", "A4", "A5", "A6")
+# A RECEIVE element hycosim reads: an attribute of the frame's Robot element or of one below it
+# (EKI can also carry an element's text; the frames here carry none).
+_ATTRIBUTE_TAG = re.compile(r"Robot(/[A-Za-z_][A-Za-z0-9_.\-]*)*/@[A-Za-z_][A-Za-z0-9_.\-]*")
+FLAGS = range(1, 1025)  # KRL's $FLAG[1] … $FLAG[1024]
 
 
 class EkiError(ValueError):
@@ -66,7 +71,9 @@ class EkiConfig:
 """
 
     @staticmethod
-    def parse(text: str, source: str = "<eki>") -> "EkiConfig":
+    def parse(text: str | bytes, source: str = "<eki>") -> "EkiConfig":
+        """The configuration in ``text`` (bytes: decoded as the XML declares, UTF-8 by default);
+        EkiError naming ``source`` and what is wrong."""
         try:
             root = ET.fromstring(text)
         except ET.ParseError as exc:
@@ -77,10 +84,10 @@ class EkiConfig:
         external = root.find("CONFIGURATION/EXTERNAL")
         if internal is None or external is None:
             raise EkiError(f"{source}: CONFIGURATION needs EXTERNAL and INTERNAL")
-        try:
-            port = int((internal.findtext("PORT") or external.findtext("PORT") or "").strip())
-        except ValueError:
-            raise EkiError(f"{source}: INTERNAL/PORT is not a port number") from None
+        port_text = (internal.findtext("PORT") or external.findtext("PORT") or "").strip()
+        if not re.fullmatch(r"[0-9]{1,5}", port_text) or not 1 <= int(port_text) <= 65535:
+            raise EkiError(f"{source}: INTERNAL/PORT {port_text[:20]!r} is not a port number (1-65535)")
+        port = int(port_text)
         elements = []
         flag = 1
         for el in root.findall("RECEIVE/XML/ELEMENT"):
@@ -88,11 +95,18 @@ class EkiConfig:
             if tag is None:
                 raise EkiError(f"{source}: RECEIVE element without Tag")
             if el.get("Set_Flag"):
-                flag = int(el.get("Set_Flag"))
+                given = el.get("Set_Flag", "").strip()
+                if not re.fullmatch(r"[0-9]{1,4}", given) or int(given) not in FLAGS:
+                    raise EkiError(f"{source}: element {tag[:60]!r} has Set_Flag {given[:20]!r}, "
+                                   f"not a flag number ({FLAGS.start}-{FLAGS.stop - 1})")
+                flag = int(given)
                 continue
             typ = el.get("Type")
             if typ not in ("REAL", "INT", "BOOL", "STRING"):
-                raise EkiError(f"{source}: element {tag} has Type {typ!r}")
+                raise EkiError(f"{source}: element {tag[:60]!r} has Type {typ!r}")
+            if not _ATTRIBUTE_TAG.fullmatch(tag):
+                raise EkiError(f"{source}: element {tag[:60]!r} is not an attribute of the Robot frame "
+                               "(Robot/…/@NAME), the only values hycosim's frames carry")
             elements.append((tag, typ))
         missing = [a for a in AXES if (f"Robot/Pos/@{a}", "REAL") not in elements]
         if missing:
