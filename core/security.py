@@ -26,12 +26,23 @@ class SecurityError(RuntimeError):
     """Credentials that cannot be read or are incomplete; names the file or user."""
 
 
+def _read_text(path: Path, what: str) -> str:
+    try:
+        return path.read_bytes().decode()
+    except OSError as exc:
+        raise SecurityError(f"{path}: cannot read {what} ({exc.strerror or exc})") from None
+    except UnicodeDecodeError as exc:
+        raise SecurityError(f"{path}: cannot read {what} (not UTF-8 text at byte {exc.start})") from None
+
+
+def read_password(path: Path) -> str:
+    """The password in a file (its first and only line, spaces around it dropped); SecurityError naming the file."""
+    return _read_text(path, "the password").strip()
+
+
 def read_credentials(path: Path) -> dict[str, str]:
     """``user:password`` lines of a Zenoh dictionary file."""
-    try:
-        lines = path.read_text().splitlines()
-    except OSError as exc:
-        raise SecurityError(f"{path}: cannot read credentials ({exc.strerror or exc})") from None
+    lines = _read_text(path, "credentials").splitlines()
     users = {}
     for n, line in enumerate(lines, 1):
         if not line.strip() or line.startswith("#"):
@@ -149,10 +160,7 @@ def node_password(loaded: LoadedProject, node: str, password_file: Path | None) 
     if credentials_path(loaded) is None:
         return None
     if password_file is not None:
-        try:
-            return password_file.read_text().strip()
-        except OSError as exc:
-            raise SecurityError(f"{password_file}: cannot read the password ({exc.strerror or exc})") from None
+        return read_password(password_file)
     if os.environ.get(PASSWORD_ENV):
         return os.environ[PASSWORD_ENV]
     path = credentials_path(loaded)

@@ -407,19 +407,14 @@ def plot(
 
 def _monitor_credentials(endpoint: str, tls_ca: Path | None, password_file: Path | None) -> tuple[dict | None, str | None]:
     """A monitor's TLS settings and password (``status``, ``dashboard``); exit 2 naming what is wrong."""
-    from core.security import SecurityError, ca_settings
+    from core.security import SecurityError, ca_settings, read_password
 
     if endpoint.startswith("tls/") and tls_ca is None:
         err.print(f"[red]error:[/red] {endpoint} is a TLS endpoint: give --tls-ca with the CA that signed "
                   "the server's certificate", highlight=False)
         raise typer.Exit(2)
     try:
-        return (ca_settings(tls_ca) if tls_ca else None,
-                password_file.read_text().strip() if password_file else None)
-    except OSError as exc:
-        err.print(f"[red]error:[/red] {password_file}: cannot read the password ({exc.strerror or exc})",
-                  highlight=False)
-        raise typer.Exit(2) from None
+        return ca_settings(tls_ca) if tls_ca else None, read_password(password_file) if password_file else None
     except SecurityError as exc:
         err.print(f"[red]error:[/red] {exc}", highlight=False)
         raise typer.Exit(2) from None

@@ -106,3 +106,20 @@ def test_status_ignores_answers_that_are_not_a_hycosim_servers(tmp_path):
             q.undeclare()
     assert res.returncode == 3 and "Traceback" not in res.stderr
     assert f"no hycosim server answered on {endpoint}" in res.stderr
+
+
+def test_credential_and_password_files_that_are_no_utf8_text_are_named(tmp_path):
+    """A credentials or password file saved in another encoding (Latin-1 here) is named with where
+    it stops being UTF-8. Before, both ended the command in a UnicodeDecodeError traceback."""
+    from tests.helpers import write_project
+
+    (tmp_path / "creds.txt").write_bytes("server:s\u00e9cret\nclock:c\n".encode("latin-1"))
+    (tmp_path / "pw.txt").write_bytes("w\u00e9".encode("latin-1"))
+    cfg = write_project(tmp_path / "p.json", [{"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]}],
+                        name="secure", security={"credentials": "creds.txt"})
+    server = hycosim("server", str(cfg), "--runs-dir", str(tmp_path / "runs"))
+    status = hycosim("status", "tcp/127.0.0.1:9", "--user", "watcher", "--password-file", str(tmp_path / "pw.txt"))
+    # The server exits 3 as for a missing credentials file: it reads them when it opens its session.
+    for res, code, says in ((server, 3, f"{tmp_path / 'creds.txt'}: cannot read credentials (not UTF-8 text at byte 8)"),
+                            (status, 2, f"{tmp_path / 'pw.txt'}: cannot read the password (not UTF-8 text at byte 1)")):
+        assert res.returncode == code and says in res.stderr and "Traceback" not in res.stderr, res.stderr

@@ -12,10 +12,13 @@ from pathlib import Path
 import pytest
 import yaml
 import zenoh
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from clients.scene_fmus import build_scene_fmus
 from core import frames
 from core.keys import ProjectKeys
+from core.security import SecurityError, read_credentials
 from core.session import client_config
 from tests.helpers import REPO, env, free_endpoint, hycosim, meta, read_rows, reap, spawn, wait_for, write_project
 from tests.netns import hosts, netns_available
@@ -230,6 +233,37 @@ def test_wrong_or_missing_credentials_cannot_attach_and_a_forged_frame_is_droppe
     assert running < len(rows)  # the forger wrote while the run was going on
     assert all(r["g.y"] != "123.0" for r in rows)
     assert all(rows[k]["g.y"] == rows[k - 1]["clock.y"] for k in range(1, len(rows)))
+
+
+_CREDENTIAL_LINES = st.one_of(
+    # (no control characters or Unicode line separators in a password: str.splitlines breaks there)
+    st.tuples(st.sampled_from(["server", "clock", "g", " watcher ", "u\u00e9"]),
+              st.text(st.characters(blacklist_categories=("Cc", "Cs", "Zl", "Zp")), max_size=8))
+    .map(lambda up: f"{up[0]}:{up[1]}"),
+    st.sampled_from(["", "   ", "# a comment", "no colon here", ":no user", "a:b:c"]))
+
+
+@settings(suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(_CREDENTIAL_LINES, max_size=5), st.sampled_from(["\n", "\r\n"]),
+       st.sampled_from(["utf-8", "utf-8", "latin-1"]))
+def test_a_credentials_file_is_read_as_users_and_passwords_or_refused_naming_the_file(tmp_path, lines, end,
+                                                                                     encoding):
+    path = tmp_path / "creds.txt"
+    try:
+        path.write_bytes(end.join(lines).encode(encoding))
+    except UnicodeEncodeError:
+        return
+    try:
+        users = read_credentials(path)
+    except SecurityError as exc:
+        assert str(path) in str(exc)
+        return
+    expected = {}
+    for line in lines:
+        if line.strip() and not line.startswith("#"):
+            user, _, password = line.partition(":")
+            expected[user.strip()] = password.strip()
+    assert users == expected and all(user for user in users)
 
 
 def _pw(tmp_path: Path, password: str) -> Path:
