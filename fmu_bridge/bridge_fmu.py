@@ -28,6 +28,8 @@ from xml.sax.saxutils import quoteattr
 from core.config import CoSimulation, LoadedProject, Node, PortType, gateway_endpoint
 
 TEMPLATE = Path(__file__).with_name("templates") / "bridge_fmu.c"
+# What hycosim_timeout may be (s): every wait has a bound (the C side refuses others; keep in step).
+TIMEOUT_RANGE = (0.001, 1e6)
 _TYPE_CODE = {PortType.REAL: "R", PortType.INTEGER: "I", PortType.BOOLEAN: "B"}
 _XML_TYPE = {PortType.REAL: "Real", PortType.INTEGER: "Integer", PortType.BOOLEAN: "Boolean"}
 
@@ -141,7 +143,8 @@ def model_description(node: Node, guid: str, server: str, timeout_s: float, proj
          f'      <Integer start="{node.UID}"/>\n    </ScalarVariable>'),
         (f'    <ScalarVariable name="hycosim_timeout" valueReference="{vr + 3}" causality="parameter" variability="fixed" '
          f'initial="exact" description="seconds a doStep may wait for the server">\n'
-         f'      <Real start="{float(timeout_s)!r}" unit="s"/>\n    </ScalarVariable>'),
+         f'      <Real start="{float(timeout_s)!r}" unit="s" min="{TIMEOUT_RANGE[0]!r}" max="{TIMEOUT_RANGE[1]!r}"/>\n'
+         '    </ScalarVariable>'),
         (f'    <ScalarVariable name="hycosim_driven" valueReference="{vr + 4}" causality="output" '
          f'variability="discrete" initial="exact" description="true while an event drives this node: over the '
          f'next step it follows its inputs (s_A = g_B(s_B)) instead of its own dynamics">\n'
@@ -226,7 +229,8 @@ def build_bridge_fmu(loaded: LoadedProject, node_name: str, out_dir: Path, serve
     node = project.node(node_name)
     _check_node(node)
     server = server or gateway_endpoint(project)
-    timeout_s = timeout_s or project.coSimulation.attachTimeout + project.coSimulation.stepTimeout
+    timeout_s = min(timeout_s or project.coSimulation.attachTimeout + project.coSimulation.stepTimeout,
+                    TIMEOUT_RANGE[1])
     guid = "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, f"hycosim:{loaded.digest}:{node.nodeName}")) + "}"
     ident = model_identifier(node.nodeName)
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -564,3 +564,21 @@ simulate_fmu({str(fmu)!r}, start_time=0, stop_time=1.0, step_size=0.1, output_in
     assert [r["stepped"] for r in rows[:4]] == ["tool clock", "tool", "tool clock", "tool"]
     # The clock's output holds over its 0.2 s steps; the tool reads it at every base point.
     assert clock_y[:5] == pytest.approx([0.0, 0.0, 0.2, 0.2, 0.4]) and tool_u[:5] == clock_y[:5]
+
+
+@pytest.mark.parametrize("timeout", [0.0, -1.0, 1e300])
+def test_a_bridge_fmu_refuses_a_timeout_that_would_leave_a_wait_without_bound(tmp_path, capsys, timeout):
+    """hycosim_timeout bounds every wait of the FMU on the server. 0 made its socket's waits endless
+    (SO_RCVTIMEO 0), a negative one was not set at all, and 1e300 made the attach deadline
+    undefined: the FMU refuses them when they are set, naming the range. A project whose timeouts
+    add up past the range gives the FMU the range's end, which it takes."""
+    cfg = _project(tmp_path, attachTimeout=1e300)
+    fmu = build_bridge_fmu(load_project(cfg), "tool", tmp_path / "fmus").path
+    assert validate_fmu(str(fmu)) == []
+    start = [v for v in read_model_description(str(fmu)).modelVariables if v.name == "hycosim_timeout"][0]
+    assert float(start.start) == 1e6 and (float(start.min), float(start.max)) == (0.001, 1e6)
+    from fmpy import simulate_fmu
+
+    with pytest.raises(Exception, match="fmi2SetReal failed"):
+        simulate_fmu(str(fmu), start_time=0, stop_time=0.1, step_size=0.1, start_values={"hycosim_timeout": timeout})
+    assert f"hycosim_timeout = {timeout:g} s: give 0.001 to 1e+06 s" in capsys.readouterr().out

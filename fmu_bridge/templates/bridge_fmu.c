@@ -45,6 +45,8 @@ typedef int hy_socket;
 #define HY_VR_NODE (HY_N_VALUES + 1)
 #define HY_VR_UID (HY_N_VALUES + 2)
 #define HY_VR_TIMEOUT (HY_N_VALUES + 3)
+#define HY_MIN_TIMEOUT 0.001 /* s; keep in step with bridge_fmu.TIMEOUT_RANGE */
+#define HY_MAX_TIMEOUT 1e6
 #define HY_VR_DRIVEN (HY_N_VALUES + 4) /* Boolean output: the mode of the last release */
 #define HY_MAGIC "HYCO"
 #define HY_PROTOCOL 1
@@ -367,7 +369,17 @@ FMI2_Export fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference v
 FMI2_Export fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real v[]) {
     Bridge *b = (Bridge *)c;
     for (size_t i = 0; i < n; i++) {
-        if (vr[i] == HY_VR_TIMEOUT) { b->timeout = v[i]; continue; }
+        if (vr[i] == HY_VR_TIMEOUT) {
+            /* Every wait has a bound: 0 would make the socket's waits endless, NaN or 1e300 the
+               deadline undefined. (Written so that NaN fails too.) */
+            if (!(v[i] >= HY_MIN_TIMEOUT && v[i] <= HY_MAX_TIMEOUT)) {
+                logf_(b, fmi2Error, "logStatusError", "hycosim_timeout = %g s: give %g to %g s", v[i], HY_MIN_TIMEOUT,
+                      HY_MAX_TIMEOUT);
+                return fmi2Error;
+            }
+            b->timeout = v[i];
+            continue;
+        }
         if (vr[i] >= HY_N_OUT || check_vr(b, vr[i], 'R', "fmi2SetReal")) {
             logf_(b, fmi2Error, "logStatusError", "fmi2SetReal: value reference %u is not an input", (unsigned)vr[i]);
             return fmi2Error;
