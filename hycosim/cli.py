@@ -9,6 +9,7 @@ failed (timeout, lost node, server gone), 4 an internal error or an invalid FMU 
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import sys
@@ -32,6 +33,13 @@ app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="hycosim: hybrid time/event co-simulation on FMI, relayed over Zenoh.")
 out = Console(soft_wrap=True)
 err = Console(stderr=True, soft_wrap=True)
+
+
+def _finite(value: float | None) -> float | None:
+    """A float option's check: click's ranges let nan through (it compares false with any bound)."""
+    if value is not None and not math.isfinite(value):
+        raise typer.BadParameter(f"{value} is not a finite number")
+    return value
 
 
 def _load(path: Path) -> LoadedProject:
@@ -424,7 +432,8 @@ def _monitor_credentials(endpoint: str, tls_ca: Path | None, password_file: Path
 def status(
     endpoint: str,
     project: Annotated[str, typer.Option(help="project name")] = "*",
-    timeout: Annotated[float, typer.Option(help="seconds to wait for an answer")] = 3.0,
+    timeout: Annotated[float, typer.Option(min=0.1, max=3600.0, callback=_finite,
+                                           help="seconds to wait for an answer")] = 3.0,
     user: Annotated[Optional[str], typer.Option(help="user, when the server requires credentials")] = None,
     password_file: Annotated[Optional[Path], typer.Option(help="that user's password")] = None,
     tls_ca: Annotated[Optional[Path], typer.Option(help="CA certificate (PEM) for a tls/ endpoint")] = None,
@@ -486,7 +495,7 @@ def dashboard(
     user: Annotated[Optional[str], typer.Option(help="user, when the server requires credentials")] = None,
     password_file: Annotated[Optional[Path], typer.Option(help="that user's password")] = None,
     tls_ca: Annotated[Optional[Path], typer.Option(help="CA certificate (PEM) for a tls/ endpoint")] = None,
-    retry: Annotated[float, typer.Option(min=0.05, max=3600.0,
+    retry: Annotated[float, typer.Option(min=0.05, max=3600.0, callback=_finite,
                                          help="seconds between tries to reach a server that does not answer")] = 2.0,
 ) -> None:
     """Watch a running co-simulation, or look through a finished run, in a browser."""
@@ -550,8 +559,10 @@ def import_ssp(
                                                                  "folder beside it)")] = Path("project.json"),
     side: Annotated[Optional[Path], typer.Option(help="JSON with what SSP has no word for: serverIP, events, "
                                                       "asynchronous nodes, coSimulation keys")] = None,
-    step: Annotated[Optional[float], typer.Option(min=0.0, help="the macro step, when the package gives none")] = None,
-    stop: Annotated[Optional[float], typer.Option(help="the stop time, when the package gives none")] = None,
+    step: Annotated[Optional[float], typer.Option(min=0.0, callback=_finite,
+                                                  help="the macro step, when the package gives none")] = None,
+    stop: Annotated[Optional[float], typer.Option(callback=_finite,
+                                                  help="the stop time, when the package gives none")] = None,
 ) -> None:
     """Turn an SSP package into a project JSON to edit and keep: components become nodes,
     connections links, parameter bindings parameters, the default experiment coSimulation."""
@@ -752,14 +763,16 @@ def scene_fmus(output: Annotated[Path, typer.Option("-o", "--output")] = Path("b
 def camera(
     source: Annotated[str, typer.Option(help="'emulated', a video file, or a camera device index")] = "emulated",
     annotate: Annotated[Optional[Path], typer.Option(help="write the frames with the detected rod drawn, .mp4 or .avi")] = None,
-    seconds: Annotated[float, typer.Option(min=0.0, help="how much to process (emulated: simulated seconds)")] = 3.0,
+    seconds: Annotated[float, typer.Option(min=0.0, callback=_finite,
+                                           help="how much to process (emulated: simulated seconds)")] = 3.0,
     calibration: Annotated[Optional[Path], typer.Option(help="calibration JSON (real sources)")] = None,
-    initial_angle: Annotated[float, typer.Option(help="emulated rod's release angle, degrees")] = 45.0,
-    noise: Annotated[float, typer.Option(min=0.0, help="emulated image noise σ (grey levels)")] = 25.0,
-    fps: Annotated[float, typer.Option(min=1.0, help="emulated frame rate")] = 60.0,
+    initial_angle: Annotated[float, typer.Option(callback=_finite,
+                                                 help="emulated rod's release angle, degrees")] = 45.0,
+    noise: Annotated[float, typer.Option(min=0.0, callback=_finite,
+                                         help="emulated image noise σ (grey levels)")] = 25.0,
+    fps: Annotated[float, typer.Option(min=1.0, max=1000.0, callback=_finite, help="emulated frame rate")] = 60.0,
 ) -> None:
     """Run the camera node alone: detect the rod in each frame and summarise (and annotate)."""
-    import math
 
     import cv2
     import numpy as np
@@ -972,12 +985,11 @@ def krl_controller(
     eki: Annotated[Path, typer.Option(help="the EKI configuration (port, RECEIVE elements)")],
     port: Annotated[Optional[int], typer.Option(min=1, max=65535, help="override the EKI file's port")] = None,
     host: Annotated[str, typer.Option(help="address to listen on")] = "127.0.0.1",
-    length: Annotated[float, typer.Option(min=0.05, help="physical rod length (m)")] = 0.6,
-    angle: Annotated[float, typer.Option(help="physical rod release angle (deg)")] = 40.0,
+    length: Annotated[float, typer.Option(min=0.05, callback=_finite, help="physical rod length (m)")] = 0.6,
+    angle: Annotated[float, typer.Option(callback=_finite, help="physical rod release angle (deg)")] = 40.0,
     programs: Annotated[int, typer.Option(min=0, help="stop after this many programs (0: run until stopped)")] = 0,
 ) -> None:
     """Listen as the robot's EKI endpoint and execute programs against the emulated physical rod."""
-    import math
 
     from clients.krl.controller import EmulatedController
     from clients.krl.eki import EkiConfig, EkiError

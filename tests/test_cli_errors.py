@@ -18,6 +18,12 @@ GRASP = str(REPO / "configs" / "grasp.json")
     (["krl", "controller", "--eki", "{missing}/eki.xml"], "{missing}/eki.xml: cannot read"),
     (["scene", "fmus", "-o", "{file}/fmus"], "{file}/fmus: cannot write the FMUs there"),
     (["scene", "reach", GRASP, "-o", "{missing}/reach.png"], "{missing}/reach.png: No such file or directory"),
+    # A negative timeout waited for good, nan ended in a traceback; click's ranges let nan through.
+    (["status", "tcp/127.0.0.1:9", "--timeout", "-1"], "'--timeout'"),
+    (["status", "tcp/127.0.0.1:9", "--timeout", "nan"], "'--timeout'"),
+    (["camera", "--initial-angle", "nan"], "nan is not a finite number"),
+    (["camera", "--fps", "inf"], "'--fps'"),
+    (["krl", "controller", "--eki", "{missing}/eki.xml", "--angle", "inf"], "inf is not a finite number"),
 ])
 def test_bad_arguments_are_named(tmp_path, args, message):
     (tmp_path / "a-file").write_text("not a folder")
