@@ -192,6 +192,9 @@ class StepControl(_Strict):
     maxStep: float = Field(gt=0)
 
 
+MAX_WAIT_S = 1e6  # about 11 days: the longest wall-clock wait a project may ask for
+
+
 class CoSimulation(_Strict):
     # Infinity or NaN in a time would make a run endless or its comparisons meaningless.
     model_config = ConfigDict(allow_inf_nan=False)
@@ -200,11 +203,13 @@ class CoSimulation(_Strict):
     stopTime: float = Field(default=1.0)
     # false: as fast as possible; true or a factor: wall time = simulated time * factor.
     realTime: bool | float = False
-    stepTimeout: float = Field(default=10.0, gt=0)
+    # Wall-clock waits (s), bounded: Zenoh takes its connect timeout in whole milliseconds as a
+    # 64-bit integer, and a wait of years is a typo.
+    stepTimeout: float = Field(default=10.0, gt=0, le=MAX_WAIT_S)
     # Locate guard crossings to within this many seconds by rolling steps back (when every
     # stepping node can save and restore its state); None: fixed macro steps.
     eventTolerance: float | None = Field(default=None, gt=0)
-    attachTimeout: float = Field(default=30.0, gt=0)
+    attachTimeout: float = Field(default=30.0, gt=0, le=MAX_WAIT_S)
     # Take a checkpoint of the whole co-simulation every this many seconds of simulated time
     # (at the first macro-step point at or after each multiple, and at the start). A node
     # process that dies is then started again and the run goes on from the last checkpoint;
@@ -212,7 +217,7 @@ class CoSimulation(_Strict):
     checkpointEvery: float | None = Field(default=None, gt=0)
     # A node (or the server) whose link drops may come back within this many seconds and
     # the run resumes without losing a step; 0: a lost node stops the run at once.
-    linkGrace: float = Field(default=0.0, ge=0)
+    linkGrace: float = Field(default=0.0, ge=0, le=MAX_WAIT_S)
     # Zenoh's low-latency unicast transport: about 1.5x the macro steps/s of the standard one
     # on loopback, but it cannot fragment, so every frame must stay within
     # core.session.LOW_LATENCY_MAX_FRAME bytes. false: standard transport, any size.

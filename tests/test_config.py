@@ -159,6 +159,9 @@ CASES = {
                                              "coSimulation.eventTolerance", "not smaller than stepSize 0.01 s"),
     "bad port type": (lambda d: d["nodeLists"][1].update(input=[{"name": "u", "type": "Float"}]),
                       "nodeLists[1].input[0].type", "Input should be"),
+    # Zenoh took it in whole milliseconds as a 64-bit integer: a Json5Err of 300 digits in each node.
+    "a wait of ages": (lambda d: d.update(coSimulation={"attachTimeout": 1e300}), "coSimulation.attachTimeout",
+                       "less than or equal to 1000000"),
 }
 
 
