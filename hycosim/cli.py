@@ -848,7 +848,7 @@ def train(
     eval_trials: Annotated[int, typer.Option(min=1, help="evaluation episodes per release angle")] = 10,
     select_trials: Annotated[int, typer.Option(min=0, help="episodes per angle to choose best.pt on at the end "
                                                "(0: the periodic evaluations choose)")] = 50,
-    seed: Annotated[int, typer.Option()] = 0,
+    seed: Annotated[int, typer.Option(min=0, max=2**31 - 1, help="seed of the networks, the noise and the episodes")] = 0,
     ship: Annotated[Optional[Path], typer.Option(help="also write a small copy of the best checkpoint here")] = None,
 ) -> None:
     """Train the DDPG grasp policy (demonstrations, behaviour cloning, DDPG); resumes from OUTPUT/last.pt."""
@@ -922,8 +922,9 @@ def train(
 def evaluate(
     checkpoints: Annotated[list[Path], typer.Argument(help="policy checkpoints (.pt) to evaluate on the same episodes")],
     trials: Annotated[int, typer.Option(min=1, help="episodes per release angle")] = 100,
-    workers: Annotated[int, typer.Option(min=1, help="processes to spread the episodes over")] = 2,
-    seed: Annotated[int, typer.Option(help="first episode seed (the release phase and side are random)")] = 10_000,
+    workers: Annotated[int, typer.Option(min=1, max=256, help="processes to spread the episodes over")] = 2,
+    seed: Annotated[int, typer.Option(min=0, max=2**31 - 1,
+                                      help="first episode seed (the release phase and side are random)")] = 10_000,
     json_out: Annotated[Optional[Path], typer.Option("--json", help="also write the figures here")] = None,
 ) -> None:
     """Evaluate policy checkpoints in the training environment: per release angle, success, grasps

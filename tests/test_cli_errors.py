@@ -24,6 +24,7 @@ GRASP = str(REPO / "configs" / "grasp.json")
     (["camera", "--initial-angle", "nan"], "nan is not a finite number"),
     (["camera", "--fps", "inf"], "'--fps'"),
     (["krl", "controller", "--eki", "{missing}/eki.xml", "--angle", "inf"], "inf is not a finite number"),
+    (["train", "--seed", "-5", "-o", "{tmp}/train"], "'--seed'"),  # numpy's error, not naming it, after setup
 ])
 def test_bad_arguments_are_named(tmp_path, args, message):
     (tmp_path / "a-file").write_text("not a folder")
