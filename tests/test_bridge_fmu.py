@@ -23,11 +23,15 @@ from tests.helpers import REPO, column, env, hycosim, meta, read_rows, reap, spa
 FMI_HEADERS = Path(__import__("fmpy").__file__).parent / "c-code"
 
 
-def _project(tmp_path: Path, stop: float = 1.0, **cosim) -> Path:
+def _project(tmp_path: Path, stop: float = 1.0, tool_step: float | None = None, **cosim) -> Path:
+    """The bridge FMU's node ``tool`` (stepping every ``tool_step`` s, if given) reading a clock."""
     settings = {"stepSize": 0.1, "stopTime": stop, "attachTimeout": 30.0, "stepTimeout": 10.0}
     settings.update(cosim)
+    tool = {"nodeName": "tool", "UID": 7, "input": ["u"], "output": [{"name": "y", "unit": "m", "start": 1.5}]}
+    if tool_step is not None:
+        tool["stepSize"] = tool_step
     cfg = write_project(tmp_path / "p.json", [
-        {"nodeName": "tool", "UID": 7, "input": ["u"], "output": [{"name": "y", "unit": "m", "start": 1.5}]},
+        tool,
         {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
     ], [{"from": "clock.y", "to": "tool.u"}], cosim=settings, name="bridge")
     doc = json.loads(cfg.read_text())
@@ -425,10 +429,7 @@ def test_a_bridge_fmu_slower_than_the_base_step_steps_at_its_own_rate(tmp_path):
     size, and answers each with the label the server expects. Before, the gateway dropped the
     clock's releases as malformed, and the run timed out at step 4. The importer is given no
     times: the FMU's default experiment is the run's, with the node's step."""
-    cfg = _project(tmp_path)
-    doc = json.loads(cfg.read_text())
-    doc["nodeLists"][0]["stepSize"] = 0.2
-    cfg.write_text(json.dumps(doc))
+    cfg = _project(tmp_path, tool_step=0.2)
     fmu = build_bridge_fmu(load_project(cfg), "tool", tmp_path / "fmus").path
     server, clock = _start(cfg, tmp_path / "run")
     experiment = read_model_description(str(fmu)).defaultExperiment
@@ -457,10 +458,7 @@ def test_a_bridge_fmus_last_step_cut_at_the_stop_time_is_the_releases_step(tmp_p
     doStep's h against the release's, not START's 0.3 s, and its last successful time is where
     the release ended. Before, it warned "doStep h=0.1 but the co-simulation step is 0.3" and
     said 1.2 s."""
-    cfg = _project(tmp_path)
-    doc = json.loads(cfg.read_text())
-    doc["nodeLists"][0]["stepSize"] = 0.3
-    cfg.write_text(json.dumps(doc))
+    cfg = _project(tmp_path, tool_step=0.3)
     fmu = build_bridge_fmu(load_project(cfg), "tool", tmp_path / "fmus").path
     server, clock = _start(cfg, tmp_path / "run")
     script = f"""
