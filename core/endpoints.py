@@ -14,6 +14,7 @@ port + 1 of the same host, which other Zenoh link kinds (unixsock, udp) do not g
 from __future__ import annotations
 
 import re
+import socket
 from dataclasses import dataclass
 
 SERVER_PORT = 7447
@@ -97,6 +98,12 @@ def _address(rest: str, default_port: int, text: str) -> Address:
         if len(host) > 253 or not _HOST.fullmatch(host):
             raise EndpointError(f"{text!r}: {host!r} is not a host name or IP address; write {FORMS}")
     return Address(host, _port(text, port_text, default_port))
+
+
+def listen_family(host: str) -> socket.AddressFamily:
+    """The socket family to listen on ``host`` with: IPv6 for an IPv6 address (which Address
+    keeps without its brackets), IPv4 for anything else (a name resolves to IPv4 here)."""
+    return socket.AF_INET6 if ":" in host else socket.AF_INET
 
 
 def gateway_beside(server: Endpoint) -> Address:

@@ -28,6 +28,7 @@ from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from core import json_text
+from core.endpoints import listen_family
 from dashboard.changes import Watchers
 
 STATIC = Path(__file__).resolve().parent / "static"
@@ -153,7 +154,7 @@ def make_app(source: Source) -> Starlette:
 
 def bind(host: str, port: int) -> socket.socket:
     """The listening socket (port 0: any free one); OSError if the address cannot be had."""
-    sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET, socket.SOCK_STREAM)
+    sock = socket.socket(listen_family(host), socket.SOCK_STREAM)
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     try:
         sock.bind((host, port))

@@ -25,7 +25,7 @@ import zenoh
 from core import frames
 from fmu_bridge import gateway_protocol as gp
 from core.config import WIRE_TYPES, Node, PortType
-from core.endpoints import Address
+from core.endpoints import Address, listen_family
 from core.keys import ProjectKeys
 from core.session import token_held
 
@@ -125,10 +125,8 @@ class Gateway:
         self._started = threading.Event()  # START sent: a bridge FMU attaching now is too late
         self._handshakes = threading.BoundedSemaphore(_MAX_HANDSHAKES)
         self._log = structlog.get_logger("server.gateway")
-        # An IPv6 address (endpoints.Address keeps it without brackets) needs its family said.
-        family = socket.AF_INET6 if ":" in host else socket.AF_INET
         try:
-            self._listener = socket.create_server((host, port), family=family, reuse_port=False)
+            self._listener = socket.create_server((host, port), family=listen_family(host), reuse_port=False)
         except OSError as exc:
             raise GatewayError(f"cannot listen for bridge FMUs on {Address(host, port)}: {exc.strerror or exc}") from None
         self.address = str(Address(host, self._listener.getsockname()[1]))

@@ -27,6 +27,7 @@ from clients.krl.eki import EkiConfig, EkiError, parse_frame
 from clients.robot import kr6
 from clients.robot.scene import RobotScene, SceneParams
 from clients.rod.model import RodModel, RodParams
+from core.endpoints import listen_family
 
 TICK = 0.001  # s: the controller's interpolation cycle, emulated
 # A frame's T is a $TIMER value the program waits for. The emulation runs the wait tick by
@@ -116,8 +117,8 @@ class EmulatedController:
         self.scene = scene or SceneParams(rod_length=rod.length, rod_radius=rod.radius, pivot=rod.pivot,
                                           grasp_distance=rod.grasp_distance)
         self.log = structlog.get_logger("krl.controller")
-        family = socket.AF_INET6 if ":" in host else socket.AF_INET  # an IPv6 address needs its family said
-        self.listener = socket.create_server((host, config.port if port is None else port), family=family)
+        self.listener = socket.create_server((host, config.port if port is None else port),
+                                             family=listen_family(host))
         self.address = self.listener.getsockname()
         self.results: list[ProgramResult] = []
         self.errors: list[str] = []
