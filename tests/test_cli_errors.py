@@ -18,7 +18,7 @@ GRASP = str(REPO / "configs" / "grasp.json")
     (["krl", "controller", "--eki", "{missing}/eki.xml"], "{missing}/eki.xml: cannot read"),
     (["scene", "fmus", "-o", "{file}/fmus"], "{file}/fmus: cannot write the FMUs there"),
     (["scene", "reach", GRASP, "-o", "{missing}/reach.png"], "{missing}/reach.png: No such file or directory"),
-    # A negative timeout waited for good, nan ended in a traceback; click's ranges let nan through.
+    # A negative timeout waited for good, nan ended in a traceback; without a bound nan and inf pass.
     (["status", "tcp/127.0.0.1:9", "--timeout", "-1"], "'--timeout'"),
     (["status", "tcp/127.0.0.1:9", "--timeout", "nan"], "'--timeout'"),
     (["camera", "--initial-angle", "nan"], "nan is not a finite number"),
