@@ -13,7 +13,9 @@ without the reading thread going to sleep and being woken again, which on a smal
 machine costs more than the rest of a macro step's Python. The number of polls adapts:
 it doubles when polling caught a sample and halves when the thread had to block, down
 to none, with a short probe every so often; so a process that waits long for each frame
-(slow peers, real-time pacing) soon stops polling.
+(slow peers, real-time pacing) soon stops polling. Polling also ends after a millisecond,
+however many polls are left: on a loaded machine each yield may give the core away for
+long, and unbounded polling would then never block.
 
 Injected payloads come back under the key :data:`LOCAL`, which no Zenoh sample can have.
 They travel as session-local puts on ``local_key`` prefixed with a secret drawn per inbox:
@@ -47,6 +49,10 @@ _TICK = 0.25  # the longest the reading thread stays out of Python (Ctrl-C)
 _PROBE = 8
 _PROBE_EVERY = 16
 _POLLS_MAX = 400
+# Polling pays while it is shorter than a sleep and wake-up (tens of µs). On a loaded
+# machine one sched_yield can hand the core away for milliseconds, and 400 of them then
+# cover any wait: the reader would never block, and never learn that its peers are slow.
+_POLL_BUDGET_S = 0.001
 
 
 class Inbox:
@@ -157,6 +163,7 @@ class Inbox:
             self._idle_waits += 1
             if self._idle_waits % _PROBE_EVERY == 0:
                 polls = _PROBE
+        until = time.perf_counter() + _POLL_BUDGET_S
         for _ in range(polls):
             os.sched_yield()
             sample = self._sub.try_recv()
@@ -164,6 +171,8 @@ class Inbox:
                 self._polls = min(_POLLS_MAX, max(_PROBE, 2 * polls))
                 waits["polled"] += 1
                 return sample
+            if time.perf_counter() > until:
+                break
         self._polls = polls // 2 if polls > _PROBE else 0
         waits["slept"] += 1
         return self._sub.recv()

@@ -63,13 +63,15 @@ class _Scripted:
     adaptation rule is checked against a script instead, behind a real Inbox.
     """
 
-    def __init__(self, empties: list[int]):
+    def __init__(self, empties: list[int], empty_s: float = 0.0):
         self.empties, self.blocked, self.tries = list(empties), 0, 0
+        self.empty_s = empty_s  # how long an empty poll takes: a yield on a loaded machine
 
     def try_recv(self):
         self.tries += 1
         if self.empties and self.empties[0] > 0:
             self.empties[0] -= 1
+            time.sleep(self.empty_s)
             return None
         if self.empties:
             self.empties.pop(0)
@@ -90,10 +92,10 @@ class _Sample:
     payload = zenoh.ZBytes(b"x")
 
 
-def _scripted_inbox(router, poll: bool, empties: list[int]) -> tuple[Inbox, _Scripted]:
+def _scripted_inbox(router, poll: bool, empties: list[int], empty_s: float = 0.0) -> tuple[Inbox, _Scripted]:
     inbox = Inbox(router, "t/up/**", "t/up/local", poll=poll)
     inbox._sub.undeclare()
-    inbox._sub = script = _Scripted(empties)
+    inbox._sub = script = _Scripted(empties, empty_s)
     return inbox, script
 
 
@@ -122,6 +124,14 @@ def test_polls_follow_how_soon_frames_come_and_stop_when_waits_are_long():
         for _ in range(15):
             assert inbox.recv(timeout=1.0) == ("t/up/a", b"x")
         assert inbox.waits == {"queued": 10, "polled": 5, "slept": 0}
+        inbox.close()
+        # Polls that each give the core away for half a millisecond: the reader blocks after
+        # a millisecond of them, though its 8 polls would have caught each frame at the 7th.
+        inbox, script = _scripted_inbox(router, True, [6] * 20, empty_s=0.0005)
+        for _ in range(20):
+            assert inbox.recv(timeout=1.0) == ("t/up/a", b"x")
+        assert script.blocked == 20 and inbox.waits == {"queued": 0, "polled": 0, "slept": 20}
+        assert script.tries <= 20 + 2 * 4  # one look a wait; at most 3 polls at the first wait and a probe
         inbox.close()
         # A blocking reader never polls.
         inbox, script = _scripted_inbox(router, False, [3] * 20)
