@@ -289,6 +289,7 @@ def run(
     dashboard_port: Annotated[int, typer.Option(min=0, max=65535, help="the dashboard's port on 127.0.0.1")] = 8050,
 ) -> None:
     """Run the server and every node as local processes on loopback (FILE: a project JSON or an SSP package)."""
+    from core.security import SecurityError, router_security
     from hycosim.embedded import run_embedded
     from server.report import summarise
 
@@ -301,6 +302,12 @@ def run(
     if dashboard and loaded.project.security is not None and loaded.project.security.credentials:
         err.print("[red]error:[/red] --dashboard: this project's server requires credentials; attach a dashboard "
                   "with its own: hycosim dashboard ENDPOINT --user NAME --password-file FILE", highlight=False)
+        raise typer.Exit(2)
+    try:
+        # The server reads these again; read here, a missing file is named before a run directory is made.
+        router_security(loaded, listen or "")
+    except SecurityError as exc:
+        err.print(f"[red]error:[/red] {escape(str(exc))}", highlight=False)
         raise typer.Exit(2)
     result = run_embedded(loaded, file, listen=listen, runs_dir=runs_dir, console=err, show_progress=progress,
                           restarts=restarts, resume=resume, dashboard_port=dashboard_port if dashboard else None)
@@ -1149,7 +1156,9 @@ def main() -> None:
             raise
         # The last resort for a file a command could not read or write (an output folder
         # that cannot be made, a PNG path in a missing folder): name it instead of a traceback.
-        err.print(f"[red]error:[/red] {exc.filename}: {exc.strerror or exc}", highlight=False)
+        # mkdir(exist_ok=True) on a file says only "File exists", which reads as no error
+        why = "exists and is not a folder" if isinstance(exc, FileExistsError) else exc.strerror or exc
+        err.print(f"[red]error:[/red] {exc.filename}: {why}", highlight=False)
         sys.exit(2)
 
 

@@ -16,7 +16,7 @@ import structlog
 from core import json_text, logs, signals
 from core.config import LoadedProject, gateway_address, server_endpoint
 from core.endpoints import GATEWAY_PORT, EndpointError, parse_address, parse_endpoint
-from core.security import router_security
+from core.security import SecurityError, router_security
 from core.session import open_session, router_config
 
 from server import checkpoints
@@ -97,8 +97,8 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
           gateway: str | None = None, resume: Path | None = None) -> tuple[int, Path | None, str]:
     """Run one co-simulation as its server; return (exit code, run directory, message).
 
-    Addresses are checked before anything is written: one that cannot be used gives
-    exit code 2 and no run directory. ``resume``: go on with the run in that directory, whose
+    Addresses and the credentials and certificate files are checked before anything is
+    written: one that cannot be used gives exit code 2 and no run directory. ``resume``: go on with the run in that directory, whose
     server died, from its last complete checkpoint (exit code 2 if it cannot be).
     """
     def done(code: int, run_dir: Path | None, message: str) -> tuple[int, Path | None, str]:
@@ -117,6 +117,12 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     except EndpointError as exc:
         return done(2, None, f"{'--gateway' if gateway else 'gatewayIP'}: {exc}")
     gateway_required = bool(gateway or loaded.project.gatewayIP)
+    try:
+        # Read before the run directory is made: a missing or unreadable credentials or
+        # certificate file is bad input (exit 2), like an address, not a failed run.
+        security = router_security(loaded, endpoint)
+    except SecurityError as exc:
+        return done(2, None, str(exc))
     resume_at, recorded = None, None
     if resume is not None:
         try:
@@ -130,7 +136,8 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         else:
             run_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        return done(2, None, f"{exc.filename or run_dir or runs_dir}: {exc.strerror or exc}")
+        why = "exists and is not a folder" if isinstance(exc, FileExistsError) else exc.strerror or exc
+        return done(2, None, f"{exc.filename or run_dir or runs_dir}: {why}")
     logs.configure(run_dir / "server.log.jsonl")
     log = structlog.get_logger("server")
     meta: dict[str, Any] = {
@@ -157,12 +164,12 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         def on_progress(p: Any) -> None:
             print(json.dumps({"progress": asdict(p), "run_dir": str(run_dir)}), flush=True)
     try:
-        session = open_session(router_config(endpoint, security=router_security(loaded, endpoint),
+        session = open_session(router_config(endpoint, security=security,
                                              low_latency=loaded.project.coSimulation.lowLatency), endpoint)
     except KeyboardInterrupt as exc:
         recorder.close("interrupted", reason=f"{signals.describe(exc)} before the run started")
         return done(signals.exit_code(exc), run_dir, f"{signals.describe(exc)} before the run started")
-    except Exception as exc:  # SecurityError or ConnectError, both with their own message
+    except Exception as exc:  # ConnectError (or what Zenoh made of the security settings), with its message
         recorder.close("failed", reason=str(exc))
         return done(3, run_dir, str(exc))
     relay = Relay(loaded, session, recorder, progress_every_s=0.1, on_progress=on_progress,

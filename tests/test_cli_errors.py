@@ -125,8 +125,29 @@ def test_credential_and_password_files_that_are_no_utf8_text_are_named(tmp_path)
     cfg = write_project(tmp_path / "p.json", [{"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]}],
                         name="secure", security={"credentials": "creds.txt"})
     server = hycosim("server", str(cfg), "--runs-dir", str(tmp_path / "runs"))
+    run = hycosim("run", str(cfg), "--runs-dir", str(tmp_path / "runs"), "--no-progress")
     status = hycosim("status", "tcp/127.0.0.1:9", "--user", "watcher", "--password-file", str(tmp_path / "pw.txt"))
-    # The server exits 3 as for a missing credentials file: it reads them when it opens its session.
-    for res, code, says in ((server, 3, f"{tmp_path / 'creds.txt'}: cannot read credentials (not UTF-8 text at byte 8)"),
-                            (status, 2, f"{tmp_path / 'pw.txt'}: cannot read the password (not UTF-8 text at byte 1)")):
-        assert res.returncode == code and says in res.stderr and "Traceback" not in res.stderr, res.stderr
+    creds = f"{tmp_path / 'creds.txt'}: cannot read credentials (not UTF-8 text at byte 8)"
+    for res, says in ((server, creds), (run, creds),
+                      (status, f"{tmp_path / 'pw.txt'}: cannot read the password (not UTF-8 text at byte 1)")):
+        assert res.returncode == 2 and says in res.stderr and "Traceback" not in res.stderr, res.stderr
+    # Bad input, read before anything is written: no run directory is left behind.
+    assert not (tmp_path / "runs").exists()
+    (tmp_path / "creds.txt").unlink()
+    for args in (("server",), ("run", "--no-progress")):
+        res = hycosim(*args, str(cfg), "--runs-dir", str(tmp_path / "runs"))
+        assert res.returncode == 2 and f"{tmp_path / 'creds.txt'}" in res.stderr and "Traceback" not in res.stderr
+    assert not (tmp_path / "runs").exists()
+
+
+def test_a_runs_dir_that_is_a_file_is_named_as_no_folder(tmp_path):
+    from tests.helpers import write_project
+
+    cfg = write_project(tmp_path / "p.json", [{"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]}])
+    (tmp_path / "runs").write_text("a file")
+    for args in (("server", str(cfg), "--runs-dir"), ("run", str(cfg), "--no-progress", "--runs-dir"),
+                 ("server", str(cfg), "--run-dir")):
+        res = hycosim(*args, str(tmp_path / "runs"))
+        assert res.returncode == 2, res.stderr
+        assert f"{tmp_path / 'runs'}: exists and is not a folder" in res.stderr and "Traceback" not in res.stderr
+    assert (tmp_path / "runs").read_text() == "a file"

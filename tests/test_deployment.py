@@ -349,5 +349,6 @@ def test_tls_settings_that_cannot_work_are_refused_naming_the_key_or_file(tmp_pa
     (tmp_path / "server.pem").write_text("not a certificate")
     cfg.write_text(json.dumps(doc))
     res = hycosim("server", str(cfg), "--run-dir", str(tmp_path / "run"), timeout=60)
-    assert res.returncode == 3 and "server.pem: the server certificate is not a PEM file" in res.stderr, res.stderr
+    assert res.returncode == 2 and "server.pem: the server certificate is not a PEM file" in res.stderr, res.stderr
+    assert not (tmp_path / "run").exists()  # read before anything is written
     assert "Traceback" not in res.stderr
