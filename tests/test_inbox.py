@@ -204,7 +204,8 @@ def test_the_watchdog_sleeps_between_deadlines_and_keeps_short_ones():
             assert inbox.recv(timeout=5.0) == (LOCAL, b"event")  # the watchdog now aims at ~0.25 s
             t0 = time.monotonic()
             assert inbox.recv(timeout=0.03) is None
-            assert 0.03 <= time.monotonic() - t0 < 0.15
+            # not at the watchdog's wake 0.25 s on; the margin is for a loaded machine's scheduling
+            assert 0.03 <= time.monotonic() - t0 < 0.2
     finally:
         inbox.close()
         client.close()
