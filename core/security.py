@@ -35,22 +35,51 @@ def _read_text(path: Path, what: str) -> str:
         raise SecurityError(f"{path}: cannot read {what} (not UTF-8 text at byte {exc.start})") from None
 
 
+# What Zenoh's dictionary reader trims around a line, a user and a password: Rust's
+# char::is_whitespace (Unicode White_Space). Python's str.strip also drops \x1c-\x1f,
+# which Zenoh keeps, so a password ending in one would not match.
+_ZENOH_SPACE = ("\t\n\x0b\x0c\r \x85\xa0\u1680" + "".join(map(chr, range(0x2000, 0x200B)))
+                + "\u2028\u2029\u202f\u205f\u3000")
+
+
 def read_password(path: Path) -> str:
-    """The password in a file (its first and only line, spaces around it dropped); SecurityError naming the file."""
-    return _read_text(path, "the password").strip()
+    """The password in a file: its one line, the spaces around it dropped as Zenoh drops them
+    in a dictionary file; SecurityError naming the file if it is unreadable, empty or has more."""
+    password = _read_text(path, "the password").strip(_ZENOH_SPACE)
+    if not password:
+        raise SecurityError(f"{path}: holds no password")
+    if "\n" in password or "\r" in password:
+        raise SecurityError(f"{path}: holds more than one line; a password is one line")
+    return password
 
 
 def read_credentials(path: Path) -> dict[str, str]:
-    """``user:password`` lines of a Zenoh dictionary file."""
-    lines = _read_text(path, "credentials").splitlines()
+    """The users and passwords of a Zenoh dictionary file, read as Zenoh 1.x reads it: lines
+    split at ``\n`` (a ``\r`` before it dropped), blank lines skipped, ``user:password`` split
+    at the first colon, each side trimmed, neither empty. SecurityError naming the file and
+    line where Zenoh would refuse the file, or read it otherwise than its author meant:
+    Zenoh has no comments (``# a:b`` would be a user ``# a``) and keeps a byte-order mark
+    as part of the first user's name."""
+    text = _read_text(path, "credentials")
+    if text.startswith("\ufeff"):
+        raise SecurityError(f"{path}: starts with a byte-order mark, which Zenoh reads as part of the first "
+                            "user's name; save it as UTF-8 without one")
     users = {}
-    for n, line in enumerate(lines, 1):
-        if not line.strip() or line.startswith("#"):
+    for n, raw in enumerate(text.split("\n"), 1):
+        line = raw.removesuffix("\r").strip(_ZENOH_SPACE)
+        if not line:
             continue
+        if line.startswith("#"):
+            raise SecurityError(f"{path}:{n}: a Zenoh dictionary file has no comments; remove the line")
         user, sep, password = line.partition(":")
-        if not sep or not user:
+        user, password = user.strip(_ZENOH_SPACE), password.strip(_ZENOH_SPACE)
+        if not sep:
             raise SecurityError(f"{path}:{n}: expected 'user:password'")
-        users[user.strip()] = password.strip()
+        if not user:
+            raise SecurityError(f"{path}:{n}: no user before the colon")
+        if not password:
+            raise SecurityError(f"{path}:{n}: user {user!r} has no password")
+        users[user] = password
     return users
 
 
