@@ -70,6 +70,7 @@ class Inbox:
         self._last_wake = 0.0
         self._poll = poll
         self._polls = _PROBE if poll else 0
+        self._poll_budget_s = _POLL_BUDGET_S
         self._idle_waits = 0
         self._waits = {"queued": 0, "polled": 0, "slept": 0}
         self._closed = False
@@ -163,7 +164,7 @@ class Inbox:
             self._idle_waits += 1
             if self._idle_waits % _PROBE_EVERY == 0:
                 polls = _PROBE
-        until = time.perf_counter() + _POLL_BUDGET_S
+        until = time.perf_counter() + self._poll_budget_s
         for _ in range(polls):
             os.sched_yield()
             sample = self._sub.try_recv()
