@@ -138,6 +138,11 @@ def test_credential_and_password_files_that_are_no_utf8_text_are_named(tmp_path)
         res = hycosim(*args, str(cfg), "--runs-dir", str(tmp_path / "runs"))
         assert res.returncode == 2 and f"{tmp_path / 'creds.txt'}" in res.stderr and "Traceback" not in res.stderr
     assert not (tmp_path / "runs").exists()
+    # A password file Zenoh could not match against any dictionary line: empty, or two lines.
+    for text, says in (("  \n", "holds no password"), ("pw\nmore\n", "holds more than one line")):
+        (tmp_path / "pw.txt").write_text(text)
+        res = hycosim("status", "tcp/127.0.0.1:9", "--user", "watcher", "--password-file", str(tmp_path / "pw.txt"))
+        assert res.returncode == 2 and f"{tmp_path / 'pw.txt'}: {says}" in res.stderr, res.stderr
 
 
 def test_a_runs_dir_that_is_a_file_is_named_as_no_folder(tmp_path):
