@@ -11,6 +11,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
+from core.folders import make_folder
 from fmu_bridge import model_fmu
 from fmu_bridge.model_fmu import build_model_fmu
 
@@ -21,7 +22,7 @@ _PACKAGED = ("__init__.py", "rod/__init__.py", "rod/model.py", "robot/__init__.p
 
 def build_scene_fmus(out_dir: Path) -> dict[str, Path]:
     """Write ``Rod.fmu`` and ``RobotScene6.fmu`` into ``out_dir``; return their paths."""
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(out_dir)
     # Built beside the destination and renamed into it: two builds at once (two trials
     # commands, two test processes on a fresh clone) each leave a whole FMU, and one that
     # reads the FMU meanwhile never opens half a zip.

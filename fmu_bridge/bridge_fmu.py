@@ -26,6 +26,7 @@ from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
 from core.config import CoSimulation, LoadedProject, Node, PortType, gateway_endpoint
+from core.folders import make_folder
 
 TEMPLATE = Path(__file__).with_name("templates") / "bridge_fmu.c"
 # What hycosim_timeout may be (s): every wait has a bound (the C side refuses others; keep in step).
@@ -208,7 +209,7 @@ def _compile(sources: Path, out: Path, node: str) -> None:
     cc = shutil.which("gcc") or shutil.which("cc")
     if cc is None:
         raise BridgeBuildError(f"node {node!r}: no C compiler (gcc or cc) on PATH")
-    out.parent.mkdir(parents=True, exist_ok=True)
+    make_folder(out.parent)
     cmd = [cc, "-shared", "-fPIC", "-O2", "-std=c99", "-D_POSIX_C_SOURCE=200112L", "-fvisibility=hidden",
            "-Wall", "-Wextra", "-Werror", f"-I{sources}", "-o", str(out), str(sources / "bridge_fmu.c")]
     res = subprocess.run(cmd, capture_output=True, text=True)
@@ -233,7 +234,7 @@ def build_bridge_fmu(loaded: LoadedProject, node_name: str, out_dir: Path, serve
                     TIMEOUT_RANGE[1])
     guid = "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, f"hycosim:{loaded.digest}:{node.nodeName}")) + "}"
     ident = model_identifier(node.nodeName)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(out_dir)
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         sources = root / "sources"

@@ -27,6 +27,8 @@ from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree as ET
 
+from core.folders import make_folder
+
 NS = {"ssd": "http://ssp-standard.org/SSP1/SystemStructureDescription",
       "ssc": "http://ssp-standard.org/SSP1/SystemStructureCommon",
       "ssv": "http://ssp-standard.org/SSP1/SystemStructureParameterValues"}
@@ -377,7 +379,7 @@ def project_from_ssp(path: Path, fmu_dir: Path, *, side: dict[str, Any] | None =
     if problems:
         shutil.rmtree(staging, ignore_errors=True)
         raise SspError(f"{path}: " + "; ".join(problems))
-    fmu_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(fmu_dir)
     for staged in staging.iterdir():
         shutil.move(str(staged), fmu_dir / staged.name)
     staging.rmdir()
@@ -472,7 +474,7 @@ def write_ssp(loaded: Any, out: Path) -> Path:
                                stopTime=repr(cosim.stopTime))
     note = ET.SubElement(ET.SubElement(experiment, _q("ssd", "Annotations")), _q("ssc", "Annotation"), type=ANNOTATION)
     ET.SubElement(note, _q("hycosim", "coSimulation"), stepSize=repr(cosim.stepSize))
-    out.parent.mkdir(parents=True, exist_ok=True)
+    make_folder(out.parent)
     with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
         z.writestr(SSD, ET.tostring(root, encoding="utf-8", xml_declaration=True))
         for source, path in files.items():

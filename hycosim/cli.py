@@ -1156,9 +1156,7 @@ def main() -> None:
             raise
         # The last resort for a file a command could not read or write (an output folder
         # that cannot be made, a PNG path in a missing folder): name it instead of a traceback.
-        # mkdir(exist_ok=True) on a file says only "File exists", which reads as no error
-        why = "exists and is not a folder" if isinstance(exc, FileExistsError) else exc.strerror or exc
-        err.print(f"[red]error:[/red] {exc.filename}: {why}", highlight=False)
+        err.print(f"[red]error:[/red] {exc.filename}: {exc.strerror or exc}", highlight=False)
         sys.exit(2)
 
 

@@ -29,6 +29,7 @@ from clients.krl.export import export
 from clients.rod.model import RodParams
 from core import signals
 from core.config import parse_project
+from core.folders import make_folder
 
 PAPER = {30: (3.2, 14.8, 95), 40: (3.8, 15.6, 95), 50: (5.0, 15.4, 90), 60: (5.8, 16.6, 80)}
 REPO = Path(__file__).resolve().parents[1]
@@ -255,7 +256,7 @@ def run_trials(angles: list[float], trials: int, out: Path, correction: bool = T
     TrialsInterrupted carries the finished ones (the interrupted trial is not counted)."""
     from core import logs
 
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out)
     logs.configure(out / "trials.log.jsonl")
     if nodes == "fmu":
         from clients.scene_fmus import ensure_scene_fmus

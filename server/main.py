@@ -16,6 +16,7 @@ import structlog
 from core import json_text, logs, signals
 from core.config import LoadedProject, gateway_address, server_endpoint
 from core.endpoints import GATEWAY_PORT, EndpointError, parse_address, parse_endpoint
+from core.folders import make_folder
 from core.security import SecurityError, router_security
 from core.session import open_session, router_config
 
@@ -98,8 +99,9 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     """Run one co-simulation as its server; return (exit code, run directory, message).
 
     Addresses and the credentials and certificate files are checked before anything is
-    written: one that cannot be used gives exit code 2 and no run directory. ``resume``: go on with the run in that directory, whose
-    server died, from its last complete checkpoint (exit code 2 if it cannot be).
+    written: one that cannot be used gives exit code 2 and no run directory. ``resume``: go
+    on with the run in that directory, whose server died, from its last complete checkpoint
+    (exit code 2 if it cannot be).
     """
     def done(code: int, run_dir: Path | None, message: str) -> tuple[int, Path | None, str]:
         # A launcher reading --progress-jsonl learns the outcome from this line, on every path.
@@ -134,10 +136,9 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         if run_dir is None:
             run_dir = run_dir_for(runs_dir, loaded.name)
         else:
-            run_dir.mkdir(parents=True, exist_ok=True)
+            make_folder(run_dir)
     except OSError as exc:
-        why = "exists and is not a folder" if isinstance(exc, FileExistsError) else exc.strerror or exc
-        return done(2, None, f"{exc.filename or run_dir or runs_dir}: {why}")
+        return done(2, None, f"{exc.filename or run_dir or runs_dir}: {exc.strerror or exc}")
     logs.configure(run_dir / "server.log.jsonl")
     log = structlog.get_logger("server")
     meta: dict[str, Any] = {

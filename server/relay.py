@@ -28,6 +28,7 @@ import zenoh
 
 from core import frames, signals
 from core.config import FREE_MODE, LoadedProject
+from core.folders import make_folder
 from core.inbox import LOCAL, Inbox
 from core.keys import SERVER_TOKEN, ProjectKeys
 from core.session import FramePublisher, FrameTooLarge
@@ -1171,7 +1172,7 @@ def run_dir_for(base: Path, project: str) -> Path:
     the same second. Made here, not just named: two processes naming it at the same moment
     would otherwise both take the same folder (or one fail on it)."""
     stamp = time.strftime("%Y%m%d-%H%M%S")
-    base.mkdir(parents=True, exist_ok=True)
+    make_folder(base)
     n = 1
     while True:
         candidate = base / (f"{project}-{stamp}" if n == 1 else f"{project}-{stamp}-{n}")

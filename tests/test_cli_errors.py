@@ -145,14 +145,18 @@ def test_credential_and_password_files_that_are_no_utf8_text_are_named(tmp_path)
         assert res.returncode == 2 and f"{tmp_path / 'pw.txt'}: {says}" in res.stderr, res.stderr
 
 
-def test_a_runs_dir_that_is_a_file_is_named_as_no_folder(tmp_path):
+def test_an_output_folder_that_is_a_file_is_named_as_no_folder(tmp_path):
     from tests.helpers import write_project
 
-    cfg = write_project(tmp_path / "p.json", [{"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]}])
+    cfg = write_project(tmp_path / "p.json", [{"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+                                              {"nodeName": "b", "UID": 2, "input": ["u"], "output": ["y"]}],
+                        [{"from": "clock.y", "to": "b.u"}])
     (tmp_path / "runs").write_text("a file")
+    # Every folder a command writes into is made one way (run directories, FMUs, trials, exports).
     for args in (("server", str(cfg), "--runs-dir"), ("run", str(cfg), "--no-progress", "--runs-dir"),
-                 ("server", str(cfg), "--run-dir")):
+                 ("server", str(cfg), "--run-dir"), ("fmu", "build", str(cfg), "-o"), ("scene", "fmus", "-o")):
         res = hycosim(*args, str(tmp_path / "runs"))
         assert res.returncode == 2, res.stderr
-        assert f"{tmp_path / 'runs'}: exists and is not a folder" in res.stderr and "Traceback" not in res.stderr
+        assert f"{tmp_path / 'runs'}: " in res.stderr and "Traceback" not in res.stderr
+        assert "exists and is not a folder" in res.stderr and "File exists" not in res.stderr
     assert (tmp_path / "runs").read_text() == "a file"

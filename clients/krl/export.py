@@ -20,6 +20,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from core.folders import make_folder
 from core.run_files import MissingColumns, RunFileError, iter_csv_rows
 
 from clients.krl.eki import EkiConfig, frame, krl_program
@@ -68,7 +69,7 @@ def read_path(run_dir: Path, robot: str = "robot") -> JointPath:
 def export(run_dir: Path, out: Path, config: EkiConfig | None = None) -> dict[str, Path]:
     config = config or EkiConfig()
     jp = read_path(run_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out)
     files = {"eki": out / f"{config.name}.xml", "krl": out / f"{config.name}.src", "frames": out / "frames.xml"}
     files["eki"].write_text(config.to_xml())
     files["krl"].write_text(krl_program(config, tuple(jp.q_deg[0]) if jp.q_deg else kr6.READY_DEG))

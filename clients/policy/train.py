@@ -24,6 +24,7 @@ import torch
 from clients.policy.ddpg import DDPG, CheckpointError, DDPGConfig, ReplayBuffer, acting_part
 from clients.policy.env import GRASP_TOLERANCE, GraspEnv
 from clients.policy.history import ResumeError, check_resumable
+from core.folders import make_folder
 from core.lifetime import end_with
 
 EVAL_ANGLES = (30.0, 40.0, 50.0, 60.0)
@@ -207,7 +208,7 @@ def _labelled_episode(env: GraspEnv, agent: DDPG, seed: int) -> list:
 
 def train(out: Path, config: TrainConfig, progress: Callable[[dict], None] | None = None) -> dict:
     """Train into ``out``; resume from ``out/last.pt`` when it exists. Returns the final metrics."""
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out)
     env = GraspEnv()
     agent = DDPG(config.ddpg)
     buffer = ReplayBuffer(n_step=config.ddpg.n_step, gamma=config.ddpg.gamma)
