@@ -244,11 +244,14 @@ _CREDENTIAL_LINES = st.one_of(
     st.tuples(st.sampled_from(["server", "clock", "g", " watcher ", "u\u00e9", "", "\x1fx"]), _PASSWORDS)
     .map(lambda up: f"{up[0]}:{up[1]}"),
     st.sampled_from(["", "   ", "# a comment", "#a:b", "no colon here", ":no user", "a:b:c", "\ufeffserver:s"]))
-_CREDENTIAL_FILES = st.tuples(st.lists(_CREDENTIAL_LINES, max_size=4), st.sampled_from(["\n", "\r\n"]))
+_CREDENTIAL_FILES = st.tuples(st.lists(_CREDENTIAL_LINES, max_size=4), st.sampled_from(["\n", "\r\n"]),
+                              st.sampled_from(["utf-8", "utf-8", "latin-1"]))
 
 
-def _credentials_file(path: Path, lines: list[str], end: str) -> Path:
-    path.write_bytes(end.join(lines).encode())
+def _credentials_file(path: Path, lines: list[str], end: str, encoding: str) -> Path:
+    text = end.join(lines)
+    # Latin-1 where it can say the text (else UTF-8): a file saved in another encoding.
+    path.write_bytes(text.encode(encoding if all(ord(c) < 256 for c in text) else "utf-8"))
     return path
 
 
@@ -275,8 +278,8 @@ def test_a_credentials_file_is_read_as_zenoh_reads_it(tmp_path_factory, doc):
     """Zenoh is the judge: a file the reader takes opens the router and lets every user in with
     its password as read; a file the reader refuses, Zenoh refuses too, except for the two it
     reads otherwise than its author meant (a comment line, a byte-order mark), refused by name."""
-    lines, end = doc
-    path = _credentials_file(tmp_path_factory.mktemp("z") / "creds.txt", ["server:s", *lines], end)
+    lines, end, encoding = doc
+    path = _credentials_file(tmp_path_factory.mktemp("z") / "creds.txt", ["server:s", *lines], end, encoding)
     try:
         users = read_credentials(path)
     except SecurityError as exc:
