@@ -787,7 +787,7 @@ def camera(
     from clients.camera.calibration import Calibration, CalibrationError
     from clients.camera.detect import RodDetector, annotate as draw
     from clients.camera.emulated import CameraSetup, EmulatedRodCamera
-    from clients.camera.sources import CameraError, DeviceSource, VideoFileSource
+    from clients.camera.sources import CameraError, DeviceSource, VideoFileSource, device_number
     from clients.camera.tracker import Tracker
     from clients.rod.model import RodParams
 
@@ -802,7 +802,8 @@ def camera(
                 err.print("[red]error:[/red] a real source needs --calibration FILE", highlight=False)
                 raise typer.Exit(2)
             cal = Calibration.load(calibration)
-            src = DeviceSource(int(source)) if source.isascii() and source.isdigit() else VideoFileSource(Path(source))
+            device = device_number(source)
+            src = DeviceSource(device) if device is not None else VideoFileSource(Path(source))
             frames = []
             for frame in src.frames():
                 if frame.t > seconds:

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from clients.camera.calibration import Calibration, CalibrationError, calibrate_from_image
 from clients.camera.detect import RodDetector
 from clients.camera.emulated import CameraSetup, EmulatedRodCamera
-from clients.camera.sources import CameraError, DeviceSource, VideoFileSource
+from clients.camera.sources import CameraError, DeviceSource, VideoFileSource, device_number
 from clients.camera.tracker import Tracker
 from clients.rod.model import RodModel, RodParams
 from tests.helpers import column, hycosim, meta, read_rows, run_project, write_project
@@ -275,3 +275,14 @@ def test_a_camera_device_needs_a_real_time_run(tmp_path):
                       step_size=0.01, start_time=0.0, project_dir=tmp_path)
     with pytest.raises(CameraError, match="camera device 0 is live, so the run must be paced by the clock"):
         CameraNode().setup(ctx)
+
+
+@given(st.text(max_size=6) | st.sampled_from(["0", "12", "²", "٣", "1e3", " 1", "video.mp4"]))
+def test_a_camera_source_names_a_device_by_ascii_digits_alone(source):
+    """The node and `hycosim camera` read a source the same way: ASCII digits are a device
+    number, anything else a video file ("²" and "٣" pass str.isdigit, and int() refuses "²")."""
+    device = device_number(source)
+    if source and all("0" <= c <= "9" for c in source):
+        assert device == int(source)
+    else:
+        assert device is None

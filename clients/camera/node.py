@@ -27,7 +27,7 @@ import structlog
 from clients.camera.calibration import Calibration
 from clients.camera.detect import RodDetector
 from clients.camera.emulated import CameraSetup, EmulatedRodCamera, Frame
-from clients.camera.sources import CameraError, DeviceSource, VideoFileSource
+from clients.camera.sources import CameraError, DeviceSource, VideoFileSource, device_number
 from clients.camera.tracker import Tracker
 from clients.node import AsyncSource, NodeContext
 from clients.rod.node import ROD_PARAMETERS, rod_params
@@ -67,11 +67,12 @@ class CameraNode(AsyncSource):
             if not cal_file:
                 raise CameraError(f"camera node {ctx.name!r}: a real source needs 'calibration' (a JSON file)")
             calibration = Calibration.load(ctx.project_dir / cal_file)
-            if source.isascii() and source.isdigit():  # "²".isdigit() holds, and int() refuses it
+            device = device_number(source)
+            if device is not None:
                 if ctx.real_time is None:
                     raise CameraError(f"camera node {ctx.name!r}: camera device {source} is live, so the run must be "
                                       'paced by the clock: set "realTime" in the project\'s coSimulation')
-                self.stream = DeviceSource(int(source), ctx.start_time, ctx.real_time).frames()
+                self.stream = DeviceSource(device, ctx.start_time, ctx.real_time).frames()
             else:
                 self.stream = VideoFileSource(ctx.project_dir / source, ctx.start_time).frames()
         self.detector = RodDetector(calibration)

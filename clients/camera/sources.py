@@ -21,6 +21,12 @@ class CameraError(NodeModelError):
     """A frame source that cannot be opened or read; names the file or device."""
 
 
+def device_number(source: str) -> int | None:
+    """The camera device a source names by its number, or None for a video file. ASCII digits
+    only: "²".isdigit() holds, and int() refuses it."""
+    return int(source) if source.isascii() and source.isdigit() else None
+
+
 @dataclass
 class VideoFileSource:
     """Frames of a video file, timestamped by their position: ``start_time`` + frame index / the file's fps."""
