@@ -233,9 +233,9 @@ def check_release(frame: Frame, node: str | None = None, input_types: tuple[tupl
         if input_types is not None:
             if len(mine) != len(input_types):
                 raise FrameError(f"STEP {k} gives node {node!r} {len(mine)} inputs, it has {len(input_types)}")
-            for i, (value, types) in enumerate(zip(mine, input_types)):
-                if type(value) not in types:
-                    raise FrameError(f"STEP {k} gives node {node!r} a {type(value).__name__} for input {i}")
+            i = first_misfit(mine, input_types)
+            if i is not None:
+                raise FrameError(f"STEP {k} gives node {node!r} a {type(mine[i]).__name__} for input {i}")
     return frame
 
 
@@ -255,6 +255,16 @@ def _check_slopes(k: int, node: str, mine: Any, input_types: tuple[tuple[type, .
                              f"{MAX_SLOPE_ORDER} finite numbers: {short(d)}")
         if input_types is not None and float not in input_types[i]:
             raise FrameError(f"STEP {k} gives node {node!r} derivatives for input {i}, which takes no floats")
+
+
+def first_misfit(values: list[Any], types: Iterable[tuple[type, ...]]) -> int | None:
+    """The index of the first of ``values`` whose type is none of its port's ``types`` (per port,
+    the Python types msgpack yields for it: config.WIRE_TYPES), or None if every one fits.
+    The caller has checked that there is one value per port."""
+    for i, (value, allowed) in enumerate(zip(values, types)):
+        if type(value) not in allowed:
+            return i
+    return None
 
 
 def state_chunks(data: bytes) -> list[bytes]:

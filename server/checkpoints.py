@@ -233,10 +233,10 @@ def _wrong_values(values: list[Any], ports: list[Port]) -> str | None:
     """What is wrong with ``values`` as one value for each of ``ports`` (their wire types), or None."""
     if len(values) != len(ports):
         return f"{len(values)} values for {len(ports)} ports"
-    for value, port in zip(values, ports):
-        if type(value) not in WIRE_TYPES[port.type]:
-            return f"{port.name} holds {type(value).__name__} {frames.short(value)}, not a {port.type.value}"
-    return None
+    i = frames.first_misfit(values, (WIRE_TYPES[p.type] for p in ports))
+    if i is None:
+        return None
+    return f"{ports[i].name} holds {type(values[i]).__name__} {frames.short(values[i])}, not a {ports[i].type.value}"
 
 
 def _first_problem(exc: ValidationError) -> str:

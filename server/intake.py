@@ -34,7 +34,8 @@ class Dropped(Exception):
 class Intake:
     def __init__(self, nodes: list[Node]):
         self._nodes = {n.nodeName: n for n in nodes}
-        self._types = {n.nodeName: [(p.name, WIRE_TYPES[p.type]) for p in n.output] for n in nodes}
+        self._ports = {n.nodeName: [p.name for p in n.output] for n in nodes}
+        self._types = {n.nodeName: [WIRE_TYPES[p.type] for p in n.output] for n in nodes}
         self.non_finite: dict[str, dict[str, float]] = {}  # "node.port" → first {"step", "t"} (or "t")
         self._log = structlog.get_logger("server.intake")
         self.drops = DropLog(self._log)
@@ -109,14 +110,15 @@ class Intake:
 
     def _check_values(self, node: str, frame: frames.Frame, t: float, values: object) -> None:
         """Dropped unless ``values`` are one value of its port's type for each of ``node``'s outputs."""
-        ports = self._types[node]
+        ports = self._ports[node]
         if type(values) is not list:
             raise Dropped("wrong type", f"from {node}: {frames.short(values)} where its outputs' values go")
         if len(values) != len(ports):
             raise Dropped("unknown ports", f"from {node}: {len(values)} values for {len(ports)} outputs")
-        for value, (port, types) in zip(values, ports):
-            if type(value) not in types:
-                raise Dropped("wrong type", f"{node}.{port} got {type(value).__name__} {frames.short(value)}")
+        i = frames.first_misfit(values, self._types[node])
+        if i is not None:
+            raise Dropped("wrong type", f"{node}.{ports[i]} got {type(values[i]).__name__} {frames.short(values[i])}")
+        for port, value in zip(ports, values):
             if type(value) is float and not math.isfinite(value):
                 self._note_non_finite(f"{node}.{port}", frame, t, value)
 

@@ -623,3 +623,45 @@ def test_a_source_stops_a_gathering_only_with_an_unclean_unbatched_end(relay, cl
         return
     assert not valid and sum(relay.intake.dropped.values()) == dropped + 1
     assert set(arrivals) == set(_UIDS)
+
+
+_PORTS_AND_VALUES = st.lists(st.sampled_from(list(PortType)), min_size=1, max_size=5).flatmap(
+    lambda types: st.tuples(st.just(types), st.lists(
+        st.sampled_from([1.5, 7, True, "s", b"\x00", [1, 2], None, {}]) | st.one_of(*_VALUE.values()),
+        min_size=len(types), max_size=len(types))))
+
+
+@given(_PORTS_AND_VALUES)
+def test_the_servers_intake_a_nodes_release_check_and_a_checkpoint_name_the_same_value_of_a_wrong_type(given_):
+    """Values for a node's ports reach three receivers: a node's outputs the server's intake, its
+    inputs in a release the node, a checkpoint's values the server that resumes. Each takes the
+    values exactly when every one is of its port's wire type, and otherwise names the first that
+    is not."""
+    from core.config import Node
+    from server.checkpoints import _wrong_values
+
+    types, vals = given_
+    wrong = next((i for i, (v, t) in enumerate(zip(vals, types)) if type(v) not in WIRE_TYPES[t]), None)
+    ports = [{"name": f"p{i}", "type": t.value} for i, t in enumerate(types)]
+    node = Node.model_validate({"nodeName": "g", "UID": 1, "model": "gain", "input": ports, "output": ports})
+    _quiet()
+    assert frames.first_misfit(vals, [WIRE_TYPES[t] for t in types]) == wrong
+    try:
+        Intake([node]).accept("g", frames.encode(frames.OUTPUTS, 1, 2, 0.1, vals))
+        intake = None
+    except Dropped as exc:
+        assert exc.reason == "wrong type"
+        intake = exc.detail
+    release = frames.decode(frames.encode(frames.STEP, 3, 0.3, 0.1, "free", {"g": vals}, [], {}))
+    try:
+        frames.check_release(release, "g", tuple(WIRE_TYPES[t] for t in types))
+        node_says = None
+    except frames.FrameError as exc:
+        node_says = str(exc)
+    checkpoint = _wrong_values(vals, node.output)
+    if wrong is None:
+        assert intake is node_says is checkpoint is None
+    else:
+        assert intake.startswith(f"g.p{wrong} got {type(vals[wrong]).__name__} ")
+        assert node_says == f"STEP 3 gives node 'g' a {type(vals[wrong]).__name__} for input {wrong}"
+        assert checkpoint.startswith(f"p{wrong} holds {type(vals[wrong]).__name__} ")
