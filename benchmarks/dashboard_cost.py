@@ -2,7 +2,10 @@
 
 Overhead: the barrier ring of benchmarks/barrier.py (N nodes, y = 0.5·u + 1) run by
 ``hycosim run``, once plain and once with ``--dashboard`` and a headless chromium page open on
-it plotting a port, the rounds interleaved; steps/s medians and their ratio.
+it plotting a port, the rounds interleaved; steps/s medians and their ratio. Beside them
+(``--least-page``) the same run plain with the browser showing the least page updated as often
+as the dashboard's (a line of text changed five times a second): what any page open in a
+browser costs the run on this machine, whatever it shows.
 
 Latency: a paced run (100 steps per second of wall time) with the dashboard and the page;
 for every step, the time from its point at the server (all its outputs in: the server's wall
@@ -19,7 +22,8 @@ A big finished run: a run directory of ``--big`` steps (two nodes, written as th
 writes them) opened with ``hycosim dashboard RUN_DIR``: seconds until the page lists the nodes
 (usable), and until a chosen port's plot has drawn.
 
-    python benchmarks/dashboard_cost.py [--n 2] [--steps 20000] [--repeat 3] [--paced-s 20] [--big 1000000] [--json]
+    python benchmarks/dashboard_cost.py [--n 2] [--steps 20000] [--repeat 3] [--least-page]
+                                        [--wait-strategy auto] [--paced-s 20] [--big 1000000] [--json]
 """
 
 from __future__ import annotations
@@ -69,7 +73,8 @@ def _cpu_by_kind() -> dict[str, float]:
         except OSError:
             continue  # gone meanwhile
         command = argv[argv.index("hycosim") + 1:argv.index("hycosim") + 2] if "hycosim" in argv else []
-        kind = ("browser" if "chromium" in os.path.basename(argv[0])
+        # Chromium's child processes write their whole command line into argv[0].
+        kind = ("browser" if os.path.basename(argv[0].split(" ", 1)[0]) == "chromium"
                 else "dashboard" if command == ["dashboard"] else None)
         if kind:
             used[kind] += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
@@ -90,17 +95,23 @@ def _sample_cpu(seconds: float, out: dict) -> None:
     out.update({kind: (after[kind] - before[kind]) / took for kind in after}, window=(wall0, time.time()))
 
 
-def browser_floor(rate_hz: float, seconds: float = 8.0) -> float:
-    """The share of one core headless chromium takes to show a page that changes one line of
-    text ``rate_hz`` times a second (its own work per update, whatever the page)."""
-    from playwright.sync_api import sync_playwright
-
+def least_page(rate_hz: float) -> str:
+    """The URL of a page that changes one line of text ``rate_hz`` times a second: the least a
+    page updated at that rate asks of a browser."""
     line = ("<p id=n>0</p><script>let i = 0; setInterval(() => "
             f"{{ document.getElementById('n').textContent = ++i; }}, {1000 / rate_hz:.0f});</script>")
+    return "data:text/html," + urllib.parse.quote(line)
+
+
+def browser_floor(rate_hz: float, seconds: float = 8.0) -> float:
+    """The share of one core headless chromium takes to show :func:`least_page` (its own work
+    per update, whatever the page)."""
+    from playwright.sync_api import sync_playwright
+
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=shutil.which("chromium"), args=["--no-sandbox"])
         page = browser.new_page()
-        page.goto("data:text/html," + urllib.parse.quote(line))
+        page.goto(least_page(rate_hz))
         time.sleep(2.0)
         before, began = _cpu_by_kind()["browser"], time.monotonic()
         time.sleep(seconds)
@@ -130,23 +141,30 @@ def _watch(url: str, launched: threading.Event, until: threading.Event, seen: li
               return ws; };""")
         page.goto("about:blank")
         launched.set()
-        _page_up(url)
-        page.goto(url + "?ports=n0.y")
+        if url.startswith("data:"):
+            page.goto(url)
+        else:
+            _page_up(url)
+            page.goto(url + "?ports=n0.y")
         until.wait()
         if seen is not None:
             seen += [((step, point), at) for (step, point), at in page.evaluate("window.hycosimSeen")]
         browser.close()
 
 
-def run(cfg: Path, runs: Path, dashboard: bool, seen: list | None = None, timeout: float = 300) -> float:
-    """``hycosim run`` the project (with the dashboard and a page on it); its steps/s."""
+def run(cfg: Path, runs: Path, dashboard: bool, seen: list | None = None, timeout: float = 300,
+        page: str | None = None) -> dict:
+    """``hycosim run`` the project (with the dashboard and a page on it; or plain, with the
+    browser showing ``page``); its meta.json (steps/s, the wait strategy it ran with)."""
     args = [sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", str(runs), "--no-progress"]
     launched, done = threading.Event(), threading.Event()
     watcher = None
     if dashboard:
         port = free_port()
         args += ["--dashboard", "--dashboard-port", str(port)]
-        watcher = threading.Thread(target=_watch, args=(f"http://127.0.0.1:{port}/", launched, done, seen))
+        page = f"http://127.0.0.1:{port}/"
+    if page is not None:
+        watcher = threading.Thread(target=_watch, args=(page, launched, done, seen))
         watcher.start()
         launched.wait(60)
     proc = start(args, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
@@ -161,8 +179,7 @@ def run(cfg: Path, runs: Path, dashboard: bool, seen: list | None = None, timeou
             watcher.join(timeout=30)
     if proc.returncode:
         raise RuntimeError(f"run failed ({proc.returncode}): {err[-800:]}")
-    meta = json.loads(max(runs.glob("*/meta.json"), key=lambda p: p.stat().st_mtime).read_text())
-    return float(meta["steps_per_s"])
+    return json.loads(max(runs.glob("*/meta.json"), key=lambda p: p.stat().st_mtime).read_text())
 
 
 def big_run(run_dir: Path, steps: int) -> Path:
@@ -245,19 +262,29 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=2)
     ap.add_argument("--steps", type=int, default=20000)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--least-page", action="store_true",
+                    help="also run plain with a browser showing the least page updated five times a second")
+    ap.add_argument("--wait-strategy", choices=["auto", "block", "yield"], default="auto",
+                    help="coSimulation.waitStrategy of the measured runs")
     ap.add_argument("--paced-s", type=float, default=20.0)
     ap.add_argument("--big", type=int, default=1_000_000, help="steps of the finished run opened (0: none)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     rates: dict[str, list[float]] = {"plain": [], "dashboard": []}
+    if args.least_page:
+        rates["least_page"] = []
+    strategies: set[str] = set()  # as the runs recorded them
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         for i in range(args.repeat):
             # Each round the other way round: a run after a run of the other kind meets a machine
             # in another state (caches, the page's browser just closed), whichever kind it is.
             for kind in (list(rates) if i % 2 == 0 else list(rates)[::-1]):
-                cfg = ring_config(args.n, args.steps, tmp / f"ring-{kind}-{i}.json")
-                rates[kind].append(run(cfg, tmp / f"runs-{kind}-{i}", kind == "dashboard"))
+                cfg = ring_config(args.n, args.steps, tmp / f"ring-{kind}-{i}.json", args.wait_strategy)
+                meta = run(cfg, tmp / f"runs-{kind}-{i}", kind == "dashboard",
+                           page=least_page(5.0) if kind == "least_page" else None)
+                rates[kind].append(float(meta["steps_per_s"]))
+                strategies.add(meta["waitStrategy"])
         cfg = ring_config(args.n, int(args.paced_s / 0.01), tmp / "paced.json")
         doc = json.loads(cfg.read_text())
         doc["coSimulation"].update(stepSize=0.01, stopTime=args.paced_s, realTime=True)
@@ -276,8 +303,12 @@ def main() -> None:
     lat = sorted(latencies(seen, 0.01))
     plain, board = statistics.median(rates["plain"]), statistics.median(rates["dashboard"])
     low, high = ratio_interval(rates["plain"], rates["dashboard"])
-    result = {"n": args.n, "steps": args.steps, "steps_per_s": rates, "median_plain": plain,
-              "median_dashboard": board, "ratio": board / plain, "ratio_90": [low, high],
+    least = statistics.median(rates["least_page"]) if args.least_page else None
+    result = {"n": args.n, "steps": args.steps, "wait_strategy": "/".join(sorted(strategies)), "steps_per_s": rates,
+              "median_plain": plain, "median_dashboard": board, "ratio": board / plain, "ratio_90": [low, high],
+              **({"median_least_page": least, "least_page_ratio": least / plain,
+                  "least_page_ratio_90": list(ratio_interval(rates["plain"], rates["least_page"]))}
+                 if args.least_page else {}),
               "latency_ms": {"steps": len(lat), "median": 1000 * statistics.median(lat) if lat else None,
                              "p95": 1000 * lat[int(0.95 * (len(lat) - 1))] if lat else None},
               "watching": {**taken, "browser_floor": floor, "cores": CORES} if taken else None,
@@ -285,9 +316,14 @@ def main() -> None:
     if args.json:
         print(json.dumps(result, indent=1))
         return
-    print(f"ring of {args.n}, {args.steps} steps, {args.repeat} interleaved rounds (medians):")
+    print(f"ring of {args.n}, {args.steps} steps, waitStrategy {result['wait_strategy']}, "
+          f"{args.repeat} interleaved rounds (medians):")
     print(f"  plain {plain:,.0f} steps/s, with the dashboard and a page open {board:,.0f} steps/s: "
           f"ratio {board / plain:.3f} (90 % bootstrap interval over rounds {low:.3f}–{high:.3f})")
+    if least is not None:
+        a, b = result["least_page_ratio_90"]
+        print(f"  plain with a browser showing a line of text changed 5 times a second {least:,.0f} steps/s: "
+              f"ratio {least / plain:.3f} ({a:.3f}–{b:.3f}); the dashboard against it {board / least:.3f}")
     la = result["latency_ms"]
     if lat:
         print(f"release to page, paced run of {args.paced_s:g} s ({la['steps']} steps shown): "

@@ -2,7 +2,7 @@
 "use strict";
 const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
-const state = { selected: (params.get("ports") || "").split(",").filter(Boolean), plots: {}, data: {}, snapshot: null, ws: null, latencies: [] };
+const state = { selected: (params.get("ports") || "").split(",").filter(Boolean), plots: {}, data: {}, snapshot: null, ws: null };
 window.hycosim = state;  // for the tests and the curious
 
 function fmt(v, digits = 3) { return v === null || v === undefined ? "–" : Number(v).toFixed(digits); }
@@ -15,11 +15,7 @@ function connect() {
   ws.onmessage = (ev) => {
     const msg = JSON.parse(ev.data);
     if (msg.problems) showProblems(msg.problems);
-    if (msg.state) {
-      // How old the point shown is when its snapshot arrives (the server's wall clock; same host).
-      if (msg.point_wall) state.latencies.push(Date.now() / 1000 - msg.point_wall);
-      render(msg);
-    }
+    if (msg.state) render(msg);
   };
   ws.onclose = () => {  // the dashboard process went, or the link: say so, and try again
     const el = $("state"); el.className = "state connecting"; el.textContent = "dashboard unreachable; retrying…";
