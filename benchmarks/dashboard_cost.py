@@ -5,7 +5,11 @@ Overhead: the barrier ring of benchmarks/barrier.py (N nodes, y = 0.5·u + 1) ru
 it plotting a port, the rounds interleaved; steps/s medians and their ratio. Beside them
 (``--least-page``) the same run plain with the browser showing the least page updated as often
 as the dashboard's (a line of text changed five times a second): what any page open in a
-browser costs the run on this machine, whatever it shows.
+browser costs the run on this machine, whatever it shows. And (``--page-elsewhere``) with the
+dashboard fed to a page on another machine: a WebSocket client takes the page's snapshots (the
+page's selection, every push) and draws nothing, so that only the dashboard's work is on this
+one (``hycosim dashboard EP`` with the browser on a workstation, as for a fast run on a small
+machine).
 
 Latency: a paced run (100 steps per second of wall time) with the dashboard and the page;
 for every step, the time from its point at the server (all its outputs in: the server's wall
@@ -22,7 +26,7 @@ A big finished run: a run directory of ``--big`` steps (two nodes, written as th
 writes them) opened with ``hycosim dashboard RUN_DIR``: seconds until the page lists the nodes
 (usable), and until a chosen port's plot has drawn.
 
-    python benchmarks/dashboard_cost.py [--n 2] [--steps 20000] [--repeat 3] [--least-page]
+    python benchmarks/dashboard_cost.py [--n 2] [--steps 20000] [--repeat 3] [--least-page] [--page-elsewhere]
                                         [--wait-strategy auto] [--paced-s 20] [--big 1000000] [--json]
 """
 
@@ -152,10 +156,33 @@ def _watch(url: str, launched: threading.Event, until: threading.Event, seen: li
         browser.close()
 
 
+def _feed_elsewhere(url: str, launched: threading.Event, until: threading.Event, got: list) -> None:
+    """Read the dashboard's feed at ``url`` as the page does (plotting ``n0.y``) until told,
+    drawing nothing; append the number of snapshots it received."""
+    from websockets.exceptions import WebSocketException
+    from websockets.sync.client import connect
+
+    launched.set()
+    _page_up(url)
+    snapshots = 0
+    with connect(url.replace("http://", "ws://") + "ws") as ws:
+        ws.send(json.dumps({"select": ["n0.y"]}))
+        while not until.is_set():
+            try:
+                message = json.loads(ws.recv(timeout=0.5))
+            except TimeoutError:
+                continue
+            except WebSocketException:
+                break  # the run, and with it the dashboard, ended
+            snapshots += "state" in message
+    got.append(snapshots)
+
+
 def run(cfg: Path, runs: Path, dashboard: bool, seen: list | None = None, timeout: float = 300,
-        page: str | None = None) -> dict:
-    """``hycosim run`` the project (with the dashboard and a page on it; or plain, with the
-    browser showing ``page``); its meta.json (steps/s, the wait strategy it ran with)."""
+        page: str | None = None, elsewhere: list | None = None) -> dict:
+    """``hycosim run`` the project (with the dashboard and a page on it, or, given ``elsewhere``,
+    its feed read as by a page on another machine, the snapshots counted there; or plain, with
+    the browser showing ``page``); its meta.json (steps/s, the wait strategy it ran with)."""
     args = [sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", str(runs), "--no-progress"]
     launched, done = threading.Event(), threading.Event()
     watcher = None
@@ -163,7 +190,11 @@ def run(cfg: Path, runs: Path, dashboard: bool, seen: list | None = None, timeou
         port = free_port()
         args += ["--dashboard", "--dashboard-port", str(port)]
         page = f"http://127.0.0.1:{port}/"
-    if page is not None:
+    if elsewhere is not None:
+        watcher = threading.Thread(target=_feed_elsewhere, args=(page, launched, done, elsewhere))
+        watcher.start()
+        launched.wait(60)
+    elif page is not None:
         watcher = threading.Thread(target=_watch, args=(page, launched, done, seen))
         watcher.start()
         launched.wait(60)
@@ -264,6 +295,8 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--least-page", action="store_true",
                     help="also run plain with a browser showing the least page updated five times a second")
+    ap.add_argument("--page-elsewhere", action="store_true",
+                    help="also run with the dashboard feeding a page on another machine (a WebSocket client here)")
     ap.add_argument("--wait-strategy", choices=["auto", "block", "yield"], default="auto",
                     help="coSimulation.waitStrategy of the measured runs")
     ap.add_argument("--paced-s", type=float, default=20.0)
@@ -273,7 +306,10 @@ def main() -> None:
     rates: dict[str, list[float]] = {"plain": [], "dashboard": []}
     if args.least_page:
         rates["least_page"] = []
+    if args.page_elsewhere:
+        rates["page_elsewhere"] = []
     strategies: set[str] = set()  # as the runs recorded them
+    fed: list[int] = []  # snapshots the page elsewhere received, by run
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         for i in range(args.repeat):
@@ -281,8 +317,9 @@ def main() -> None:
             # in another state (caches, the page's browser just closed), whichever kind it is.
             for kind in (list(rates) if i % 2 == 0 else list(rates)[::-1]):
                 cfg = ring_config(args.n, args.steps, tmp / f"ring-{kind}-{i}.json", args.wait_strategy)
-                meta = run(cfg, tmp / f"runs-{kind}-{i}", kind == "dashboard",
-                           page=least_page(5.0) if kind == "least_page" else None)
+                meta = run(cfg, tmp / f"runs-{kind}-{i}", kind in ("dashboard", "page_elsewhere"),
+                           page=least_page(5.0) if kind == "least_page" else None,
+                           elsewhere=fed if kind == "page_elsewhere" else None)
                 rates[kind].append(float(meta["steps_per_s"]))
                 strategies.add(meta["waitStrategy"])
         cfg = ring_config(args.n, int(args.paced_s / 0.01), tmp / "paced.json")
@@ -304,11 +341,15 @@ def main() -> None:
     plain, board = statistics.median(rates["plain"]), statistics.median(rates["dashboard"])
     low, high = ratio_interval(rates["plain"], rates["dashboard"])
     least = statistics.median(rates["least_page"]) if args.least_page else None
+    elsewhere = statistics.median(rates["page_elsewhere"]) if args.page_elsewhere else None
     result = {"n": args.n, "steps": args.steps, "wait_strategy": "/".join(sorted(strategies)), "steps_per_s": rates,
               "median_plain": plain, "median_dashboard": board, "ratio": board / plain, "ratio_90": [low, high],
               **({"median_least_page": least, "least_page_ratio": least / plain,
                   "least_page_ratio_90": list(ratio_interval(rates["plain"], rates["least_page"]))}
                  if args.least_page else {}),
+              **({"median_page_elsewhere": elsewhere, "page_elsewhere_ratio": elsewhere / plain,
+                  "page_elsewhere_ratio_90": list(ratio_interval(rates["plain"], rates["page_elsewhere"])),
+                  "page_elsewhere_snapshots": fed} if args.page_elsewhere else {}),
               "latency_ms": {"steps": len(lat), "median": 1000 * statistics.median(lat) if lat else None,
                              "p95": 1000 * lat[int(0.95 * (len(lat) - 1))] if lat else None},
               "watching": {**taken, "browser_floor": floor, "cores": CORES} if taken else None,
@@ -324,6 +365,10 @@ def main() -> None:
         a, b = result["least_page_ratio_90"]
         print(f"  plain with a browser showing a line of text changed 5 times a second {least:,.0f} steps/s: "
               f"ratio {least / plain:.3f} ({a:.3f}–{b:.3f}); the dashboard against it {board / least:.3f}")
+    if elsewhere is not None:
+        a, b = result["page_elsewhere_ratio_90"]
+        print(f"  with the dashboard feeding a page on another machine {elsewhere:,.0f} steps/s: "
+              f"ratio {elsewhere / plain:.3f} ({a:.3f}–{b:.3f})")
     la = result["latency_ms"]
     if lat:
         print(f"release to page, paced run of {args.paced_s:g} s ({la['steps']} steps shown): "

@@ -225,14 +225,18 @@ def test_the_baselines_saved_curves_are_read_back_whole_or_refused_by_name(paper
 
 def test_dashboard_cost_benchmark_reports_the_cost_the_latency_and_what_watching_takes():
     res = subprocess.run([sys.executable, "benchmarks/dashboard_cost.py", "--steps", "500", "--repeat", "1",
-                          "--least-page", "--wait-strategy", "block", "--paced-s", "10", "--big", "2000", "--json"],
+                          "--least-page", "--page-elsewhere", "--wait-strategy", "block", "--paced-s", "10", "--big",
+                          "2000", "--json"],
                          capture_output=True, text=True, timeout=400, cwd=REPO, env=env())
     assert res.returncode == 0, res.stderr
     got = json.loads(res.stdout)
     assert got["ratio"] == got["median_dashboard"] / got["median_plain"] > 0
     # Beside them, the plain run with a browser showing the least page: what any page costs.
     assert got["least_page_ratio"] == got["median_least_page"] / got["median_plain"] > 0
-    assert got["wait_strategy"] == "block" and [len(r) for r in got["steps_per_s"].values()] == [1, 1, 1]
+    # And with the dashboard feeding a page elsewhere, which got its snapshots.
+    assert got["page_elsewhere_ratio"] == got["median_page_elsewhere"] / got["median_plain"] > 0
+    assert len(got["page_elsewhere_snapshots"]) == 1 and got["page_elsewhere_snapshots"][0] >= 1
+    assert got["wait_strategy"] == "block" and [len(r) for r in got["steps_per_s"].values()] == [1, 1, 1, 1]
     # The paced run's 1,000 steps reach the page, each within seconds of its point at the server.
     lat = got["latency_ms"]
     assert lat["steps"] >= 900 and 0 < lat["median"] <= lat["p95"] < 5000
