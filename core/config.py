@@ -225,8 +225,8 @@ class CoSimulation(_Strict):
     # How the server and each node wait for their next frame. "block": sleep in Zenoh's
     # channel until it comes. "yield": poll it first, yielding the CPU between polls
     # (core.inbox): faster when frames come quickly, slower when many more processes
-    # than cores compete. "auto": "yield" for up to 2 processes per core and one more (the
-    # server and the project's nodes), else "block".
+    # than cores compete. "auto": "yield" for up to 2 processes per core (the server and the
+    # project's nodes), else "block".
     waitStrategy: Literal["auto", "block", "yield"] = "auto"
     # The master algorithm. "jacobi": every node due at a macro-step point steps at once on the
     # outputs at that point (the paper's scheme). "gauss-seidel": within a macro step the nodes
@@ -347,10 +347,11 @@ def polls_before_blocking(strategy: str, processes: int, cpus: int | None) -> bo
     that sends it; with many more runnable processes than cores every yield is one more
     context switch. Measured on 2 cores (barrier benchmark, 3 to 17 processes): polling
     gave +20 to +50 % macro steps/s at 3 and 5 processes, lost a sixth at 9 and a fifth
-    at 17; hence up to two processes per core, and one more.
+    at 17. On the same VM from 2026-11-26 on it paid nowhere: even at 3 and 4 processes,
+    and at 5 it lost 4 to 9 % in each of three sessions; hence up to two processes per core.
     """
     if strategy == "auto":
-        return processes <= 2 * (cpus or 1) + 1
+        return processes <= 2 * (cpus or 1)
     return strategy == "yield"
 
 

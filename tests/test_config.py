@@ -323,11 +323,11 @@ def test_zenoh_errors_lose_their_rust_source_locations():
 
 
 def test_wait_strategy_polls_only_where_the_processes_fit_the_cores(tmp_path):
-    # auto: up to two processes (the server and the nodes) per core, and one more.
-    assert polls_before_blocking("auto", 5, 2) is True
-    assert polls_before_blocking("auto", 6, 2) is False
-    assert polls_before_blocking("auto", 33, 16) is True
-    assert polls_before_blocking("auto", 3, None) is True and polls_before_blocking("auto", 4, None) is False
+    # auto: up to two processes (the server and the nodes) per core.
+    assert polls_before_blocking("auto", 4, 2) is True
+    assert polls_before_blocking("auto", 5, 2) is False
+    assert polls_before_blocking("auto", 32, 16) is True and polls_before_blocking("auto", 33, 16) is False
+    assert polls_before_blocking("auto", 2, None) is True and polls_before_blocking("auto", 3, None) is False
     assert polls_before_blocking("yield", 17, 2) is True
     assert polls_before_blocking("block", 2, 64) is False
     doc = copy.deepcopy(GOOD)  # 3 nodes and the server: 4 processes
