@@ -6,6 +6,7 @@ import signal
 from pathlib import Path
 
 from core import logs, signals
+from core.signals import FAILED_ELSEWHERE
 from core.config import LoadedProject, server_endpoint
 from core.endpoints import EndpointError, parse_endpoint
 from core.security import SecurityError, node_password
@@ -14,11 +15,6 @@ from core.session import ConnectError
 from clients.loader import NodeLoadError, load_node
 from clients.node import NodeModelError
 from clients.runtime import NodeRunError, NodeRuntime, RunFailedElsewhere
-
-
-# The exit status of a node whose run the server stopped because it failed elsewhere (the
-# server's reason is the node's message); launchers tell it from the node's own failure.
-FAILED_ELSEWHERE = 5
 
 
 def run_node(loaded: LoadedProject, name: str, connect: str | None = None,

@@ -15,6 +15,10 @@ from typing import Any
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
+# The exit status of a node whose run the server stopped because it failed elsewhere (the
+# server's reason is the node's message); launchers tell it from the node's own failure.
+FAILED_ELSEWHERE = 5
+
 
 class Stopped(KeyboardInterrupt):
     """A stop asked for by a signal."""

@@ -24,8 +24,8 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from core import signals
 from core.config import LoadedProject
-from clients.main import FAILED_ELSEWHERE
-from server.relay import run_dir_for
+from core.folders import run_dir_for
+from core.signals import FAILED_ELSEWHERE
 
 
 def free_loopback_endpoint() -> str:

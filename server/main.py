@@ -16,14 +16,14 @@ import structlog
 from core import json_text, logs, signals
 from core.config import LoadedProject, gateway_address, server_endpoint
 from core.endpoints import GATEWAY_PORT, EndpointError, parse_address, parse_endpoint
-from core.folders import make_folder
+from core.folders import make_folder, run_dir_for
 from core.security import SecurityError, router_security
 from core.session import open_session, router_config
 
 from server import checkpoints
 from server.coordinator import GuardEvaluationError
 from server.recorder import Recorder, RecordError
-from server.relay import Relay, RunError, run_dir_for
+from server.relay import Relay, RunError
 
 
 # The project file as the run began, in its run directory.

@@ -28,7 +28,6 @@ import zenoh
 
 from core import frames, signals
 from core.config import FREE_MODE, LoadedProject
-from core.folders import make_folder
 from core.inbox import LOCAL, Inbox
 from core.keys import SERVER_TOKEN, ProjectKeys
 from core.session import FramePublisher, FrameTooLarge
@@ -1165,19 +1164,3 @@ class Relay:
         if self._on_progress is not None:
             self.progress.steps_per_s = self.recorder.meta["steps_per_s"] or 0.0
             self._on_progress(self.progress)
-
-
-def run_dir_for(base: Path, project: str) -> Path:
-    """Make and return ``runs/<project>-<timestamp>``, suffixed ``-2``, ``-3``… when runs start in
-    the same second. Made here, not just named: two processes naming it at the same moment
-    would otherwise both take the same folder (or one fail on it)."""
-    stamp = time.strftime("%Y%m%d-%H%M%S")
-    make_folder(base)
-    n = 1
-    while True:
-        candidate = base / (f"{project}-{stamp}" if n == 1 else f"{project}-{stamp}-{n}")
-        try:
-            candidate.mkdir()
-            return candidate
-        except FileExistsError:
-            n += 1

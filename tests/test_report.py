@@ -223,7 +223,7 @@ def test_runs_started_in_the_same_second_get_folders_of_their_own(tmp_path):
     """Two runs of one project started together (trials, CI jobs) each get their own folder."""
     from concurrent.futures import ThreadPoolExecutor
 
-    from server.relay import run_dir_for
+    from core.folders import run_dir_for
 
     with ThreadPoolExecutor(8) as pool:
         dirs = list(pool.map(lambda _: run_dir_for(tmp_path / "runs", "p"), range(24)))
