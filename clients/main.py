@@ -6,11 +6,11 @@ import signal
 from pathlib import Path
 
 from core import logs, signals
-from core.signals import FAILED_ELSEWHERE
 from core.config import LoadedProject, server_endpoint
 from core.endpoints import EndpointError, parse_endpoint
 from core.security import SecurityError, node_password
 from core.session import ConnectError
+from core.signals import FAILED_ELSEWHERE
 
 from clients.loader import NodeLoadError, load_node
 from clients.node import NodeModelError

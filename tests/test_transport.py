@@ -95,6 +95,16 @@ def test_every_node_knows_the_servers_token_from_the_start(tmp_path):
         assert "server back" not in events and events.index("server seen") < events.index("stop")
 
 
+def test_the_servers_router_does_not_wait_for_peers_it_cannot_find():
+    """zenoh.open in router mode waits scouting/delay (500 ms by default) for peers found by
+    scouting; the server scouts for none, and every run waited with its nodes attached
+    (docs/wire.md has the figures). A client's open has no such wait to lose."""
+    conf = router_config(free_endpoint())
+    assert conf.get_json("scouting/multicast/enabled") == "false"
+    assert json.loads(conf.get_json("scouting/delay")) == 0
+    assert json.loads(conf.get_json("listen/endpoints")) != []
+
+
 def test_a_node_started_before_its_server_attaches_soon_after_the_server_listens(tmp_path):
     """Nodes usually start with their server, before it listens; Zenoh's own retries (1 s
     apart, then 2 s) kept them waiting up to a second after it did (0.3 s a run, in the median)."""
