@@ -137,6 +137,13 @@ def write(run_dir: Path, step: int, server: dict[str, Any], states: dict[str, by
     return final
 
 
+def next_time(t: float, start: float, every: float | None) -> float:
+    """The first checkpoint time after ``t``, on a grid of its own from ``start``: a run
+    restored to a checkpoint takes the same ones again (never, without ``every``)."""
+    every = every or math.inf
+    return start + (math.floor((t - start) / every + 1e-9) + 1) * every
+
+
 def steps(run_dir: Path) -> list[int]:
     """The steps that have a checkpoint folder, oldest first."""
     root = run_dir / FOLDER

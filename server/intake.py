@@ -14,12 +14,31 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from typing import Any
 
 import structlog
 
 from core import frames
 from core.config import WIRE_TYPES, Node
 from core.drops import DropLog
+
+
+def port_mismatch(spec: Node, theirs: Any) -> str | None:
+    """How the ports a node's HELLO lists (``theirs``, off the wire) differ from its entry in
+    the server's project file, in words; None when they agree or the node listed none."""
+    ours = spec.wire_ports()
+    if theirs is None or theirs == ours:
+        return None
+    if type(theirs) is not dict:
+        theirs = {}
+    differ = []
+    for kind in ("input", "output"):
+        given = theirs.get(kind)
+        if given != ours[kind]:
+            shown = ", ".join(frames.short(g) if type(g) is not str else g[:64] for g in given[:32]) \
+                if type(given) is list else ""
+            differ.append(f"its {kind}s are {shown or 'none'}, the server's {', '.join(ours[kind]) or 'none'}")
+    return "; ".join(differ) or None  # other keys beside the two lists are no concern
 
 
 class Dropped(Exception):

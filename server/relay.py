@@ -20,7 +20,6 @@ import os
 import threading
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Callable
 
 import structlog
@@ -33,11 +32,11 @@ from core.keys import SERVER_TOKEN, ProjectKeys
 from core.session import FramePublisher, FrameTooLarge
 from core.sim_clock import RealTimeClock
 
-from server import checkpoints
+from server import checkpoints, plans
 from server.async_sources import SampleHistory
 from server.coordinator import Coordinator, GuardEvaluationError
 from server.gateway import Gateway, GatewayError
-from server.intake import Dropped, Intake
+from server.intake import Dropped, Intake, port_mismatch
 from server.interpolation import STARTUP_SPLIT, InputTrack
 from server.recorder import Recorder, RecordError
 from server.retakes import IterationLog, StepSizer, input_change, relaxed
@@ -448,25 +447,20 @@ class Relay:
         self.recorder.meta["last_checkpoint"] = {"step": p.step, "t": p.server["t"], "path": str(path)}
         self._log.info("checkpoint", step=p.step, t=p.server["t"], bytes=sum(map(len, p.states.values())))
 
+    def _said(self) -> dict[str, dict[str, Any]]:
+        """What each stepping node said it can do (nothing, if it said no HELLO)."""
+        return {n: self.capabilities.get(n, {}) for n in self.stepping}
+
     def _checkpoint_plan(self) -> bool:
         """Whether checkpoints are taken; say why not in the metadata."""
-        every = self.cosim.checkpointEvery
-        if every is None:
-            self.recorder.meta["checkpoints"] = "off (no checkpointEvery)"
-            return False
-        fixed = sorted(n for n in self.stepping if not self.capabilities.get(n, {}).get("serialize"))
-        if fixed:
-            self.recorder.meta["checkpoints"] = f"off: {', '.join(fixed)} cannot serialise their state"
-            self._log.warning("no checkpoints", cannot_serialise=fixed)
-            return False
-        self.recorder.meta["checkpoints"] = f"every {every:g} s of simulated time"
-        return True
+        plan = plans.checkpoints(self.cosim, self._said())
+        self.recorder.meta["checkpoints"] = plan.words
+        if plan.why:
+            self._log.warning("no checkpoints", cannot_serialise=plan.why)
+        return plan.on
 
     def _next_checkpoint(self, t: float) -> float:
-        """The first checkpoint time after t, on a grid of its own from startTime: a run restored
-        to a checkpoint takes the same ones again."""
-        start, every = self.cosim.startTime, self.cosim.checkpointEvery or math.inf
-        return start + (math.floor((t - start) / every + 1e-9) + 1) * every
+        return checkpoints.next_time(t, self.cosim.startTime, self.cosim.checkpointEvery)
 
     def _take_checkpoint(self, k: int, t: float, origin: float, j: int, localised: dict[str, Any], h: float) -> None:
         """Ask every stepping node for its state at point k (they send it after their next
@@ -590,20 +584,10 @@ class Relay:
     def _check_ports(self, node: str, theirs: Any) -> None:
         """Stop the run if a node's copy of the project file gives it other ports than ours:
         its frames would all be dropped and the run would only time out."""
-        ours = self.project.node(node).wire_ports()
-        if theirs is None or theirs == ours:
-            return
-        if type(theirs) is not dict:
-            theirs = {}
-        differ = []
-        for kind in ("input", "output"):
-            given = theirs.get(kind)
-            if given != ours[kind]:
-                shown = ", ".join(frames.short(g) if type(g) is not str else g[:64] for g in given[:32]) \
-                    if type(given) is list else ""
-                differ.append(f"its {kind}s are {shown or 'none'}, the server's {', '.join(ours[kind]) or 'none'}")
-        raise RunError(f"node {node!r} attached with another version of its entry in the project file: "
-                       f"{'; '.join(differ)}. Give every process the same project file")
+        differ = port_mismatch(self.project.node(node), theirs)
+        if differ is not None:
+            raise RunError(f"node {node!r} attached with another version of its entry in the project file: "
+                           f"{differ}. Give every process the same project file")
 
     def _time(self, step: int) -> float:
         return self.cosim.startTime + max(step, 0) * self.cosim.stepSize
@@ -723,72 +707,33 @@ class Relay:
 
     def _localisation_plan(self) -> bool:
         """Whether steps may be rolled back to locate guard crossings; say why not in the metadata."""
-        tol = self.cosim.eventTolerance
-        if tol is None:
-            self.recorder.meta["event_localisation"] = "none: fixed macro steps (no eventTolerance)"
-            return False
-        why = self._cannot_retake(variable=True)
-        if why:
-            self.recorder.meta["event_localisation"] = f"none: fixed macro steps ({why})"
-            return False
-        self.recorder.meta["event_localisation"] = f"rollback and bisection to {tol:g} s"
-        return True
-
-    def _cannot_retake(self, variable: bool) -> str:
-        """Why steps cannot be taken again (shorter, with ``variable``): the nodes that cannot."""
-        said = {n: self.capabilities.get(n, {}) for n in self.stepping}
-        fixed = sorted(n for n, c in said.items() if c.get("rollback") is not True)
-        why = [f"{', '.join(fixed)} cannot get and set state"] if fixed else []
-        if variable:
-            rigid = sorted(n for n, c in said.items() if c.get("variableStep") is False)
-            if rigid:
-                why.append(f"{', '.join(rigid)} cannot take steps of any length")
-        return "; ".join(why)
+        plan = plans.localisation(self.cosim, self._said())
+        self.recorder.meta["event_localisation"] = plan.words
+        return plan.on
 
     def _retake_plan(self) -> None:
         """Whether steps are iterated or their size controlled; say which, or why not, in the metadata."""
         meta, cosim = self.recorder.meta, self.cosim
         if cosim.iterate is not None:
             it = cosim.iterate
-            why = self._cannot_retake(variable=False)
-            if why:
-                meta["iteration"] = f"none: one take of each step ({why})"
-                self._log.warning("no iterative coupling", why=why)
+            plan = plans.iteration(it, self._said(), {n: bool(ports) for n, ports in self._input_labels.items()})
+            meta["iteration"] = plan.words
+            if not plan.on:
+                self._log.warning("no iterative coupling", why=plan.why)
             else:
                 self.iteration = IterationLog(it)
-                meta["iteration"] = (f"up to {it.maxIterations} takes of each step until the inputs change by at most "
-                                     f"{it.tolerance:g}·max(1, |value|)"
-                                     + (f", relaxation {it.relaxation:g}" if it.relaxation != 1.0 else "")
-                                     + f"; a step that does not converge: {it.onFailure}"
-                                     + self._interpolation_plan(it.interpolate))
+                if plan.interpolated:
+                    self.track = InputTrack(it.interpolate, list(plan.interpolated))
+                    self._short_steps = (it.interpolate - 1) * STARTUP_SPLIT
+                elif it.interpolate > 0:
+                    self._log.warning("no interpolated inputs", nodes=list(plan.holding))
         if cosim.stepControl is not None:
-            sc = cosim.stepControl
-            why = self._cannot_retake(variable=True)
-            if why:
-                meta["step_control"] = f"none: fixed macro steps of {cosim.stepSize:g} s ({why})"
-                self._log.warning("no step control", why=why)
+            plan = plans.step_control(cosim.stepControl, cosim.stepSize, self._said())
+            meta["step_control"] = plan.words
+            if not plan.on:
+                self._log.warning("no step control", why=plan.why)
             else:
-                self.sizer = StepSizer.starting(sc, cosim.stepSize)
-                meta["step_control"] = (f"steps of {sc.minStep:g} to {sc.maxStep:g} s, each held input's error over a "
-                                        f"step (its change × step / 2) at most {sc.tolerance:g}·max(1, |value|) s")
-
-    def _interpolation_plan(self, degree: int) -> str:
-        """Which nodes' inputs follow polynomials over a step; the words for the metadata."""
-        if degree == 0:
-            return "; inputs held at the step's end value"
-        said = {n: self.capabilities.get(n, {}) for n in self.stepping}
-        takes = sorted(n for n in self.stepping if said[n].get("interpolates") is True)
-        holds = sorted(n for n in self.stepping if n not in takes and self._input_labels.get(n))
-        held = f"; {', '.join(holds)} cannot interpolate its inputs and holds the step's end value" if holds else ""
-        if not takes:
-            self._log.warning("no interpolated inputs", nodes=holds)
-            return held
-        self.track = InputTrack(degree, takes)
-        self._short_steps = (degree - 1) * STARTUP_SPLIT
-        short = (f"; the first {degree - 1} macro steps taken as {STARTUP_SPLIT} each, until there are "
-                 f"points enough" if degree > 1 else "")
-        return (f"; inputs of {', '.join(takes)} interpolated over each step by polynomials of degree {degree} "
-                f"(FMI input derivatives{short}){held}")
+                self.sizer = StepSizer.starting(cosim.stepControl, cosim.stepSize)
 
     def _change(self, mode: str, used: dict[str, list[Any]], tolerance: float) -> tuple[dict[str, list[Any]], float, str, float]:
         """The inputs routed from the outputs now, and their change from ``used`` (input_change)."""

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 import yaml
 import zenoh
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from clients.scene_fmus import build_scene_fmus

@@ -4,13 +4,10 @@ from __future__ import annotations
 
 import json
 import math
-import shutil
 import threading
 import zipfile
 from pathlib import Path
 
-import numpy as np
-import pytest
 from fmpy import simulate_fmu
 from fmpy.validation import validate_fmu
 

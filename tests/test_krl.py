@@ -164,7 +164,7 @@ def test_export_and_controller_cli_errors(tmp_path):
     assert res.returncode == 2 and "values.csv" in res.stderr
     q = [f"robot.q{i}" for i in range(1, 7)]
     header = ",".join(["step", "t", "mode", *q, "robot.grasped"])
-    (tmp_path / "values.csv").write_text(f"step,t,mode,rod.angle\n0,0.0,free,0.1\n")
+    (tmp_path / "values.csv").write_text("step,t,mode,rod.angle\n0,0.0,free,0.1\n")
     with pytest.raises(ExportError, match="no joint path .* recorded for node 'robot'"):
         export(tmp_path, tmp_path / "out")
     (tmp_path / "values.csv").write_text(f"{header}\n0,0.0,free,0,0,0,0,0,0,0\n1,0.01,free,0,0,up,0,0,0,1\n")

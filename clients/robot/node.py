@@ -8,7 +8,6 @@ Outputs: ``q1``…``q6``, ``tcp_x/y/z`` and ``tcp_roll/pitch/yaw`` (ZYX Euler, r
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
