@@ -328,40 +328,9 @@ class Relay:
     def _handle_side_message(self, key: str, payload: bytes, step: int, collecting: bool) -> tuple[str, frames.Frame] | None:
         """Liveliness and samples are handled here; stepping outputs are returned to the caller."""
         if key == LOCAL:
-            frame = frames.decode(payload)
-            node, alive = frame.fields
-            if node not in self._names:
-                return None  # the server's own token, or one no node of this project holds
-            if alive:
-                self.alive.add(node)
-                if node not in self.capabilities or node in self.lost:
-                    self._fresh.add(node)
-                self.progress.attached = sorted(self.alive)
-                self._log.info("node attached", node=node, step=step)
-                if node in self.lost:
-                    del self.lost[node]
-                    self.reattached[node] = self.reattached.get(node, 0) + 1
-                    # An asynchronous source that restarted needs the run's START (its clock);
-                    # the others, a played one included, the last release.
-                    last = (self._start_frame if self.project.node(node).asynchronous and node not in self.paced
-                            else self._last_release_of.get(node, self._last_release))
-                    if last is not None:
-                        try:
-                            self.release.put(frames.encode(frames.REPLAY, node, last))
-                        except FrameTooLarge as exc:
-                            raise RunError(f"cannot replay the last release to {node!r}: {exc}") from None
-            elif node in self.alive:
-                self.alive.discard(node)
-                self._went[node] = time.monotonic()
-                if step >= 0 and self._grace() > 0:
-                    self.lost[node] = time.monotonic()
-                    self._log.warning("node lost, waiting for it", node=node, step=step, grace_s=self._grace())
-                elif collecting or step >= 0:
-                    why = self.recorder.meta.get("checkpoints", "")
-                    raise RunError(f"node {node!r} was lost at step {step} (t={self._time(step):g} s): "
-                                   "its liveliness token disappeared (process killed or link lost)"
-                                   + (f"; the run cannot go on from a checkpoint (checkpoints {why})"
-                                      if self.cosim.checkpointEvery is not None else ""))
+            node, alive = frames.decode(payload).fields
+            if node in self._names:  # not the server's own token, nor one no node of this project holds
+                self._on_live(node, alive, step, collecting)
             return None
         node = ProjectKeys.last_chunk(key)
         try:
@@ -379,28 +348,64 @@ class Relay:
             self._on_state(node, frame, step)
             return None
         if frame.kind == frames.HELLO:
-            if node in self.capabilities and node not in self._fresh and node not in self.lost:
-                self.intake.drop("duplicate hello", f"{node} said HELLO again while its process held its token",
-                                 step, node)
-                return None
-            self._fresh.discard(node)
-            said = frame.fields[1]
-            if node in self.capabilities and step > 0 and said.get("restart") is True:
-                self._restarted(node, step)
-                if self.project.node(node).asynchronous:
-                    return None  # a source lives on the wall clock: it just goes on sampling
-            elif node in self.capabilities and step > 0 and not self._restoring:
-                # A node process says HELLO once: this is a new process, whose model starts
-                # from scratch while the others are at step k. Not a link cut to wait out.
-                # (While the START is collected, a fresh start is all that was asked of it.)
-                raise RunError(f"node {node!r} was started again at step {step} (t={self._time(step):g} s) while "
-                               "the run was under way: the state it had is gone, so the run cannot go on; "
-                               "start the run again")
-            self.capabilities[node] = dict(said)
-            self._check_ports(node, self.capabilities[node].get("ports"))
+            self._on_hello(node, frame.fields[1], step)
             return None
         self.messages["received"] += 1
         return node, frame
+
+    def _on_live(self, node: str, alive: bool, step: int, collecting: bool) -> None:
+        """A node's liveliness token came or went (``step`` -1: while the nodes attach)."""
+        if alive:
+            self.alive.add(node)
+            if node not in self.capabilities or node in self.lost:
+                self._fresh.add(node)
+            self.progress.attached = sorted(self.alive)
+            self._log.info("node attached", node=node, step=step)
+            if node in self.lost:
+                del self.lost[node]
+                self.reattached[node] = self.reattached.get(node, 0) + 1
+                # An asynchronous source that restarted needs the run's START (its clock);
+                # the others, a played one included, the last release.
+                last = (self._start_frame if self.project.node(node).asynchronous and node not in self.paced
+                        else self._last_release_of.get(node, self._last_release))
+                if last is not None:
+                    try:
+                        self.release.put(frames.encode(frames.REPLAY, node, last))
+                    except FrameTooLarge as exc:
+                        raise RunError(f"cannot replay the last release to {node!r}: {exc}") from None
+        elif node in self.alive:
+            self.alive.discard(node)
+            self._went[node] = time.monotonic()
+            if step >= 0 and self._grace() > 0:
+                self.lost[node] = time.monotonic()
+                self._log.warning("node lost, waiting for it", node=node, step=step, grace_s=self._grace())
+            elif collecting or step >= 0:
+                why = self.recorder.meta.get("checkpoints", "")
+                raise RunError(f"node {node!r} was lost at step {step} (t={self._time(step):g} s): "
+                               "its liveliness token disappeared (process killed or link lost)"
+                               + (f"; the run cannot go on from a checkpoint (checkpoints {why})"
+                                  if self.cosim.checkpointEvery is not None else ""))
+
+    def _on_hello(self, node: str, said: dict[str, Any], step: int) -> None:
+        """A node's HELLO: what it can do, from a node new to the run or a new process of one."""
+        if node in self.capabilities and node not in self._fresh and node not in self.lost:
+            self.intake.drop("duplicate hello", f"{node} said HELLO again while its process held its token",
+                             step, node)
+            return
+        self._fresh.discard(node)
+        if node in self.capabilities and step > 0 and said.get("restart") is True:
+            self._restarted(node, step)
+            if self.project.node(node).asynchronous:
+                return  # a source lives on the wall clock: it just goes on sampling
+        elif node in self.capabilities and step > 0 and not self._restoring:
+            # A node process says HELLO once: this is a new process, whose model starts
+            # from scratch while the others are at step k. Not a link cut to wait out.
+            # (While the START is collected, a fresh start is all that was asked of it.)
+            raise RunError(f"node {node!r} was started again at step {step} (t={self._time(step):g} s) while "
+                           "the run was under way: the state it had is gone, so the run cannot go on; "
+                           "start the run again")
+        self.capabilities[node] = dict(said)
+        self._check_ports(node, self.capabilities[node].get("ports"))
 
     def _grace(self) -> float:
         """How long a lost node is waited for: its linkGrace, or with checkpoints its restart
@@ -942,6 +947,35 @@ class Relay:
             tries += 1
         return hi, arrivals, wait, {"retries": tries, "window": [t + lo, t + hi]}
 
+    def _show(self, k: int, t: float, mode: str, lateness: float | None, holder: str, wait: float,
+              arrivals: dict[str, float], ages: dict[str, float | None]) -> float:
+        """Point k for the progress bar and the status answer; return when (perf_counter)."""
+        self.progress.step, self.progress.t, self.progress.mode = k, t, mode
+        self.progress.lateness_s = lateness
+        now = time.perf_counter()
+        self._recent.append((now, holder, wait, arrivals))
+        # Point k's values, whole (the outputs change while the nodes step).
+        self._shown = (k, t, mode, dict(self.outputs), {n: list(v) for n, v in self.router.inputs.items()},
+                       time.time())
+        self._history.append(self._shown)
+        self._ages = ages
+        return now
+
+    def _next_point(self, k: int, t: float, origin: float, j: int, short: bool) -> tuple[float, list[float] | None]:
+        """The time the step from point k (at t, the j-th of the grid from ``origin``) ends, and
+        for a batched release the base points it spans."""
+        cosim = self.cosim
+        H = cosim.stepSize
+        if short:  # interpolated inputs' start-up: steps of H / STARTUP_SPLIT until there are points enough
+            return min(cosim.startTime + (k + 1) * H / STARTUP_SPLIT, cosim.stopTime), None
+        if self.sizer is not None:
+            return min(t + self.sizer.h, cosim.stopTime), None
+        if self._span > 1:  # a batched release: its base points as single releases would have them
+            times = [min(origin + (j + i) * H, cosim.stopTime)
+                     for i in range(min(self._span, self._last_point - k) + 1)]
+            return times[-1], times
+        return min(origin + (j + 1) * H, cosim.stopTime), None
+
     def _loop(self) -> None:
         cosim = self.cosim
         H = cosim.stepSize
@@ -1028,15 +1062,7 @@ class Relay:
                 if ahead > 0:
                     time.sleep(ahead)
             holder = max(arrivals, key=arrivals.get) if arrivals else ""
-            self.progress.step, self.progress.t, self.progress.mode = k, t, mode
-            self.progress.lateness_s = lateness
-            now = time.perf_counter()
-            self._recent.append((now, holder, wait, arrivals))
-            # Point k's values, whole, for the status answer (the outputs change while the nodes step).
-            self._shown = (k, t, mode, dict(self.outputs), {n: list(v) for n, v in self.router.inputs.items()},
-                           time.time())
-            self._history.append(self._shown)
-            self._ages = ages
+            now = self._show(k, t, mode, lateness, holder, wait, arrivals, ages)
             if self._on_progress is not None and now - last_progress >= self._progress_every:
                 last_progress = now
                 self.progress.steps_per_s = (k - k0) / (now - perf0) if now > perf0 else 0.0
@@ -1051,18 +1077,8 @@ class Relay:
             if t >= end or self._stop_requested.is_set():
                 record()
                 break
-            times = None
             short = k < self._short_steps
-            if short:  # interpolated inputs' start-up: steps of H / STARTUP_SPLIT until there are points enough
-                next_t = min(cosim.startTime + (k + 1) * H / STARTUP_SPLIT, cosim.stopTime)
-            elif self.sizer is not None:
-                next_t = min(t + self.sizer.h, cosim.stopTime)
-            elif self._span > 1:  # a batched release: its base points as single releases would have them
-                times = [min(origin + (j + i) * H, cosim.stopTime)
-                         for i in range(min(self._span, self._last_point - k) + 1)]
-                next_t = times[-1]
-            else:
-                next_t = min(origin + (j + 1) * H, cosim.stopTime)
+            next_t, times = self._next_point(k, t, origin, j, short)
             h = h_used = next_t - t
             watched = localise and self.coordinator.pending_guard_holds(view)
             try:
