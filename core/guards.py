@@ -50,6 +50,12 @@ class Guard:
         self.text = text
         if len(text) > MAX_TEXT:
             raise GuardError(f"guard {text[:40]!r}… is {len(text)} characters; a guard has at most {MAX_TEXT}")
+        if not text.isascii():
+            # Node and port names are ASCII, and Python's parser folds other letters to ASCII ones
+            # (NFKC): 'rod.ａngle' would be read as rod.angle, unlike what it says.
+            first = next(c for c in text if not c.isascii())
+            raise GuardError(f"guard {text!r} holds {first!r} (U+{ord(first):04X}): a guard is ASCII, as node and "
+                             "port names are")
         try:
             tree = ast.parse(text, mode="eval")
         except SyntaxError as exc:

@@ -97,6 +97,9 @@ def test_a_guard_raising_to_a_huge_power_fails_at_once_rather_than_computing_for
     ("a.x >= 1\x00", "does not parse"),
     ("min(a.x) > 1", "min takes 2 to 32 arguments"),  # min(x) iterates over x
     ("abs() > 1", "abs takes 1 argument"),
+    # Python reads the fullwidth letter as 'a' (NFKC): the guard would watch rod.angle unsaid.
+    ("rod.\uff41ngle > 0.5", "holds '\uff41' (U+FF41): a guard is ASCII"),
+    ("a.\u00e9 > 1", "holds '\u00e9' (U+00E9)"),
 ])
 def test_a_guard_too_long_deep_or_calling_with_the_wrong_arguments_is_refused(text, says):
     with pytest.raises(GuardError, match=re.escape(says)):
