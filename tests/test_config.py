@@ -342,7 +342,8 @@ def test_wait_strategy_polls_only_where_the_processes_fit_the_cores(tmp_path):
 _BASES = [GOOD, *(json.loads(p.read_text()) for p in sorted((REPO / "configs").glob("*.json")))]
 _JUNK = st.sampled_from([None, -1, 0, 1, 2.5, -0.0, 1e308, float("nan"), float("inf"), "", "x", "a.y", "free", "é²",
                          "0", [], {}, [1], {"a": 1}, True, False, "x" * 300, 2 ** 70, "..", "/etc/passwd",
-                         "a.y >= 0.3", "__import__('os')", "1 +", "a.b.c", "tcp/127.0.0.1:²", "hold"])
+                         "a.y >= 0.3", "__import__('os')", "1 +", "a.b.c", "tcp/127.0.0.1:²", "hold"]
+                        ).map(copy.deepcopy)  # a fresh [] or {} each draw: a later edit may add to it
 _KEYS = st.sampled_from(["extra", "async", "stepSize", "fmu", "model", "activeIn", "rate", "pairs", "order",
                          "coupling", "events", "gatewayIP", "checkpointEvery", "replay", "until"])
 
