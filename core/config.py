@@ -653,7 +653,11 @@ def check_semantics(project: Project) -> tuple[list[Route], dict[str, EventGuard
             try:
                 g = Guard(text)
             except GuardError as exc:
-                issues.append(Issue(f"events[{i}].{key}", str(exc), "e.g. 'robot.grasped > 0.5'"))
+                # A node name may hold '-', which a guard reads as a minus (it reads Python names).
+                dashed = sorted(n for n in names if "-" in n and f"{n}." in text)
+                issues.append(Issue(f"events[{i}].{key}", str(exc),
+                                    f"a guard cannot name node {dashed[0]!r}: '-' is a minus there; give the node "
+                                    "a name without '-'" if dashed else "e.g. 'robot.grasped > 0.5'"))
                 continue
             for ref in g.references:
                 if ref not in outputs:

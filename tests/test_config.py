@@ -62,6 +62,17 @@ def test_good_file_loads_with_routes_and_guards(tmp_path):
     assert len(loaded.digest) == 64
 
 
+def test_a_guard_naming_a_node_with_a_dash_says_that_is_why_it_does_not_parse(tmp_path):
+    def dashed(doc):
+        doc["nodeLists"][2]["nodeName"] = "c-1"  # a name the config's pattern allows
+        doc["linkLists"][1]["to"], doc["linkLists"][2]["to"] = "c-1.u", "c-1"
+        doc["events"][0].update({"drives": "c-1", "when": "c-1.flag", "until": "a.y > 1"})
+
+    rendered = [i.render() for i in _bad(tmp_path, dashed).issues]
+    assert rendered == ["events[0].when: guard 'c-1.flag' does not parse: invalid decimal literal (hint: a guard "
+                        "cannot name node 'c-1': '-' is a minus there; give the node a name without '-')"]
+
+
 @pytest.mark.parametrize("path", sorted((REPO / "configs").glob("*.json")), ids=lambda p: p.name)
 def test_shipped_configs_validate(path):
     # grasp-fmu.json and grasp-paper.json name FMUs that `hycosim scene fmus` builds (into
