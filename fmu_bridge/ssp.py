@@ -23,8 +23,8 @@ import shutil
 import tempfile
 import zipfile
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any
+from pathlib import Path, PurePosixPath
+from typing import Any, Iterable
 from xml.etree import ElementTree as ET
 
 from core.folders import make_folder
@@ -302,6 +302,34 @@ def _port_type(fmi_type: str) -> str:
     return _PORT_TYPES.get(fmi_type, "Integer")  # Integer, Int8…UInt64, Enumeration
 
 
+def _plain(text: str) -> str:
+    """``text`` as an FMU's file name: letters, digits, '_', '-' and inner dots, ending in
+    '.fmu'; no folder, no hidden file, never '.fmu' alone."""
+    name = re.sub(r"[^A-Za-z0-9_.\-]", "_", text).strip(".")
+    name = name[:-4] if name.lower().endswith(".fmu") else name
+    return f"{name.rstrip('.') or 'component'}.fmu"
+
+
+def fmu_file_names(sources: Iterable[str]) -> dict[str, str]:
+    """A file name for each FMU entry of a package (``sources``: entry names, repeats allowed),
+    distinct for distinct entries (in any letter case): the entry's own name where it is free, else the entry's
+    folders joined into it with ``_``, else that with ``-2``, ``-3``... before ``.fmu``
+    (added where the entry's name lacks it).
+    A component that shares another's entry shares its file."""
+    names: dict[str, str] = {}
+    taken: set[str] = set()  # lower case: on a case-insensitive disk A.fmu is a.fmu
+    for source in dict.fromkeys(sources):
+        name = _plain(PurePosixPath(source).name)
+        if name.lower() in taken:
+            name = _plain(source)
+        base, k = name[:-4], 2
+        while name.lower() in taken:
+            name, k = f"{base}-{k}.fmu", k + 1
+        names[source] = name
+        taken.add(name.lower())
+    return names
+
+
 def project_from_ssp(path: Path, fmu_dir: Path, *, side: dict[str, Any] | None = None,
                      step: float | None = None, stop: float | None = None) -> dict[str, Any]:
     """The project JSON (as a dict) for the package at ``path``, with its FMUs extracted into
@@ -317,16 +345,13 @@ def project_from_ssp(path: Path, fmu_dir: Path, *, side: dict[str, Any] | None =
     nodes: list[dict[str, Any]] = []
     port_of: dict[tuple[str, str], str] = {}
     fed = {s.dst for s in system.signals}
-    # One file per FMU in the package: a component that shares another's source shares its file;
-    # two sources of one name in different folders get their folders in the name.
-    names: dict[str, str] = {}
-    for source in dict.fromkeys(c.source for c in system.components):
-        name = Path(source).name
-        names[source] = name if name not in names.values() else source.replace("/", "_")
+    names = fmu_file_names(c.source for c in system.components)
     with zipfile.ZipFile(path) as z:
         for uid, comp in enumerate(system.components, start=1):
             staged = staging / names[comp.source]
-            staged.write_bytes(z.read(comp.source))
+            if not staged.exists():  # streamed: an FMU may be larger than memory should hold
+                with z.open(comp.source) as src, staged.open("wb") as dst:
+                    shutil.copyfileobj(src, dst, 1 << 20)
             try:
                 variables = {v.name: v for v in describe(staged).modelVariables}
             except FmuError as exc:

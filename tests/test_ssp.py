@@ -283,3 +283,42 @@ def test_two_fmus_of_one_name_in_different_folders_stay_two(tmp_path, gain):
     assert fmus["g1"] == fmus["Sub_g3"] == "fmus/GainModel.fmu" and fmus["g2"] == "fmus/resources_v3_GainModel.fmu"
     assert (tmp_path / fmus["g2"]).read_bytes() == other.read_bytes()
     assert (tmp_path / fmus["g1"]).read_bytes() == gain.read_bytes()
+
+
+@pytest.mark.parametrize("third", ["resources_v3_GainModel.fmu", ".", "Resources/V3/gainmodel.FMU"])
+def test_fmu_entries_whose_file_names_would_meet_stay_apart(tmp_path, gain, third):
+    """A third entry whose file name is the one the second gets (its folders joined in), in
+    another letter case, or no file name at all ('.'): each node still runs its own FMU."""
+    other = build_model_fmu(REPO / "tests" / "models" / "gain_model3.py", tmp_path / "fmi3", fmi_version="3.0")
+    ssd = _SSD.replace('name="g2" source="resources/GainModel.fmu"', 'name="g2" source="resources/v3/GainModel.fmu"')
+    ssd = ssd.replace('name="g3" source="resources/GainModel.fmu"', f'name="g3" source="{third}"')
+    package = _package(tmp_path / "three.ssp", gain, ssd=ssd)
+    with zipfile.ZipFile(package, "a") as z:
+        z.write(other, "resources/v3/GainModel.fmu")
+        z.writestr(third, gain.read_bytes())
+    from fmu_bridge.ssp import project_from_ssp
+
+    doc = project_from_ssp(package, tmp_path / "fmus", step=0.1)
+    fmus = {n["nodeName"]: tmp_path / n["fmu"] for n in doc["nodeLists"]}
+    assert len({f.name.lower() for f in fmus.values()}) == 3
+    assert all(f.parent == tmp_path / "fmus" and f.suffix == ".fmu" for f in fmus.values()), fmus
+    assert fmus["g2"].read_bytes() == other.read_bytes()
+    assert fmus["g1"].read_bytes() == fmus["Sub_g3"].read_bytes() == gain.read_bytes()
+
+
+_ENTRY = st.text(alphabet="ab./\\_-A é:", max_size=12)
+
+
+@given(sources=st.lists(_ENTRY, max_size=8))
+def test_each_fmu_entry_of_a_package_gets_a_file_name_of_its_own(sources):
+    from fmu_bridge.ssp import fmu_file_names
+
+    names = fmu_file_names(sources)
+    assert set(names) == set(sources)
+    assert len({n.lower() for n in names.values()}) == len(names)
+    for name in names.values():
+        assert re.fullmatch(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]*\.fmu", name), name
+    if sources:  # the first entry keeps its own name where that is a plain FMU file name
+        own = sources[0].rsplit("/", 1)[-1]
+        if re.fullmatch(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]*\.fmu", own):
+            assert names[sources[0]] == own
