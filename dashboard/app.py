@@ -5,7 +5,8 @@ the feed answers a name that is no port with the closest ones, and pushes a snap
 run as soon as the source has a newer one (a live run's: five times a second, whatever its
 step rate), so that the page is no later than the source. Static files are served from the
 package's ``static/`` folder alone (Starlette's StaticFiles refuses ``..``, absolute paths
-and links out of it); nothing else on the disk is reachable from the page.
+and links out of it); nothing else on the disk is reachable from the page. Pages of other
+sites cannot read the run through the user's browser (dashboard.origin).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from starlette.applications import Starlette
 from starlette.concurrency import run_in_threadpool
 from starlette.requests import Request
 from starlette.responses import FileResponse, JSONResponse
+from starlette.middleware import Middleware
 from starlette.routing import Mount, Route, WebSocketRoute
 from starlette.staticfiles import StaticFiles
 from starlette.websockets import WebSocket, WebSocketDisconnect
@@ -30,6 +32,7 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 from core import json_text
 from core.endpoints import listen_family
 from dashboard.changes import Watchers
+from dashboard.origin import OwnOriginOnly, is_loopback
 
 STATIC = Path(__file__).resolve().parent / "static"
 MIN_PUSH_S = 0.02  # the least time between two pushes to a page (a finished run's reader changes in bursts)
@@ -78,8 +81,11 @@ def finite(value: Any) -> Any:
     return value
 
 
-def make_app(source: Source) -> Starlette:
-    """The app serving ``source`` (a dashboard.live.LiveFeed or a dashboard.finished.FinishedRun)."""
+def make_app(source: Source, *, loopback_only: bool = True, allow_origins: tuple[str, ...] = ()) -> Starlette:
+    """The app serving ``source`` (a dashboard.live.LiveFeed or a dashboard.finished.FinishedRun)
+    to its own page alone (dashboard.origin): ``loopback_only``, for a dashboard listening on a
+    loopback address, answers requests addressed to this machine only; ``allow_origins`` are
+    the other sites whose pages may open the feed."""
 
     async def index(request: Request) -> FileResponse:
         return FileResponse(STATIC / "index.html")
@@ -149,7 +155,8 @@ def make_app(source: Source) -> Starlette:
             source.watchers.remove(changed)
 
     return Starlette(routes=[Route("/", index), Route("/api/ports", ports), Route("/api/snapshot", snapshot),
-                             WebSocketRoute("/ws", feed), Mount("/static", StaticFiles(directory=STATIC))])
+                             WebSocketRoute("/ws", feed), Mount("/static", StaticFiles(directory=STATIC))],
+                     middleware=[Middleware(OwnOriginOnly, loopback_only=loopback_only, allowed=allow_origins)])
 
 
 def bind(host: str, port: int) -> socket.socket:
@@ -165,9 +172,11 @@ def bind(host: str, port: int) -> socket.socket:
     return sock
 
 
-def serve(source: Source, sock: socket.socket) -> None:
-    """Serve the page on ``sock`` until Ctrl-C or SIGTERM (uvicorn's own handling)."""
+def serve(source: Source, sock: socket.socket, allow_origins: tuple[str, ...] = ()) -> None:
+    """Serve the page on ``sock`` until Ctrl-C or SIGTERM (uvicorn's own handling); on a
+    loopback address to requests addressed to this machine alone."""
     import uvicorn
 
-    config = uvicorn.Config(make_app(source), log_level="warning", lifespan="off", ws="websockets-sansio")
+    app = make_app(source, loopback_only=is_loopback(str(sock.getsockname()[0])), allow_origins=allow_origins)
+    config = uvicorn.Config(app, log_level="warning", lifespan="off", ws="websockets-sansio")
     uvicorn.Server(config).run(sockets=[sock])

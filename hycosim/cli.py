@@ -504,11 +504,20 @@ def dashboard(
     tls_ca: Annotated[Optional[Path], typer.Option(help="CA certificate (PEM) for a tls/ endpoint")] = None,
     retry: Annotated[float, typer.Option(min=0.05, max=3600.0,
                                          help="seconds between tries to reach a server that does not answer")] = 2.0,
+    allow_origin: Annotated[Optional[list[str]], typer.Option(
+        help="another site whose pages may open the feed (scheme://host[:port]): a page embedding the "
+             "dashboard, a reverse proxy; repeatable")] = None,
 ) -> None:
     """Watch a running co-simulation, or look through a finished run, in a browser."""
     from dashboard.app import bind, serve
+    from dashboard.origin import normal_origin
     from server.report import RunDirError
 
+    for origin in allow_origin or []:
+        if normal_origin(origin) is None:
+            err.print(f"[red]error:[/red] --allow-origin {escape(repr(origin))}: not an origin "
+                      "(scheme://host\\[:port], http or https, no path)", highlight=False)
+            raise typer.Exit(2)
     path = Path(target)
     if path.is_dir():
         from dashboard.finished import FinishedRun
@@ -537,7 +546,7 @@ def dashboard(
     out.print(f"dashboard: http://{shown}:{sock.getsockname()[1]}/", highlight=False)
     sys.stdout.flush()  # a launcher reads the address from a pipe
     try:
-        serve(source, sock)
+        serve(source, sock, tuple(allow_origin or ()))
     finally:
         if closing is not None:
             closing()

@@ -214,6 +214,116 @@ def test_bad_dashboard_targets_are_refused_by_name(tmp_path):
     assert res.returncode == 2 and "not a run directory (no meta.json)" in res.stderr and "Traceback" not in res.stderr
 
 
+class _OtherSite:
+    """Another web site on this machine (its own port: another origin): a page that is not the dashboard's."""
+
+    def __init__(self, folder: Path):
+        import functools
+        import http.server
+        import threading
+
+        (folder / "index.html").write_text("<!doctype html><title>another site</title><p>nothing here</p>")
+        handler = functools.partial(http.server.SimpleHTTPRequestHandler, directory=str(folder))
+        handler.log_message = lambda *a: None
+        self.server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+        self.origin = f"http://127.0.0.1:{self.server.server_address[1]}"
+        threading.Thread(target=self.server.serve_forever, daemon=True).start()
+
+    def close(self) -> None:
+        self.server.shutdown()
+        self.server.server_close()
+
+
+_STEAL = """async ([host, port]) => {  // what a page of another site would run: read the run, by feed or by fetch
+    const feed = await new Promise((resolve) => {
+        let got = null;
+        const ws = new WebSocket(`ws://${host}:${port}/ws`);
+        ws.onopen = () => ws.send(JSON.stringify({ select: [] }));
+        ws.onmessage = (ev) => { got = ev.data; ws.close(); };
+        ws.onclose = () => resolve(got === null ? "refused" : "read " + got.slice(0, 40));
+        setTimeout(() => resolve(got === null ? "no answer" : "read " + got.slice(0, 40)), 8000);
+    });
+    let fetched;
+    try { fetched = "read " + (await (await fetch(`http://${host}:${port}/api/ports`)).text()).slice(0, 40); }
+    catch (e) { fetched = "blocked"; }
+    return [feed, fetched];
+}"""
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is installed by `make test`")
+def test_pages_of_other_sites_cannot_read_the_run_through_the_users_browser(tmp_path):
+    """A dashboard on 127.0.0.1 is within reach of every page the browser shows. In a real
+    browser: a page of another site opens the feed (cross-site WebSocket hijacking) and is
+    refused, unless the dashboard allows its origin; a name turned to 127.0.0.1 (DNS
+    rebinding, here by chromium's resolver rules) is answered 403; the dashboard's own page,
+    at 127.0.0.1 or localhost, reads its feed."""
+    from playwright.sync_api import sync_playwright
+
+    other = _OtherSite(tmp_path)
+    port, allowing_port = free_port(), free_port()
+    server = f"tcp/127.0.0.1:{free_port()}"  # nobody there: the page is served, its feed says so
+    board = spawn("dashboard", server, "--port", str(port), "--retry", "5")
+    allowing = spawn("dashboard", server, "--port", str(allowing_port), "--retry", "5", "--allow-origin", other.origin)
+    try:
+        _page_up(f"http://127.0.0.1:{port}/")
+        _page_up(f"http://127.0.0.1:{allowing_port}/")
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM,
+                                        args=["--no-sandbox", "--host-resolver-rules=MAP rebind.test 127.0.0.1"])
+            page = browser.new_page()
+            for host in ("127.0.0.1", "localhost"):
+                page.goto(f"http://{host}:{port}/")
+                page.wait_for_function("window.hycosim.snapshot !== null", timeout=20_000)
+                feed, fetched = page.evaluate(_STEAL, [host, port])
+                assert feed.startswith("read {") and fetched.startswith("read {")  # its own origin: all is its
+            page.goto(other.origin + "/")
+            assert page.title() == "another site"
+            feed, fetched = page.evaluate(_STEAL, ["127.0.0.1", port])
+            assert (feed, fetched) == ("refused", "blocked")
+            feed, fetched = page.evaluate(_STEAL, ["127.0.0.1", allowing_port])
+            assert feed.startswith("read {") and fetched == "blocked"  # allowed to the feed, no further
+            answer = page.goto(f"http://rebind.test:{port}/api/ports")
+            assert answer.status == 403 and "is not this machine" in page.content()
+            assert "rod" not in page.content() and "ports" not in page.content()
+            browser.close()
+    finally:
+        reap(board, allowing)
+        other.close()
+    assert not board.stderr.read() and not allowing.stderr.read()  # refused quietly, no traceback
+
+
+_HOSTS = st.one_of(
+    st.sampled_from(["127.0.0.1", "127.8.9.10", "localhost", "app.localhost", "[::1]", "::1", "[::1", "evil.test",
+                     "127.0.0.1.evil.test", "localhost.evil.test", "0.0.0.0", "[::ffff:127.0.0.1]", "LOCALHOST", ""]),
+    st.text(max_size=12)).flatmap(
+    lambda name: st.sampled_from([name, f"{name}:8050", f"{name}:0", f"{name}:99999", f"{name}:x", f"{name}:"]))
+_ORIGINS = st.none() | st.sampled_from(["null", "file://", "http://evil.test", "https://127.0.0.1:8050/x"]) | \
+    _HOSTS.flatmap(lambda h: st.sampled_from([f"http://{h}", f"https://{h}", h])) | st.text(max_size=20)
+
+
+@given(kind=st.sampled_from(["http", "websocket"]), host=st.none() | _HOSTS, origin=_ORIGINS,
+       loopback_only=st.booleans(), allowed=st.lists(_ORIGINS.filter(lambda o: o is not None), max_size=2))
+def test_a_request_is_answered_only_when_addressed_here_and_a_feed_only_to_its_own_page(kind, host, origin,
+                                                                                       loopback_only, allowed):
+    from dashboard.origin import is_loopback, normal_origin, refusal, split_host
+
+    permitted = frozenset(o for o in map(normal_origin, allowed) if o)
+    why = refusal(kind, host, origin, loopback_only=loopback_only, allowed=permitted)
+    assert why is None or (type(why) is str and why)
+    where = None if host is None else split_host(host)
+    if why is None and loopback_only:  # addressed to this machine, or to a site the user allowed
+        assert where is not None and (is_loopback(where[0]) or any(f"//{where[0]}:" in o or f"//[{where[0]}]:" in o
+                                                                   for o in permitted))
+    if why is None and kind == "websocket" and origin is not None:  # from its own page, or one allowed
+        theirs = normal_origin(origin)
+        assert theirs is not None
+        assert theirs in permitted or (where is not None and split_host(theirs.split("//")[1])[0] == where[0])
+    if kind == "http" and host is not None and where is not None and not loopback_only:
+        assert why is None  # a page's address never refuses plain requests: CORS keeps their answers from other sites
+    if where is not None and is_loopback(where[0]) and (kind == "http" or origin is None):
+        assert why is None
+
+
 _answers = st.fixed_dictionaries(
     {"project": st.just("p") | values},
     optional={"nodes": st.just([{"name": "a", "uid": 1, "input": ["u"], "output": ["y", "z"]},
