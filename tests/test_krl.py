@@ -143,7 +143,8 @@ def test_malformed_inputs_are_rejected_and_the_controller_keeps_running(grasp_ru
     # A peer that never ends a frame is cut off at a bound, not buffered for ever.
     with socket.create_connection((host, port), timeout=30) as s:
         s.sendall(b"<Robot>" + b" " * MAX_FRAME_BYTES)  # all of it read before the cut: no reset
-        assert b"no frame end (</Robot>)" in s.recv(4096)
+        reply = ET.fromstring(s.recv(4096))  # XML the PC reads, the frame end in it quoted
+        assert reply.find("Error").get("Msg").startswith("no frame end (</Robot>) in ")
     # A connection that drops mid-program is rejected too; the next program still runs.
     with socket.create_connection((host, port)) as s:
         s.sendall("\n".join(good[:5]).encode())
@@ -276,7 +277,7 @@ def test_ctrl_c_stops_the_trials_and_tabulates_the_finished_ones(tmp_path):
 
 # Frame streams as a PC sends them, each frame right or with one thing wrong, the whole
 # stream ended by the empty-A1 frame or by the connection closing.
-_FRAME_WRONGS = ["axis", "time", "element", "root", "xml", "bytes", "entity"]
+_FRAME_WRONGS = ["axis", "time", "element", "root", "xml", "bytes", "entity", "markup"]
 
 
 @st.composite
@@ -294,6 +295,10 @@ def _frame_streams(draw) -> tuple[bytes, int, int, bool]:
                           text)
             if axis == "A1" and 'A1=""' in text:  # an empty A1 is the end frame, not a wrong one
                 text = text.replace('A1=""', 'A1="?"')
+        elif wrong == "markup":  # a value holding what XML escapes: the reason quotes it back
+            axis = draw(st.sampled_from(AXES[1:]))
+            text = re.sub(f'{axis}="[^"]*"', f'{axis}="{draw(st.sampled_from(["&lt;", "&amp;", "&quot;", "&apos;"]))}x"',
+                          text)
         elif wrong == "time":
             text = re.sub(r'T="[^"]*"', f'T="{draw(st.sampled_from(["-1", "1e300", "nan", "", "t"]))}"', text)
         elif wrong == "element":  # (a frame without Pos has no A1: EKI_GetReal finds none, the program EXITs)
@@ -331,8 +336,15 @@ def test_the_controller_executes_each_right_frame_and_rejects_each_wrong_one(str
         theirs.sendall(data)
         theirs.shutdown(socket.SHUT_WR)
         result = controller.handle(ours, "the test")
+        ours.shutdown(socket.SHUT_WR)
+        answers = b"".join(iter(lambda: theirs.recv(65536), b""))
     finally:
         ours.close(), theirs.close(), controller.stop()
+    # Each answer is XML the PC can read, whatever the wrong frame held (its text is in the reason).
+    replies = [part + b"</Robot>" for part in answers.split(b"</Robot>")[:-1]]
+    assert len(replies) == rejected + ends
+    for reply in replies:
+        ET.fromstring(reply)
     assert (result is not None) == ends
     if ends:
         assert result.frames == executed and len(result.rejected) == rejected

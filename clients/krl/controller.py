@@ -19,6 +19,7 @@ import math
 import socket
 import threading
 from dataclasses import asdict, dataclass, field
+from xml.sax.saxutils import quoteattr
 
 import numpy as np
 import structlog
@@ -147,7 +148,8 @@ class EmulatedController:
         self.log.warning("rejected", reason=message)
         if conn is not None:
             try:
-                conn.sendall(f'<Robot><Error Msg="{message.replace(chr(34), chr(39))}"/></Robot>'.encode())
+                # quoted: the reason may hold the frame's own text, '<' and '&' included
+                conn.sendall(f"<Robot><Error Msg={quoteattr(message)}/></Robot>".encode())
             except OSError:
                 pass
 
