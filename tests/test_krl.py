@@ -11,6 +11,7 @@ import time
 import socket
 import threading
 import xml.etree.ElementTree as ET
+from xml.sax.saxutils import escape
 
 import numpy as np
 import pytest
@@ -360,10 +361,12 @@ def _eki_files(draw) -> bytes:
     an element's Tag or Type, a line dropped, or text that is no XML."""
     text = EkiConfig().to_xml()
     lines = text.splitlines()
-    what = draw(st.sampled_from([None, "port", "flag", "tag", "type", "line", "text", "bytes"]))
+    what = draw(st.sampled_from([None, "ip", "port", "flag", "tag", "type", "line", "text", "bytes"]))
     junk = st.sampled_from(["", "x", "-1", "0", "65536", "99999999", "²", "1e3", " 7 ", "1025", "9" * 40]) \
         | st.text(alphabet=st.characters(blacklist_characters='"<>&', blacklist_categories=("Cs",)), max_size=8)
-    if what == "port":
+    if what == "ip":  # any text, as XML escapes it
+        text = text.replace("<IP>", f"<IP>{escape(draw(st.sampled_from(['<', '&', ' ']) | st.text(max_size=8)))}", 1)
+    elif what == "port":
         text = text.replace("<PORT>54600</PORT>", f"<PORT>{draw(junk)}</PORT>")
     elif what == "flag":
         text = text.replace('Set_Flag="1"', f'Set_Flag="{draw(junk)}"')
@@ -408,6 +411,7 @@ def test_an_eki_file_is_read_whole_or_refused_by_name_and_its_frames_read_or_rej
     assert all(typ in ("REAL", "INT", "BOOL", "STRING") and tag.startswith("Robot/") and "/@" in tag
                for tag, typ in config.elements)
     assert {f"Robot/Pos/@{a}" for a in AXES} <= {tag for tag, _ in config.elements}
+    assert EkiConfig.parse(config.to_xml(), "cell.eki") == config  # written back as it was read
     for text in frames_text:
         try:
             parse_frame(text, config)

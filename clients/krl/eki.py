@@ -16,6 +16,7 @@ import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
+from xml.sax.saxutils import escape, quoteattr
 
 AXES = ("A1", "A2", "A3", "A4", "A5", "A6")
 # A RECEIVE element hycosim reads: an attribute of the frame's Robot element or of one below it
@@ -39,11 +40,12 @@ class EkiConfig:
         *((f"Robot/Pos/@{a}", "REAL") for a in AXES), ("Robot/Pos/@T", "REAL"), ("Robot/Gripper/@Close", "BOOL")])
 
     def to_xml(self) -> str:
-        elements = "\n".join(f'      <ELEMENT Tag="{tag}" Type="{typ}"/>' for tag, typ in self.elements)
+        # quoted: a configuration read from a file may hold any text in its IPs and Tags
+        elements = "\n".join(f"      <ELEMENT Tag={quoteattr(tag)} Type={quoteattr(typ)}/>" for tag, typ in self.elements)
         return f"""<ETHERNETKRL>
   <CONFIGURATION>
     <EXTERNAL>
-      <IP>{self.external_ip}</IP>
+      <IP>{escape(self.external_ip)}</IP>
       <PORT>{self.port}</PORT>
       <TYPE>Client</TYPE>
     </EXTERNAL>
@@ -51,7 +53,7 @@ class EkiConfig:
       <ENVIRONMENT>Program</ENVIRONMENT>
       <BUFFERING Mode="FIFO" Limit="512"/>
       <ALIVE Set_Flag="{self.flag + 1}"/>
-      <IP>{self.internal_ip}</IP>
+      <IP>{escape(self.internal_ip)}</IP>
       <PORT>{self.port}</PORT>
       <PROTOCOL>TCP</PROTOCOL>
     </INTERNAL>
