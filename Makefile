@@ -63,6 +63,7 @@ bench: $(STAMP) bytecode chromium
 	$(PY) benchmarks/scene_fmus.py
 	$(PY) benchmarks/memory.py
 	$(PY) benchmarks/fuzz.py
+	$(PY) benchmarks/status_flood.py
 	$(PY) benchmarks/recovery.py
 	$(PY) benchmarks/accuracy.py
 	$(PY) benchmarks/dashboard_cost.py

@@ -135,6 +135,7 @@ class LiveFeed:
         self.version = 0  # counts the answers taken (and the state changes): the page is pushed each
         self.watchers = Watchers()  # the pages' feeds, woken at each
         self._thread: threading.Thread | None = None
+        self._busy = False  # the server's last reply said it was over its budget of answers
 
     # --- lifecycle ------------------------------------------------------------------
 
@@ -171,8 +172,9 @@ class LiveFeed:
     def _watch(self, session: zenoh.Session) -> None:
         status = self._ask(session, self.project or "*")
         if status is None:
-            self._say("connecting", f"no hycosim server answers at {self.endpoint}"
-                      + (f" for project {self.project!r}" if self.project else "") + "; retrying")
+            self._say("connecting", (f"the server at {self.endpoint} is busy answering others; retrying" if self._busy
+                                     else f"no hycosim server answers at {self.endpoint}"
+                                     + (f" for project {self.project!r}" if self.project else "") + "; retrying"))
             return
         self.project = status["project"]
         self.take(status)
@@ -188,7 +190,8 @@ class LiveFeed:
                     continue
                 missed += 1
                 if missed >= 10 and self.state != "ended":
-                    self._say("connecting", f"the server at {self.endpoint} does not answer; retrying")
+                    self._say("connecting", f"the server at {self.endpoint} "
+                              + ("is busy answering others; retrying" if self._busy else "does not answer; retrying"))
                     return
         finally:
             watcher.undeclare()
@@ -196,9 +199,11 @@ class LiveFeed:
     def _ask(self, session: zenoh.Session, project: str, since: int | None = None) -> dict[str, Any] | None:
         """The server's checked status answer (with its points after step ``since``), or None."""
         key = ProjectKeys(project).status
+        self._busy = False
         try:
             for reply in session.get(key if since is None else f"{key}?since={since}", timeout=1.0):
-                if reply.ok is None:
+                if reply.ok is None:  # a server over its budget of answers says so (server.answer_budget)
+                    self._busy |= reply.err is not None and reply.err.payload.to_bytes().startswith(b"busy: ")
                     continue
                 checked = _read_status(reply.ok.payload.to_bytes())
                 if checked is not None:

@@ -458,10 +458,13 @@ def status(
     except ConnectError as exc:
         err.print(f"[red]error:[/red] {exc}", highlight=False)
         raise typer.Exit(3) from None
-    answers = []
+    answers, busy = [], []
     try:
         for reply in session.get(ProjectKeys(project).status, timeout=timeout):
-            if reply.ok is not None:
+            if reply.ok is None:  # a server over its budget of answers says so (server.answer_budget)
+                said = reply.err.payload.to_bytes()[:200].decode(errors="replace") if reply.err is not None else ""
+                busy += [said] if said.startswith("busy: ") else []
+            else:
                 try:
                     answer = json_text.loads(reply.ok.payload.to_bytes())
                 except ValueError:
@@ -470,6 +473,10 @@ def status(
                     answers.append(answer)
     finally:
         session.close()
+    if not answers and busy:
+        shown = "".join(c for c in busy[0] if c.isprintable())  # anyone may answer on the key
+        err.print(f"[red]error:[/red] the server on {endpoint} is {escape(shown)}", highlight=False)
+        raise typer.Exit(3)
     if not answers:
         err.print(f"[red]error:[/red] no hycosim server answered on {endpoint} within {timeout:g} s", highlight=False)
         raise typer.Exit(3)

@@ -33,6 +33,7 @@ from core.session import FramePublisher, FrameTooLarge
 from core.sim_clock import RealTimeClock
 
 from server import checkpoints, plans
+from server.answer_budget import AnswerBudget
 from server.async_sources import SampleHistory
 from server.coordinator import Coordinator, GuardEvaluationError
 from server.gateway import Gateway, GatewayError
@@ -159,6 +160,7 @@ class Relay:
             0, self.cosim.startTime, FREE_MODE, {}, {}, None)
         self._history: collections.deque[tuple] = collections.deque(maxlen=RECENT_KEPT)  # the latest points, for the dashboard
         self._ages: dict[str, float | None] = {}  # each asynchronous value's age at the latest point
+        self.answers = AnswerBudget()  # status answers a second: anyone may ask
         self._last_release: bytes | None = None
         self._start_frame: bytes | None = None
         # Checkpoints (coSimulation.checkpointEvery): on once every stepping node said it can
@@ -189,6 +191,9 @@ class Relay:
         self.inbox.inject(frames.encode(frames.LIVE, node, alive))
 
     def _on_status(self, query: zenoh.Query) -> None:
+        if not self.answers.take():
+            query.reply_err(f"busy: over {self.answers.per_s:g} status answers a second; ask again".encode())
+            return
         since = query.parameters.get("since")
         try:
             after = int(since) if since is not None and len(since) < 20 else None
@@ -196,6 +201,11 @@ class Relay:
             after = None  # anyone may ask: a selector that is no step asks for no points
         # A byte port's value is no JSON: it goes as null (the dashboard plots numbers only).
         query.reply(self.keys.status, json.dumps(self.status(after), default=lambda _: None))
+
+    def _dropped(self) -> dict[str, int]:
+        """What was dropped, by reason: the frames the intake refused, the status questions over budget."""
+        refused = self.answers.refused
+        return {**self.intake.dropped, **({"status over budget": refused} if refused else {})}
 
     def status(self, since: int | None = None) -> dict[str, Any]:
         """Who is attached and where the run is, for ``hycosim status`` and the dashboard (read
@@ -216,7 +226,7 @@ class Relay:
                 "expected": [n.nodeName for n in self.project.nodeLists], "nodes": nodes,
                 "run": self.recorder.run_dir.name, "step": shown[0], "t": shown[1],
                 "mode": shown[2], "stopTime": self.cosim.stopTime, "lateness_s": self.progress.lateness_s,
-                "dropped": dict(self.intake.dropped), "switches": list(self.switches), "window": window,
+                "dropped": self._dropped(), "switches": list(self.switches), "window": window,
                 "outputs": shown[3], "inputs": shown[4], "point_wall": shown[5], "ages": dict(self._ages),
                 **({} if since is None else {"points": points_since(list(self._history), since)})}
 
@@ -262,7 +272,7 @@ class Relay:
             if self.gateway is not None:
                 self.gateway.close(reason or status_text)
             self.intake.drops.flush(self.progress.step)
-            self.recorder.close(status_text, reason=reason, dropped_frames=dict(self.intake.dropped),
+            self.recorder.close(status_text, reason=reason, dropped_frames=self._dropped(),
                                 non_finite=self.intake.non_finite,
                                 reattached=dict(self.reattached), server_waits=self.inbox.waits,
                                 messages=dict(self.messages),

@@ -126,6 +126,19 @@ def test_fuzz_benchmark_reports_an_unharmed_run_at_a_small_scale():
     assert forgery["reached_server"] == 0 and forgery["reached_nodes"] == 0 and sum(forgery["by_key"].values()) == 300
 
 
+def test_status_flood_benchmark_reports_the_floods_cost_and_that_the_server_said_busy():
+    res = subprocess.run([sys.executable, "benchmarks/status_flood.py", "--steps", "1500", "--repeat", "1", "--json"],
+                         capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
+    assert res.returncode == 0, res.stderr
+    r = json.loads(res.stdout)
+    assert set(r["ratio_to_plain"]) == {"plain", "busy core", "flood, waiting", "flood, firing"}
+    assert r["ratio_to_plain"]["plain"] == 1.0 and all(v > 0 for v in r["median_steps_per_s"].values())
+    for kind, f in r["floods"].items():
+        # every question past the budget was answered busy, and the server counted each
+        assert f["answered"][0] >= 1 and 0 < f["busy"][0] <= f["counted_busy"][0], (kind, f)
+    assert r["floods"]["flood, waiting"]["busy"][0] > 5 * r["floods"]["flood, waiting"]["answered"][0]
+
+
 def test_recovery_benchmark_reports_identical_records_at_a_small_scale():
     res = subprocess.run([sys.executable, "benchmarks/recovery.py", "--stop", "10", "--every", "0.5", "--node-kills", "2",
                           "--server-kills", "1", "--replay-stop", "0", "--ring-steps", "2000", "--repeat", "1",

@@ -208,6 +208,33 @@ def test_a_dashboard_that_cannot_reach_its_server_says_so_and_keeps_trying():
         feed.close()
 
 
+def test_a_dashboard_whose_server_is_busy_answering_others_says_so_and_keeps_trying():
+    """A server over its budget of status answers replies 'busy' (server.answer_budget): the
+    page says the server is busy, not that no server answers. The server here is a Zenoh peer
+    on the status key that only ever says busy."""
+    import zenoh
+
+    from core.keys import ProjectKeys
+    from core.session import router_config
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with zenoh.open(router_config(endpoint)) as server:
+        said = []
+        busy = server.declare_queryable(ProjectKeys("p").status, lambda q: (
+            said.append(1), q.reply_err(b"busy: over 40 status answers a second; ask again")))
+        feed = LiveFeed(endpoint, "p", retry_s=0.2)
+        feed.start()
+        try:
+            wait_for(lambda: "busy" in feed.snapshot([])["message"], 20, "the page to say the server is busy")
+            snap = feed.snapshot([])
+            assert snap["state"] == "connecting" and snap["message"].endswith("busy answering others; retrying")
+            count = len(said)
+            wait_for(lambda: len(said) > count, 10, "the feed to ask again")
+        finally:
+            feed.close()
+            busy.undeclare()
+
+
 def test_bad_dashboard_targets_are_refused_by_name(tmp_path):
     (tmp_path / "empty").mkdir()
     res = hycosim("dashboard", str(tmp_path / "empty"), "--port", "0")

@@ -101,3 +101,39 @@ def test_points_since_are_after_the_step_thinned_with_the_latest(history, since)
         stride = -(-len(after) // STATUS_POINTS)
         assert {b - a for a, b in zip(at, at[1:])} == {stride}
         assert len(points) == -(-len(after) // stride)
+
+
+@given(gaps=st.lists(st.floats(0.0, 0.2), max_size=300), per_s=st.floats(1.0, 100.0), burst=st.integers(1, 30))
+def test_the_answer_budget_grants_at_most_its_rate_and_burst_and_refuses_only_beyond_them(gaps, per_s, burst):
+    """Questions at any times: the answers granted by any moment are at most the burst plus the
+    rate times the time gone by, every refusal is counted, and a question that finds the
+    bucket refilled for one more is never refused."""
+    from server.answer_budget import AnswerBudget
+
+    now = [0.0]
+    budget = AnswerBudget(per_s, burst, clock=lambda: now[0])
+    granted = 0
+    tokens = float(burst)  # reckoned here alongside, as the bucket should
+    for gap in gaps:
+        now[0] += gap
+        tokens = min(float(burst), tokens + gap * per_s)
+        took = budget.take()
+        if abs(tokens - 1.0) > 1e-6:  # (at the edge, rounding decides)
+            assert took == (tokens > 1.0)
+        if took:
+            granted, tokens = granted + 1, max(0.0, tokens - 1.0)
+        assert granted <= burst + per_s * now[0] + 1e-6
+    assert budget.refused == len(gaps) - granted
+
+
+def test_an_asker_within_the_budget_is_never_refused():
+    from server.answer_budget import AnswerBudget
+
+    now = [0.0]
+    budget = AnswerBudget(32.0, 20, clock=lambda: now[0])
+    for _ in range(2000):  # askers at the budget's rate (times a power of two: no rounding in the sums)
+        now[0] += 1 / 32
+        assert budget.take()
+    assert budget.refused == 0
+    # then a loop at once: what is left of the burst (one went to the last steady question), no more
+    assert sum(budget.take() for _ in range(100)) == 19 and budget.refused == 81

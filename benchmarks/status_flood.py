@@ -1,0 +1,132 @@
+"""A peer asking the server's status in a loop: what it costs a fast run, against the same run left alone.
+
+Anyone who reaches the server may ask its status queryable, and an answer is built while
+the barrier waits. The server answers ``server.answer_budget.ANSWERS_PER_S`` questions a
+second and replies "busy" to the rest. Three ways to run the same ring of 2 nodes
+(benchmarks/barrier.py's, y = 0.5·u + 1, each node its own process, on loopback), the
+rounds interleaved, medians of steps/s:
+
+* **plain**: nobody asks;
+* **busy core**: a process spinning on a core beside it, the cost of any busy process;
+* **flood, waiting**: a Zenoh client asking the status one question at a time, the next as
+  soon as the last is answered, from a process of its own (on the machine too, as an
+  attacker's process would be);
+* **flood, firing**: the same client sending its questions without waiting for replies.
+
+Goal: a flood costs the run about what a process taking a core costs it (its ratio to plain
+near busy core's), and every question past the budget is answered "busy" and counted.
+Measured 2026-11-27 on the project's 2-core VM (10,000 steps, 2 rounds): without the budget
+0.17 (waiting) and 0.26 (firing) of plain, busy core 0.66–0.72; with it 0.45 and 0.78. The
+waiting flooder is answered "busy" at once and asks again, some 1,300 questions a second:
+what remains is Zenoh's and Python's handling of each question in the server.
+
+    python benchmarks/status_flood.py [--steps 20000] [--repeat 3] [--timeout 300] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from _procs import free_port, kill_group, start
+
+HERE = Path(__file__).resolve().parent
+REPO = HERE.parent
+sys.path.insert(0, str(REPO))
+
+from barrier import ring_config  # noqa: E402
+
+# The flooder: asks until killed; prints its tally (answers, busy replies) each half second.
+_FLOODER = r"""
+import sys, time
+from core.keys import ProjectKeys
+from core.session import client_config, open_session
+endpoint, project = sys.argv[1], sys.argv[2]
+session = None
+while session is None:
+    try:
+        session = open_session(client_config(endpoint, timeout_s=2.0), endpoint)
+    except Exception:
+        time.sleep(0.05)
+waits = sys.argv[3] == "waits"
+key, tally, shown = ProjectKeys(project).status, [0, 0], time.monotonic()
+def count(reply):
+    tally[0 if reply.ok is not None else 1] += 1
+while True:
+    if waits:  # one question at a time, the next as soon as the last is answered
+        for reply in session.get(key, timeout=1.0):
+            count(reply)
+    else:  # questions sent without waiting for their replies
+        session.get(key, count, timeout=1.0)
+    if time.monotonic() - shown > 0.5:
+        print(*tally, flush=True)
+        shown = time.monotonic()
+"""
+
+
+def one_run(kind: str, steps: int, timeout: float) -> dict:
+    """One ring run with ``kind`` beside it; its steps/s, and the flooder's tally and meta's count."""
+    with tempfile.TemporaryDirectory() as tmp:
+        cfg = ring_config(2, steps, Path(tmp) / "ring.json")
+        endpoint = f"tcp/127.0.0.1:{free_port()}"
+        beside = None
+        if kind == "busy core":
+            beside = start([sys.executable, "-c", "while True: pass"])
+        elif kind.startswith("flood"):
+            beside = start([sys.executable, "-c", _FLOODER, endpoint, json.loads(cfg.read_text())["projectName"],
+                            "waits" if kind == "flood, waiting" else "fires"], cwd=REPO, stdout=subprocess.PIPE, text=True)
+        try:
+            run = start([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", tmp, "--no-progress",
+                         "--listen", endpoint], cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+            try:
+                _, err = run.communicate(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                kill_group(run)
+                raise RuntimeError(f"{kind}: the run passed --timeout {timeout:g} s") from None
+        finally:
+            if beside is not None:
+                kill_group(beside)
+                tally = beside.communicate()[0] if kind.startswith("flood") else ""
+        if run.returncode:
+            raise RuntimeError(f"{kind}: the run failed ({run.returncode}): {err[-600:]}")
+        meta = json.loads(next(Path(tmp).glob("ring*/meta.json")).read_text())
+        last = (tally or "").split("\n")[-2:-1] if kind.startswith("flood") else []
+        ok, busy = (int(x) for x in last[0].split()) if last else (0, 0)
+        return {"steps_per_s": float(meta["steps_per_s"]), "answered": ok, "busy": busy,
+                "counted": meta.get("dropped_frames", {}).get("status over budget", 0)}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=20_000)
+    ap.add_argument("--repeat", type=int, default=3, help="rounds of the three kinds, interleaved")
+    ap.add_argument("--timeout", type=float, default=300.0, help="seconds a run may take")
+    ap.add_argument("--json", action="store_true")
+    args = ap.parse_args()
+    kinds = ["plain", "busy core", "flood, waiting", "flood, firing"]
+    runs: dict[str, list[dict]] = {k: [] for k in kinds}
+    for r in range(args.repeat):
+        for kind in kinds if r % 2 == 0 else kinds[::-1]:
+            runs[kind].append(one_run(kind, args.steps, args.timeout))
+    median = {k: statistics.median(x["steps_per_s"] for x in v) for k, v in runs.items()}
+    result = {"steps": args.steps, "repeat": args.repeat, "median_steps_per_s": median,
+              "ratio_to_plain": {k: median[k] / median["plain"] for k in kinds},
+              "floods": {k: {"answered": [x["answered"] for x in runs[k]], "busy": [x["busy"] for x in runs[k]],
+                             "counted_busy": [x["counted"] for x in runs[k]]} for k in kinds if k.startswith("flood")}}
+    if args.json:
+        print(json.dumps(result, indent=1))
+        return
+    print(f"ring of 2, {args.steps} steps, {args.repeat} rounds interleaved (medians):")
+    for k in kinds:
+        print(f"  {k:15s} {median[k]:8.0f} steps/s  {result['ratio_to_plain'][k]:.2f} of plain")
+    for k, f in result["floods"].items():
+        print(f"  {k}: answered {f['answered']} times, told busy {f['busy']} (the server counted {f['counted_busy']})")
+
+
+if __name__ == "__main__":
+    main()
