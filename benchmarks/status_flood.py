@@ -104,15 +104,18 @@ def one_run(kind: str, steps: int, timeout: float) -> dict:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=20_000)
-    ap.add_argument("--repeat", type=int, default=3, help="rounds of the three kinds, interleaved")
+    ap.add_argument("--repeat", type=int, default=3, help="rounds of the four kinds, interleaved")
     ap.add_argument("--timeout", type=float, default=300.0, help="seconds a run may take")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     kinds = ["plain", "busy core", "flood, waiting", "flood, firing"]
     runs: dict[str, list[dict]] = {k: [] for k in kinds}
-    for r in range(args.repeat):
-        for kind in kinds if r % 2 == 0 else kinds[::-1]:
-            runs[kind].append(one_run(kind, args.steps, args.timeout))
+    try:
+        for r in range(args.repeat):
+            for kind in kinds if r % 2 == 0 else kinds[::-1]:
+                runs[kind].append(one_run(kind, args.steps, args.timeout))
+    except RuntimeError as exc:
+        sys.exit(f"status_flood: {exc}")
     median = {k: statistics.median(x["steps_per_s"] for x in v) for k, v in runs.items()}
     result = {"steps": args.steps, "repeat": args.repeat, "median_steps_per_s": median,
               "ratio_to_plain": {k: median[k] / median["plain"] for k in kinds},
