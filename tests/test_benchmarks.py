@@ -136,7 +136,7 @@ def test_status_flood_benchmark_reports_the_floods_cost_and_that_the_server_said
     for kind, f in r["floods"].items():
         # every question past the budget was answered busy, and the server counted each
         assert f["answered"][0] >= 1 and 0 < f["busy"][0] <= f["counted_busy"][0], (kind, f)
-    assert r["floods"]["flood, waiting"]["busy"][0] > 5 * r["floods"]["flood, waiting"]["answered"][0]
+    assert r["floods"]["flood, waiting"]["busy"][0] > r["floods"]["flood, waiting"]["answered"][0]
 
 
 def test_recovery_benchmark_reports_identical_records_at_a_small_scale():

@@ -142,7 +142,7 @@ def test_a_peer_asking_the_status_in_a_loop_gets_the_budgets_answers_and_busy_fo
         if proc.poll() is None:
             proc.kill()
     assert 1 <= ok <= BURST + ANSWERS_PER_S * took + 1
-    assert len(busy) > 10 * ok and set(busy) == {f"busy: over {ANSWERS_PER_S:g} status answers a second; "
+    assert len(busy) > ok and set(busy) == {f"busy: over {ANSWERS_PER_S:g} status answers a second; "
                                                  "ask again".encode()}
     assert again == [True]
     assert meta(run_dir)["dropped_frames"]["status over budget"] >= len(busy)
