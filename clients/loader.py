@@ -102,6 +102,9 @@ def model_class(spec: NodeSpec, project_dir: Path | None = None) -> type[Node] |
     _check_names(spec, "parameter", spec.parameters, cls.PARAMETERS)
     _check_names(spec, "input", spec.input_names(), cls.INPUTS)
     _check_names(spec, "output", spec.output_names(), cls.OUTPUTS)
+    wrong = cls.parameter_problems(spec.parameters)
+    if wrong:
+        raise NodeLoadError(f"node {spec.nodeName!r}: model {spec.model!r}: {'; '.join(wrong)}")
     return cls
 
 

@@ -87,6 +87,14 @@ class Node(ABC):
     # ``hycosim validate`` names. None: no output does.
     FEEDTHROUGH: ClassVar[dict[str, frozenset[str]] | None] = None
 
+    @classmethod
+    def parameter_problems(cls, parameters: dict[str, Any]) -> list[str]:
+        """What is wrong with the values of a node entry's ``parameters``, each a sentence
+        naming the parameter (``clients.parameters`` has the checks). The loader refuses the
+        entry with them before the run, as it refuses names outside PARAMETERS. Empty:
+        nothing wrong, or the model does not check."""
+        return []
+
     def setup(self, ctx: NodeContext) -> None:
         """Prepare the model; called once before the node attaches."""
 
@@ -181,6 +189,11 @@ class AsyncSource(ABC):
     PARAMETERS: ClassVar[frozenset[str] | None] = None  # as for Node
     INPUTS: ClassVar[frozenset[str] | None] = None  # as for Node (an asynchronous node has none)
     OUTPUTS: ClassVar[frozenset[str] | None] = None  # as for Node
+
+    @classmethod
+    def parameter_problems(cls, parameters: dict[str, Any]) -> list[str]:
+        """What is wrong with the values of a node entry's ``parameters`` (as for Node)."""
+        return []
 
     def setup(self, ctx: NodeContext) -> None:
         """Prepare the source; called once before the node attaches."""

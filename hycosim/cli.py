@@ -737,7 +737,7 @@ def scene_reach(
     output: Annotated[Optional[Path], typer.Option("-o", "--output", help="PNG to write")] = None,
 ) -> None:
     """Which part of the rod's swing the robot can reach from its base placement: table and PNG."""
-    from clients.robot.node import scene_params
+    from clients.robot.node import scene_parameter_problems, scene_params
     from clients.robot.reach import analyse_reach, plot_reach
 
     loaded = _load(file)
@@ -746,6 +746,10 @@ def scene_reach(
     except KeyError:
         err.print(f"[red]error:[/red] {file}: no node named {node!r} (use --node)", highlight=False)
         raise typer.Exit(2) from None
+    wrong = scene_parameter_problems(spec.parameters)
+    if wrong:
+        err.print(f"[red]error:[/red] {escape(str(file))}: node {node!r}: {escape('; '.join(wrong))}", highlight=False)
+        raise typer.Exit(2)
     report = analyse_reach(scene_params(spec.parameters))
     table = Table(title=f"reach of {node!r} over the rod's swing")
     for col in ("rod angle (°)", "grasp point (m)", "reachable", "IK error (mm)", "A1…A6 (°)", "limit margin (°)"):

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from clients import parameters as check
 from clients.node import Node, NodeContext, pack_state, unpack_state
 
 
@@ -42,6 +43,13 @@ class BouncingBall(Node):
     PARAMETERS = frozenset({"h0", "v0", "g", "e"})
     INPUTS = frozenset({"h_in", "v_in"})
     OUTPUTS = frozenset({"h", "v", "impacts"})
+
+    @classmethod
+    def parameter_problems(cls, parameters: dict[str, Any]) -> list[str]:
+        return check.problems(check.number(parameters, "h0", at_least=0.0, at_most=1e6),
+                              check.number(parameters, "v0", at_least=-1e4, at_most=1e4),
+                              check.number(parameters, "g", above=0.0, at_most=1e3),
+                              check.number(parameters, "e", at_least=0.0, at_most=1.0))
 
     def setup(self, ctx: NodeContext) -> None:
         self.h = float(ctx.parameter("h0", 1.0))

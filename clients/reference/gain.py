@@ -5,6 +5,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
+from clients import parameters as check
 from clients.node import Node, NodeContext, pack_state, unpack_state
 
 
@@ -21,6 +22,11 @@ class Gain(Node):
     INPUTS = frozenset({"u"})
     OUTPUTS = frozenset({"y"})
     FEEDTHROUGH = {"y": frozenset({"u"})}
+
+    @classmethod
+    def parameter_problems(cls, parameters: dict[str, Any]) -> list[str]:
+        return check.problems(check.number(parameters, "k"), check.number(parameters, "b"),
+                              check.number(parameters, "work_s", at_least=0.0))
 
     def setup(self, ctx: NodeContext) -> None:
         self.k = float(ctx.parameter("k", 1.0))

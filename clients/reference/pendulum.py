@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from clients import parameters as check
 from clients.node import Node, NodeContext, pack_state, unpack_state
 
 
@@ -20,6 +21,15 @@ class Pendulum(Node):
     INPUTS = frozenset({"theta_in", "omega_in"})
     # The pivot and the bob in the x–z plane (m): what a dashboard draws of it.
     OUTPUTS = frozenset({"theta", "omega", "pivot_x", "pivot_z", "bob_x", "bob_z"})
+
+    @classmethod
+    def parameter_problems(cls, parameters: dict[str, Any]) -> list[str]:
+        return check.problems(check.number(parameters, "length", at_least=1e-3, at_most=1e3),
+                              check.number(parameters, "g", at_least=-1e3, at_most=1e3),
+                              check.number(parameters, "damping", at_least=0.0, at_most=1e3),
+                              check.number(parameters, "theta0", at_least=-1e3, at_most=1e3),
+                              check.number(parameters, "omega0", at_least=-1e3, at_most=1e3),
+                              check.number(parameters, "micro_steps", at_least=1, at_most=1_000_000, whole=True))
 
     def setup(self, ctx: NodeContext) -> None:
         self.length = float(ctx.parameter("length", 1.0))

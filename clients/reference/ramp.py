@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from clients import parameters as check
 from clients.node import Node, NodeContext, pack_state, unpack_state
 
 
@@ -13,6 +14,10 @@ class Ramp(Node):
     PARAMETERS = frozenset({"a", "b"})
     INPUTS = frozenset()
     OUTPUTS = frozenset({"y", "v"})
+
+    @classmethod
+    def parameter_problems(cls, parameters: dict[str, Any]) -> list[str]:
+        return check.problems(check.number(parameters, "a"), check.number(parameters, "b"))
 
     def setup(self, ctx: NodeContext) -> None:
         self.a = float(ctx.parameter("a", 0.0))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from clients import parameters as check
 from clients.node import AsyncSource, NodeContext
 
 
@@ -13,6 +14,11 @@ class RampSource(AsyncSource):
 
     PARAMETERS = frozenset({"a", "b", "rate"})
     OUTPUTS = frozenset({"y"})
+
+    @classmethod
+    def parameter_problems(cls, parameters: dict[str, Any]) -> list[str]:
+        return check.problems(check.number(parameters, "a"), check.number(parameters, "b"),
+                              check.number(parameters, "rate", above=0.0, at_most=1e5))  # samples a second
 
     def setup(self, ctx: NodeContext) -> None:
         self.a = float(ctx.parameter("a", 0.0))

@@ -8,18 +8,39 @@ Outputs: ``q1``…``q6``, ``tcp_x/y/z`` and ``tcp_roll/pitch/yaw`` (ZYX Euler, r
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
+from clients import parameters as check
 from clients.node import Node, NodeContext, NodeModelError, pack_state, unpack_state
 from clients.robot import kr6
 from clients.robot.scene import RobotScene, SceneOutputs, SceneParams, euler_zyx, outputs_restore, outputs_snapshot
-from clients.rod.node import ROD_PARAMETERS, rod_params
+from clients.rod.node import ROD_PARAMETERS, rod_parameter_problems, rod_params
 
 
 # What scene_params reads.
 SCENE_PARAMETERS = ROD_PARAMETERS | {"base", "check_reach"}
+
+
+def scene_parameter_problems(parameters: dict[str, Any]) -> list[str]:
+    """What is wrong with the scene's description in a node's ``parameters``: the rod's, the
+    robot's base (x, y, z in m) and ``check_reach``."""
+    return rod_parameter_problems(parameters) + check.problems(check.point(parameters, "base", within=100.0),
+                                                               check.flag(parameters, "check_reach"))
+
+
+def pose_problem(q0_deg: Any) -> str | None:
+    """Why ``q0_deg`` is not six joint angles in degrees within the axes' limits, or None (a
+    pose outside them is no robot's, and a state saved from it would not restore)."""
+    if not (type(q0_deg) in (list, tuple) and len(q0_deg) == 6
+            and all(type(v) in (int, float) and math.isfinite(v) for v in q0_deg)):
+        return f"q0_deg must be six joint angles in degrees, not {check.json_repr(q0_deg)}"
+    for i, (v, (lo, hi)) in enumerate(zip(q0_deg, kr6.LIMITS_DEG)):
+        if not lo <= v <= hi:
+            return f"q0_deg: A{i + 1} = {v:g}° is outside its limits [{lo}, {hi}]°"
+    return None
 
 
 def scene_params(parameters: dict[str, Any]) -> SceneParams:
@@ -41,19 +62,12 @@ def scene_output_dict(o: SceneOutputs) -> dict[str, Any]:
 
 def initial_pose(node: str, q0_deg: Any) -> np.ndarray:
     """The parameter ``q0_deg`` as a pose (rad); NodeModelError naming the node, the parameter
-    and the axis unless it is six numbers within the axis limits (a pose outside them is no
-    robot's, and a state saved from it would not restore)."""
-    try:
-        q = np.asarray(q0_deg, dtype=float)
-    except (TypeError, ValueError):
-        q = np.empty(0)
-    if q.shape != (6,):
-        raise NodeModelError(f"robot node {node!r}: parameters.q0_deg must be six joint angles in degrees, not {q0_deg!r}")
-    for i, (v, (lo, hi)) in enumerate(zip(q, kr6.LIMITS_DEG)):
-        if not lo <= v <= hi:
-            raise NodeModelError(f"robot node {node!r}: parameters.q0_deg: A{i + 1} = {v:g}° is outside its "
-                                 f"limits [{lo}, {hi}]°")
-    return np.clip(np.radians(q), kr6.LIMITS[:, 0], kr6.LIMITS[:, 1])  # radians() may round past a limit
+    and the axis unless it fits (:func:`pose_problem`)."""
+    problem = pose_problem(q0_deg)
+    if problem is not None:
+        raise NodeModelError(f"robot node {node!r}: parameters.{problem}")
+    # radians() may round past a limit
+    return np.clip(np.radians(np.asarray(q0_deg, dtype=float)), kr6.LIMITS[:, 0], kr6.LIMITS[:, 1])
 
 
 class RobotNode(Node):
@@ -62,6 +76,11 @@ class RobotNode(Node):
     OUTPUTS = frozenset({f"q{i + 1}" for i in range(6)} | {
         "tcp_x", "tcp_y", "tcp_z", "tcp_roll", "tcp_pitch", "tcp_yaw", "dist", "grasped", "collision", "reachable",
         "near_miss", "gap", "grip_x", "grip_y", "grip_z"})
+
+    @classmethod
+    def parameter_problems(cls, parameters: dict[str, Any]) -> list[str]:
+        pose = None if parameters.get("q0_deg") is None else pose_problem(parameters["q0_deg"])
+        return scene_parameter_problems(parameters) + (["parameter 'q0_deg'" + pose[len("q0_deg"):]] if pose else [])
 
     def setup(self, ctx: NodeContext) -> None:
         self.scene = RobotScene(scene_params(ctx.parameters))

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from clients import parameters as check
 from clients.node import Node, NodeContext, pack_state, unpack_state
 from clients.rod.model import RodModel, RodParams
 
@@ -21,6 +22,30 @@ from clients.rod.model import RodModel, RodParams
 # share the rod's description so that a project states it once per node alike).
 ROD_PARAMETERS = frozenset({"length", "mass", "radius", "damping", "pivot", "grasp_distance", "initial_angle_deg",
                             "initial_omega", "observer_gain"})
+
+
+def rod_parameter_problems(parameters: dict[str, Any]) -> list[str]:
+    """What is wrong with the rod's description in a node's ``parameters`` (clients.parameters)."""
+    found = check.problems(
+        # Bounds a rod in a robot's cell keeps, far on both sides; beyond them MuJoCo refuses the
+        # body (mass or inertia under 1e-15) or its millisecond steps diverge to NaN.
+        check.number(parameters, "length", at_least=1e-3, at_most=100.0),
+        check.number(parameters, "mass", at_least=1e-3, at_most=1e4),
+        check.number(parameters, "radius", at_least=1e-4, at_most=1.0),
+        check.number(parameters, "damping", at_least=0.0, at_most=1e3),
+        check.point(parameters, "pivot", within=100.0), check.number(parameters, "grasp_distance", above=0.0),
+        check.number(parameters, "initial_angle_deg", at_least=-180.0, at_most=180.0),
+        check.number(parameters, "initial_omega", at_least=-100.0, at_most=100.0),
+        check.number(parameters, "observer_gain", at_least=0.0, at_most=1e3))
+    if not found:  # the grasp point and the rod's thickness lie on the rod
+        p = rod_params(parameters)
+        if p.grasp_distance > p.length:
+            found.append(f"parameter 'grasp_distance' ({p.grasp_distance:g} m) lies beyond the rod's 'length' "
+                         f"({p.length:g} m)")
+        if 2 * p.radius >= p.length:
+            found.append(f"parameter 'radius' ({p.radius:g} m) is half the rod's 'length' ({p.length:g} m) or "
+                         "more: a rod longer than it is thick")
+    return found
 
 
 def rod_params(parameters: dict[str, Any]) -> RodParams:
@@ -43,6 +68,10 @@ class RodNode(Node):
     PARAMETERS = ROD_PARAMETERS
     INPUTS = frozenset({"driven", "grip_x", "grip_y", "grip_z", "meas_angle", "meas_t", "meas_valid"})
     OUTPUTS = frozenset({"angle", "omega", "grasp_x", "grasp_y", "grasp_z", "tip_x", "tip_y", "tip_z"})
+
+    @classmethod
+    def parameter_problems(cls, parameters: dict[str, Any]) -> list[str]:
+        return rod_parameter_problems(parameters)
 
     def setup(self, ctx: NodeContext) -> None:
         self.rod = RodModel(rod_params(ctx.parameters))
