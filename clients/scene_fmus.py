@@ -16,8 +16,8 @@ from fmu_bridge import model_fmu
 from fmu_bridge.model_fmu import build_model_fmu
 
 HERE = Path(__file__).resolve().parent
-_PACKAGED = ("__init__.py", "rod/__init__.py", "rod/model.py", "robot/__init__.py", "robot/kr6.py",
-             "robot/ik.py", "robot/scene.py")
+_PACKAGED = ("__init__.py", "rod/__init__.py", "rod/model.py", "rod/bounded.py", "robot/__init__.py",
+             "robot/kr6.py", "robot/ik.py", "robot/scene.py")
 
 
 def build_scene_fmus(out_dir: Path) -> dict[str, Path]:

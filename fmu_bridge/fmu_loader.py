@@ -10,6 +10,7 @@ failure is an :class:`FmuError` that names the node and, where there is one, the
 from __future__ import annotations
 
 import json
+import math
 import shutil
 import struct
 import tempfile
@@ -192,6 +193,32 @@ def check_parameters(md: ModelDescription, node: str, parameters: dict[str, Any]
         if not _fits(var_type, value):
             raise FmuError(f"node {node!r}: parameter {name!r} is {_a(var_type)} variable of {path.name}, "
                            f"which {json.dumps(value)} is not")
+        if type(value) is float and not math.isfinite(value):
+            raise FmuError(f"node {node!r}: parameter {name!r} is {json.dumps(value)}, not a finite number")
+        outside = _outside_range(variables[name], value)
+        if outside:
+            raise FmuError(f"node {node!r}: parameter {name!r} is {json.dumps(value)}, {outside} that {path.name} "
+                           "declares for it")
+
+
+def _bound(text: Any) -> float | None:
+    try:
+        return float(text) if text is not None else None
+    except (TypeError, ValueError):
+        return None  # an FMU's own malformed bound: its values are not held to it
+
+
+def _outside_range(variable: ScalarVariable, value: Any) -> str | None:
+    """Where a number lies against the variable's declared ``min`` and ``max`` (an FMU may refuse,
+    or clamp without a word, a value outside them), or None when within or undeclared."""
+    if type(value) not in (int, float):
+        return None
+    low, high = _bound(getattr(variable, "min", None)), _bound(getattr(variable, "max", None))
+    if low is not None and value < low:
+        return f"below the minimum {low:g}"
+    if high is not None and value > high:
+        return f"above the maximum {high:g}"
+    return None
 
 
 @dataclass(frozen=True)

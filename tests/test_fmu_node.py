@@ -9,6 +9,8 @@ import zipfile
 from pathlib import Path
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from core.config import load_project
 from fmu_bridge.fmu_loader import FmuError, FmuInstance, open_fmu
@@ -186,6 +188,34 @@ def test_missing_fmu_file_and_bad_parameter(tmp_path, fmus):
     cfg = write_project(tmp_path / "q.json", [_gain_node(fmus["gain"], parameters={"k": "2.0"})])
     res = hycosim("validate", str(cfg))
     assert res.returncode == 2 and "parameter 'k' is a Real variable of GainModel.fmu, which \"2.0\" is not" in res.stderr
+
+
+@given(value=st.floats(allow_nan=True, allow_infinity=True) | st.integers(-10 ** 20, 10 ** 20) | st.booleans()
+       | st.text(max_size=4) | st.none(), low=st.sampled_from([None, "0.001", "-5", "x"]),
+       high=st.sampled_from([None, "100", "0", ""]))
+def test_a_parameter_is_set_only_within_the_range_its_variable_declares(value, low, high):
+    """An FMU's variable may declare a min and a max; a value outside them (which the FMU may
+    refuse, or clamp without a word) is named before the FMU loads. A bound that is no number
+    (the FMU's own fault) holds nothing."""
+    from fmpy.model_description import ModelDescription, ScalarVariable
+
+    from fmu_bridge.fmu_loader import check_parameters
+
+    var = ScalarVariable("k", 0)
+    var.type, var.min, var.max = "Real", low, high
+    md = ModelDescription()
+    md.modelVariables.append(var)
+    try:
+        check_parameters(md, "g", {"k": value}, Path("M.fmu"))
+    except FmuError as exc:
+        assert str(exc).startswith("node 'g': parameter 'k' is ")
+        refused = True
+    else:
+        refused = False
+    number = type(value) in (int, float)
+    below = low not in (None, "x") and number and value < float(low)
+    above = high not in (None, "") and number and value > float(high)
+    assert refused == (not number or not math.isfinite(value) or below or above)
 
 
 def test_model_fmu_helper_errors_name_the_script(tmp_path):

@@ -11,7 +11,7 @@ from pathlib import Path
 from fmpy import simulate_fmu
 from fmpy.validation import validate_fmu
 
-from clients.rod.model import RodModel, RodParams
+from clients.rod.model import LIMITS, RodModel, RodParams
 from clients.scene_fmus import build_scene_fmus
 from tests.helpers import REPO, column, hycosim, read_rows, run_project
 
@@ -75,6 +75,24 @@ def test_scene_fmus_run_in_plain_fmpy_and_as_nodes(tmp_path):
     assert res.returncode == 2
     assert "nodeLists[0]: node 'rod': parameter 'lenght' is not a variable of Rod.fmu; did you mean 'length'?" in res.stderr
     assert "nodeLists[1]: node 'robot': RobotScene6.fmu has no variable for output 'q1' (variable 'q_1')" in res.stderr
+    # A value outside the range the FMU declares is refused as the rod node refuses it, whatever the importer
+    doc = json.loads(cfg.read_text())
+    doc["nodeLists"][0]["parameters"]["length"] = -0.6
+    doc["nodeLists"][1]["parameters"]["pivot_z"] = 1e6
+    doc["nodeLists"][2]["parameters"]["mass"] = 0.0
+    (tmp_path / "outside.json").write_text(json.dumps(doc))
+    res = hycosim("validate", str(tmp_path / "outside.json"))
+    assert res.returncode == 2
+    text = res.stderr.replace("\n", " ")
+    assert "node 'rod': parameter 'length' is -0.6, below the minimum 0.001 that Rod.fmu declares for it" in text
+    assert "node 'robot': parameter 'pivot_z' is 1000000.0, above the maximum 100 that RobotScene6.fmu declares" in text
+    assert "node 'controller': model 'clients.robot.controller:ReferenceController': parameter 'mass' is 0.0; " \
+           "it must be at least 0.001" in text
+    from fmu_bridge.fmu_loader import describe
+
+    bounds = {v.name: (float(v.min), float(v.max)) for v in describe(fmus["rod"]).modelVariables
+              if v.causality == "parameter"}
+    assert bounds["length"] == LIMITS["length"] and bounds["pivot_x"] == LIMITS["coordinate"]
     run = run_project(cfg, tmp_path / "runs")
     _check_grasp(run, read_rows(run))
 

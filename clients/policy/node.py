@@ -22,7 +22,7 @@ from clients.policy.ddpg import load_policy
 from clients.policy.features import (Predictor, TurningPoint, action_to_targets, aim_time, grip_reflex, missed,
                                      observe)
 from clients.robot import kr6
-from clients.robot.node import SCENE_PARAMETERS, scene_params
+from clients.robot.node import SCENE_PARAMETERS, scene_parameter_problems, scene_params
 from clients.robot.scene import RobotScene, SceneParams
 from clients.rod.model import RodModel
 from clients.rod.node import rod_params
@@ -35,6 +35,10 @@ class PolicyNode(Node):
     INPUTS = frozenset({f"q{i + 1}" for i in range(6)} | {
         "rod_angle", "rod_omega", "grasp_x", "grasp_y", "grasp_z", "tcp_x", "tcp_y", "tcp_z", "gap", "dist", "grasped"})
     OUTPUTS = frozenset({f"q_cmd{i + 1}" for i in range(6)} | {"grip_cmd", "infer_ms"})
+
+    @classmethod
+    def parameter_problems(cls, parameters: dict[str, Any]) -> list[str]:
+        return scene_parameter_problems(parameters)  # (the rod and the cell it plans in)
 
     def setup(self, ctx: NodeContext) -> None:
         given = ctx.parameters.get("checkpoint")

@@ -21,7 +21,7 @@ import numpy as np
 
 from clients.node import Node, NodeContext, pack_state, unpack_state
 from clients.robot import kr6
-from clients.robot.node import SCENE_PARAMETERS, scene_params
+from clients.robot.node import SCENE_PARAMETERS, scene_parameter_problems, scene_params
 from clients.robot.scene import RobotScene, SceneParams
 from clients.rod.model import RodModel
 from clients.rod.node import rod_params
@@ -85,6 +85,10 @@ class ReferenceController(Node):
     PARAMETERS = SCENE_PARAMETERS | {"close_lead", "replan_every"}
     INPUTS = frozenset({f"q{i + 1}" for i in range(6)} | {"rod_angle", "rod_omega", "grasped"})
     OUTPUTS = frozenset({f"q_cmd{i + 1}" for i in range(6)} | {"grip_cmd"})
+
+    @classmethod
+    def parameter_problems(cls, parameters: dict[str, Any]) -> list[str]:
+        return scene_parameter_problems(parameters)  # (the rod and the cell it plans in)
 
     def setup(self, ctx: NodeContext) -> None:
         self.rod = RodModel(rod_params(ctx.parameters))

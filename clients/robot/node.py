@@ -17,6 +17,7 @@ from clients import parameters as check
 from clients.node import Node, NodeContext, NodeModelError, pack_state, unpack_state
 from clients.robot import kr6
 from clients.robot.scene import RobotScene, SceneOutputs, SceneParams, euler_zyx, outputs_restore, outputs_snapshot
+from clients.rod.model import LIMITS
 from clients.rod.node import ROD_PARAMETERS, rod_parameter_problems, rod_params
 
 
@@ -27,7 +28,7 @@ SCENE_PARAMETERS = ROD_PARAMETERS | {"base", "check_reach"}
 def scene_parameter_problems(parameters: dict[str, Any]) -> list[str]:
     """What is wrong with the scene's description in a node's ``parameters``: the rod's, the
     robot's base (x, y, z in m) and ``check_reach``."""
-    return rod_parameter_problems(parameters) + check.problems(check.point(parameters, "base", within=100.0),
+    return rod_parameter_problems(parameters) + check.problems(check.point(parameters, "base", within=LIMITS["coordinate"][1]),
                                                                check.flag(parameters, "check_reach"))
 
 

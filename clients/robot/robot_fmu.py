@@ -11,11 +11,15 @@ from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variab
 
 from clients.robot import kr6
 from clients.robot.scene import RobotScene, SceneParams, euler_zyx
+from clients.rod.bounded import BoundedReal
+from clients.rod.model import LIMITS
 
 _REAL_OUT = ("tcp_x", "tcp_y", "tcp_z", "tcp_roll", "tcp_pitch", "tcp_yaw", "dist", "gap", "grip_x", "grip_y",
              "grip_z")
 _BOOL_OUT = ("grasped", "collision", "reachable", "near_miss")
 _PARAMS = ("rod_length", "rod_radius", "pivot_x", "pivot_y", "pivot_z", "grasp_distance", "base_x", "base_y", "base_z")
+_RANGES = {"rod_length": LIMITS["length"], "rod_radius": LIMITS["radius"], "grasp_distance": LIMITS["grasp_distance"],
+           **{f"{at}_{c}": LIMITS["coordinate"] for at in ("pivot", "base") for c in "xyz"}}
 
 
 class RobotScene6(Fmi2Slave):
@@ -29,7 +33,9 @@ class RobotScene6(Fmi2Slave):
         self.pivot_x, self.pivot_y, self.pivot_z = d.pivot
         self.base_x, self.base_y, self.base_z = d.base
         for name in _PARAMS:
-            self.register_variable(Real(name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
+            low, high = _RANGES[name]
+            self.register_variable(BoundedReal(name, low, high, causality=Fmi2Causality.parameter,
+                                               variability=Fmi2Variability.fixed))
         for i in range(6):
             setattr(self, f"q_cmd{i + 1}", float(kr6.READY[i]))
             self.register_variable(Real(f"q_cmd{i + 1}", causality=Fmi2Causality.input))

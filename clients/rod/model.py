@@ -44,6 +44,15 @@ class RodParams:
         return self.mass * (3 * self.radius ** 2 + self.length ** 2) / 12 + self.mass * (self.length / 2) ** 2
 
 
+# What a rod in a robot's cell may be, far on both sides (SI units; "coordinate": each of the
+# pivot's, and of the robot's base, in m): beyond, MuJoCo refuses the body (mass or inertia
+# under 1e-15) or its millisecond steps diverge. The rod and robot nodes check their
+# parameters against them, and the scene FMUs declare them as their parameters' min and max.
+LIMITS = {"length": (1e-3, 100.0), "mass": (1e-3, 1e4), "radius": (1e-4, 1.0), "damping": (0.0, 1e3),
+          "coordinate": (-100.0, 100.0), "grasp_distance": (0.0, 100.0), "initial_angle_deg": (-180.0, 180.0),
+          "initial_omega": (-100.0, 100.0), "observer_gain": (0.0, 1e3)}
+
+
 def rod_mjcf(p: RodParams, name: str = "rod") -> str:
     """MJCF of the rod scene: pivot, hinge, cylinder, grasp and tip sites, and the gripper mocap."""
     px, py, pz = p.pivot

@@ -15,7 +15,7 @@ import numpy as np
 
 from clients import parameters as check
 from clients.node import Node, NodeContext, pack_state, unpack_state
-from clients.rod.model import RodModel, RodParams
+from clients.rod.model import LIMITS, RodModel, RodParams
 
 
 # What rod_params reads: the rod node's parameters, and part of every grasp node's (they
@@ -26,17 +26,16 @@ ROD_PARAMETERS = frozenset({"length", "mass", "radius", "damping", "pivot", "gra
 
 def rod_parameter_problems(parameters: dict[str, Any]) -> list[str]:
     """What is wrong with the rod's description in a node's ``parameters`` (clients.parameters)."""
+
+    def within(name: str) -> str | None:
+        low, high = LIMITS[name]
+        return check.number(parameters, name, at_least=low, at_most=high)
+
     found = check.problems(
-        # Bounds a rod in a robot's cell keeps, far on both sides; beyond them MuJoCo refuses the
-        # body (mass or inertia under 1e-15) or its millisecond steps diverge to NaN.
-        check.number(parameters, "length", at_least=1e-3, at_most=100.0),
-        check.number(parameters, "mass", at_least=1e-3, at_most=1e4),
-        check.number(parameters, "radius", at_least=1e-4, at_most=1.0),
-        check.number(parameters, "damping", at_least=0.0, at_most=1e3),
-        check.point(parameters, "pivot", within=100.0), check.number(parameters, "grasp_distance", above=0.0),
-        check.number(parameters, "initial_angle_deg", at_least=-180.0, at_most=180.0),
-        check.number(parameters, "initial_omega", at_least=-100.0, at_most=100.0),
-        check.number(parameters, "observer_gain", at_least=0.0, at_most=1e3))
+        within("length"), within("mass"), within("radius"), within("damping"),
+        check.point(parameters, "pivot", within=LIMITS["coordinate"][1]),
+        check.number(parameters, "grasp_distance", above=0.0, at_most=LIMITS["grasp_distance"][1]),
+        within("initial_angle_deg"), within("initial_omega"), within("observer_gain"))
     if not found:  # the grasp point and the rod's thickness lie on the rod
         p = rod_params(parameters)
         if p.grasp_distance > p.length:

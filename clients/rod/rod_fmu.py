@@ -8,12 +8,19 @@ the camera's measurement corrects it. State save/restore covers MuJoCo's state, 
 coordinator can roll it back.
 """
 
+import math
+
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Real
 
-from clients.rod.model import RodModel, RodParams
+from clients.rod.bounded import BoundedReal
+from clients.rod.model import LIMITS, RodModel, RodParams
 
 _PARAMS = ("length", "mass", "radius", "damping", "pivot_x", "pivot_y", "pivot_z", "grasp_distance",
            "initial_angle", "observer_gain")
+_RANGES = {**{name: LIMITS[name] for name in ("length", "mass", "radius", "damping", "grasp_distance",
+                                               "observer_gain")},
+           **{f"pivot_{c}": LIMITS["coordinate"] for c in "xyz"},
+           "initial_angle": tuple(math.radians(v) for v in LIMITS["initial_angle_deg"])}
 _INPUTS = ("grip_x", "grip_y", "grip_z", "meas_angle", "meas_t")
 _OUTPUTS = ("angle", "omega", "grasp_x", "grasp_y", "grasp_z", "tip_x", "tip_y", "tip_z")
 
@@ -29,7 +36,9 @@ class Rod(Fmi2Slave):
         self.pivot_x, self.pivot_y, self.pivot_z = d.pivot
         self.grasp_distance, self.initial_angle, self.observer_gain = d.grasp_distance, d.initial_angle, d.observer_gain
         for name in _PARAMS:
-            self.register_variable(Real(name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
+            low, high = _RANGES[name]
+            self.register_variable(BoundedReal(name, low, high, causality=Fmi2Causality.parameter,
+                                               variability=Fmi2Variability.fixed))
         self.driven = False
         self.meas_valid = False
         self.grip_x, self.grip_y, self.grip_z, self.meas_angle, self.meas_t = d.pivot[0], 0.0, 0.0, 0.0, 0.0
