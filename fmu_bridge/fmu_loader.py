@@ -181,7 +181,8 @@ def _fits(var_type: str, value: Any) -> bool:
 
 def check_parameters(md: ModelDescription, node: str, parameters: dict[str, Any], path: Path) -> None:
     """Raise FmuError unless every key of ``parameters`` names a variable of the FMU and its
-    value fits the variable's type (a number for a Real, a whole number for an Integer, …)."""
+    value fits the variable's type (a number for a Real, a whole number for an Integer, …),
+    is finite, and lies within the ``min`` and ``max`` the variable declares."""
     variables = {v.name: v for v in md.modelVariables}
     unknown = sorted(set(parameters) - set(variables))
     if unknown:

@@ -28,19 +28,20 @@ SCENE_PARAMETERS = ROD_PARAMETERS | {"base", "check_reach"}
 def scene_parameter_problems(parameters: dict[str, Any]) -> list[str]:
     """What is wrong with the scene's description in a node's ``parameters``: the rod's, the
     robot's base (x, y, z in m) and ``check_reach``."""
-    return rod_parameter_problems(parameters) + check.problems(check.point(parameters, "base", within=LIMITS["coordinate"][1]),
-                                                               check.flag(parameters, "check_reach"))
+    return rod_parameter_problems(parameters) + check.problems(
+        check.point(parameters, "base", within=LIMITS["coordinate"][1]), check.flag(parameters, "check_reach"))
 
 
 def pose_problem(q0_deg: Any) -> str | None:
-    """Why ``q0_deg`` is not six joint angles in degrees within the axes' limits, or None (a
-    pose outside them is no robot's, and a state saved from it would not restore)."""
+    """Why ``q0_deg`` is not six joint angles in degrees within the axes' limits (the words
+    that follow the parameter's name), or None (a pose outside them is no robot's, and a
+    state saved from it would not restore)."""
     if not (type(q0_deg) in (list, tuple) and len(q0_deg) == 6
             and all(type(v) in (int, float) and math.isfinite(v) for v in q0_deg)):
-        return f"q0_deg must be six joint angles in degrees, not {check.json_repr(q0_deg)}"
+        return f" must be six joint angles in degrees, not {check.json_repr(q0_deg)}"
     for i, (v, (lo, hi)) in enumerate(zip(q0_deg, kr6.LIMITS_DEG)):
         if not lo <= v <= hi:
-            return f"q0_deg: A{i + 1} = {v:g}° is outside its limits [{lo}, {hi}]°"
+            return f": A{i + 1} = {v:g}° is outside its limits [{lo}, {hi}]°"
     return None
 
 
@@ -66,7 +67,7 @@ def initial_pose(node: str, q0_deg: Any) -> np.ndarray:
     and the axis unless it fits (:func:`pose_problem`)."""
     problem = pose_problem(q0_deg)
     if problem is not None:
-        raise NodeModelError(f"robot node {node!r}: parameters.{problem}")
+        raise NodeModelError(f"robot node {node!r}: parameters.q0_deg{problem}")
     # radians() may round past a limit
     return np.clip(np.radians(np.asarray(q0_deg, dtype=float)), kr6.LIMITS[:, 0], kr6.LIMITS[:, 1])
 
@@ -81,7 +82,7 @@ class RobotNode(Node):
     @classmethod
     def parameter_problems(cls, parameters: dict[str, Any]) -> list[str]:
         pose = None if parameters.get("q0_deg") is None else pose_problem(parameters["q0_deg"])
-        return scene_parameter_problems(parameters) + (["parameter 'q0_deg'" + pose[len("q0_deg"):]] if pose else [])
+        return scene_parameter_problems(parameters) + ([f"parameter 'q0_deg'{pose}"] if pose else [])
 
     def setup(self, ctx: NodeContext) -> None:
         self.scene = RobotScene(scene_params(ctx.parameters))
