@@ -55,8 +55,11 @@ while session is None:
         time.sleep(0.05)
 waits = sys.argv[3] == "waits"
 key, tally, shown = ProjectKeys(project).status, [0, 0], time.monotonic()
-def count(reply):
-    tally[0 if reply.ok is not None else 1] += 1
+def count(reply):  # an answer, or the server's "busy" (a timeout's error, as the run ends, is neither)
+    if reply.ok is not None:
+        tally[0] += 1
+    elif reply.err is not None and reply.err.payload.to_bytes().startswith(b"busy: "):
+        tally[1] += 1
 while True:
     if waits:  # one question at a time, the next as soon as the last is answered
         for reply in session.get(key, timeout=1.0):
