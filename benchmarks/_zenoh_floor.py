@@ -14,9 +14,9 @@ import time
 import msgpack
 import zenoh
 
-from core.config import polls_before_blocking
-from core.inbox import Inbox
-from core.session import client_config, prefer_shared_runtime, router_config
+from hycosim.core.config import polls_before_blocking
+from hycosim.core.inbox import Inbox
+from hycosim.core.session import client_config, prefer_shared_runtime, router_config
 
 
 def _conf(endpoint: str, router: bool) -> zenoh.Config:

@@ -43,12 +43,12 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(REPO))
 
-from server import checkpoints  # noqa: E402
+from hycosim.server import checkpoints  # noqa: E402
 
 
 def project(dir_: Path, stop: float, every: float) -> Path:
     """The grasp scenario on FMUs plus a pendulum: four nodes, FMU and Python, checkpoints on."""
-    from clients.scene_fmus import ensure_scene_fmus
+    from hycosim.clients.scene_fmus import ensure_scene_fmus
 
     fmus = ensure_scene_fmus(REPO / "build" / "fmus")
     doc = json.loads((REPO / "configs" / "grasp-fmu.json").read_text())
@@ -200,7 +200,7 @@ def server_kills(cfg: Path, runs: Path, kills: int, after: float) -> tuple[Path,
 
 def replay_trial(tmp: Path, stop: float) -> dict:
     """A grasp trial of the paper's scenario, then the same with its camera replayed."""
-    from clients.scene_fmus import ensure_scene_fmus
+    from hycosim.clients.scene_fmus import ensure_scene_fmus
 
     fmus = ensure_scene_fmus(REPO / "build" / "fmus")
     doc = json.loads((REPO / "configs" / "grasp-paper.json").read_text())

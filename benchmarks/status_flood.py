@@ -44,8 +44,8 @@ from barrier import ring_config  # noqa: E402
 # The flooder: asks until killed; prints its tally (answers, busy replies) each half second.
 _FLOODER = r"""
 import sys, time
-from core.keys import ProjectKeys
-from core.session import client_config, open_session
+from hycosim.core.keys import ProjectKeys
+from hycosim.core.session import client_config, open_session
 endpoint, project = sys.argv[1], sys.argv[2]
 session = None
 while session is None:

@@ -24,10 +24,10 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from core import signals
-from core.config import ConfigError, LoadedProject, load_project
-from core.endpoints import GATEWAY_PORT, Address, EndpointError, parse_address, parse_endpoint
-from core.signals import ignore_stops
+from hycosim.core import signals
+from hycosim.core.config import ConfigError, LoadedProject, load_project
+from hycosim.core.endpoints import GATEWAY_PORT, Address, EndpointError, parse_address, parse_endpoint
+from hycosim.core.signals import ignore_stops
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="hycosim: hybrid time/event co-simulation on FMI, relayed over Zenoh.")
@@ -62,8 +62,8 @@ def _from_ssp(package: Path, project_file: Path, side: Path | None = None, step:
               stop: float | None = None) -> Path:
     """Import the SSP package into ``project_file`` (its FMUs in a folder beside it); exit 2 with
     what is wrong."""
-    from core import json_text
-    from fmu_bridge.ssp import SspError, project_from_ssp
+    from hycosim.core import json_text
+    from hycosim.fmu_bridge.ssp import SspError, project_from_ssp
 
     side = side or (package.with_name(package.stem + SSP_SIDE_SUFFIX) if
                     package.with_name(package.stem + SSP_SIDE_SUFFIX).is_file() else None)
@@ -156,7 +156,7 @@ def validate(
     loaded = _load(_project_file(file))
     p = loaded.project
     if models:
-        from clients.loader import NodeLoadError, check_node
+        from hycosim.clients.loader import NodeLoadError, check_node
 
         problems = []
         for i, node in enumerate(p.nodeLists):
@@ -176,7 +176,7 @@ def validate(
     if models:
         _warn_algebraic_loops(file, loaded)
     if p.coSimulation.checkpointEvery is not None and models:
-        from clients.loader import why_no_checkpoint
+        from hycosim.clients.loader import why_no_checkpoint
 
         unable = [(n.nodeName, why) for n in p.nodeLists if (why := why_no_checkpoint(n, loaded.path.parent))]
         for name, why in unable:
@@ -191,7 +191,7 @@ def validate(
 def _check_retakes(file: Path, loaded: Any) -> None:
     """Iterative coupling and the error-controlled step need every stepping node to take a step
     again: name each one that cannot, exit 2."""
-    from clients.loader import why_no_retake
+    from hycosim.clients.loader import why_no_retake
 
     cosim = loaded.project.coSimulation
     for key, variable in (("iterate", False), ("stepControl", True)):
@@ -206,7 +206,7 @@ def _check_retakes(file: Path, loaded: Any) -> None:
                 err.print(f"  node {name!r}: {why}", highlight=False, markup=False)
             raise typer.Exit(2)
     if cosim.iterate is not None and cosim.iterate.interpolate:
-        from clients.loader import why_no_interpolation
+        from hycosim.clients.loader import why_no_interpolation
 
         for n in loaded.project.stepping_nodes():
             if n.input and (why := why_no_interpolation(n, loaded.path.parent)):
@@ -216,8 +216,8 @@ def _check_retakes(file: Path, loaded: Any) -> None:
 
 def _warn_algebraic_loops(file: Path, loaded: Any) -> None:
     """Name each cycle of direct feedthrough, which a step-by-step scheme takes a step late."""
-    from clients.loader import feedthrough_of
-    from core.coupling import algebraic_loops
+    from hycosim.clients.loader import feedthrough_of
+    from hycosim.core.coupling import algebraic_loops
 
     p = loaded.project
     feedthrough = {n.nodeName: feedthrough_of(n, loaded.path.parent) for n in p.stepping_nodes()}
@@ -245,7 +245,7 @@ def server(
                                                        "from its last checkpoint")] = None,
 ) -> None:
     """Run the relay server for one co-simulation (Zenoh nodes and bridge FMUs)."""
-    from server.main import serve
+    from hycosim.server.main import serve
 
     loaded = _load(file)
     code, rdir, message = serve(loaded, listen=listen, runs_dir=runs_dir, run_dir=run_dir,
@@ -267,7 +267,7 @@ def node(
                                                                "when the project has 'security'")] = None,
 ) -> None:
     """Attach one node of the project to a running server (local or on another host)."""
-    from clients.main import run_node
+    from hycosim.clients.main import run_node
 
     loaded = _load(file)
     code, message = run_node(loaded, name, connect, log_file, password_file)
@@ -289,9 +289,9 @@ def run(
     dashboard_port: Annotated[int, typer.Option(min=0, max=65535, help="the dashboard's port on 127.0.0.1")] = 8050,
 ) -> None:
     """Run the server and every node as local processes on loopback (FILE: a project JSON or an SSP package)."""
-    from core.security import SecurityError, router_security
+    from hycosim.core.security import SecurityError, router_security
     from hycosim.embedded import run_embedded
-    from server.report import summarise
+    from hycosim.server.report import summarise
 
     file = _project_file(file)
     loaded = _load(file)
@@ -341,7 +341,7 @@ def report(
     as_json: Annotated[bool, typer.Option("--json", help="print the summary as JSON")] = False,
 ) -> None:
     """Summarise a run: rate, who held the barrier, slowest steps, lateness, mode switches."""
-    from server.report import RunDirError, summarise
+    from hycosim.server.report import RunDirError, summarise
 
     try:
         s = summarise(run_dir)
@@ -411,7 +411,7 @@ def plot(
     output: Annotated[Optional[Path], typer.Option("-o", "--output", help="PNG to write")] = None,
 ) -> None:
     """Draw recorded values over time with the mode switches marked, to a PNG."""
-    from server.report import RunDirError, plot_run
+    from hycosim.server.report import RunDirError, plot_run
 
     try:
         path = plot_run(run_dir, ports or [], output or run_dir / "plot.png")
@@ -423,7 +423,7 @@ def plot(
 
 def _monitor_credentials(endpoint: str, tls_ca: Path | None, password_file: Path | None) -> tuple[dict | None, str | None]:
     """A monitor's TLS settings and password (``status``, ``dashboard``); exit 2 naming what is wrong."""
-    from core.security import SecurityError, ca_settings, read_password
+    from hycosim.core.security import SecurityError, ca_settings, read_password
 
     if endpoint.startswith("tls/") and tls_ca is None:
         err.print(f"[red]error:[/red] {endpoint} is a TLS endpoint: give --tls-ca with the CA that signed "
@@ -446,9 +446,9 @@ def status(
     tls_ca: Annotated[Optional[Path], typer.Option(help="CA certificate (PEM) for a tls/ endpoint")] = None,
 ) -> None:
     """Ask a running server who is attached."""
-    from core import json_text
-    from core.keys import ProjectKeys
-    from core.session import ConnectError, client_config, open_session
+    from hycosim.core import json_text
+    from hycosim.core.keys import ProjectKeys
+    from hycosim.core.session import ConnectError, client_config, open_session
 
     endpoint = _endpoint("endpoint", endpoint)
     tls, password = _monitor_credentials(endpoint, tls_ca, password_file)
@@ -516,9 +516,9 @@ def dashboard(
              "dashboard, a reverse proxy; repeatable")] = None,
 ) -> None:
     """Watch a running co-simulation, or look through a finished run, in a browser."""
-    from dashboard.app import bind, serve
-    from dashboard.origin import normal_origin
-    from server.report import RunDirError
+    from hycosim.dashboard.app import bind, serve
+    from hycosim.dashboard.origin import normal_origin
+    from hycosim.server.report import RunDirError
 
     for origin in allow_origin or []:
         if normal_origin(origin) is None:
@@ -527,7 +527,7 @@ def dashboard(
             raise typer.Exit(2)
     path = Path(target)
     if path.is_dir():
-        from dashboard.finished import FinishedRun
+        from hycosim.dashboard.finished import FinishedRun
 
         try:
             source = FinishedRun(path)
@@ -536,7 +536,7 @@ def dashboard(
             raise typer.Exit(2) from None
         closing = None
     else:
-        from dashboard.live import LiveFeed
+        from hycosim.dashboard.live import LiveFeed
 
         endpoint = _endpoint("endpoint", target)
         tls, password = _monitor_credentials(endpoint, tls_ca, password_file)
@@ -565,7 +565,7 @@ def schema(
 ) -> None:
     """The JSON Schema of the project file: name it in a project with "$schema" and an editor
     checks and completes the file as you type."""
-    from core.config import project_json_schema
+    from hycosim.core.config import project_json_schema
 
     text = json.dumps(project_json_schema(), indent=1) + "\n"
     if output is None:
@@ -601,7 +601,7 @@ def export_ssp(
     output: Annotated[Path, typer.Option("-o", "--output", help="the .ssp package to write")] = Path("system.ssp"),
 ) -> None:
     """Write a project whose nodes are all FMUs as an SSP 1.0 package (FMPy's simulate_ssp reads it)."""
-    from fmu_bridge.ssp import SspError, write_ssp
+    from hycosim.fmu_bridge.ssp import SspError, write_ssp
 
     loaded = _load(file)
     try:
@@ -627,7 +627,7 @@ def fmu_build(
     """Write one native FMI 2.0 co-simulation bridge FMU per stepping node of the project."""
     from fmpy.validation import validate_fmu
 
-    from fmu_bridge.bridge_fmu import BridgeBuildError, build_bridge_fmus
+    from hycosim.fmu_bridge.bridge_fmu import BridgeBuildError, build_bridge_fmus
 
     loaded = _load(file)
     if server is not None:
@@ -658,7 +658,7 @@ def fmu_inspect(
     """List an FMU's co-simulation capabilities and variables; with --config, the port mapping."""
     import fmpy
 
-    from fmu_bridge.fmu_loader import FmuError, check_platform, describe, map_driven, map_ports
+    from hycosim.fmu_bridge.fmu_loader import FmuError, check_platform, describe, map_driven, map_ports
 
     try:
         md = describe(fmu)
@@ -737,8 +737,8 @@ def scene_reach(
     output: Annotated[Optional[Path], typer.Option("-o", "--output", help="PNG to write")] = None,
 ) -> None:
     """Which part of the rod's swing the robot can reach from its base placement: table and PNG."""
-    from clients.robot.node import scene_parameter_problems, scene_params
-    from clients.robot.reach import analyse_reach, plot_reach
+    from hycosim.clients.robot.node import scene_parameter_problems, scene_params
+    from hycosim.clients.robot.reach import analyse_reach, plot_reach
 
     loaded = _load(file)
     try:
@@ -772,7 +772,7 @@ def scene_fmus(output: Annotated[Path, typer.Option("-o", "--output")] = Path("b
     """Build the rod and robot-scene FMUs (pythonfmu) into a folder."""
     from fmpy.validation import validate_fmu
 
-    from clients.scene_fmus import build_scene_fmus
+    from hycosim.clients.scene_fmus import build_scene_fmus
 
     try:
         built = build_scene_fmus(output)
@@ -804,12 +804,12 @@ def camera(
     import cv2
     import numpy as np
 
-    from clients.camera.calibration import Calibration, CalibrationError
-    from clients.camera.detect import RodDetector, annotate as draw
-    from clients.camera.emulated import CameraSetup, EmulatedRodCamera
-    from clients.camera.sources import CameraError, DeviceSource, VideoFileSource, device_number
-    from clients.camera.tracker import Tracker
-    from clients.rod.model import RodParams
+    from hycosim.clients.camera.calibration import Calibration, CalibrationError
+    from hycosim.clients.camera.detect import RodDetector, annotate as draw
+    from hycosim.clients.camera.emulated import CameraSetup, EmulatedRodCamera
+    from hycosim.clients.camera.sources import CameraError, DeviceSource, VideoFileSource, device_number
+    from hycosim.clients.camera.tracker import Tracker
+    from hycosim.clients.rod.model import RodParams
 
     try:
         if source == "emulated":
@@ -882,8 +882,8 @@ def train(
     """Train the DDPG grasp policy (demonstrations, behaviour cloning, DDPG); resumes from OUTPUT/last.pt."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from clients.policy.ddpg import CheckpointError
-    from clients.policy.train import TrainConfig, train as run_training
+    from hycosim.clients.policy.ddpg import CheckpointError
+    from hycosim.clients.policy.train import TrainConfig, train as run_training
 
     config = TrainConfig(demo_episodes=demos, episodes=episodes, eval_every=eval_every, eval_trials=eval_trials,
                          select_trials=select_trials, seed=seed)
@@ -931,7 +931,7 @@ def train(
             err.print(f"[red]error:[/red] {exc}", highlight=False)
             raise typer.Exit(2) from None
     if ship is not None:
-        from clients.policy.ddpg import strip_checkpoint
+        from hycosim.clients.policy.ddpg import strip_checkpoint
 
         strip_checkpoint(output / "best.pt", ship)
     for when, e in (result.get("critic_error") or {}).items():
@@ -959,8 +959,8 @@ def evaluate(
     within 3 mm (with 95 % intervals), collisions, time to grasp and distance."""
     import json
 
-    from clients.policy.ddpg import CheckpointError, load_policy
-    from clients.policy.train import evaluate_checkpoint
+    from hycosim.clients.policy.ddpg import CheckpointError, load_policy
+    from hycosim.clients.policy.train import evaluate_checkpoint
 
     def save(figures: dict) -> None:  # after each checkpoint: what was measured stays on disk
         if json_out is None:
@@ -998,7 +998,7 @@ app.add_typer(krl_app, name="krl")
 @krl_app.command("export")
 def krl_export(run_dir: Path, output: Annotated[Path, typer.Option("-o", "--output")] = Path("krl")) -> None:
     """Write the EKI configuration, the KRL program (Table 1) and the XML frame stream of a run."""
-    from clients.krl.export import ExportError, export
+    from hycosim.clients.krl.export import ExportError, export
 
     try:
         files = export(run_dir, output)
@@ -1020,9 +1020,9 @@ def krl_controller(
 ) -> None:
     """Listen as the robot's EKI endpoint and execute programs against the emulated physical rod."""
 
-    from clients.krl.controller import EmulatedController
-    from clients.krl.eki import EkiConfig, EkiError
-    from clients.rod.model import RodParams
+    from hycosim.clients.krl.controller import EmulatedController
+    from hycosim.clients.krl.eki import EkiConfig, EkiError
+    from hycosim.clients.rod.model import RodParams
 
     try:
         config = EkiConfig.parse(eki.read_bytes(), str(eki))
@@ -1150,7 +1150,7 @@ def main() -> None:
     """Console entry point."""
     import faulthandler
 
-    from core.session import prefer_shared_runtime
+    from hycosim.core.session import prefer_shared_runtime
 
     # A model that crashes in native code (an FMU's binary, an extension) kills the process
     # without a word from Python; the fault handler at least prints the stack it was at.

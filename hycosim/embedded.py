@@ -22,10 +22,10 @@ from pathlib import Path
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-from core import signals
-from core.config import LoadedProject
-from core.folders import run_dir_for
-from core.signals import FAILED_ELSEWHERE
+from hycosim.core import signals
+from hycosim.core.config import LoadedProject
+from hycosim.core.folders import run_dir_for
+from hycosim.core.signals import FAILED_ELSEWHERE
 
 
 def free_loopback_endpoint() -> str:

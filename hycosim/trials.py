@@ -23,13 +23,13 @@ from typing import Callable
 
 import numpy as np
 
-from clients.krl.controller import EmulatedController, parse_ack, stream_program
-from clients.krl.eki import EkiConfig
-from clients.krl.export import export
-from clients.rod.model import RodParams
-from core import signals
-from core.config import parse_project
-from core.folders import make_folder
+from hycosim.clients.krl.controller import EmulatedController, parse_ack, stream_program
+from hycosim.clients.krl.eki import EkiConfig
+from hycosim.clients.krl.export import export
+from hycosim.clients.rod.model import RodParams
+from hycosim.core import signals
+from hycosim.core.config import parse_project
+from hycosim.core.folders import make_folder
 
 PAPER = {30: (3.2, 14.8, 95), 40: (3.8, 15.6, 95), 50: (5.0, 15.4, 90), 60: (5.8, 16.6, 80)}
 REPO = Path(__file__).resolve().parents[1]
@@ -193,7 +193,7 @@ def plot(results: list[TrialResult], path: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from server.report import read_columns
+    from hycosim.server.report import read_columns
 
     table = summarise(results)
     angles = list(table)
@@ -217,7 +217,7 @@ def plot(results: list[TrialResult], path: Path) -> Path:
     data = read_columns(Path(example.run_dir), ["rod.angle", "robot.dist"])
     t = np.array(data["t"])
     ax.plot(t, np.degrees(data["rod.angle"]), label="rod twin angle (°)")
-    from clients.rod.model import RodModel
+    from hycosim.clients.rod.model import RodModel
 
     physical = RodModel(RodParams(length=example.physical_length, damping=example.physical_damping,
                                   initial_angle=math.radians(example.physical_angle_deg)))
@@ -254,12 +254,12 @@ def run_trials(angles: list[float], trials: int, out: Path, correction: bool = T
     """Every trial, in order; one that fails to run is recorded as not grasped, with its error,
     and the others go on. ``trials.csv`` is rewritten after each trial. Ctrl-C stops them:
     TrialsInterrupted carries the finished ones (the interrupted trial is not counted)."""
-    from core import logs
+    from hycosim.core import logs
 
     make_folder(out)
     logs.configure(out / "trials.log.jsonl")
     if nodes == "fmu":
-        from clients.scene_fmus import ensure_scene_fmus
+        from hycosim.clients.scene_fmus import ensure_scene_fmus
 
         ensure_scene_fmus(REPO / "build" / "fmus")
     results = []

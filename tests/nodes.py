@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from clients.node import AsyncSource, Node, NodeContext
+from hycosim.clients.node import AsyncSource, Node, NodeContext
 
 
 class Text(Node):

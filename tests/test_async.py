@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from server.async_sources import SampleHistory
+from hycosim.server.async_sources import SampleHistory
 from tests.helpers import column, meta, read_rows, run_project, write_project
 
 
@@ -32,9 +32,9 @@ def test_sample_history_hold_and_linear():
 def test_a_sample_stamped_at_no_finite_time_is_dropped_before_it_can_freeze_its_source():
     import pytest
 
-    from core import frames
-    from core.config import Node
-    from server.intake import Dropped, Intake
+    from hycosim.core import frames
+    from hycosim.core.config import Node
+    from hycosim.server.intake import Dropped, Intake
 
     camera = Node.model_validate({"nodeName": "camera", "UID": 3, "async": True, "model": "ramp_source",
                                   "output": ["angle"]})
@@ -88,7 +88,7 @@ def test_real_time_pacing_keeps_its_pace_when_the_wall_clock_is_stepped(monkeypa
     server slept until the wall clock caught up; its nodes gave up first)."""
     import time
 
-    from core.sim_clock import RealTimeClock
+    from hycosim.core.sim_clock import RealTimeClock
 
     clock = RealTimeClock(10.0, time.time() - 1.0, 2.0)  # started a second ago, at half speed
     assert abs(clock.now() - 10.5) < 0.05 and abs(clock.seconds_until(11.0) - 1.0) < 0.05

@@ -15,9 +15,9 @@ import pytest
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
-from fmu_bridge import gateway_protocol as gp
-from fmu_bridge.bridge_fmu import BridgeBuildError, build_bridge_fmu
-from core.config import load_project
+from hycosim.fmu_bridge import gateway_protocol as gp
+from hycosim.fmu_bridge.bridge_fmu import BridgeBuildError, build_bridge_fmu
+from hycosim.core.config import load_project
 from tests.helpers import REPO, column, env, hycosim, meta, read_rows, reap, spawn, write_project
 
 FMI_HEADERS = Path(__import__("fmpy").__file__).parent / "c-code"
@@ -291,9 +291,9 @@ def test_gateway_drops_forged_releases_and_passes_only_the_servers(tmp_path):
     the server's own do): it does not reach the FMU either, and is no malformed release."""
     import zenoh
 
-    from core import frames
-    from core.keys import ProjectKeys
-    from core.session import client_config
+    from hycosim.core import frames
+    from hycosim.core.keys import ProjectKeys
+    from hycosim.core.session import client_config
 
     cfg = _project(tmp_path, stop=0.5)
     server, clock = _start(cfg, tmp_path / "run")
@@ -391,7 +391,7 @@ def test_a_bridge_fmu_attaching_mid_run_is_told_the_run_is_under_way(tmp_path):
 
 
 def test_a_malformed_hello_is_named_by_what_is_wrong_with_it():
-    from fmu_bridge import gateway_protocol as gp
+    from hycosim.fmu_bridge import gateway_protocol as gp
 
     good = gp.hello(7, "rod", 4, 2)[gp.HEADER.size:]
     assert gp.parse_hello(good) == (7, "rod", 4, 2)

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from core.config import ConfigError, parse_project
+from hycosim.core.config import ConfigError, parse_project
 from tests.helpers import column, hycosim, meta, read_rows, run_killing, run_project, write_project
 
 
@@ -84,8 +84,8 @@ def test_a_release_spans_only_base_steps_in_which_no_input_any_node_steps_on_cha
     """The span batch_span gives: every link's exchange period (the slower end's step) is a
     multiple of it, every rate divides it or is a multiple of it, it fits MAX_BATCH, and on the
     low-latency transport each node's BATCH (a list of outputs per step of its) fits a frame."""
-    from core.coupling import BATCH_BYTES
-    from core.frames import MAX_BATCH
+    from hycosim.core.coupling import BATCH_BYTES
+    from hycosim.core.frames import MAX_BATCH
 
     names = [f"n{i}" for i in range(len(rates))]
     links = sorted({(s % len(rates), d % len(rates)) for s, d in links})
@@ -261,7 +261,7 @@ def test_coupling_keys_give_a_plan_or_errors_that_name_them(doc):
 
 def _recovering(tmp_path: Path, **extra) -> Path:
     nodes = [
-        {"nodeName": "rod", "UID": 1, "model": "clients.rod.node:RodNode", "parameters": {"initial_angle_deg": 35},
+        {"nodeName": "rod", "UID": 1, "model": "hycosim.clients.rod.node:RodNode", "parameters": {"initial_angle_deg": 35},
          "output": ["angle", "omega"]},
         {"nodeName": "g1", "UID": 2, "model": "gain", "parameters": {"k": 2.0}, "input": ["u"], "output": ["y"]},
         {"nodeName": "g2", "UID": 3, "model": "gain", "parameters": {"k": 0.5, "work_s": 0.003}, "input": ["u"],
@@ -305,9 +305,9 @@ def test_a_forged_batch_of_another_number_of_steps_is_dropped_and_the_run_record
 
     import zenoh
 
-    from core import frames
-    from core.keys import ProjectKeys
-    from core.session import client_config
+    from hycosim.core import frames
+    from hycosim.core.keys import ProjectKeys
+    from hycosim.core.session import client_config
     from tests.helpers import free_endpoint, reap, recorded_rows, spawn, wait_for
 
     def project(name: str, endpoint: str) -> Path:

@@ -14,9 +14,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from dashboard.app import check_selection, finite
-from dashboard.live import LiveFeed, _checked_status, _read_status
-from dashboard.series import ThinnedSeries
+from hycosim.dashboard.app import check_selection, finite
+from hycosim.dashboard.live import LiveFeed, _checked_status, _read_status
+from hycosim.dashboard.series import ThinnedSeries
 from tests.helpers import descendants, free_port, hycosim, reap, running, spawn, wait_for, write_project
 from tests.wire_strategies import deep_json, values
 
@@ -214,8 +214,8 @@ def test_a_dashboard_whose_server_is_busy_answering_others_says_so_and_keeps_try
     on the status key that only ever says busy."""
     import zenoh
 
-    from core.keys import ProjectKeys
-    from core.session import router_config
+    from hycosim.core.keys import ProjectKeys
+    from hycosim.core.session import router_config
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     with zenoh.open(router_config(endpoint)) as server:
@@ -332,7 +332,7 @@ _ORIGINS = st.none() | st.sampled_from(["null", "file://", "http://evil.test", "
        loopback_only=st.booleans(), allowed=st.lists(_ORIGINS.filter(lambda o: o is not None), max_size=2))
 def test_a_request_is_answered_only_when_addressed_here_and_a_feed_only_to_its_own_page(kind, host, origin,
                                                                                        loopback_only, allowed):
-    from dashboard.origin import is_loopback, normal_origin, refusal, split_host
+    from hycosim.dashboard.origin import is_loopback, normal_origin, refusal, split_host
 
     permitted = frozenset(o for o in map(normal_origin, allowed) if o)
     why = refusal(kind, host, origin, loopback_only=loopback_only, allowed=permitted)
@@ -443,7 +443,7 @@ def test_the_feed_pushes_a_page_when_the_source_changes_and_only_then():
     import uvicorn
     from websockets.sync.client import connect
 
-    from dashboard.app import HEARTBEAT_S, bind, make_app
+    from hycosim.dashboard.app import HEARTBEAT_S, bind, make_app
 
     feed = LiveFeed("tcp/127.0.0.1:1", "p")  # never started: the test hands it the answers
 

@@ -62,9 +62,9 @@ def test_catch_and_release_of_a_falling_ball(tmp_path):
 
 
 def _coordinator(*events: dict):
-    from core.config import Event, EventGuards
-    from core.guards import Guard
-    from server.coordinator import Coordinator
+    from hycosim.core.config import Event, EventGuards
+    from hycosim.core.guards import Guard
+    from hycosim.server.coordinator import Coordinator
 
     parsed = [Event(**e) for e in events]
     return Coordinator(parsed, {e.name: EventGuards(Guard(e.when), Guard(e.until), Guard(e.rearm) if e.rearm else None)

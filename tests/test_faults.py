@@ -12,9 +12,9 @@ import msgpack
 import pytest
 import zenoh
 
-from core import frames
-from core.keys import ProjectKeys
-from core.session import client_config
+from hycosim.core import frames
+from hycosim.core.keys import ProjectKeys
+from hycosim.core.session import client_config
 from tests.helpers import hycosim, meta, read_rows, reap, spawn, wait_for, write_project
 
 

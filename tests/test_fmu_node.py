@@ -12,9 +12,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from core.config import load_project
-from fmu_bridge.fmu_loader import FmuError, FmuInstance, open_fmu
-from fmu_bridge.model_fmu import ModelFmuError, build_model_fmu
+from hycosim.core.config import load_project
+from hycosim.fmu_bridge.fmu_loader import FmuError, FmuInstance, open_fmu
+from hycosim.fmu_bridge.model_fmu import ModelFmuError, build_model_fmu
 from tests.helpers import REPO, column, hycosim, meta, read_rows, run_project, write_project
 
 MODELS = REPO / "tests" / "models"
@@ -199,7 +199,7 @@ def test_a_parameter_is_set_only_within_the_range_its_variable_declares(value, l
     (the FMU's own fault) holds nothing."""
     from fmpy.model_description import ModelDescription, ScalarVariable
 
-    from fmu_bridge.fmu_loader import check_parameters
+    from hycosim.fmu_bridge.fmu_loader import check_parameters
 
     var = ScalarVariable("k", 0)
     var.type, var.min, var.max = "Real", low, high

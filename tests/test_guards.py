@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from core.guards import MAX_TEXT, Guard, GuardError
+from hycosim.core.guards import MAX_TEXT, Guard, GuardError
 
 
 def test_guard_evaluates_comparisons_logic_and_functions():

@@ -8,8 +8,8 @@ import time
 import pytest
 import zenoh
 
-from core.inbox import LOCAL, Inbox
-from core.session import FramePublisher, client_config, open_session, router_config
+from hycosim.core.inbox import LOCAL, Inbox
+from hycosim.core.session import FramePublisher, client_config, open_session, router_config
 from tests.helpers import free_endpoint
 
 

@@ -18,12 +18,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from clients.krl.controller import MAX_FRAME_BYTES, EmulatedController, Program, parse_ack, stream_program
-from clients.krl.eki import AXES, EkiConfig, EkiError, frame, parse_frame
-from clients.krl.export import ExportError, export, read_path
-from clients.robot import kr6
-from clients.robot.scene import SceneParams
-from clients.rod.model import RodParams
+from hycosim.clients.krl.controller import MAX_FRAME_BYTES, EmulatedController, Program, parse_ack, stream_program
+from hycosim.clients.krl.eki import AXES, EkiConfig, EkiError, frame, parse_frame
+from hycosim.clients.krl.export import ExportError, export, read_path
+from hycosim.clients.robot import kr6
+from hycosim.clients.robot.scene import SceneParams
+from hycosim.clients.rod.model import RodParams
 from tests.helpers import REPO, hycosim, run_project
 
 TWIN = RodParams(length=0.6, mass=0.3, damping=0.002, pivot=(0.62, 0.0, 1.0), grasp_distance=0.4,

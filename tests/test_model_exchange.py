@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from fmpy import simulate_fmu
 
-from clients.fmu_node import FmuNode
-from clients.node import NodeContext
-from core.config import Node, load_project
+from hycosim.clients.fmu_node import FmuNode
+from hycosim.clients.node import NodeContext
+from hycosim.core.config import Node, load_project
 from tests.helpers import column, hycosim, meta, read_rows, run_project, write_project
 from tests.me_fmus import build_me_fmus
 

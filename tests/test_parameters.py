@@ -10,9 +10,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from clients.loader import NodeLoadError, model_class
-from clients.node import AsyncSource, NodeContext
-from core.config import Node as NodeSpec
+from hycosim.clients.loader import NodeLoadError, model_class
+from hycosim.clients.node import AsyncSource, NodeContext
+from hycosim.core.config import Node as NodeSpec
 from tests.helpers import hycosim, write_project
 
 # Each checked model, with values a user might write for its parameters: plausible numbers

@@ -19,15 +19,15 @@ import structlog
 from hypothesis import given
 from hypothesis import strategies as st
 
-from core import frames
-from fmu_bridge import gateway_protocol as gp
-from core.config import WIRE_TYPES, PortType, load_project
-from core.drops import DropLog
-from server.gateway import _Connection, translate_release
-from server.intake import Dropped, Intake
-from server.recorder import Recorder
-from server.relay import Relay
-from clients.runtime import NodeRuntime
+from hycosim.core import frames
+from hycosim.fmu_bridge import gateway_protocol as gp
+from hycosim.core.config import WIRE_TYPES, PortType, load_project
+from hycosim.core.drops import DropLog
+from hycosim.server.gateway import _Connection, translate_release
+from hycosim.server.intake import Dropped, Intake
+from hycosim.server.recorder import Recorder
+from hycosim.server.relay import Relay
+from hycosim.clients.runtime import NodeRuntime
 from tests.helpers import write_project
 from tests.wire_strategies import frame_arrays, gateway_streams, names, payloads, values
 
@@ -525,7 +525,7 @@ def test_the_drop_log_keeps_exact_counts_and_a_bounded_log():
 
 
 def test_a_logged_exception_carries_its_traceback_in_the_json_line(tmp_path):
-    from core import logs
+    from hycosim.core import logs
 
     path = tmp_path / "x.log.jsonl"
     logs.configure(path)
@@ -570,7 +570,7 @@ def test_a_batched_release_is_gathered_whole_from_each_nodes_answer_whatever_els
     the relay gathers point 30 with ten steps' outputs of each node, each of its ports' types,
     or stops the run on an END (a forged one cannot be told from a node's on an open network),
     a source's among them (its samples are taken on the way)."""
-    from server.relay import RunError, _ModelEnded
+    from hycosim.server.relay import RunError, _ModelEnded
 
     relay._early.clear()
     relay._earlier.clear()
@@ -603,7 +603,7 @@ def test_a_source_stops_a_gathering_only_with_an_unclean_unbatched_end(relay, cl
     """A source's END says it was stopped or failed, whatever point the run is gathering: then
     the run stops with the source's words and the run's step. Any other END from it (clean, with
     batch outputs, a step or time out of range) is dropped and counted, and the point is gathered."""
-    from server.relay import RunError
+    from hycosim.server.relay import RunError
 
     relay._early.clear()
     relay._batch_steps.clear()
@@ -637,8 +637,8 @@ def test_the_servers_intake_a_nodes_release_check_and_a_checkpoint_name_the_same
     inputs in a release the node, a checkpoint's values the server that resumes. Each takes the
     values exactly when every one is of its port's wire type, and otherwise names the first that
     is not."""
-    from core.config import Node
-    from server.checkpoints import _wrong_values
+    from hycosim.core.config import Node
+    from hycosim.server.checkpoints import _wrong_values
 
     types, vals = given_
     wrong = next((i for i, (v, t) in enumerate(zip(vals, types)) if type(v) not in WIRE_TYPES[t]), None)

@@ -14,20 +14,20 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from core import frames
-from server import checkpoints
-from server.interpolation import MAX_DEGREE, InputTrack
+from hycosim.core import frames
+from hycosim.server import checkpoints
+from hycosim.server.interpolation import MAX_DEGREE, InputTrack
 from tests.helpers import REPO, hycosim, meta, run_killing, run_project, write_project
 from tests.wire_strategies import deep_json
 
-from clients.node import NodeContext
+from hycosim.clients.node import NodeContext
 
 
 def _project(tmp_path: Path, every: float | None = 0.5, clock: bool = False) -> Path:
     """Four nodes, the MuJoCo rod among them; one gain takes a little time per step so that a
     kill lands mid-run."""
     nodes = [
-        {"nodeName": "rod", "UID": 1, "model": "clients.rod.node:RodNode", "parameters": {"initial_angle_deg": 35},
+        {"nodeName": "rod", "UID": 1, "model": "hycosim.clients.rod.node:RodNode", "parameters": {"initial_angle_deg": 35},
          "input": [], "output": ["angle", "omega"]},
         {"nodeName": "pend", "UID": 2, "model": "pendulum", "parameters": {"theta0": 0.5}, "input": ["theta_in"],
          "output": ["theta", "omega"]},
@@ -172,8 +172,8 @@ def _continue_identically(make, inputs: dict, steps: int = 25) -> int:
     return len(data)
 
 
-@pytest.mark.parametrize("model", ["clients.rod.node:RodNode", "clients.robot.node:RobotNode",
-                                   "clients.robot.controller:ReferenceController", "clients.policy.node:PolicyNode"])
+@pytest.mark.parametrize("model", ["hycosim.clients.rod.node:RodNode", "hycosim.clients.robot.node:RobotNode",
+                                   "hycosim.clients.robot.controller:ReferenceController", "hycosim.clients.policy.node:PolicyNode"])
 def test_a_scenario_node_goes_on_in_another_process_from_its_state(model):
     import importlib
 
@@ -192,9 +192,9 @@ def test_a_scenario_node_goes_on_in_another_process_from_its_state(model):
 
 
 def test_the_scene_fmus_serialise_their_whole_state(tmp_path):
-    from clients.scene_fmus import ensure_scene_fmus
-    from core.config import load_project
-    from clients.loader import load_node
+    from hycosim.clients.scene_fmus import ensure_scene_fmus
+    from hycosim.core.config import load_project
+    from hycosim.clients.loader import load_node
 
     ensure_scene_fmus(REPO / "build" / "fmus")
     loaded = load_project(REPO / "configs" / "grasp-paper.json")
@@ -294,8 +294,8 @@ def test_a_checkpoint_folder_is_read_whole_or_refused_with_its_name(tmp_path, fo
 @settings(suppress_health_check=[HealthCheck.function_scoped_fixture], max_examples=40)
 @given(st.text(max_size=40) | _json_values.map(json.dumps) | deep_json)
 def test_a_resume_reads_any_meta_json_without_a_traceback(tmp_path, meta_text):
-    from core.config import load_project
-    from server.main import _resume_plan
+    from hycosim.core.config import load_project
+    from hycosim.server.main import _resume_plan
 
     cfg = _project(tmp_path)
     (tmp_path / "meta.json").write_text(meta_text)
@@ -455,7 +455,7 @@ def _write_folder(run: Path, state: dict, states: dict[str, bytes], wrong: str |
 
 @pytest.fixture(scope="module")
 def fit_project(tmp_path_factory):
-    from core.config import load_project
+    from hycosim.core.config import load_project
 
     tmp = tmp_path_factory.mktemp("fit")
     cfg = write_project(tmp / "p.json", _FIT_NODES, [{"from": "src.a", "to": "g.u"}], events=_FIT_EVENTS,

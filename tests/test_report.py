@@ -79,7 +79,7 @@ def test_real_time_pacing_follows_the_wall_clock(tmp_path):
 
 
 def test_a_run_cut_off_mid_write_still_reports_and_plots_what_it_finished(tmp_path):
-    from core.run_files import read_csv_rows
+    from hycosim.core.run_files import read_csv_rows
 
     cfg = write_project(tmp_path / "p.json", [
         {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
@@ -185,7 +185,7 @@ def test_a_long_run_is_read_back_in_one_pass(tmp_path):
     extremes per pixel bucket without losing a peak."""
     from array import array
 
-    from server.report import PLOT_BUCKETS, envelope, plot_run, summarise
+    from hycosim.server.report import PLOT_BUCKETS, envelope, plot_run, summarise
 
     run = tmp_path / "long"
     run.mkdir()
@@ -223,7 +223,7 @@ def test_runs_started_in_the_same_second_get_folders_of_their_own(tmp_path):
     """Two runs of one project started together (trials, CI jobs) each get their own folder."""
     from concurrent.futures import ThreadPoolExecutor
 
-    from core.folders import run_dir_for
+    from hycosim.core.folders import run_dir_for
 
     with ThreadPoolExecutor(8) as pool:
         dirs = list(pool.map(lambda _: run_dir_for(tmp_path / "runs", "p"), range(24)))
@@ -263,7 +263,7 @@ def _timing_files(draw) -> str:
 def test_a_run_directory_read_back_is_figures_or_a_named_error(tmp_path, timing, meta_text):
     """A run directory is a user's to edit: report, plot's step panels and the columns read it
     back, or say which file is wrong; never a traceback."""
-    from server.report import RunDirError, read_columns, read_steps, summarise
+    from hycosim.server.report import RunDirError, read_columns, read_steps, summarise
 
     run = tmp_path / "run"
     run.mkdir(exist_ok=True)

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from core.config import parse_project
-from core.coupling import algebraic_loops
-from server.report import read_steps
-from server.retakes import StepSizer, input_change
+from hycosim.core.config import parse_project
+from hycosim.core.coupling import algebraic_loops
+from hycosim.server.report import read_steps
+from hycosim.server.retakes import StepSizer, input_change
 from tests.helpers import column, hycosim, meta, read_rows, run_project, write_project
 
 
@@ -171,7 +171,7 @@ def test_algebraic_loops_follow_feedthrough_inside_nodes_only():
 
 
 def test_the_step_size_control_and_the_change_it_reads():
-    from core.config import StepControl
+    from hycosim.core.config import StepControl
 
     labels = {"n": ["n.x", "n.F", "n.flag"]}
     change, port, absolute = input_change({"n": [0.1, 50.0, True]}, {"n": [0.0, 40.0, False]}, labels, 0.1)

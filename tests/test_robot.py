@@ -10,12 +10,12 @@ import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
-from clients.node import NodeContext, NodeModelError
-from clients.robot import kr6
-from clients.robot.controller import ReferenceController
-from clients.robot.node import initial_pose
-from clients.robot.reach import analyse_reach
-from clients.robot.scene import RobotScene, SceneParams, grasp_rotation
+from hycosim.clients.node import NodeContext, NodeModelError
+from hycosim.clients.robot import kr6
+from hycosim.clients.robot.controller import ReferenceController
+from hycosim.clients.robot.node import initial_pose
+from hycosim.clients.robot.reach import analyse_reach
+from hycosim.clients.robot.scene import RobotScene, SceneParams, grasp_rotation
 
 
 def _flange(scene: RobotScene) -> np.ndarray:

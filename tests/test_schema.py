@@ -7,7 +7,7 @@ import json
 import pytest
 from jsonschema import Draft202012Validator
 
-from core.config import project_json_schema
+from hycosim.core.config import project_json_schema
 from hycosim.cli import SCHEMA_FILE
 from tests.helpers import REPO, hycosim
 

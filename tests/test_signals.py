@@ -13,9 +13,9 @@ import time
 import pytest
 import zenoh
 
-from core import frames
-from core.keys import SERVER_TOKEN, ProjectKeys
-from core.session import open_session, router_config
+from hycosim.core import frames
+from hycosim.core.keys import SERVER_TOKEN, ProjectKeys
+from hycosim.core.session import open_session, router_config
 from tests.helpers import HYCOSIM, REPO, env, free_port, meta, read_rows, reap, spawn, wait_for, write_project
 from tests.test_faults import _pair as fault_pair
 
@@ -194,7 +194,7 @@ def test_the_launcher_sent_sigterm_stops_the_run_and_keeps_its_records(tmp_path)
 
 _SELF_ENDING = '''
 import os, signal
-from clients.node import Node
+from hycosim.clients.node import Node
 
 class Quitter(Node):
     def setup(self, ctx):
@@ -233,7 +233,7 @@ def _dashboard(tmp_path) -> list[str]:
 
 
 def _controller(tmp_path) -> list[str]:
-    from clients.krl.eki import EkiConfig
+    from hycosim.clients.krl.eki import EkiConfig
 
     eki = tmp_path / "eki.xml"
     eki.write_text(EkiConfig().to_xml())

@@ -19,11 +19,11 @@ import msgpack
 import pytest
 import zenoh
 
-from core import frames
-from core.config import load_project
-from core.keys import SERVER_TOKEN, ProjectKeys
-from core.security import router_security
-from core.session import ConnectError, client_config, open_session, router_config
+from hycosim.core import frames
+from hycosim.core.config import load_project
+from hycosim.core.keys import SERVER_TOKEN, ProjectKeys
+from hycosim.core.security import router_security
+from hycosim.core.session import ConnectError, client_config, open_session, router_config
 from tests.helpers import HYCOSIM, env, free_endpoint, meta, read_rows, REPO, wait_for, write_project
 from tests.wire_strategies import examples, forgeable, gateway_streams, payloads, send_to_gateway
 
@@ -113,7 +113,7 @@ def test_a_peer_asking_the_status_in_a_loop_gets_the_budgets_answers_and_busy_fo
     peer asking as fast as it can (before, it took a fast ring from 3,000 steps/s to 500) gets
     at most the budget's answers and a 'busy' error at once for the rest, each one counted in
     meta.json; `hycosim status` says the server is busy; the run goes on to its end."""
-    from server.answer_budget import ANSWERS_PER_S, BURST
+    from hycosim.server.answer_budget import ANSWERS_PER_S, BURST
 
     endpoint = free_endpoint()
     proc = _run(_project(tmp_path / "asked.json", endpoint), tmp_path / "asked", endpoint)

@@ -14,8 +14,8 @@ import struct
 import msgpack
 from hypothesis import strategies as st
 
-from core import frames
-from fmu_bridge import gateway_protocol as gp
+from hycosim.core import frames
+from hycosim.fmu_bridge import gateway_protocol as gp
 
 NAMES = ["a", "g", "clock", "src", "s", "_server", "_local", "nobody", ""]
 

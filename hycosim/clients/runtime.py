@@ -1,0 +1,651 @@
+"""The node runtime: attach one node to a relay server and step it until STOP.
+
+One Zenoh client session, explicit declarations, closed on exit: a subscriber (the
+inbox) on the server's ``down`` key, a publisher on the node's own ``up`` key, a
+liveliness token announcing the node, and a liveliness subscriber that notices the
+server going away. Every wait has a timeout.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import socket
+import time
+from typing import Any
+
+import structlog
+import zenoh
+
+from hycosim.core import frames, signals
+from hycosim.core.config import WIRE_TYPES, LoadedProject, PortType
+from hycosim.core.drops import DropLog
+from hycosim.core.inbox import LOCAL, Inbox
+from hycosim.core.keys import SERVER_TOKEN, ProjectKeys
+from hycosim.core.security import client_tls
+from hycosim.core.session import ConnectError, FramePublisher, FrameTooLarge, client_config, open_session, token_held
+from hycosim.core.sim_clock import RealTimeClock
+
+from hycosim.clients.node import AsyncSource, Node, NodeContext, NodeModelError, SimulationEnded
+from hycosim.clients.replay import SamplePlayer
+
+_COERCE = {
+    PortType.REAL: float,
+    PortType.INTEGER: int,
+    PortType.BOOLEAN: bool,
+    PortType.STRING: str,
+    PortType.BINARY: bytes,
+}
+
+
+# How long a node a supervisor stops (SIGTERM, SIGHUP) waits for the server to read its END:
+# well inside the 10 s a supervisor (docker, systemd) gives before it kills.
+_STOPPED_WAIT = 2.0
+
+
+class NodeRunError(RuntimeError):
+    """The node cannot go on; the message names the node and the step."""
+
+
+class RunFailedElsewhere(NodeRunError):
+    """The server stopped a run that failed (another node lost, a timeout): this node's end too."""
+
+
+class NodeRuntime:
+    def __init__(self, loaded: LoadedProject, node_name: str, impl: Node | AsyncSource, endpoint: str,
+                 password: str | None = None):
+        self.loaded = loaded
+        self.spec = loaded.project.node(node_name)
+        self.name = node_name
+        self.impl = impl
+        self.endpoint = endpoint
+        self.password = password
+        self.cosim = loaded.project.coSimulation
+        self.keys = ProjectKeys(loaded.project.projectName)
+        self._out_ports = [(p.name, _COERCE[p.type]) for p in self.spec.output]
+        self._in_names = self.spec.input_names()
+        self._in_types = tuple(WIRE_TYPES[p.type] for p in self.spec.input)
+        # Releases carry inputs for the stepping nodes; an asynchronous source only reads their time.
+        self._release_for = None if self.spec.asynchronous else node_name
+        # Multi-rate: this node steps over this many base steps, at every such base point.
+        self._rate = loaded.coupling.rates.get(node_name, 1)
+        self._log = structlog.get_logger("node").bind(node=node_name)
+        self.drops = DropLog(self._log)
+        self.steps = 0
+        self._server_lost: float | None = None
+        self._server_seen = False  # its liveliness token, which tells this node when it goes
+
+    def context(self) -> NodeContext:
+        params = dict(self.spec.parameters)
+        if self.spec.rate is not None:
+            params.setdefault("rate", self.spec.rate)
+        project_dir = self.loaded.path.parent if self.loaded.path else None
+        return NodeContext(self.name, self.spec.UID, list(self.spec.input), list(self.spec.output), params,
+                           self.cosim.stepSize, self.cosim.startTime, **({"project_dir": project_dir} if project_dir else {}),
+                           real_time=self.cosim.real_time_factor(), stop_time=self.cosim.stopTime)
+
+    def _pack_outputs(self, values: dict[str, Any]) -> list[Any]:
+        packed = []
+        for port, coerce in self._out_ports:
+            if port not in values:
+                raise NodeRunError(f"node {self.name!r}: its model returned no value for output {port!r}")
+            packed.append(coerce(values[port]))
+        return packed
+
+    def _on_server_liveliness(self, sample: zenoh.Sample) -> None:
+        self.inbox.inject(frames.encode(frames.LIVE, SERVER_TOKEN, sample.kind == zenoh.SampleKind.PUT))
+
+    def run(self) -> None:
+        try:
+            self.impl.setup(self.context())
+        except Exception as exc:
+            if isinstance(exc, NodeRunError):
+                raise
+            if isinstance(exc, NodeModelError):  # a clear message of its own
+                raise NodeRunError(str(exc)) from None
+            raise NodeRunError(f"node {self.name!r}: its model failed to set up: {type(exc).__name__}: {exc}") from exc
+        conf = client_config(self.endpoint, timeout_s=self.cosim.attachTimeout, low_latency=self.cosim.lowLatency,
+                             user=self.name if self.password is not None else None, password=self.password,
+                             tls=client_tls(self.loaded, self.endpoint))
+        try:
+            session = open_session(conf, self.endpoint)
+        except ConnectError as exc:
+            if self.password is not None:
+                raise ConnectError(f"{exc} (node {self.name!r} authenticates as user {self.name!r}: "
+                                   "wrong credentials are refused this way too)") from None
+            raise
+        try:
+            # Before any declaration: a refused node leaves nothing behind to fire as it closes.
+            self._refuse_a_second_instance(session)
+            self.inbox = Inbox(session, self.keys.down, self.keys.down,
+                               poll=self.loaded.project.polls_before_blocking(os.cpu_count()))
+            self._publisher = FramePublisher(session, self.keys.up(self.name), low_latency=self.cosim.lowLatency)
+            # history: fetch the server's token now. Without it this session learnt of the token
+            # only if the router's announcement won a race with the subscription (it lost about one
+            # attach in fifteen with Zenoh receiving on the app runtime), and a session that never
+            # knew the token never reports it gone, so a cut link went unnoticed.
+            watch = session.liveliness().declare_subscriber(self.keys.alive(SERVER_TOKEN), self._on_server_liveliness,
+                                                            history=True)
+            # Declared after the subscriber: the server starts once it sees this token.
+            token = session.liveliness().declare_token(self.keys.alive(self.name))
+            try:
+                # The server times out the attach; outwait it so that its STOP, naming who is
+                # missing, reaches this node rather than a timeout of our own.
+                try:
+                    start = self._wait(self.cosim.attachTimeout + self.cosim.stepTimeout, "START")
+                except NodeRunError as exc:
+                    raise NodeRunError(f"{exc}{self._other_projects(session)}") from None
+                # START again, after a link cut during the attach; or, to a process that
+                # replaces one that died, the run's START (a source) or last release (a player).
+                returning = start.kind == frames.REPLAY
+                if returning:
+                    start = start.fields[1]
+                if start.kind == frames.STOP:
+                    self._on_stop(start)
+                    return
+                if start.kind in (frames.STEP, frames.STEPS) and not isinstance(self.impl, AsyncSource):
+                    # The run is under way: this process is a restart. Say so at once (a node
+                    # process says HELLO once per run); a server that takes checkpoints
+                    # restores the run, and this node with it; one that does not stops the run.
+                    start = self._await_restore(start.fields[0])
+                    if start is None:
+                        return
+                played = isinstance(self.impl, SamplePlayer)
+                if not played and (start.kind not in (frames.START, frames.RESTORE) or (
+                        start.kind == frames.RESTORE and isinstance(self.impl, AsyncSource))):
+                    at = f" (step {start.fields[0]})" if start.kind in (frames.STEP, frames.STEPS) else ""
+                    raise NodeRunError(f"node {self.name!r}: the run on {self.endpoint} was already under way{at} "
+                                       "when it attached; a node joins before the run starts")
+                try:
+                    if played:
+                        self._run_played(start, returning)
+                    elif isinstance(self.impl, AsyncSource):
+                        self._run_async(start, returning)
+                    elif start.kind == frames.RESTORE:
+                        self._run_stepping(bool(start.fields[6].get("checkpoint")), restore=start)
+                    else:
+                        self._run_stepping(bool(start.fields[5].get("checkpoint")))
+                except KeyboardInterrupt as exc:
+                    self._say_stopped(exc)
+                    raise
+            finally:
+                token.undeclare()
+                watch.undeclare()
+                self.inbox.close()
+        finally:
+            try:
+                self.impl.teardown()
+            finally:
+                session.close()
+
+    def _refuse_a_second_instance(self, session: zenoh.Session) -> None:
+        """Stop if another process already holds this node's liveliness token.
+
+        Two processes answering for one node would both send its outputs, and the server
+        would take whichever came first.
+        """
+        if token_held(session, self.keys.alive(self.name), timeout=min(5.0, self.cosim.attachTimeout)):
+            raise NodeRunError(f"node {self.name!r} is already attached to the server at {self.endpoint}: "
+                               "another process holds its liveliness token (one process per node)")
+
+    def _send(self, payload: bytes) -> None:
+        """Publish one frame; one too large for the link stops the node, naming its largest outputs."""
+        try:
+            self._publisher.put(payload)
+        except FrameTooLarge as exc:
+            frame = frames.decode(payload)
+            values = frame.fields[3] if frame.kind in (frames.OUTPUTS, frames.SAMPLE, frames.BATCH) else []
+            largest = frames.largest_values(zip((port for port, _ in self._out_ports), values))
+            raise NodeRunError(f"node {self.name!r}: its outputs at step {self.steps} are {exc}; "
+                               f"largest: {largest}") from None
+
+    def _wait(self, timeout: float, what: str) -> frames.Frame:
+        """The next frame from the server (skipping ones not for us); STOP ends the wait too."""
+        frame = self._next_frame(timeout)
+        if frame is None:
+            raise NodeRunError(f"node {self.name!r}: no {what} from the server at {self.endpoint} "
+                               f"within {timeout:g} s (after step {self.steps})")
+        return frame
+
+    def _next_frame(self, timeout: float) -> frames.Frame | None:
+        """The next frame from the server within ``timeout`` seconds, or None.
+
+        Liveliness is handled here: if the server's token goes (a link cut), wait up to
+        linkGrace for it to come back, then stop. Malformed frames are dropped.
+        """
+        deadline = time.monotonic() + timeout
+        grace = self.cosim.linkGrace
+        while True:
+            now = time.monotonic()
+            wait = deadline - now
+            if self._server_lost is not None:
+                if now - self._server_lost > grace:
+                    raise NodeRunError(f"node {self.name!r}: the server went away after step {self.steps} and did not "
+                                       f"come back within the link grace of {grace:g} s")
+                wait = min(wait, self._server_lost + grace - now + 0.01)
+            msg = self.inbox.recv(max(wait, 0.0))
+            if msg is None:
+                if time.monotonic() < deadline:
+                    continue  # woken for the grace check above
+                return None
+            try:
+                frame = self._accept(msg[0] == LOCAL, msg[1])
+            except frames.FrameError as exc:
+                self.drops.drop("not a release", str(exc), self.steps)
+                continue
+            if frame is None:
+                continue
+            if frame.kind == frames.LIVE:
+                if frame.fields[1]:
+                    self._log.info("server back" if self._server_seen else "server seen", step=self.steps)
+                    self._server_lost, self._server_seen = None, True
+                elif grace > 0:
+                    self._server_lost = time.monotonic()
+                    self._log.warning("server lost, waiting for it", step=self.steps, grace_s=grace)
+                else:
+                    raise NodeRunError(f"node {self.name!r}: the server went away after step {self.steps}")
+                continue
+            return frame
+
+    def _accept(self, local: bool, payload: bytes) -> frames.Frame | None:
+        """A frame from ``down`` (or this process's own liveliness news) that this node can act
+        on; None for one meant for another node; FrameError for anything else."""
+        frame = frames.decode(payload)
+        kind = frame.kind
+        if local:
+            return frame  # liveliness news from this process's own subscriber
+        if kind in (frames.STEP, frames.STEPS) and self._release_for is not None and \
+                self._release_for not in frame.fields[4 if kind == frames.STEP else 3]:
+            return None  # a release of other nodes (this one is not due, or not yet in Gauss-Seidel order)
+        if kind in (frames.START, frames.STEP, frames.STEPS):
+            return frames.check_release(frame, self._release_for, self._in_types, self._interpolates())
+        if kind == frames.REPLAY:
+            if frame.fields[0] != self.name:
+                return None
+            inner = frames.decode(frame.fields[1])
+            if inner.kind not in (frames.START, frames.STEP, frames.STEPS):
+                raise frames.FrameError(f"a replay of a {frames.KIND_NAMES[inner.kind]} frame")
+            return frames.Frame(frames.REPLAY, (self.name, frames.check_release(inner, self._release_for, self._in_types,
+                                                                                self._interpolates())))
+        if kind == frames.ROLLBACK:
+            k, t = frame.fields
+            if not (0 <= k < frames.MAX_STEP and math.isfinite(t)):
+                raise frames.FrameError(f"ROLLBACK frame to step {k}, t {t}: out of range")
+            return frame
+        if kind == frames.STOP:
+            return frame
+        if kind == frames.CHECKPOINT:
+            if not 0 <= frame.fields[0] < frames.MAX_STEP:
+                raise frames.FrameError(f"CHECKPOINT frame at step {frame.fields[0]}: out of range")
+            return frame
+        if kind == frames.RESTORE:
+            node, step, t, index, count, chunk, _ = frame.fields
+            if node != self.name:
+                return None
+            frames.check_chunk(step, index, count, chunk)
+            if not math.isfinite(t):
+                raise frames.FrameError(f"RESTORE frame to t {t}: not finite")
+            return frame
+        raise frames.FrameError(f"a {frames.KIND_NAMES[kind]} frame is not for a node")
+
+    def _say_stopped(self, exc: BaseException) -> None:
+        """A node stopped by SIGTERM or SIGHUP (its supervisor) tells the server, which then names it
+        rather than a lost token. Not on Ctrl-C: a terminal's reaches the server too, which
+        reports its own interruption."""
+        if signals.signal_of(exc) == signal.SIGINT:
+            return
+        # A source knows no step (the server adds the run's).
+        said = (f"node {self.name!r} (an asynchronous source) {signals.describe(exc)}"
+                if isinstance(self.impl, AsyncSource) else
+                f"node {self.name!r} {signals.describe(exc)} after step {self.steps}")
+        try:
+            self._send(frames.encode(frames.END, self.spec.UID, self.steps + 1, 0.0, False, said, []))
+            # The token goes as this process leaves, and the server can learn that before it
+            # reads the END (it did on a loaded machine, and named a lost token): wait for its
+            # STOP, which says it has read it. A second signal ends the wait.
+            deadline = time.monotonic() + _STOPPED_WAIT
+            while (left := deadline - time.monotonic()) > 0:
+                frame = self._next_frame(left)
+                if frame is None or frame.kind == frames.STOP:
+                    break
+        except Exception:  # on its way out: the token's loss still tells the server
+            pass
+
+    def _end(self, step: int, t: float, clean: bool, message: str, earlier: list[list[Any]] | None = None) -> None:
+        """Tell the server this node's model ended the run (``clean``) or failed, in place of its
+        outputs for ``step`` (``earlier``: those of its steps inside a batch before that), and
+        wait for the server's STOP (so that it hears this first, not that the node's token
+        went). A failure is raised as this node's own."""
+        message = message[:2000]
+        try:
+            self._send(frames.encode(frames.END, self.spec.UID, step, t, clean, message, earlier or []))
+            deadline = time.monotonic() + min(10.0, self.cosim.stepTimeout)
+            while (left := deadline - time.monotonic()) > 0:
+                frame = self._next_frame(left)
+                if frame is None or frame.kind == frames.STOP:
+                    break
+        except NodeRunError:
+            pass  # the server is gone: the node's own message says enough
+        if not clean:
+            raise NodeRunError(message)
+        self._log.info("ended the simulation", step=step, t=t, message=message)
+
+    def _step_model(self, impl: Node, k: int, t: float, h: float | None, inputs: dict[str, Any]) -> bytes | None:
+        """Step the model from t by h (h None: only read its outputs at t, k = -1), send its
+        outputs at step k + 1 and return them as sent; None if it ended the simulation. A model
+        that fails, or whose outputs cannot be sent, is reported to the server (END) and raised."""
+        try:
+            if h is not None:
+                impl.step(t, h, inputs)
+            frame = frames.encode(frames.OUTPUTS, self.spec.UID, k + 1, t + (h or 0.0),
+                                  self._pack_outputs(impl.outputs()))
+            self._send(frame)
+            return frame
+        except Exception as exc:
+            self._step_failed(exc, k, t)
+            return None  # the model ended the simulation (_step_failed raises for a failure)
+
+    def _step_failed(self, exc: Exception, k: int, t: float, earlier: list[list[Any]] | None = None) -> None:
+        """Tell the server, in place of the outputs of the release at point k (from t), how the
+        model's step ended: a model that ended the simulation returns (with ``earlier``, the
+        outputs of its steps before inside a batch); a failure is raised."""
+        if isinstance(exc, SimulationEnded):
+            self._end(k + 1, exc.t, True, f"{exc}", earlier)
+        elif isinstance(exc, NodeRunError):
+            self._end(k + 1, t, False, str(exc))
+        elif isinstance(exc, NodeModelError):
+            self._end(k + 1, t, False, f"{exc} (step {k})")
+        else:
+            self._log.exception("model failed", step=k)
+            self._end(k + 1, t, False, f"node {self.name!r}: its model failed at step {k} (t={t:g} s): "
+                                       f"{type(exc).__name__}: {exc}")
+
+    def _step_batch(self, impl: Node, k: int, times: list[float], inputs: dict[str, Any]) -> bytes | None:
+        """A batched release (STEPS) from point k over the base points ``times``: this node's own
+        steps that start inside it, each as a STEP would have it (a base-rate node from one
+        point to the next, a slower one over its rate, cut at stopTime), all on ``inputs``;
+        send the outputs after each as one BATCH labelled k + 1 and return it. None if the
+        model ended the simulation; a failure is reported (END) and raised."""
+        outs: list[list[Any]] = []
+        t = end = times[0]
+        try:
+            for i in range(0, len(times) - 1, self._rate):
+                t = times[i]
+                end = times[i + 1] if self._rate == 1 else t + min(self._rate * self.cosim.stepSize,
+                                                                    self.cosim.stopTime - t)
+                impl.step(t, end - t, inputs)
+                outs.append(self._pack_outputs(impl.outputs()))
+            frame = frames.encode(frames.BATCH, self.spec.UID, k + 1, end, outs[-1], outs[:-1])
+            self._send(frame)
+            return frame
+        except Exception as exc:
+            self._step_failed(exc, k, t, outs)
+            return None  # the model ended the simulation (_step_failed raises for a failure)
+
+    def _await_restore(self, step: int) -> frames.Frame | None:
+        """A restarted process (the run was at ``step`` when it attached): say HELLO, then wait
+        for the server to restore the run from its last checkpoint. Return the first piece of
+        this node's state (a RESTORE frame), or None when the server stopped the run instead."""
+        self._send(self._hello(False, restart=True))
+        self._log.info("restarted: waiting for the run to be restored", step=step)
+        wait = self.cosim.attachTimeout + self.cosim.stepTimeout
+        deadline = time.monotonic() + wait
+        while (left := deadline - time.monotonic()) > 0:
+            frame = self._next_frame(left)
+            if frame is None:
+                break
+            if frame.kind == frames.STOP:
+                self._on_stop(frame)
+                return None
+            if frame.kind == frames.RESTORE:
+                return frame
+        raise NodeRunError(f"node {self.name!r}: the run on {self.endpoint} was already under way (step {step}) "
+                           f"when it attached, and the server did not restore it within {wait:g} s: a node "
+                           "restarted mid-run goes on only from a checkpoint (coSimulation.checkpointEvery)")
+
+    def _restore(self, impl: Node, first: frames.Frame) -> tuple[int, float, bytes] | None:
+        """Collect the pieces of this node's state that ``first`` begins, set it, and answer with a
+        HELLO and the outputs at the checkpoint's point. Return (step, t, outputs sent), or None
+        when a piece is missing or the state is not this node's (the frame is dropped)."""
+        chunks = frames.Chunks()
+        frame = first
+        while True:
+            node, step, t, index, count, chunk, _ = frame.fields
+            data = chunks.add(step, index, count, chunk)
+            if data is not None:
+                break
+            frame = self._next_frame(self.cosim.stepTimeout)
+            if frame is None or frame.kind != frames.RESTORE:
+                self.drops.drop("not a release", f"the state to restore at step {step} came in part", self.steps)
+                return None
+        try:
+            impl.deserialize_state(data)
+        except Exception as exc:  # a state from another build of the model, or a forged frame
+            self.drops.drop("not a release", f"a state to restore at step {step} that does not fit: "
+                            f"{type(exc).__name__}: {exc}", self.steps)
+            return None
+        self._log.info("restored", step=step, t=t)
+        self._send(self._hello(impl.can_rollback))
+        out = self._step_model(impl, step - 1, t, None, {})
+        return None if out is None else (step, t, out)
+
+    def _run_stepping(self, checkpoint: bool, restore: frames.Frame | None = None) -> None:
+        impl = self.impl
+        assert isinstance(impl, Node)
+        checkpoint = checkpoint and impl.can_rollback
+        saved_step, saved = -1, None
+        if restore is None:
+            self._send(self._hello(impl.can_rollback))
+            last_out = self._step_model(impl, -1, self.cosim.startTime, None, {})
+            if last_out is None:
+                return
+            done = -1  # the last step integrated
+        else:
+            restored = self._restore(impl, restore)
+            if restored is None:
+                raise NodeRunError(f"node {self.name!r}: the state the server sent to restore could not be set "
+                                   f"(see {self.name}'s log)")
+            k, _, last_out = restored
+            self.steps, done = k, k - 1
+        pending_state: tuple[int, bytes] | None = None  # a checkpoint's state, sent after the next outputs
+        # The server enforces step timeouts; a node only needs to notice the server is gone,
+        # which liveliness tells; this bound is the last resort for a frozen server.
+        silence = self.cosim.stepTimeout + 30.0
+        mode, driven = None, False
+        while True:
+            frame = self._wait(silence, "release")
+            if frame.kind == frames.STOP:
+                self._on_stop(frame)
+                return
+            if frame.kind == frames.REPLAY:
+                # Back after a link cut: the release we may have missed, or already answered.
+                inner = frame.fields[1]
+                if inner.kind in (frames.STEP, frames.STEPS) and inner.fields[0] > done:
+                    frame = inner
+                else:
+                    self._send(last_out)
+                    self._log.info("outputs re-sent", step=done + 1)
+                    continue
+            if frame.kind == frames.CHECKPOINT:
+                if frame.fields[0] == done + self._rate:  # at the end of this node's last step
+                    pending_state = self._checkpoint_state(impl, frame.fields[0])
+                continue
+            if frame.kind == frames.RESTORE:
+                restored = self._restore(impl, frame)
+                if restored is not None:
+                    # The whole run went back to a checkpoint: this node's saved states are of the future.
+                    k, _, last_out = restored
+                    self.steps, done, mode, saved_step, pending_state = k, k - 1, None, -1, None
+                continue
+            if frame.kind == frames.ROLLBACK:
+                k, t = frame.fields
+                if saved_step != k:
+                    # Not from this run's server, which rolls back only to the step it just released.
+                    self.drops.drop("not a release", f"ROLLBACK to step {k}; the state saved is of step {saved_step}",
+                                    self.steps)
+                    continue
+                impl.set_state(saved)
+                self._log.info("rollback", step=k, t=t)
+                continue
+            if frame.kind == frames.STEPS:
+                k, times, new_mode, inputs, driven_nodes = frame.fields
+            elif frame.kind == frames.STEP:
+                k, t, h, new_mode, inputs, driven_nodes, slopes = frame.fields
+            else:  # a START: this run has started already
+                self.drops.drop("not a release", "a START while the run is under way", self.steps)
+                continue
+            if checkpoint and saved_step != k:
+                saved, saved_step = impl.get_state(), k
+            now_driven = self.name in driven_nodes
+            if (new_mode, now_driven) != (mode, driven):
+                mode, driven = new_mode, now_driven
+                impl.set_mode(mode, driven)
+                self._log.info("mode", step=k, mode=mode, driven=driven)
+            values = dict(zip(self._in_names, inputs[self.name]))
+            if frame.kind == frames.STEPS:
+                out = self._step_batch(impl, k, times, values)
+                if out is None:
+                    return
+                self.steps, done, last_out = k + len(times) - 1, k + len(times) - 2, out
+                continue
+            if self._rate > 1:  # its own step, the last one cut at stopTime as the base's is
+                h = min(self._rate * self.cosim.stepSize, self.cosim.stopTime - t)
+            if self.name in slopes:  # iterative coupling's interpolated inputs (check_release checked them)
+                impl.set_input_derivatives({n: d for n, d in zip(self._in_names, slopes[self.name]) if d})
+            out = self._step_model(impl, k, t, h, values)
+            if out is None:
+                return
+            self.steps, done, last_out = k + 1, k, out
+            if pending_state is not None and pending_state[0] == k:
+                for i, chunk in enumerate(chunks := frames.state_chunks(pending_state[1])):
+                    self._send(frames.encode(frames.STATE, self.spec.UID, k, i, len(chunks), chunk))
+                pending_state = None
+
+    def _other_projects(self, session: zenoh.Session) -> str:
+        """A hint for a node that heard nothing from its server: the endpoint may serve another project."""
+        found = []
+        try:
+            for reply in session.get(ProjectKeys("*").status, timeout=2.0):
+                if reply.ok is not None:
+                    found.append(str(json.loads(reply.ok.payload.to_bytes()).get("project")))
+        except Exception:  # a hint only: a refused query (access control) or a bad answer gives none
+            return ""
+        if not found or self.loaded.project.projectName in found:
+            return ""
+        return (f"; the server there runs project {', '.join(map(repr, sorted(found)))}, not "
+                f"{self.loaded.project.projectName!r}: is this the project file the server was started with?")
+
+    def _checkpoint_state(self, impl: Node, step: int) -> tuple[int, bytes] | None:
+        """This node's state at point ``step`` for a checkpoint, or None if it cannot give one (the
+        server then keeps its previous checkpoint)."""
+        if not impl.can_serialize:
+            return None
+        try:
+            return step, impl.serialize_state()
+        except Exception as exc:
+            self._log.warning("cannot serialise its state for a checkpoint", step=step,
+                              error=f"{type(exc).__name__}: {exc}")
+            return None
+
+    def _interpolates(self) -> bool:
+        return isinstance(self.impl, Node) and self.impl.can_interpolate
+
+    def _hello(self, rollback: bool, restart: bool = False) -> bytes:
+        stepping = isinstance(self.impl, Node)
+        return frames.encode(frames.HELLO, self.spec.UID, {
+            "rollback": rollback, "serialize": stepping and self.impl.can_serialize,
+            "variableStep": stepping and self.impl.can_vary_step, "restart": restart, "batches": stepping,
+            "interpolates": self._interpolates(),
+            "ports": self.spec.wire_ports(), "host": socket.gethostname()[:64]})
+
+    def _on_stop(self, frame: frames.Frame) -> None:
+        """The server's STOP: the end of the run, or of a failed one, which is this node's failure too."""
+        reason = frame.fields[1]
+        self._log.info("stop", step=self.steps, reason=reason, waits=self.inbox.waits, dropped=dict(self.drops.counts))
+        if reason not in frames.CLEAN_STOPS:  # the reason names the step where it matters
+            raise RunFailedElsewhere(f"node {self.name!r}: the server stopped the run: {reason}")
+
+    def _run_async(self, start: frames.Frame, restart: bool) -> None:
+        impl = self.impl
+        assert isinstance(impl, AsyncSource)
+        self._send(self._hello(False, restart=restart))
+        _, t0, _, wall0, rt, _ = start.fields
+        clock = RealTimeClock(t0, wall0, rt) if rt else None
+        sim_now, seq = t0, 0
+        period = 1.0 / float(self.spec.rate or 30.0)
+        while True:
+            try:
+                for ts, values in impl.samples_until(sim_now):
+                    self._send(frames.encode(frames.SAMPLE, self.spec.UID, seq, ts, self._pack_outputs(values)))
+                    seq += 1
+            except Exception as exc:
+                self._source_failed(exc, sim_now)
+            if clock is not None:
+                # Real time: sample by the clock, and look for STOP in between. While the
+                # server is away (within linkGrace) samples go nowhere; sampling goes on.
+                frame = self._next_frame(period)
+                sim_now = clock.now()
+            else:
+                # As fast as possible: the server's releases are the clock.
+                frame = self._wait(self.cosim.stepTimeout + 30.0, "release")
+                if frame.kind == frames.REPLAY:
+                    frame = frame.fields[1]
+                if frame.kind == frames.STEP:
+                    _, t, h, *_ = frame.fields
+                    sim_now = t + h
+                    self.steps = frame.fields[0] + 1
+            if frame is not None and frame.kind == frames.STOP:
+                self._on_stop(frame)
+                return
+
+    def _source_failed(self, exc: Exception, sim_now: float) -> None:
+        """Tell the server how an asynchronous source failed (it would otherwise learn only that
+        its token went, and with a link grace wait that long to say so), then raise it."""
+        if isinstance(exc, NodeRunError):
+            message = str(exc)
+        elif isinstance(exc, NodeModelError):
+            message = f"{exc} (at t={sim_now:g} s)"
+        else:
+            self._log.exception("source failed", t=sim_now)
+            message = (f"node {self.name!r} (an asynchronous source): its model failed at t={sim_now:g} s: "
+                       f"{type(exc).__name__}: {exc}")
+        self._end(self.steps + 1, sim_now, False, message)
+
+    def _run_played(self, frame: frames.Frame, restart: bool) -> None:
+        """An asynchronous node played from a recording, paced by the releases: before the server
+        gathers point k it gets every sample the recorded server had first had at k, then
+        OUTPUTS for k, the word that they are all sent (it waits for that as for a stepping
+        node's outputs). A release seen again (a located event's retry, a replay after a link
+        cut) sends no sample twice; a restore goes on from its point."""
+        impl = self.impl
+        assert isinstance(impl, SamplePlayer)
+        self._send(self._hello(False, restart=restart))
+        held = self._pack_outputs({p.name: p.start_value() for p in self.spec.output})  # the server ignores them
+        # The last point whose samples are sent: by the process this one replaces, if any.
+        sent = frame.fields[0] if restart and frame.kind == frames.STEP else -1
+        seq, silence = 0, self.cosim.stepTimeout + 30.0
+        while True:
+            if frame.kind == frames.STOP:
+                self._on_stop(frame)
+                return
+            if frame.kind == frames.REPLAY:
+                frame = frame.fields[1]
+            point: int | None = None
+            if frame.kind == frames.START and sent < 0:
+                point, t = 0, frame.fields[1]
+            elif frame.kind == frames.STEP:
+                point, t = frame.fields[0] + 1, frame.fields[1] + frame.fields[2]
+            elif frame.kind == frames.RESTORE:
+                point, t = frame.fields[1], frame.fields[2]
+                sent = point  # the server's restored histories hold what came before
+            if point is not None:  # not a CHECKPOINT, ROLLBACK or the START a resume sends again
+                for sample in impl.due(sent, point):
+                    self._send(frames.encode(frames.SAMPLE, self.spec.UID, seq, sample.t,
+                                             self._pack_outputs(impl.values(sample))))
+                    seq += 1
+                sent = max(sent, point)
+                self._send(frames.encode(frames.OUTPUTS, self.spec.UID, point, t, held))
+                self.steps = point
+            frame = self._wait(silence, "release")

@@ -1,0 +1,537 @@
+"""Loading an FMU with fmpy and mapping a node's ports onto its variables.
+
+One class, :class:`FmuInstance`, one method per thing the node runtime needs (set
+inputs, step, get outputs, save and restore state), each a thin call into fmpy's FMI 2.0
+or 3.0 slave; a Model Exchange FMU is the same with an integrator inside its step
+(:mod:`fmu_bridge.fmu_me`). :func:`open_fmu` makes the one the node entry asks for. Every
+failure is an :class:`FmuError` that names the node and, where there is one, the variable.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import struct
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import fmpy
+from fmpy import read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.model_description import ModelDescription, ScalarVariable
+
+from hycosim.core.config import Node, PortType
+from hycosim.core.hints import did_you_mean
+
+# FMI 2 type names and their FMI 3 counterparts, per port type.
+_COMPATIBLE = {
+    PortType.REAL: {"Real", "Float64", "Float32"},
+    PortType.INTEGER: {"Integer", "Int32", "Int64", "Int16", "Int8", "UInt32", "UInt64", "UInt16", "UInt8", "Enumeration"},
+    PortType.BOOLEAN: {"Boolean"},
+    PortType.STRING: {"String"},
+    PortType.BINARY: {"Binary"},
+}
+_DRIVEN_TYPES = _COMPATIBLE[PortType.REAL] | _COMPATIBLE[PortType.INTEGER] | _COMPATIBLE[PortType.BOOLEAN]
+
+
+class FmuError(RuntimeError):
+    """An FMU that cannot serve as the node, or a call into it that failed."""
+
+
+_DISCARD = 2  # fmi2Discard and fmi3Discard
+
+
+class FmuTerminated(FmuError):
+    """The FMU asked to end the simulation (FMI 2: fmi2Discard with fmi2Terminated; FMI 3:
+    terminateSimulation) at ``t``, the end of its last successful step."""
+
+    def __init__(self, message: str, t: float):
+        super().__init__(message)
+        self.t = t
+
+
+@dataclass(frozen=True)
+class MappedPort:
+    port: str
+    variable: str
+    vr: int
+    type: str
+
+
+def describe(path: Path) -> ModelDescription:
+    """Read an FMU's model description; FmuError if the file is not a readable FMU."""
+    try:
+        return read_model_description(str(path))
+    except FileNotFoundError:
+        raise FmuError(f"{path}: no such FMU file") from None
+    except Exception as exc:
+        raise FmuError(f"{path}: not a readable FMU ({exc})") from None
+
+
+CO_SIMULATION, MODEL_EXCHANGE = "CoSimulation", "ModelExchange"
+
+
+def interface_of(md: ModelDescription, node: Node, path: Path) -> str:
+    """The interface the node runs its FMU through: the one its entry names, else co-simulation
+    when the FMU has it, else Model Exchange; FmuError if the FMU lacks it, or if the entry
+    sets an integrator (solver, relativeTolerance, maxStep) for an FMU that runs as co-simulation."""
+    name = node.nodeName
+    if node.interface == MODEL_EXCHANGE:
+        if md.modelExchange is None:
+            raise FmuError(f"node {name!r}: {path.name} has no Model Exchange interface (co-simulation only); "
+                           'leave out "interface"')
+        return MODEL_EXCHANGE
+    if node.interface == CO_SIMULATION or md.coSimulation is not None:
+        if md.coSimulation is None:
+            raise FmuError(f"node {name!r}: {path.name} has no co-simulation interface (Model Exchange only); "
+                           'leave out "interface" and hycosim integrates it')
+        given = [k for k in ("solver", "relativeTolerance", "maxStep") if getattr(node, k) is not None]
+        if given and node.interface is None:
+            raise FmuError(f"node {name!r}: {', '.join(given)} set, but {path.name} has a co-simulation interface, "
+                           'which the node uses unless told: add "interface": "ModelExchange"')
+        return CO_SIMULATION
+    if md.modelExchange is None:
+        raise FmuError(f"node {name!r}: {path.name} has neither a co-simulation nor a Model Exchange interface")
+    return MODEL_EXCHANGE
+
+
+def check_platform(path: Path, md: ModelDescription, node: str) -> None:
+    """Raise FmuError unless the FMU is FMI 2.0 or 3.0 with a binary for this platform."""
+    if not md.fmiVersion.startswith(("2", "3")):
+        # FMI 1.0 names every C function differently (fmiDoStep, no fmi2 prefix): refused here
+        # rather than failing on a missing symbol when the binary loads.
+        raise FmuError(f"node {node!r}: {path.name} is an FMI {md.fmiVersion} FMU; hycosim runs FMI 2.0 and 3.0 "
+                       "FMUs (export it again as FMI 2.0 or 3.0)")
+    platforms = fmpy.supported_platforms(str(path))
+    want = fmpy.platform_tuple if md.fmiVersion.startswith("3") else fmpy.platform
+    if want not in platforms and not (md.fmiVersion.startswith("3") and fmpy.platform in platforms):
+        raise FmuError(f"node {node!r}: {path.name} has binaries for {', '.join(platforms) or 'no platform'}, "
+                       f"not for this one ({want})")
+
+
+def _a(word: str) -> str:
+    return ("an " if word[:1] in "aeiou" else "a ") + word
+
+
+def map_ports(md: ModelDescription, node: Node, path: Path) -> tuple[list[MappedPort], list[MappedPort]]:
+    """Map the node's inputs and outputs onto FMU variables by name (``variable`` renames)."""
+    variables = {v.name: v for v in md.modelVariables}
+
+    def one(port, causalities: tuple[str, ...], kind: str) -> MappedPort:
+        name = port.variable or port.name
+        var: ScalarVariable | None = variables.get(name)
+        if var is None:
+            raise FmuError(f"node {node.nodeName!r}: {kind} {port.name!r} maps to variable {name!r}, "
+                           f"which {path.name} does not have")
+        if var.causality not in causalities:
+            raise FmuError(f"node {node.nodeName!r}: variable {name!r} of {path.name} is {_a(var.causality)}, "
+                           f"not an {kind}")
+        if var.type not in _COMPATIBLE[port.type]:
+            raise FmuError(f"node {node.nodeName!r}: {kind} {port.name!r} is {port.type.value} but variable "
+                           f"{name!r} of {path.name} is {var.type}")
+        return MappedPort(port.name, name, var.valueReference, var.type)
+
+    missing = [f"{kind} {p.name!r}" + (f" (variable {p.variable!r})" if p.variable else "")
+               for kind, ports in (("input", node.input), ("output", node.output))
+               for p in ports if (p.variable or p.name) not in variables]
+    if missing:
+        # All at once: an FMU built for other ports (an old build) usually lacks several.
+        raise FmuError(f"node {node.nodeName!r}: {path.name} has no variable for {', '.join(missing)} "
+                       "(an FMU built for other ports than the project names? rebuild it)")
+    inputs = [one(p, ("input", "parameter"), "input") for p in node.input]
+    outputs = [one(p, ("output", "local"), "output") for p in node.output]
+    return inputs, outputs
+
+
+def map_driven(md: ModelDescription, node: Node, path: Path) -> ScalarVariable | None:
+    """The FMU variable named by the node's ``drivenVariable``: an input not mapped to a port."""
+    name = node.drivenVariable
+    if name is None:
+        return None
+    var = next((v for v in md.modelVariables if v.name == name), None)
+    if var is None:
+        raise FmuError(f"node {node.nodeName!r}: drivenVariable {name!r} is not a variable of {path.name}")
+    if var.causality != "input":
+        raise FmuError(f"node {node.nodeName!r}: drivenVariable {name!r} of {path.name} is {_a(var.causality)}, "
+                       "not an input")
+    if var.type not in _DRIVEN_TYPES:
+        raise FmuError(f"node {node.nodeName!r}: drivenVariable {name!r} of {path.name} is {var.type}; "
+                       "it must be Boolean, Integer or Real")
+    if name in {p.variable or p.name for p in node.input}:
+        raise FmuError(f"node {node.nodeName!r}: drivenVariable {name!r} is also an input port of the node; "
+                       "the coordinator sets it, a link cannot")
+    return var
+
+
+def _fits(var_type: str, value: Any) -> bool:
+    """Whether a JSON value can be set on a variable of this FMI type without guessing."""
+    if var_type in _COMPATIBLE[PortType.REAL]:
+        return type(value) in (int, float)
+    if var_type == "Boolean":
+        return type(value) is bool or (type(value) is int and value in (0, 1))
+    if var_type == "String":
+        return type(value) is str
+    if var_type in _COMPATIBLE[PortType.INTEGER]:
+        return type(value) is int
+    return True  # Binary and the like: the FMU says
+
+
+def check_parameters(md: ModelDescription, node: str, parameters: dict[str, Any], path: Path) -> None:
+    """Raise FmuError unless every key of ``parameters`` names a variable of the FMU and its
+    value fits the variable's type (a number for a Real, a whole number for an Integer, …),
+    is finite, and lies within the ``min`` and ``max`` the variable declares."""
+    variables = {v.name: v for v in md.modelVariables}
+    unknown = sorted(set(parameters) - set(variables))
+    if unknown:
+        raise FmuError(f"node {node!r}: parameter {', '.join(map(repr, unknown))} "
+                       f"{'is not a variable' if len(unknown) == 1 else 'are not variables'} of {path.name}"
+                       + did_you_mean(unknown, variables))
+    for name, value in parameters.items():
+        var_type = variables[name].type
+        if not _fits(var_type, value):
+            raise FmuError(f"node {node!r}: parameter {name!r} is {_a(var_type)} variable of {path.name}, "
+                           f"which {json.dumps(value)} is not")
+        if type(value) is float and not math.isfinite(value):
+            raise FmuError(f"node {node!r}: parameter {name!r} is {json.dumps(value)}, not a finite number")
+        outside = _outside_range(variables[name], value)
+        if outside:
+            raise FmuError(f"node {node!r}: parameter {name!r} is {json.dumps(value)}, {outside} that {path.name} "
+                           "declares for it")
+
+
+def _bound(text: Any) -> float | None:
+    try:
+        return float(text) if text is not None else None
+    except (TypeError, ValueError):
+        return None  # an FMU's own malformed bound: its values are not held to it
+
+
+def _outside_range(variable: ScalarVariable, value: Any) -> str | None:
+    """Where a number lies against the variable's declared ``min`` and ``max`` (an FMU may refuse,
+    or clamp without a word, a value outside them), or None when within or undeclared."""
+    if type(value) not in (int, float):
+        return None
+    low, high = _bound(getattr(variable, "min", None)), _bound(getattr(variable, "max", None))
+    if low is not None and value < low:
+        return f"below the minimum {low:g}"
+    if high is not None and value > high:
+        return f"above the maximum {high:g}"
+    return None
+
+
+@dataclass(frozen=True)
+class FmuMapping:
+    """An FMU's model description and the node's ports and driven flag mapped onto it."""
+
+    md: ModelDescription
+    inputs: list[MappedPort]
+    outputs: list[MappedPort]
+    driven: ScalarVariable | None
+    interface: str = CO_SIMULATION
+
+    @property
+    def capabilities(self) -> Any:
+        """The model description's element of the interface used (its capability flags)."""
+        return self.md.coSimulation if self.interface == CO_SIMULATION else self.md.modelExchange
+
+    @property
+    def variable_step(self) -> bool:
+        """Whether the FMU takes communication steps of any length (a Model Exchange FMU does:
+        the node's integrator steps it)."""
+        if self.interface != CO_SIMULATION:
+            return True
+        return bool(getattr(self.md.coSimulation, "canHandleVariableCommunicationStepSize", False))
+
+    def feedthrough(self) -> dict[str, set[str]]:
+        """Each mapped output port → the mapped input ports it depends on directly, from the model
+        structure; an output listed without ``dependencies`` depends on every input (as FMI
+        says), and an output not listed there depends on none."""
+        ports_of = {p.variable: p.port for p in self.inputs}
+        every = set(ports_of.values())
+        out: dict[str, set[str]] = {}
+        for unknown in self.md.outputs:
+            port = next((p.port for p in self.outputs if p.variable == getattr(unknown.variable, "name", None)), None)
+            if port is None:
+                continue
+            if unknown.dependencies is None:
+                out[port] = set(every)
+            else:
+                out[port] = {ports_of[v.name] for v in unknown.dependencies if v.name in ports_of}
+        return out
+
+
+def check_fmu(path: Path, node: Node, parameters: dict[str, Any] | None = None) -> FmuMapping:
+    """Everything checked before an FMU's binary loads: the FMU is readable, FMI 2.0 or 3.0
+    with the interface the node uses (:func:`interface_of`) and a binary for this platform,
+    and the node's ports, drivenVariable and parameters (``parameters``, default the node's)
+    map onto its variables. Nothing is extracted or instantiated."""
+    md = describe(path)
+    check_platform(path, md, node.nodeName)
+    interface = interface_of(md, node, path)
+    inputs, outputs = map_ports(md, node, path)
+    driven = map_driven(md, node, path)
+    check_parameters(md, node.nodeName, node.parameters if parameters is None else parameters, path)
+    return FmuMapping(md, inputs, outputs, driven, interface)
+
+
+def open_fmu(path: Path, node: Node, parameters: dict[str, Any], stop_time: float | None = None) -> FmuInstance:
+    """Instantiate the FMU as the node's entry says: a co-simulation slave, or a Model Exchange
+    model with its integrator (``stop_time``: the run's, for the default largest step)."""
+    mapping = check_fmu(path, node, parameters)
+    if mapping.interface == MODEL_EXCHANGE:
+        from hycosim.fmu_bridge.fmu_me import MeInstance
+
+        return MeInstance(path, node, parameters, mapping, stop_time)
+    return FmuInstance(path, node, parameters, mapping)
+
+
+class FmuInstance:
+    """One instantiated co-simulation FMU playing one node."""
+
+    def __init__(self, path: Path, node: Node, parameters: dict[str, Any], mapping: FmuMapping | None = None):
+        self.path = path
+        self.node = node.nodeName
+        mapping = mapping or check_fmu(path, node, parameters)
+        self.md, self.inputs, self.outputs, self.driven_variable = (
+            mapping.md, mapping.inputs, mapping.outputs, mapping.driven)
+        self.fmi3 = self.md.fmiVersion.startswith("3")
+        cs = mapping.capabilities
+        self.can_rollback = bool(getattr(cs, "canGetAndSetFMUstate", False))
+        self.can_serialize = self.can_rollback and bool(getattr(cs, "canSerializeFMUstate", False))
+        self.variable_step = mapping.variable_step
+        self.event_mode = bool(self.fmi3 and getattr(cs, "hasEventMode", False))
+        self.early_return = bool(self.fmi3 and getattr(cs, "canReturnEarlyAfterIntermediateUpdate", False))
+        # FMI 2 only: FMI 3 co-simulation has no input derivatives.
+        self.can_interpolate = not self.fmi3 and bool(getattr(cs, "canInterpolateInputs", False))
+        self._variables = {v.name: v for v in self.md.modelVariables}
+        self._starts = {p.variable or p.name: p.start for p in node.input if p.start is not None}
+        self._parameters = parameters
+        self._unzipdir = tempfile.mkdtemp(prefix=f"hycosim-{self.node}-")
+        fmpy.extract(str(path), self._unzipdir)
+        try:
+            self.fmu = self._instantiate(dict(guid=self.md.guid, unzipDirectory=self._unzipdir,
+                                              modelIdentifier=cs.modelIdentifier, instanceName=self.node))
+        except Exception as exc:  # a binary without the interface's functions, or one that fails to load
+            shutil.rmtree(self._unzipdir, ignore_errors=True)
+            raise FmuError(f"node {self.node!r}: {path.name}: its binary cannot be loaded as {mapping.interface} "
+                           f"({type(exc).__name__}: {exc})") from None
+        self.time = 0.0
+
+    def _instantiate(self, kwargs: dict[str, Any]) -> Any:
+        """The fmpy object of the FMU's co-simulation interface, instantiated."""
+        if self.fmi3:
+            from fmpy.fmi3 import FMU3Slave
+
+            fmu = FMU3Slave(**kwargs)
+            fmu.instantiate(eventModeUsed=self.event_mode, earlyReturnAllowed=self.early_return)
+        else:
+            from fmpy.fmi2 import FMU2Slave
+
+            fmu = FMU2Slave(**kwargs)
+            fmu.instantiate()
+        return fmu
+
+    # --- values ---------------------------------------------------------------------
+
+    def _set(self, var: ScalarVariable, value: Any) -> None:
+        vr = [var.valueReference]
+        t = var.type
+        try:
+            if t in ("Real", "Float64", "Float32"):
+                (self.fmu.setFloat64 if self.fmi3 else self.fmu.setReal)(vr, [float(value)])
+            elif t == "Boolean":
+                self.fmu.setBoolean(vr, [bool(value)])
+            elif t == "String":
+                self.fmu.setString(vr, [str(value)])
+            elif self.fmi3:
+                getattr(self.fmu, f"set{t if t != 'Enumeration' else 'Int64'}")(vr, [int(value)])
+            else:
+                self.fmu.setInteger(vr, [int(value)])
+        except FMICallException as exc:
+            raise FmuError(f"node {self.node!r}: setting {var.name!r} = {value!r} failed ({exc})") from None
+
+    def _get(self, vr: int, t: str) -> Any:
+        if t in ("Real", "Float64", "Float32"):
+            return (self.fmu.getFloat64 if self.fmi3 else self.fmu.getReal)([vr])[0]
+        if t == "Boolean":
+            return bool(self.fmu.getBoolean([vr])[0])
+        if t == "String":
+            return self.fmu.getString([vr])[0]
+        if self.fmi3:
+            return int(getattr(self.fmu, f"get{t if t != 'Enumeration' else 'Int64'}")([vr])[0])
+        return int(self.fmu.getInteger([vr])[0])
+
+    def set_variable(self, name: str, value: Any) -> None:
+        """Set a parameter or start value by FMU variable name."""
+        var = self._variables.get(name)
+        if var is None:
+            raise FmuError(f"node {self.node!r}: parameter {name!r} is not a variable of {self.path.name}")
+        self._set(var, value)
+
+    def set_driven(self, driven: bool) -> None:
+        """Tell the FMU, through its ``drivenVariable`` (if any), whether an event drives it."""
+        if self.driven_variable is not None:
+            self._set(self.driven_variable, driven)
+
+    def set_inputs(self, values: dict[str, Any]) -> None:
+        for m in self.inputs:
+            if m.port in values:
+                self._set(self._variables[m.variable], values[m.port])
+
+    def set_input_derivatives(self, derivatives: dict[str, list[float]]) -> None:
+        """Give Real inputs (by port) their time derivatives at the next step's start, orders 1,
+        2, …: over that step each follows the Taylor polynomial from the value set_inputs gave
+        (fmi2SetRealInputDerivatives; the FMU must declare canInterpolateInputs)."""
+        vrs, orders, values = [], [], []
+        for m in self.inputs:
+            for order, value in enumerate(derivatives.get(m.port, ()), start=1):
+                vrs.append(m.vr)
+                orders.append(order)
+                values.append(float(value))
+        if not vrs:
+            return
+        try:
+            self.fmu.setRealInputDerivatives(vrs, orders, values)
+        except FMICallException as exc:
+            raise FmuError(f"node {self.node!r}: setting input derivatives failed ({exc})") from None
+
+    def get_outputs(self) -> dict[str, Any]:
+        try:
+            return {m.port: self._get(m.vr, m.type) for m in self.outputs}
+        except FMICallException as exc:
+            raise FmuError(f"node {self.node!r}: reading outputs failed ({exc})") from None
+
+    # --- lifecycle ------------------------------------------------------------------
+
+    def _initialize(self, start_time: float) -> None:
+        """Set parameters and input start values, then through initialisation mode (both interfaces)."""
+        self.time = start_time
+        if not self.fmi3:
+            self.fmu.setupExperiment(startTime=start_time)
+        for name, value in {**self._starts, **self._parameters}.items():
+            self.set_variable(name, value)
+        if self.fmi3:
+            self.fmu.enterInitializationMode(startTime=start_time)
+        else:
+            self.fmu.enterInitializationMode()
+        self.fmu.exitInitializationMode()
+
+    def initialize(self, start_time: float) -> None:
+        """Initialise the FMU at ``start_time`` (FMI 3 with event mode: settle its first event)."""
+        try:
+            self._initialize(start_time)
+            if self.event_mode:
+                self._handle_events()
+        except FMICallException as exc:
+            raise FmuError(f"node {self.node!r}: initialising {self.path.name} failed ({exc})") from None
+
+    def _handle_events(self) -> None:
+        """FMI 3 event mode: iterate the discrete states until settled, then back to step mode."""
+        while self.fmu.updateDiscreteStates()[0]:  # discreteStatesNeedUpdate
+            pass
+        self.fmu.enterStepMode()
+
+    def do_step(self, t: float, h: float) -> None:
+        """Advance from t to t+h; the FMU's own micro-steps stay inside it."""
+        try:
+            if not self.fmi3:
+                self.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+            else:
+                end = t + h
+                now = t
+                while now < end - 1e-12 * max(1.0, abs(end)):
+                    event, terminate, early, last = self.fmu.doStep(
+                        currentCommunicationPoint=now, communicationStepSize=end - now)
+                    if terminate:
+                        raise FmuTerminated(f"{self.path.name} asked to terminate the simulation at t={last:g} s "
+                                            "(terminateSimulation)", last)
+                    if event and self.event_mode:
+                        self.fmu.enterEventMode()
+                        self._handle_events()
+                    # An early return ends the call before `end`; go on from where it stopped.
+                    now = last if early else end
+        except FMICallException as exc:
+            if exc.status != _DISCARD:
+                raise FmuError(f"node {self.node!r}: {self.path.name}: doStep from t={t:g} s by {h:g} s failed "
+                               f"(status {exc.status})") from None
+            if not self.fmi3:
+                ended = self._fmi2_terminated()
+                if ended is not None:
+                    raise FmuTerminated(f"{self.path.name} asked to terminate the simulation at t={ended:g} s "
+                                        "(fmi2Discard with fmi2Terminated)", ended) from None
+            raise FmuError(f"node {self.node!r}: {self.path.name} discarded doStep from t={t:g} s by {h:g} s "
+                           f"({'fmi3' if self.fmi3 else 'fmi2'}Discard) without asking to terminate") from None
+        self.time = t + h
+
+    def _fmi2_terminated(self) -> float | None:
+        """After an fmi2Discard: the time the FMU ended the simulation at, or None if it did not."""
+        from fmpy.fmi2 import fmi2LastSuccessfulTime, fmi2Terminated
+
+        try:
+            if not self.fmu.getBooleanStatus(fmi2Terminated):
+                return None
+        except FMICallException:  # an FMU that cannot say: a plain discard
+            return None
+        try:
+            return self.fmu.getRealStatus(fmi2LastSuccessfulTime)
+        except FMICallException:
+            return self.time
+
+    def get_state(self) -> Any:
+        if not self.can_rollback:
+            raise FmuError(f"node {self.node!r}: {self.path.name} cannot get and set its state")
+        return (self.fmu.getFMUState() if self.fmi3 else self.fmu.getFMUstate()), self.time
+
+    def set_state(self, state: Any) -> None:
+        handle, self.time = state
+        (self.fmu.setFMUState if self.fmi3 else self.fmu.setFMUstate)(handle)
+
+    def free_state(self, state: Any) -> None:
+        (self.fmu.freeFMUState if self.fmi3 else self.fmu.freeFMUstate)(state[0])
+
+    def serialize_state(self) -> bytes:
+        """The FMU's current state as bytes that outlive this process (fmi2SerializeFMUstate /
+        fmi3SerializeFMUState), prefixed by the communication time it is at."""
+        if not self.can_serialize:
+            raise FmuError(f"node {self.node!r}: {self.path.name} cannot serialize its state (canSerializeFMUstate)")
+        try:
+            handle = self.fmu.getFMUState() if self.fmi3 else self.fmu.getFMUstate()
+            try:
+                data = (self.fmu.serializeFMUState if self.fmi3 else self.fmu.serializeFMUstate)(handle)
+            finally:
+                (self.fmu.freeFMUState if self.fmi3 else self.fmu.freeFMUstate)(handle)
+        except FMICallException as exc:
+            raise FmuError(f"node {self.node!r}: {self.path.name}: serializing its state failed ({exc})") from None
+        return struct.pack("<d", self.time) + bytes(data)
+
+    def deserialize_state(self, data: bytes) -> None:
+        """Set the state :meth:`serialize_state` gave (from this FMU, in any process)."""
+        if len(data) < 8:
+            raise FmuError(f"node {self.node!r}: {self.path.name}: a serialized state of {len(data)} bytes")
+        (t,) = struct.unpack_from("<d", data)
+        try:
+            if self.fmi3:
+                handle = self.fmu.deserializeFMUState(data[8:])
+                self.fmu.setFMUState(handle)
+                self.fmu.freeFMUState(handle)
+            else:
+                handle = self.fmu.deSerializeFMUstate(data[8:])
+                self.fmu.setFMUstate(handle)
+                self.fmu.freeFMUstate(handle)
+        except FMICallException as exc:
+            raise FmuError(f"node {self.node!r}: {self.path.name}: restoring a serialized state failed ({exc})") from None
+        self.time = t
+
+    def close(self) -> None:
+        try:
+            self.fmu.terminate()
+        except Exception:
+            pass
+        try:
+            self.fmu.freeInstance()
+        except Exception:
+            pass
+        shutil.rmtree(self._unzipdir, ignore_errors=True)

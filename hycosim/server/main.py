@@ -1,0 +1,200 @@
+"""``hycosim server FILE``: open the router session, run the relay, report the outcome."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import sys
+from dataclasses import asdict
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import structlog
+
+from hycosim.core import json_text, logs, signals
+from hycosim.core.config import LoadedProject, gateway_address, server_endpoint
+from hycosim.core.endpoints import GATEWAY_PORT, EndpointError, parse_address, parse_endpoint
+from hycosim.core.folders import make_folder, run_dir_for
+from hycosim.core.security import SecurityError, router_security
+from hycosim.core.session import open_session, router_config
+
+from hycosim.server import checkpoints
+from hycosim.server.coordinator import GuardEvaluationError
+from hycosim.server.recorder import Recorder, RecordError
+from hycosim.server.relay import Relay, RunError
+
+
+# The project file as the run began, in its run directory.
+PROJECT_COPY = "project.json"
+
+
+def _versions() -> dict[str, str]:
+    found = {"python": platform.python_version()}
+    for dist in ("hycosim", "eclipse-zenoh", "fmpy", "msgpack", "pydantic", "mujoco", "torch"):
+        try:
+            found[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            pass
+    return found
+
+
+def _project_differences(recorded: Any, given: Any, at: str = "") -> list[str]:
+    """Where two project files differ, as ``path: recorded → given`` (the first few)."""
+    if type(recorded) is dict and type(given) is dict:
+        found = []
+        for key in sorted(set(recorded) | set(given), key=str):
+            path = f"{at}.{key}" if at else str(key)
+            if key not in given:
+                found.append(f"{path} is gone")
+            elif key not in recorded:
+                found.append(f"{path} is new")
+            else:
+                found += _project_differences(recorded[key], given[key], path)
+        return found
+    if type(recorded) is list and type(given) is list and len(recorded) == len(given):
+        return [d for i, (a, b) in enumerate(zip(recorded, given)) for d in _project_differences(a, b, f"{at}[{i}]")]
+    if recorded != given:
+        return [f"{at or 'the file'}: {json.dumps(recorded)[:60]} → {json.dumps(given)[:60]}"]
+    return []
+
+
+def _resume_plan(loaded: LoadedProject, run_dir: Path) -> tuple[dict[str, Any], dict[str, int], int]:
+    """The meta, record offsets and recorded steps of a run to resume; ValueError saying why it cannot be."""
+    try:
+        meta = json_text.loads((run_dir / "meta.json").read_bytes())
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{run_dir}: not a run directory (no readable meta.json: {exc})") from None
+    if type(meta) is not dict:
+        raise ValueError(f"{run_dir}: not a run directory (its meta.json holds no object)")
+    if meta.get("config_sha256") != loaded.digest:
+        differ = ["(the recorded copy is missing)"]
+        try:
+            differ = _project_differences(json_text.loads((run_dir / PROJECT_COPY).read_bytes()),
+                                          json_text.loads(loaded.path.read_bytes()) if loaded.path else {}) or \
+                ["(only in layout)"]
+        except (OSError, ValueError, RecursionError):  # a hint only; the comparison recurses per level too
+            pass
+        raise ValueError(f"{run_dir} was run with another project file than {loaded.path}: "
+                         f"{'; '.join(differ[:5])}{' …' if len(differ) > 5 else ''}")
+    cp, passed = checkpoints.latest(run_dir, loaded.digest, project=loaded.project)
+    if cp is None:
+        raise ValueError(f"{run_dir}: no checkpoint to resume from"
+                         + (f" ({'; '.join(passed)})" if passed else " (was coSimulation.checkpointEvery set?)"))
+    try:
+        with open(run_dir / "values.csv", "rb") as f:
+            recorded = max(sum(1 for _ in f) - 1, 0)
+    except OSError:
+        recorded = cp.step
+    earlier = meta.get("checkpoints_passed_over")  # the relay adds what it passes over on restoring
+    if earlier is not None and type(earlier) is not list:
+        del meta["checkpoints_passed_over"]
+    return meta, cp.server["records"], recorded
+
+
+def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = Path("runs"),
+          run_dir: Path | None = None, progress_jsonl: bool = False,
+          gateway: str | None = None, resume: Path | None = None) -> tuple[int, Path | None, str]:
+    """Run one co-simulation as its server; return (exit code, run directory, message).
+
+    Addresses and the credentials and certificate files are checked before anything is
+    written: one that cannot be used gives exit code 2 and no run directory. ``resume``: go
+    on with the run in that directory, whose server died, from its last complete checkpoint
+    (exit code 2 if it cannot be).
+    """
+    def done(code: int, run_dir: Path | None, message: str) -> tuple[int, Path | None, str]:
+        # A launcher reading --progress-jsonl learns the outcome from this line, on every path.
+        if progress_jsonl:
+            print(json.dumps({"done": code, "message": message, "run_dir": str(run_dir) if run_dir else None}),
+                  flush=True)
+        return code, run_dir, message
+
+    try:
+        endpoint = str(parse_endpoint(listen)) if listen else server_endpoint(loaded.project.serverIP)
+    except EndpointError as exc:
+        return done(2, None, f"{'--listen' if listen else 'serverIP'}: {exc}")
+    try:
+        gw = parse_address(gateway, GATEWAY_PORT) if gateway else gateway_address(loaded.project, endpoint)
+    except EndpointError as exc:
+        return done(2, None, f"{'--gateway' if gateway else 'gatewayIP'}: {exc}")
+    gateway_required = bool(gateway or loaded.project.gatewayIP)
+    try:
+        # Read before the run directory is made: a missing or unreadable credentials or
+        # certificate file is bad input (exit 2), like an address, not a failed run.
+        security = router_security(loaded, endpoint)
+    except SecurityError as exc:
+        return done(2, None, str(exc))
+    resume_at, recorded = None, None
+    if resume is not None:
+        try:
+            old_meta, resume_at, recorded = _resume_plan(loaded, resume)
+        except ValueError as exc:
+            return done(2, None, f"--resume: {exc}")
+        run_dir = resume
+    try:
+        if run_dir is None:
+            run_dir = run_dir_for(runs_dir, loaded.name)
+        else:
+            make_folder(run_dir)
+    except OSError as exc:
+        return done(2, None, f"{exc.filename or run_dir or runs_dir}: {exc.strerror or exc}")
+    logs.configure(run_dir / "server.log.jsonl")
+    log = structlog.get_logger("server")
+    meta: dict[str, Any] = {
+        "project": loaded.name, "config": str(loaded.path) if loaded.path else None,
+        "config_sha256": loaded.digest, "endpoint": endpoint, "versions": _versions(),
+        "stepSize": loaded.project.coSimulation.stepSize, "stopTime": loaded.project.coSimulation.stopTime,
+        "realTime": loaded.project.coSimulation.realTime,
+        "lowLatency": loaded.project.coSimulation.lowLatency,
+        "waitStrategy": loaded.project.coSimulation.waitStrategy, "zenoh_runtime": os.environ.get("ZENOH_RUNTIME"),
+    }
+    if resume_at is not None:
+        meta = {**old_meta, "endpoint": endpoint, "versions": meta["versions"]}
+    try:
+        recorder = Recorder(run_dir, loaded, meta, resume_at=resume_at)
+        if resume_at is None and loaded.path is not None:
+            # What the project was, for a resume to compare with (the hash alone cannot say where it differs).
+            (run_dir / PROJECT_COPY).write_bytes(loaded.path.read_bytes())
+    except OSError as exc:
+        return done(3, run_dir, f"cannot write {run_dir / PROJECT_COPY}: {exc.strerror or exc}")
+    except RecordError as exc:
+        return done(3, run_dir, str(exc))
+    on_progress = None
+    if progress_jsonl:
+        def on_progress(p: Any) -> None:
+            print(json.dumps({"progress": asdict(p), "run_dir": str(run_dir)}), flush=True)
+    try:
+        session = open_session(router_config(endpoint, security=security,
+                                             low_latency=loaded.project.coSimulation.lowLatency), endpoint)
+    except KeyboardInterrupt as exc:
+        recorder.close("interrupted", reason=f"{signals.describe(exc)} before the run started")
+        return done(signals.exit_code(exc), run_dir, f"{signals.describe(exc)} before the run started")
+    except Exception as exc:  # ConnectError (or what Zenoh made of the security settings), with its message
+        recorder.close("failed", reason=str(exc))
+        return done(3, run_dir, str(exc))
+    relay = Relay(loaded, session, recorder, progress_every_s=0.1, on_progress=on_progress,
+                  gateway_address=(gw.host, gw.port), gateway_required=gateway_required, resume=recorded)
+    try:
+        relay.run()
+        code, message = 0, f"completed {recorder.meta['steps']} macro steps"
+        if relay.ended_by is not None:
+            e = relay.ended_by
+            message += f"; node {e['node']!r} ended the simulation at t={e['t']:g} s: {e['message']}"
+    except (RunError, RecordError, GuardEvaluationError) as exc:
+        log.error("run failed", error=str(exc))
+        code, message = 3, str(exc)
+    except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM or SIGHUP
+        code, message = signals.exit_code(exc), f"{signals.describe(exc)}; results so far are flushed"
+        if not recorder.closed:  # interrupted while the relay declared itself, before its own shutdown
+            recorder.close("interrupted", reason=signals.describe(exc))
+    except Exception as exc:  # a bug, not bad input: keep the traceback in the log
+        log.exception("internal error")
+        code, message = 4, f"internal error {type(exc).__name__}: {exc} (traceback in {run_dir / 'server.log.jsonl'})"
+    finally:
+        session.close()
+    return done(code, run_dir, message)
+
+
+if __name__ == "__main__":  # pragma: no cover - the CLI is the entry point
+    sys.exit("use: hycosim server FILE")

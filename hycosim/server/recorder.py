@@ -1,0 +1,263 @@
+"""The run directory: every routed value at every macro step, events, timing, every
+asynchronous sample as received (``samples.jsonl``, which a replay plays back), metadata.
+
+Rows are written as each macro step completes and flushed at least every 0.1 s of wall
+time (a flush per step costs the barrier about a tenth of its rate), and always on close,
+which every failure path of the server reaches: whatever happened before a failure is on
+disk and readable. ``meta.json`` is rewritten with the outcome at the end.
+
+A disk that fills up stops the run (RecordError) rather than the records going on with
+gaps. So that the rows already taken and the outcome still reach the disk then, the run
+directory holds a reserve file (RESERVE_BYTES) from the start, removed when the records
+close: the space it frees is what the last buffered rows and ``meta.json`` are written into.
+"""
+
+from __future__ import annotations
+
+import csv
+import errno
+import io
+import json
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+from hycosim.core.config import LoadedProject, PortType
+from hycosim.core.recordings import SAMPLES_FILE, encode_sample
+
+
+FLUSH_EVERY_S = 0.1
+# Several times what is buffered when writing fails (three files' buffers, meta.json, the
+# last log lines) and small beside any run's records.
+RESERVE_BYTES = 256 * 1024
+RESERVE_NAME = ".reserve"
+
+
+class RecordError(RuntimeError):
+    """The run directory cannot be written (a full disk, a quota): the run stops."""
+
+    @classmethod
+    def writing(cls, run_dir: Path, name: str, exc: OSError, step: int | None = None) -> RecordError:
+        at = f" at step {step}" if step is not None else ""
+        return cls(f"cannot write the run's records{at}: {run_dir / name}: {exc.strerror or exc}")
+
+
+def _cell(value: Any) -> Any:
+    if isinstance(value, bool):
+        return int(value)
+    if isinstance(value, (bytes, bytearray)):
+        return value.hex() if len(value) <= 32 else f"<{len(value)} bytes>"
+    return value
+
+
+class _RecordFile:
+    """A file the recorder writes through its own buffer: rows collect in ``buffer`` (written to
+    directly, by csv.writer in C, on the hot path) and go to the file at each flush; whatever a failed write (a full disk) left unwritten stays in memory
+    for the next flush, in order. (A Python text file drops its pending text when the write
+    under it fails: rows would go missing from the middle of the file.)"""
+
+    def __init__(self, path: Path, resume_at: int | None = None):
+        """Open ``path`` afresh, or (``resume_at``) the file a run wrote, cut back to that offset."""
+        self.name = path.name
+        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | (0 if resume_at is not None else os.O_TRUNC), 0o644)
+        self.buffer = io.StringIO()
+        self._unwritten = b""
+        if resume_at is not None:
+            self.cut(resume_at)
+
+    def position(self) -> int:
+        """Where the file ends once what is buffered is written (flushes)."""
+        self.flush()
+        return os.lseek(self._fd, 0, os.SEEK_CUR)
+
+    def cut(self, offset: int) -> None:
+        """Drop everything after ``offset`` (the file and what is buffered): back to a checkpoint."""
+        self.buffer.seek(0)
+        self.buffer.truncate()
+        self._unwritten = b""
+        os.ftruncate(self._fd, offset)
+        os.lseek(self._fd, offset, os.SEEK_SET)
+
+    def flush(self) -> None:
+        data = self._unwritten + self.buffer.getvalue().encode()
+        self.buffer.seek(0)
+        self.buffer.truncate()
+        while data:
+            try:
+                written = os.write(self._fd, data)
+            except OSError:
+                self._unwritten = data
+                raise
+            data = data[written:]
+        self._unwritten = b""
+
+    @property
+    def closed(self) -> bool:
+        return self._fd < 0
+
+    def close(self) -> None:
+        if self._fd < 0:
+            return
+        try:
+            self.flush()
+        finally:
+            os.close(self._fd)
+            self._fd = -1
+
+
+class Recorder:
+    """Writes ``values.csv``, ``timing.csv``, ``events.jsonl`` and ``meta.json`` in ``run_dir``."""
+
+    def __init__(self, run_dir: Path, loaded: LoadedProject, meta: dict[str, Any],
+                 resume_at: dict[str, int] | None = None):
+        """Open the run's files in ``run_dir`` (made by the caller); RecordError if they cannot be
+        written (no space even for the reserve). ``resume_at``: go on with the files a run left
+        there, each cut back to its offset (a checkpoint's), under the meta it wrote."""
+        self.run_dir = run_dir
+        try:
+            with open(run_dir / RESERVE_NAME, "wb") as reserve:
+                reserve.write(bytes(RESERVE_BYTES))
+        except OSError as exc:
+            (run_dir / RESERVE_NAME).unlink(missing_ok=True)
+            full = exc.errno in (errno.ENOSPC, errno.EDQUOT)
+            raise RecordError(f"cannot start the run's records in {run_dir}: {exc.strerror or exc}" + (
+                f" (a run directory needs {RESERVE_BYTES // 1024} KiB free to start)" if full else "")) from None
+        project = loaded.project
+        self._nodes = [n.nodeName for n in project.nodeLists]
+        # Numbers go to the CSV as they are; only nodes with boolean or byte ports need _cell.
+        plain = (PortType.REAL, PortType.INTEGER, PortType.STRING)
+        self._plain_out = {n.nodeName: all(p.type in plain for p in n.output) for n in project.nodeLists}
+        self._plain_in = {n.nodeName: all(p.type in plain for p in n.input) for n in project.nodeLists}
+        self._stepping = [n.nodeName for n in project.stepping_nodes()]
+        # A multi-rate run says at each point which nodes started a step there.
+        self._marks_steps = loaded.coupling.multirate
+        # A run that may take steps again says how often it took each.
+        self._counts_takes = project.coSimulation.iterate is not None or project.coSimulation.stepControl is not None
+        self._async_labels = [f"{r.dst_node}.{r.dst_port}" for r in loaded.routes
+                              if project.node(r.src_node).asynchronous]
+        at = resume_at or {}
+        try:
+            self._values_file = _RecordFile(run_dir / "values.csv", at.get("values.csv"))
+            self._timing_file = _RecordFile(run_dir / "timing.csv", at.get("timing.csv"))
+            self._events_file = _RecordFile(run_dir / "events.jsonl", at.get("events.jsonl"))
+            self._samples_file = _RecordFile(run_dir / SAMPLES_FILE, at.get(SAMPLES_FILE))
+        except OSError as exc:
+            raise RecordError(f"cannot open the run's records in {run_dir}: {exc.strerror or exc}") from None
+        self._values = csv.writer(self._values_file.buffer)
+        self._timing = csv.writer(self._timing_file.buffer)
+        if resume_at is None:
+            out_cols = [f"{n.nodeName}.{p.name}" for n in project.nodeLists for p in n.output]
+            in_cols = [f"{n.nodeName}.{p.name}" for n in project.nodeLists for p in n.input]
+            self._values.writerow(["step", "t", "mode", *(["stepped"] if self._marks_steps else []),
+                                   *out_cols, *in_cols])
+            self._timing.writerow(["step", "t", "wait_s", "holder", "lateness_s",
+                                   *(f"arrival_s:{n}" for n in self._stepping),
+                                   *(f"age_s:{label}" for label in self._async_labels),
+                                   *(["takes"] if self._counts_takes else [])])
+        self._flushed = time.monotonic()
+        self.meta = dict(meta)
+        if resume_at is None:
+            self.meta.update(status="running", started_at=time.time(), steps=0)
+        else:
+            self.meta.update(status="running")
+        self.write_meta()
+        self._files = {"values.csv": self._values_file, "timing.csv": self._timing_file,
+                       "events.jsonl": self._events_file, SAMPLES_FILE: self._samples_file}
+
+    def row(self, step: int, t: float, mode: str, outputs: dict[str, list[Any]], inputs: dict[str, list[Any]],
+            stepped: list[str] | None = None) -> None:
+        cells: list[Any] = [step, repr(t), mode]
+        if self._marks_steps:
+            cells.append(" ".join(stepped or ()))
+        for n in self._nodes:
+            cells.extend(outputs[n] if self._plain_out[n] else map(_cell, outputs[n]))
+        for n in self._nodes:
+            cells.extend(inputs[n] if self._plain_in[n] else map(_cell, inputs[n]))
+        self._values.writerow(cells)
+        self.meta["steps"] = step + 1
+
+    def sample(self, node: str, point: int, t: float, values: list[Any]) -> None:
+        """A sample of asynchronous ``node`` received while point ``point`` was gathered (written
+        with the next flush: a camera's samples cost the barrier no write of their own)."""
+        self._samples_file.buffer.write(encode_sample(node, point, t, values))
+
+    def timing(self, step: int, t: float, wait_s: float, holder: str, lateness_s: float | None,
+               arrivals: dict[str, float], ages: dict[str, float | None], takes: int = 1) -> None:
+        """One point's timing: of the step that ended there (``takes``: how often it was taken)."""
+        self._timing.writerow([
+            step, repr(t), f"{wait_s:.9f}", holder, "" if lateness_s is None else f"{lateness_s:.6f}",
+            *(f"{arrivals[n]:.9f}" if n in arrivals else "" for n in self._stepping),
+            *("" if ages.get(label) is None else f"{ages[label]:.6f}" for label in self._async_labels),
+            *([takes] if self._counts_takes else [])])
+        now = time.monotonic()
+        if now - self._flushed >= FLUSH_EVERY_S:
+            self.flush(step)
+            self._flushed = now
+
+    def positions(self, step: int | None = None) -> dict[str, int]:
+        """Where each record file ends now (for a checkpoint); flushes them."""
+        try:
+            return {name: f.position() for name, f in self._files.items()}
+        except OSError as exc:
+            raise RecordError.writing(self.run_dir, "the records", exc, step) from None
+
+    def cut(self, positions: dict[str, int], steps: int) -> None:
+        """Back to a checkpoint: every record file ends where ``positions`` says, ``steps`` rows recorded."""
+        try:
+            for name, f in self._files.items():
+                f.cut(positions[name])
+        except OSError as exc:
+            raise RecordError.writing(self.run_dir, "the records", exc) from None
+        self.meta["steps"] = steps
+
+    def flush(self, step: int | None = None) -> None:
+        """Write what is buffered; RecordError naming the file if the disk refuses it."""
+        for name, f in self._files.items():
+            try:
+                f.flush()
+            except OSError as exc:
+                raise RecordError.writing(self.run_dir, name, exc, step) from None
+
+    def event(self, record: dict[str, Any]) -> None:
+        try:
+            self._events_file.buffer.write(json.dumps(record) + "\n")
+            self._events_file.flush()
+        except OSError as exc:
+            raise RecordError.writing(self.run_dir, "events.jsonl", exc, record.get("step")) from None
+
+    def write_meta(self) -> None:
+        tmp = self.run_dir / "meta.json.tmp"
+        try:
+            tmp.write_text(json.dumps(self.meta, indent=2, default=str))
+            tmp.replace(self.run_dir / "meta.json")
+        except OSError as exc:
+            raise RecordError.writing(self.run_dir, "meta.json", exc) from None
+
+    @property
+    def closed(self) -> bool:
+        return self._values_file.closed
+
+    def free_reserve(self) -> None:
+        """Give back the reserve's space (at the start of a shutdown, so that the nodes' last
+        words also find room); close does it too."""
+        (self.run_dir / RESERVE_NAME).unlink(missing_ok=True)
+
+    def close(self, status: str, **extra: Any) -> None:
+        """Write the rest and the outcome. Never raises: it is the end of every failure path;
+        a file that still cannot be written is named in meta.json, if that can be."""
+        self.free_reserve()
+        self.meta.update(status=status, finished_at=time.time(), **extra)
+        self.meta["wall_time_s"] = self.meta["finished_at"] - self.meta["started_at"]
+        unwritten = []
+        for name, f in self._files.items():
+            try:
+                f.close()
+            except OSError as exc:
+                unwritten.append(f"{name}: {exc.strerror or exc}")
+        if unwritten:
+            self.meta["unwritten"] = unwritten
+        try:
+            self.write_meta()
+        except RecordError:
+            pass

@@ -1,0 +1,1137 @@
+"""The relay server's co-simulation loop: attach, then the macro-step barrier until stopTime.
+
+Read top to bottom, :meth:`Relay.run` is the whole algorithm (Jacobi coupling):
+
+1. wait until every node holds a liveliness token (attachTimeout names the missing ones);
+2. START: every stepping node reports its outputs at t0;
+3. at each macro-step point T_k: evaluate the guards (maybe switch mode), route the
+   outputs along the links active in the mode, record the step, then release all nodes
+   at once to integrate T_k → T_k+H on those inputs, and gather their outputs at T_k+H;
+4. STOP at stopTime, on Ctrl-C, or on a fault, with everything recorded so far on disk.
+"""
+
+from __future__ import annotations
+
+import collections
+import functools
+import json
+import math
+import os
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import structlog
+import zenoh
+
+from hycosim.core import frames, signals
+from hycosim.core.config import FREE_MODE, LoadedProject
+from hycosim.core.inbox import LOCAL, Inbox
+from hycosim.core.keys import SERVER_TOKEN, ProjectKeys
+from hycosim.core.session import FramePublisher, FrameTooLarge
+from hycosim.core.sim_clock import RealTimeClock
+
+from hycosim.server import checkpoints, plans
+from hycosim.server.answer_budget import AnswerBudget
+from hycosim.server.async_sources import SampleHistory
+from hycosim.server.coordinator import Coordinator, GuardEvaluationError
+from hycosim.server.gateway import Gateway, GatewayError
+from hycosim.server.intake import Dropped, Intake, port_mismatch
+from hycosim.server.interpolation import STARTUP_SPLIT, InputTrack
+from hycosim.server.recorder import Recorder, RecordError
+from hycosim.server.retakes import IterationLog, StepSizer, input_change, relaxed
+from hycosim.server.routing import OutputView, Router
+from hycosim.server.status_view import Recent, barrier_window, points_since
+
+RECENT_KEPT = 4096  # the latest points kept for the status answers
+
+
+class RunError(RuntimeError):
+    """A run that cannot go on; the message names the node and the step."""
+
+
+class _Recover(Exception):
+    """A node's process was started again mid-run: the run goes back to its last checkpoint."""
+
+    def __init__(self, node: str, step: int, cause: str):
+        super().__init__(cause)
+        self.node, self.step, self.cause = node, step, cause
+
+
+@dataclass
+class _PendingCheckpoint:
+    """A checkpoint asked for at point ``step``: the server's state then, and the nodes' as they come."""
+
+    step: int
+    server: dict[str, Any]
+    states: dict[str, bytes] = field(default_factory=dict)
+    chunks: dict[str, frames.Chunks] = field(default_factory=dict)
+
+
+class _ModelEnded(Exception):
+    """A node's model ended the simulation (an FMU that asked to terminate): the run ends at
+    the last macro-step point every node reached."""
+
+
+# A node's own words about why it ended or failed are shown and recorded up to this length.
+_MESSAGE_MAX = 2000
+
+
+@dataclass
+class Progress:
+    """What the server reports while running (read by ``hycosim run``'s progress bar)."""
+
+    step: int = 0
+    t: float = 0.0
+    mode: str = FREE_MODE
+    steps_per_s: float = 0.0
+    attached: list[str] = field(default_factory=list)
+    lateness_s: float | None = None  # a paced run's, at the last point
+
+
+class Relay:
+    def __init__(self, loaded: LoadedProject, session: zenoh.Session, recorder: Recorder,
+                 progress_every_s: float = 0.0, on_progress: Any = None,
+                 gateway_address: tuple[str, int] | None = None, gateway_required: bool = False,
+                 resume: int | None = None):
+        self.loaded = loaded
+        self.project = loaded.project
+        self.cosim = self.project.coSimulation
+        self.keys = ProjectKeys(self.project.projectName)
+        self.session = session
+        self.recorder = recorder
+        self.coordinator = Coordinator(self.project.events, loaded.guards)
+        self.router = Router(loaded)
+        self._input_labels = {n.nodeName: [f"{n.nodeName}.{p.name}" for p in n.input] for n in self.project.nodeLists}
+        # Iterative coupling and the error-controlled step, once the nodes said they can take part.
+        self.iteration: IterationLog | None = None
+        self.sizer: StepSizer | None = None
+        # Iterative coupling's interpolated inputs, and how many short steps start the run for them.
+        self.track: InputTrack | None = None
+        self._short_steps = 0
+        self.intake = Intake(self.project.nodeLists)
+        self.stepping = [n.nodeName for n in self.project.stepping_nodes()]
+        self.coupling = loaded.coupling
+        # Each stepping node's outstanding step: the label its outputs carry (the step's release
+        # point + 1), the point they are gathered at (later for a multi-rate node), and when it
+        # was released. Outputs that come before their point wait in _early.
+        self._label: dict[str, int] = {n: 0 for n in self.stepping}
+        self._due_at: dict[str, int] = {n: 0 for n in self.stepping}
+        self._released_at: dict[str, float] = {}
+        self._early: dict[str, frames.Frame] = {}
+        # Batched releases (STEPS, multi-rate): base steps one may span once the nodes said they
+        # can take them; per node, how many of its own steps' outputs a BATCH carries before its
+        # last, and those it brought for the batch being gathered.
+        self._span = 1
+        self._batch_steps: dict[str, int] = {}
+        self._earlier: dict[str, list[list[Any]]] = {}
+        self.messages = {"releases": 0, "received": 0}  # release frames sent, node frames taken in
+        self._point = 0  # the point the loop is at: the last recorded should a node end the run now
+        self._last_release_of: dict[str, bytes] = {}  # node → the last release that named it
+        self._last_point = math.inf  # the index of the point at stopTime, on a grid from startTime
+        # Asynchronous nodes played from a recording take part in the barrier: each point waits
+        # for the samples the recorded run had by then, so that a replay gives the same values.
+        self.paced = [n.nodeName for n in self.project.paced_nodes()]
+        self._everyone = [*self.stepping, *self.paced]  # who is gathered at every point of a single-rate run
+        self._names = {n.nodeName for n in self.project.nodeLists}
+        self.histories = {n.nodeName: SampleHistory([p.start_value() for p in n.output])
+                          for n in self.project.async_nodes()}
+        # Async nodes' outputs as seen at the current point (hold), for guards and records.
+        self.outputs: dict[str, list[Any]] = {
+            n.nodeName: [p.start_value() for p in n.output] for n in self.project.nodeLists}
+        self.alive: set[str] = set()
+        self.capabilities: dict[str, dict[str, Any]] = {}
+        # Nodes whose token (re)appeared and whose HELLO has not come since: a HELLO is taken only
+        # from a node new to the run or one whose process may have changed, so that a forged
+        # one (the UIDs are in the project file) cannot pass for a restart and stop the run.
+        self._fresh: set[str] = set()
+        self.lost: dict[str, float] = {}  # node → when its token went, while within linkGrace
+        self.reattached: dict[str, int] = {}
+        self.ended_by: dict[str, Any] | None = None  # the node whose model ended the run, when, and why
+        # The nodes whose models ended the run inside a batched release, and the batch's
+        # arrivals: the points their steps before reached are recorded once all batches are in.
+        self._ended_inside: set[str] = set()
+        self._ended_arrivals: dict[str, float] = {}
+        self.switches: collections.deque[dict[str, Any]] = collections.deque(maxlen=200)  # the latest mode switches
+        # The latest points as (time, holder, wait, arrivals): the status answer's last second.
+        self._recent: collections.deque[Recent] = collections.deque(maxlen=RECENT_KEPT)
+        self._shown: tuple[int, float, str, dict[str, list[Any]], dict[str, list[Any]], float | None] = (
+            0, self.cosim.startTime, FREE_MODE, {}, {}, None)
+        self._history: collections.deque[tuple] = collections.deque(maxlen=RECENT_KEPT)  # the latest points, for the dashboard
+        self._ages: dict[str, float | None] = {}  # each asynchronous value's age at the latest point
+        self.answers = AnswerBudget()  # status answers a second: anyone may ask
+        self._last_release: bytes | None = None
+        self._start_frame: bytes | None = None
+        # Checkpoints (coSimulation.checkpointEvery): on once every stepping node said it can
+        # serialise its state; the one being gathered; restores done (node, steps, cause, time).
+        self._checkpoints = False
+        self._pending: _PendingCheckpoint | None = None
+        self.checkpoints_taken = 0
+        self.recoveries: list[dict[str, Any]] = []
+        self._restoring = False
+        self._went: dict[str, float] = {}  # node → when its token last went (recovery times are measured from it)
+        # Go on from the run directory's last checkpoint (its server died after recording this many steps).
+        self._resume = resume
+        self.progress = Progress()
+        self._progress_every = progress_every_s
+        self._on_progress = on_progress
+        self._log = structlog.get_logger("server").bind(project=self.project.projectName)
+        self._local_key = f"{self.keys.root}/up/_local"
+        self._stop_requested = threading.Event()
+        self._gateway_address = gateway_address
+        self._gateway_required = gateway_required
+        self.gateway: Gateway | None = None
+
+    # --- wiring -------------------------------------------------------------------
+
+    def _on_liveliness(self, sample: zenoh.Sample) -> None:
+        node = ProjectKeys.last_chunk(str(sample.key_expr))
+        alive = sample.kind == zenoh.SampleKind.PUT
+        self.inbox.inject(frames.encode(frames.LIVE, node, alive))
+
+    def _on_status(self, query: zenoh.Query) -> None:
+        if not self.answers.take():
+            query.reply_err(f"busy: over {self.answers.per_s:g} status answers a second; ask again".encode())
+            return
+        since = query.parameters.get("since")
+        try:
+            after = int(since) if since is not None and len(since) < 20 else None
+        except ValueError:
+            after = None  # anyone may ask: a selector that is no step asks for no points
+        # A byte port's value is no JSON: it goes as null (the dashboard plots numbers only).
+        query.reply(self.keys.status, json.dumps(self.status(after), default=lambda _: None))
+
+    def _dropped(self) -> dict[str, int]:
+        """What was dropped, by reason: the frames the intake refused, the status questions over budget."""
+        refused = self.answers.refused
+        return {**self.intake.dropped, **({"status over budget": refused} if refused else {})}
+
+    def status(self, since: int | None = None) -> dict[str, Any]:
+        """Who is attached and where the run is, for ``hycosim status`` and the dashboard (read
+        from Zenoh's thread: copies of what the loop changes, each taken at once under the GIL).
+        ``since``: also the recent points after that step (server.status_view)."""
+        restarts: dict[str, int] = {}
+        for r in list(self.recoveries):
+            restarts[r["node"]] = restarts.get(r["node"], 0) + 1
+        nodes = []
+        for n in self.project.nodeLists:
+            host = self.capabilities.get(n.nodeName, {}).get("host")
+            nodes.append({"name": n.nodeName, "uid": n.UID, "async": n.asynchronous,
+                          "input": n.input_names(), "output": n.output_names(),
+                          "host": host if type(host) is str else None, "restarts": restarts.get(n.nodeName, 0)})
+        shown = self._shown
+        window = barrier_window(list(self._recent), time.perf_counter(), RECENT_KEPT)
+        return {"project": self.project.projectName, "attached": sorted(self.alive), "lost": sorted(self.lost),
+                "expected": [n.nodeName for n in self.project.nodeLists], "nodes": nodes,
+                "run": self.recorder.run_dir.name, "step": shown[0], "t": shown[1],
+                "mode": shown[2], "stopTime": self.cosim.stopTime, "lateness_s": self.progress.lateness_s,
+                "dropped": self._dropped(), "switches": list(self.switches), "window": window,
+                "outputs": shown[3], "inputs": shown[4], "point_wall": shown[5], "ages": dict(self._ages),
+                **({} if since is None else {"points": points_since(list(self._history), since)})}
+
+    def request_stop(self) -> None:
+        """Ask the loop to stop at the next macro-step point (thread-safe)."""
+        self._stop_requested.set()
+
+    # --- the loop -----------------------------------------------------------------
+
+    def run(self) -> None:
+        polls = self.project.polls_before_blocking(os.cpu_count())
+        self.recorder.meta["server_polls"] = polls
+        self.inbox = Inbox(self.session, self.keys.up_all, self._local_key, poll=polls)
+        self.release = FramePublisher(self.session, self.keys.down, low_latency=self.cosim.lowLatency)
+        token = self.session.liveliness().declare_token(self.keys.alive(SERVER_TOKEN))
+        watcher = self.session.liveliness().declare_subscriber(self.keys.alive_all, self._on_liveliness, history=True)
+        status = self.session.declare_queryable(self.keys.status, self._on_status)
+        status_text, reason = "failed", ""
+        signals.stop_once()
+        try:
+            self._start_gateway()
+            self._wait_for_nodes()
+            try:
+                self._loop()
+            except _ModelEnded:  # at the START: no macro step was taken
+                pass
+            status_text = frames.STOP_COMPLETED if not self._stop_requested.is_set() else frames.STOP_STOPPED
+            if self.ended_by is not None:
+                self.recorder.meta["ended_by"] = self.ended_by
+        except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM or SIGHUP
+            status_text, reason = "interrupted", signals.describe(exc)
+            self.recorder.meta["stopped_by"] = {"signal": signals.name_of(exc),
+                                                "step": self.progress.step, "t": self.progress.t}
+            raise
+        except (RunError, RecordError) as exc:
+            reason = str(exc)
+            raise
+        finally:
+            signals.ignore_stops()
+            self.recorder.free_reserve()
+            self._broadcast_stop(status_text if not reason else reason)
+            self._await_departures()
+            if self.gateway is not None:
+                self.gateway.close(reason or status_text)
+            self.intake.drops.flush(self.progress.step)
+            self.recorder.close(status_text, reason=reason, dropped_frames=self._dropped(),
+                                non_finite=self.intake.non_finite,
+                                reattached=dict(self.reattached), server_waits=self.inbox.waits,
+                                messages=dict(self.messages),
+                                checkpoints_taken=self.checkpoints_taken,
+                                samples_received={n: h.received for n, h in self.histories.items()})
+            for decl in (status, watcher, token):
+                try:
+                    decl.undeclare()
+                except Exception:
+                    pass
+            self.inbox.close()
+
+    def _await_departures(self, timeout: float = 3.0) -> None:
+        """After STOP, give the nodes a moment to leave before this session closes: closing at
+        once can drop the STOP still queued for a node, which then sees only the server vanish."""
+        deadline = time.monotonic() + timeout
+        try:
+            while self.alive and time.monotonic() < deadline:
+                msg = self.inbox.recv(deadline - time.monotonic())
+                if msg is None:
+                    break
+                if msg[0] == LOCAL:
+                    node, alive = frames.decode(msg[1]).fields
+                    if not alive:
+                        self.alive.discard(node)
+        except Exception:  # shutting down: never mask the run's own outcome
+            pass
+
+    def _start_gateway(self) -> None:
+        if self._gateway_address is None:
+            return
+        host, port = self._gateway_address
+        try:
+            self.gateway = Gateway(
+                self.project.stepping_nodes(), self.session, self.keys, host, port,
+                drop=self.intake.drop, rates=self.coupling.rates, stop_time=self.cosim.stopTime)
+        except GatewayError as exc:
+            if self._gateway_required:
+                raise RunError(str(exc)) from None
+            self._log.warning("gateway disabled", reason=str(exc))
+            self.recorder.meta["gateway"] = f"disabled: {exc}"
+            return
+        self.recorder.meta["gateway"] = self.gateway.address
+
+    def _broadcast_stop(self, reason: str) -> None:
+        try:
+            self.release.put(frames.encode(frames.STOP, self.progress.step, reason))
+        except Exception:  # the session may be gone with Ctrl-C
+            pass
+
+    def _wait_for_nodes(self) -> None:
+        expected = {n.nodeName for n in self.project.nodeLists}
+        deadline = time.monotonic() + self.cosim.attachTimeout
+        while not expected <= self.alive:
+            msg = self.inbox.recv(deadline - time.monotonic())
+            if msg is None:
+                missing = sorted(expected - self.alive)
+                raise RunError(f"timed out after {self.cosim.attachTimeout:g} s waiting for node(s) "
+                               f"{', '.join(missing)} to attach to {self.project.serverIP}")
+            self._handle_side_message(*msg, step=-1, collecting=False)
+        self._log.info("all nodes attached", nodes=sorted(self.alive))
+
+    def _handle_side_message(self, key: str, payload: bytes, step: int, collecting: bool) -> tuple[str, frames.Frame] | None:
+        """Liveliness and samples are handled here; stepping outputs are returned to the caller."""
+        if key == LOCAL:
+            node, alive = frames.decode(payload).fields
+            if node in self._names:  # not the server's own token, nor one no node of this project holds
+                self._on_live(node, alive, step, collecting)
+            return None
+        node = ProjectKeys.last_chunk(key)
+        try:
+            frame = self.intake.accept(node, payload)
+        except Dropped as exc:
+            self.intake.drop(exc.reason, exc.detail, step, node if node in self._names else "")
+            return None
+        if frame.kind == frames.SAMPLE:
+            _, _, t, values = frame.fields
+            self.histories[node].add(float(t), values)
+            # Received while point ``step`` is gathered: usable from that point on.
+            self.recorder.sample(node, max(step, 0), float(t), values)
+            return None
+        if frame.kind == frames.STATE:
+            self._on_state(node, frame, step)
+            return None
+        if frame.kind == frames.HELLO:
+            self._on_hello(node, frame.fields[1], step)
+            return None
+        self.messages["received"] += 1
+        return node, frame
+
+    def _on_live(self, node: str, alive: bool, step: int, collecting: bool) -> None:
+        """A node's liveliness token came or went (``step`` -1: while the nodes attach)."""
+        if alive:
+            self.alive.add(node)
+            if node not in self.capabilities or node in self.lost:
+                self._fresh.add(node)
+            self.progress.attached = sorted(self.alive)
+            self._log.info("node attached", node=node, step=step)
+            if node in self.lost:
+                del self.lost[node]
+                self.reattached[node] = self.reattached.get(node, 0) + 1
+                # An asynchronous source that restarted needs the run's START (its clock);
+                # the others, a played one included, the last release.
+                last = (self._start_frame if self.project.node(node).asynchronous and node not in self.paced
+                        else self._last_release_of.get(node, self._last_release))
+                if last is not None:
+                    try:
+                        self.release.put(frames.encode(frames.REPLAY, node, last))
+                    except FrameTooLarge as exc:
+                        raise RunError(f"cannot replay the last release to {node!r}: {exc}") from None
+        elif node in self.alive:
+            self.alive.discard(node)
+            self._went[node] = time.monotonic()
+            if step >= 0 and self._grace() > 0:
+                self.lost[node] = time.monotonic()
+                self._log.warning("node lost, waiting for it", node=node, step=step, grace_s=self._grace())
+            elif collecting or step >= 0:
+                why = self.recorder.meta.get("checkpoints", "")
+                raise RunError(f"node {node!r} was lost at step {step} (t={self._time(step):g} s): "
+                               "its liveliness token disappeared (process killed or link lost)"
+                               + (f"; the run cannot go on from a checkpoint (checkpoints {why})"
+                                  if self.cosim.checkpointEvery is not None else ""))
+
+    def _on_hello(self, node: str, said: dict[str, Any], step: int) -> None:
+        """A node's HELLO: what it can do, from a node new to the run or a new process of one."""
+        if node in self.capabilities and node not in self._fresh and node not in self.lost:
+            self.intake.drop("duplicate hello", f"{node} said HELLO again while its process held its token",
+                             step, node)
+            return
+        self._fresh.discard(node)
+        if node in self.capabilities and step > 0 and said.get("restart") is True:
+            self._restarted(node, step)
+            if self.project.node(node).asynchronous:
+                return  # a source lives on the wall clock: it just goes on sampling
+        elif node in self.capabilities and step > 0 and not self._restoring:
+            # A node process says HELLO once: this is a new process, whose model starts
+            # from scratch while the others are at step k. Not a link cut to wait out.
+            # (While the START is collected, a fresh start is all that was asked of it.)
+            raise RunError(f"node {node!r} was started again at step {step} (t={self._time(step):g} s) while "
+                           "the run was under way: the state it had is gone, so the run cannot go on; "
+                           "start the run again")
+        self.capabilities[node] = dict(said)
+        self._check_ports(node, self.capabilities[node].get("ports"))
+
+    def _grace(self) -> float:
+        """How long a lost node is waited for: its linkGrace, or with checkpoints its restart
+        (attachTimeout: a new process attaches as a first one does)."""
+        return max(self.cosim.linkGrace, self.cosim.attachTimeout if self._checkpoints else 0.0)
+
+    def _restarted(self, node: str, step: int) -> None:
+        """A node's new process said HELLO mid-run: go back to the last checkpoint, or say why not."""
+        at = f"at step {step} (t={self._time(step):g} s)"
+        if self.project.node(node).asynchronous and self._checkpoints:
+            self._note_recovery({"node": node, "step": step, "t": self._time(step), "cause": "restarted",
+                                 "restored": None, "at": time.time()})
+            self._log.warning("asynchronous node restarted", node=node, step=step)
+            return
+        if not self._checkpoints:
+            why = self.recorder.meta.get("checkpoints", "off")
+            raise RunError(f"node {node!r} was started again {at} while the run was under way: the state it had "
+                           f"is gone and the run cannot go back to a checkpoint (checkpoints {why}); start the run again")
+        raise _Recover(node, step, "restarted")
+
+    def _on_state(self, node: str, frame: frames.Frame, step: int) -> None:
+        """A piece of a node's state for the checkpoint being gathered; the checkpoint is written
+        once every stepping node's state is whole."""
+        _, at, index, count, chunk = frame.fields
+        p = self._pending
+        if p is None or at != p.step or self.project.node(node).asynchronous:
+            self.intake.drop("stale state", f"{node} sent its state at step {at}, no checkpoint of it is gathered",
+                             step, node)
+            return
+        data = p.chunks.setdefault(node, frames.Chunks()).add(at, index, count, chunk)
+        if data is None:
+            return
+        p.states[node] = data
+        if len(p.states) < len(self.stepping):
+            return
+        self._pending = None
+        try:
+            path = checkpoints.write(self.recorder.run_dir, p.step, p.server, p.states, self.loaded.digest)
+        except checkpoints.CheckpointError as exc:
+            self._log.warning("checkpoint not written", step=p.step, error=str(exc))
+            self.recorder.meta["checkpoint_error"] = str(exc)
+            return
+        self.checkpoints_taken += 1
+        self.recorder.meta["last_checkpoint"] = {"step": p.step, "t": p.server["t"], "path": str(path)}
+        self._log.info("checkpoint", step=p.step, t=p.server["t"], bytes=sum(map(len, p.states.values())))
+
+    def _said(self) -> dict[str, dict[str, Any]]:
+        """What each stepping node said it can do (nothing, if it said no HELLO)."""
+        return {n: self.capabilities.get(n, {}) for n in self.stepping}
+
+    def _checkpoint_plan(self) -> bool:
+        """Whether checkpoints are taken; say why not in the metadata."""
+        plan = plans.checkpoints(self.cosim, self._said())
+        self.recorder.meta["checkpoints"] = plan.words
+        if plan.why:
+            self._log.warning("no checkpoints", cannot_serialise=plan.why)
+        return plan.on
+
+    def _next_checkpoint(self, t: float) -> float:
+        return checkpoints.next_time(t, self.cosim.startTime, self.cosim.checkpointEvery)
+
+    def _take_checkpoint(self, k: int, t: float, origin: float, j: int, localised: dict[str, Any], h: float) -> None:
+        """Ask every stepping node for its state at point k (they send it after their next
+        outputs) and keep the server's own, records included, until theirs are in."""
+        if self._pending is not None:
+            missing = sorted(set(self.stepping) - set(self._pending.states))
+            self._log.warning("checkpoint abandoned", step=self._pending.step, missing=missing)
+        server = {"step": k, "t": float(t), "origin": float(origin), "j": j, "mode": self.coordinator.mode,
+                  "disarmed": sorted(self.coordinator.disarmed),
+                  "outputs": {n: list(v) for n, v in self.outputs.items()},
+                  "inputs": {n: list(v) for n, v in self.router.inputs.items()},
+                  "histories": {n: h.snapshot() for n, h in self.histories.items()},
+                  "records": self.recorder.positions(k), "localised": localised, "h": float(h),
+                  "track": self.track.snapshot() if self.track is not None else None}
+        self._pending = _PendingCheckpoint(k, server)
+        self.release.put(frames.encode(frames.CHECKPOINT, k))
+
+    def _restore(self, cause: _Recover) -> tuple[dict[str, Any], dict[str, float], float]:
+        """Take the whole run back to its last readable checkpoint: every stepping node gets its
+        state back and answers with its outputs there, the records are cut back to it, and the
+        server takes its own state back. Return the server's state, arrivals and wait."""
+        began = time.monotonic()
+        while True:
+            cp, passed = checkpoints.latest(self.recorder.run_dir, self.loaded.digest, project=self.project)
+            for reason in passed:
+                self._log.warning("checkpoint passed over", reason=reason)
+                self.recorder.meta.setdefault("checkpoints_passed_over", []).append(reason)
+            if cp is None:
+                raise RunError(f"node {cause.node!r} was started again at step {cause.step}, and no checkpoint "
+                               f"of the run could be read to go on from"
+                               + (f": {'; '.join(passed)}" if passed else ""))
+            self._log.warning("restoring checkpoint", node=cause.node, lost_at=cause.step, step=cp.step)
+            self._restoring = True
+            try:
+                self._pending = None
+                self._fresh.update(self.stepping)
+                self._send_restore(cp)
+                if cause.node == "server" and self._start_frame is not None:
+                    start = frames.decode(self._start_frame).fields
+                    self._start_frame = frames.encode(frames.START, start[0], cp.server["t"], *start[2:])
+                    self.release.put(self._start_frame)
+                released = time.perf_counter()
+                self._expect_all(cp.step, released)
+                arrivals = self._collect(cp.step, released)
+                wait = time.perf_counter() - released
+            except _Recover as again:  # another process restarted meanwhile: once more
+                cause = again
+                continue
+            finally:
+                self._restoring = False
+            break
+        restored = self._apply(cp)
+        self._note_recovery({"node": cause.node, "step": cause.step, "t": self._time(cause.step),
+                             "cause": cause.cause, "restored": cp.step, "restored_t": cp.server["t"],
+                             "seconds": round(time.monotonic() - self._went.get(cause.node, began), 3),
+                             "at": time.time()})
+        return restored, arrivals, wait
+
+    def _note_recovery(self, entry: dict[str, Any]) -> None:
+        """A restart or resume, in the metadata at once (the run may yet die)."""
+        self.recoveries.append(entry)
+        earlier = self.recorder.meta.get("recoveries")  # a resumed run's, from its meta.json
+        self.recorder.meta["recoveries"] = (earlier if type(earlier) is list else []) + [entry]
+        self.recorder.write_meta()
+
+    def _restore_track(self, s: dict[str, Any], what: str) -> None:
+        """The interpolated inputs' points before a checkpoint's (its server state ``s``), so that
+        the steps from it are taken on the polynomials they were taken on before."""
+        if self.track is None:
+            return  # not yet planned (a resume plans it once the nodes are back) or no interpolation
+        try:
+            self.track.restore(s.get("track"))
+        except ValueError as exc:
+            raise RunError(f"{what}: {exc}") from None
+        ours = self.router.inputs
+        if any(set(values) != set(ours) or any(len(values[n]) != len(ours[n]) for n in ours)
+               for _, values in self.track.snapshot()["points"]):
+            raise RunError(f"{what} does not fit the project: its interpolated inputs differ")
+
+    def _saves_states(self) -> bool:
+        """Whether nodes save their state before each step, so that a step can be taken again."""
+        cosim = self.cosim
+        return cosim.eventTolerance is not None or cosim.iterate is not None or cosim.stepControl is not None
+
+    def _send_restore(self, cp: checkpoints.Checkpoint) -> None:
+        # As START's: a node started again must save its state before each step as the others do,
+        # or the retakes of iterative coupling and step control would step it on from where it was.
+        options = {"checkpoint": self._saves_states()}
+        for node in self.paced:  # no state: a played source goes on from the checkpoint's point
+            self.release.put(frames.encode(frames.RESTORE, node, cp.step, cp.server["t"], 0, 1, b"", options))
+        for node in self.stepping:
+            if node not in cp.states:
+                raise RunError(f"checkpoint {cp.path} holds no state of node {node!r}")
+            pieces = frames.state_chunks(cp.states[node])
+            for i, chunk in enumerate(pieces):
+                self.release.put(frames.encode(frames.RESTORE, node, cp.step, cp.server["t"], i, len(pieces),
+                                               chunk, options))
+
+    def _apply(self, cp: checkpoints.Checkpoint) -> dict[str, Any]:
+        """The server's own state at the checkpoint (read as fitting the project), and its
+        records cut back to it."""
+        s = cp.server
+        for node, values in self.outputs.items():
+            if not self.project.node(node).asynchronous and values != s["outputs"][node]:
+                self._log.warning("restored outputs differ from the checkpoint's", node=node, step=cp.step)
+        self._restore_track(s, f"checkpoint {cp.path}")
+        self.coordinator.mode = s["mode"]
+        self.coordinator.disarmed = set(s["disarmed"])
+        for node in self.outputs:
+            self.outputs[node] = list(s["outputs"][node])
+            self.router.inputs[node][:] = s["inputs"][node]
+        self.recorder.cut(s["records"], steps=s["step"])
+        for node, history in self.histories.items():
+            newer = [(t, v) for t, v in history.snapshot()["samples"]]
+            history.restore(s["histories"].get(node, {"samples": [], "received": 0}))
+            for t, v in newer:  # samples taken since keep their place: a source is not rolled back
+                if history.add(t, v):
+                    self.recorder.sample(node, s["step"], t, v)  # as if received again at the checkpoint
+        return s
+
+    def _check_ports(self, node: str, theirs: Any) -> None:
+        """Stop the run if a node's copy of the project file gives it other ports than ours:
+        its frames would all be dropped and the run would only time out."""
+        differ = port_mismatch(self.project.node(node), theirs)
+        if differ is not None:
+            raise RunError(f"node {node!r} attached with another version of its entry in the project file: "
+                           f"{differ}. Give every process the same project file")
+
+    def _time(self, step: int) -> float:
+        return self.cosim.startTime + max(step, 0) * self.cosim.stepSize
+
+    def _expect_all(self, step: int, released_at: float) -> None:
+        """Every stepping node owes its outputs at ``step`` (the START, a restore)."""
+        for node in self.stepping:
+            self._label[node] = self._due_at[node] = step
+            self._released_at[node] = released_at
+        self._early.clear()
+
+    def _collect(self, step: int, released_at: float, nodes: set[str] | None = None) -> dict[str, float]:
+        """Gather the outputs due at point ``step`` (every stepping node's whose step ends there,
+        or just ``nodes``'), and a played source's word that its samples for ``step`` are sent;
+        return arrival offsets (s), each from its node's release."""
+        if nodes is not None:
+            pending = set(nodes) | set(self.paced)
+        elif self.coupling.multirate:
+            pending = {n for n, at in self._due_at.items() if at == step} | set(self.paced)
+        else:
+            pending = set(self._everyone)
+        arrivals: dict[str, float] = {}
+
+        def take(node: str, frame: frames.Frame) -> None:
+            pending.discard(node)
+            if node not in self.histories:  # a played source's values are its samples'
+                self.outputs[node] = frame.fields[3]
+            if frame.kind == frames.BATCH:
+                self._earlier[node] = frame.fields[4]
+            arrivals[node] = time.perf_counter() - self._released_at.get(node, released_at)
+
+        if self._early:
+            for node in sorted(pending & set(self._early)):
+                take(node, self._early.pop(node))
+        deadline = time.monotonic() + self.cosim.stepTimeout
+        grace = self._grace()
+        while pending:
+            wait = deadline - time.monotonic()
+            if self.lost:
+                node, since = min(self.lost.items(), key=lambda item: item[1])
+                # While a node is away the step's own timeout does not run: its return (or a
+                # restore) gives the others a fresh one.
+                deadline = max(deadline, time.monotonic() + self.cosim.stepTimeout)
+                if time.monotonic() - since > grace:
+                    raise RunError(f"node {node!r} was lost at step {step} (t={self._time(step):g} s) and did not "
+                                   f"come back within the link grace of {grace:g} s")
+                wait = min(wait, since + grace - time.monotonic() + 0.01)
+            msg = self.inbox.recv(wait if wait > 0.0 else 0.0)
+            if msg is None:
+                if self.lost:
+                    continue  # the grace check above reports it
+                raise RunError(f"timed out after {self.cosim.stepTimeout:g} s at step {step} "
+                               f"(t={self._time(step):g} s) waiting for outputs of {', '.join(sorted(pending))}")
+            got = self._handle_side_message(msg[0], msg[1], step, True)
+            if got is None:
+                continue
+            node, frame = got
+            if frame.kind == frames.END and self.project.node(node).asynchronous:
+                self._on_end(node, step, frame)  # a source stopped or failed (never clean: the intake)
+            frame_step = frame.fields[1]
+            label = step if node in self.paced else self._label.get(node, step)
+            if frame.kind == frames.END and frame_step == label + 1 and not frame.fields[3]:
+                # A node stopped (SIGTERM) while waiting for a release: it names the next step.
+                self._on_end(node, step, frame)
+            if frame_step != label:
+                reason = "step already past" if frame_step < label else "wrong step"
+                self.intake.drop(reason, f"{node} sent step {frame_step} while collecting {step}", step, node)
+                continue
+            batched = self._batch_steps.get(node)
+            if frame.kind == frames.END:
+                self._on_end(node, step, frame, inside=batched is not None)
+                # Inside a batch: the others' batches hold the points its earlier steps reached.
+                pending.discard(node)
+                self._earlier[node] = frame.fields[5]
+                arrivals[node] = time.perf_counter() - self._released_at.get(node, released_at)
+                self._ended_inside.add(node)
+                self._ended_arrivals = arrivals
+                continue
+            if (frame.kind == frames.BATCH) != (batched is not None):
+                self.intake.drop("wrong kind", f"{node} sent a {frames.KIND_NAMES[frame.kind]} frame for step "
+                                 f"{frame_step}, which it was released for {'in' if batched is None else 'as'} "
+                                 "a batch", step, node)
+                continue
+            if batched is not None and len(frame.fields[4]) != batched:
+                self.intake.drop("wrong step", f"{node} sent the outputs of {len(frame.fields[4]) + 1} steps for "
+                                 f"a batch of {batched + 1} of its steps", step, node)
+                continue
+            if node in pending:
+                take(node, frame)
+            elif node in self.paced or node in self._early or self._due_at.get(node, step) <= step:
+                self.intake.drop("duplicate", f"{node} sent step {frame_step} twice", step, node)
+            else:  # a slower node's outputs, for a later point
+                self._early[node] = frame
+        if self._ended_inside:
+            raise _ModelEnded
+        return arrivals
+
+    def _on_end(self, node: str, step: int, frame: frames.Frame, inside: bool = False) -> None:
+        """A node's END instead of its outputs for ``step``: its model ended the run, or failed.
+        ``inside`` a batched release the caller gathers the others' batches before it ends."""
+        _, _, t, clean, message, _ = frame.fields
+        # The point the run's records end at (inside a batched release: its first, until the
+        # points its steps before reached are recorded).
+        message, k = message[:_MESSAGE_MAX], self._point
+        if not clean:
+            # The node's runtime names itself and the step; a message that does not is prefixed.
+            # A source lives on the wall clock and knows no step: the run's is added.
+            at = f" (the run at step {k}, t={self._time(k):g} s)" if self.project.node(node).asynchronous else ""
+            raise RunError(message + at if message.startswith(f"node {node!r}")
+                           else f"node {node!r} failed at step {k} (t={self._time(k):g} s): {message}")
+        if inside and self._ended_inside:
+            return  # another node ended inside this batch first: the run ends by its word
+        self.ended_by = {"node": node, "step": k, "t": t, "message": message}
+        self._log.info("node ended the simulation", node=node, step=k, t=t, message=message)
+        if not inside:
+            raise _ModelEnded
+
+    def _localisation_plan(self) -> bool:
+        """Whether steps may be rolled back to locate guard crossings; say why not in the metadata."""
+        plan = plans.localisation(self.cosim, self._said())
+        self.recorder.meta["event_localisation"] = plan.words
+        return plan.on
+
+    def _retake_plan(self) -> None:
+        """Whether steps are iterated or their size controlled; say which, or why not, in the metadata."""
+        meta, cosim = self.recorder.meta, self.cosim
+        if cosim.iterate is not None:
+            it = cosim.iterate
+            plan = plans.iteration(it, self._said(), {n: bool(ports) for n, ports in self._input_labels.items()})
+            meta["iteration"] = plan.words
+            if not plan.on:
+                self._log.warning("no iterative coupling", why=plan.why)
+            else:
+                self.iteration = IterationLog(it)
+                if plan.interpolated:
+                    self.track = InputTrack(it.interpolate, list(plan.interpolated))
+                    self._short_steps = (it.interpolate - 1) * STARTUP_SPLIT
+                elif it.interpolate > 0:
+                    self._log.warning("no interpolated inputs", nodes=list(plan.holding))
+        if cosim.stepControl is not None:
+            plan = plans.step_control(cosim.stepControl, cosim.stepSize, self._said())
+            meta["step_control"] = plan.words
+            if not plan.on:
+                self._log.warning("no step control", why=plan.why)
+            else:
+                self.sizer = StepSizer.starting(cosim.stepControl, cosim.stepSize)
+
+    def _change(self, mode: str, used: dict[str, list[Any]], tolerance: float) -> tuple[dict[str, list[Any]], float, str, float]:
+        """The inputs routed from the outputs now, and their change from ``used`` (input_change)."""
+        candidate = self.router.candidate(mode, self.outputs)
+        return (candidate, *input_change(candidate, used, self._input_labels, tolerance))
+
+    def _iterated(self, k: int, t: float, h: float, mode: str) -> tuple[dict[str, float], float, int]:
+        """Take step k until the inputs routed from its end stop changing; return arrivals, wait
+        and takes. The inputs it was last taken on stay in the router (they are point k's record)."""
+        it = self.iteration.settings
+        track = self.track
+        start: dict[str, list[Any]] = {}
+        if track is not None:
+            # The routed inputs are point k's; the step is taken on its end values (first guessed
+            # from the points before), which the interpolating nodes reach along a polynomial.
+            track.add(t, mode, self.router.inputs)
+            start = track.start()
+            self.router.inputs = track.first_guess(t, h)
+        takes = 1
+        try:
+            arrivals, wait = self._release(k, t, h, mode, **self._moving(start, t, h))
+            while True:
+                used = self.router.inputs
+                candidate, change, port, absolute = self._change(mode, used, it.tolerance)
+                if change <= 1.0 or takes >= it.maxIterations:
+                    break
+                self.release.put(frames.encode(frames.ROLLBACK, k, t))
+                self.router.inputs = relaxed(candidate, used, it.relaxation)
+                arrivals, wait = self._release(k, t, h, mode, **self._moving(start, t, h))
+                takes += 1
+        finally:
+            for n in track.nodes if track is not None else ():  # point k's record: what each had at t
+                self.router.inputs[n] = start[n]
+        self.iteration.add(k, t, takes, change, port, absolute)
+        self.recorder.meta["iterations"] = self.iteration.record()  # in the meta however the run ends
+        if change > 1.0:
+            self._log.warning("step did not converge", step=k, t=t, takes=takes, port=port, change=absolute)
+            if it.onFailure == "stop":
+                raise RunError(f"step {k} (t={t:g} s) did not converge in {takes} takes: input {port} still changed "
+                               f"by {absolute:g} (tolerance {it.tolerance:g}·max(1, |value|))")
+        return arrivals, wait, takes
+
+    def _moving(self, start: dict[str, list[Any]], t: float, h: float) -> dict[str, Any]:
+        """The release's inputs and slopes when inputs are interpolated: an interpolating node
+        gets the value at the step's start and the derivatives there; any other the end value."""
+        if self.track is None:
+            return {}
+        end = self.router.inputs
+        inputs = {n: start[n] if n in self.track.nodes else end[n] for n in end}
+        return {"inputs": inputs, "slopes": self.track.slopes(t, h, end)}
+
+    def _controlled(self, k: int, t: float, h: float, mode: str,
+                    record: Callable[[], None]) -> tuple[float, dict[str, float], float, int]:
+        """Take step k, shorter again and again while its inputs changed too much over it; return
+        the step length that stood, arrivals, wait and takes."""
+        tolerance = self.sizer.settings.tolerance
+        used = {n: list(v) for n, v in self.router.inputs.items()}
+        takes = 1
+        arrivals, wait = self._release(k, t, h, mode, meanwhile=record)
+        while True:
+            _, change, _, _ = self._change(mode, used, tolerance)
+            shorter = self.sizer.judge(h, change)
+            if shorter is None:
+                self.recorder.meta["step_sizes"] = self.sizer.record()  # in the meta however the run ends
+                return h, arrivals, wait, takes
+            self.release.put(frames.encode(frames.ROLLBACK, k, t))
+            h = shorter
+            arrivals, wait = self._release(k, t, h, mode)
+            takes += 1
+
+    def _release(self, k: int, t: float, h: float, mode: str,
+                 meanwhile: Callable[[], None] | None = None,
+                 times: list[float] | None = None, inputs: dict[str, list[Any]] | None = None,
+                 slopes: dict[str, Any] | None = None) -> tuple[dict[str, float], float]:
+        """Release step k (t → t+h) and gather the outputs due at t+h; return arrivals and wait.
+
+        Jacobi: one release for every node due at k, on the inputs routed at t. Gauss-Seidel:
+        one release per node in order, each on inputs routed again from its predecessors'
+        outputs at t+h. ``meanwhile`` runs once the (first) release is sent, while the nodes
+        integrate: work there (recording the point) is off the barrier's critical path.
+        ``times``: a batched release (STEPS) over these base points, gathered at the last.
+        ``inputs`` and ``slopes``: the release's, for interpolated inputs (else the router's).
+        """
+        released_at = time.perf_counter()
+        if self.coupling.scheme == "gauss-seidel":
+            return self._release_in_order(k, t, h, mode, released_at, meanwhile)
+        due = self.coupling.due(k) if self.coupling.multirate else self.stepping
+        try:
+            self._put_release(k, t, h, mode, due, released_at, times, inputs, slopes)
+        finally:
+            if meanwhile is not None:
+                meanwhile()  # a release that could not be sent still leaves its point recorded
+        arrivals = self._collect(k + 1 if times is None else k + len(times) - 1, released_at)
+        return arrivals, time.perf_counter() - released_at
+
+    def _put_release(self, k: int, t: float, h: float, mode: str, nodes: list[str], released_at: float,
+                     times: list[float] | None = None, inputs: dict[str, list[Any]] | None = None,
+                     slopes: dict[str, Any] | None = None) -> None:
+        """Send the release of step k to ``nodes``: each owes its outputs, labelled k + 1, at the
+        end of its own step (k + its rate, or the last point). ``times``: a batched release
+        over these base points, after which a node as fast as the batch or faster owes its
+        outputs (one BATCH, with those of its steps before the last)."""
+        inputs = {n: (inputs or self.router.inputs)[n] for n in nodes}
+        if times is None:
+            self._last_release = frames.encode(frames.STEP, k, t, h, mode, inputs, self.coordinator.driven_nodes(),
+                                               slopes or {})
+        else:
+            self._last_release = frames.encode(frames.STEPS, k, times, mode, inputs, self.coordinator.driven_nodes())
+        try:
+            self.release.put(self._last_release)
+        except FrameTooLarge as exc:
+            raise RunError(f"the release of step {k} (t={t:g} s) is {exc}; largest inputs, by node: "
+                           f"{frames.largest_values(inputs.items())}") from None
+        self.messages["releases"] += 1
+        count = 1 if times is None else len(times) - 1
+        self._earlier.clear()
+        for n in nodes:
+            self._label[n] = k + 1
+            m = self.coupling.rates[n]
+            if times is None:
+                self._batch_steps.pop(n, None)
+                self._due_at[n] = k + 1 if m == 1 else min(k + m, self._last_point)
+            else:
+                self._batch_steps[n] = len(range(0, count, m)) - 1
+                self._due_at[n] = k + count if m <= self._span else min(k + m, self._last_point)
+            self._released_at[n] = released_at
+            self._last_release_of[n] = self._last_release
+
+    def _release_in_order(self, k: int, t: float, h: float, mode: str, released_at: float,
+                          meanwhile: Callable[[], None] | None) -> tuple[dict[str, float], float]:
+        """Gauss-Seidel: release the nodes one after the other, each on its predecessors' new outputs.
+        Each node's inputs are routed again just before its release, and so are, once all are
+        released, the inputs every node stepped on."""
+        arrivals: dict[str, float] = {}
+        try:
+            for i, node in enumerate(self.coupling.order):
+                if i > 0:
+                    self.router.route_into(node, mode, self.outputs)
+                self._put_release(k, t, h, mode, [node], time.perf_counter())
+                arrivals.update(self._collect(k + 1, released_at, {node}))
+        finally:
+            if meanwhile is not None:
+                meanwhile()
+        return arrivals, time.perf_counter() - released_at
+
+    def _record_point(self, k: int, t: float, mode: str, outputs: dict[str, list[Any]], stepped: list[str] | None,
+                      wait: float, holder: str, lateness: float | None, arrivals: dict[str, float],
+                      ages: dict[str, float | None], takes: int) -> None:
+        self.recorder.row(k, t, mode, outputs, self.router.inputs, stepped)
+        self.recorder.timing(k, t, wait, holder, lateness, arrivals, ages, takes)
+
+    def _record_inside(self, k: int, times: list[float], mode: str, at_k: dict[str, list[Any]],
+                       arrivals: dict[str, float]) -> None:
+        """The base points inside the batched release from point k, each with the outputs every
+        node had there (a node's after each of its own steps, held between) and the inputs
+        they route to: what a release per base point would have recorded. Their timing: no
+        wait of their own (the batch's is at its end), and for each node whose step ended
+        there, when the frame with its outputs came."""
+        outputs = dict(at_k)
+        holder = max(arrivals, key=arrivals.get) if arrivals else ""
+        for i in range(1, len(times) - 1):
+            came = {}
+            for node, earlier in self._earlier.items():
+                m = self.coupling.rates[node]
+                if i % m == 0:
+                    outputs[node] = earlier[i // m - 1]
+                    came[node] = arrivals[node]
+            self.router.route(mode, times[i], outputs, self.histories)
+            self.recorder.row(k + i, times[i], mode, outputs, self.router.inputs, self.coupling.due(k + i))
+            self.recorder.timing(k + i, times[i], 0.0, holder, None, came, {})
+
+    def _end_inside(self, k: int, times: list[float], mode: str, at_k: dict[str, list[Any]]) -> None:
+        """A node's model ended the run inside the batched release from point k: record the
+        points inside it that its steps before reached (every other node's batch reached
+        them too), as one release per base point would have."""
+        assert self.ended_by is not None
+        reached = min([len(self._earlier[n]) * self.coupling.rates[n] for n in self._ended_inside] + [len(times) - 2])
+        if reached > 0:
+            self._record_inside(k, times[:reached + 2], mode, at_k, self._ended_arrivals)
+            self.ended_by["step"] = k + reached
+
+    def _localise(self, k: int, t: float, h: float, mode: str, watched_at_start: bool,
+                  arrivals: dict[str, float], wait: float) -> tuple[float, dict[str, float], float, dict[str, Any]]:
+        """Shrink step k until a guard crossing inside it lies within eventTolerance of its end.
+
+        The step was taken and its end satisfies a guard that did not hold at its start. Bisect on
+        the step length, rolling every node back to its state at t before each retry.
+        """
+        view = OutputView(self.router.output_index, self.outputs)
+        tol = self.cosim.eventTolerance
+        if watched_at_start or not self.coordinator.pending_guard_holds(view) or h <= tol:
+            return h, arrivals, wait, {}
+        lo, hi, tries, at_hi = 0.0, h, 0, True
+        while hi - lo > tol:
+            mid = 0.5 * (lo + hi)
+            self.release.put(frames.encode(frames.ROLLBACK, k, t))
+            arrivals, wait = self._release(k, t, mid, mode)
+            tries += 1
+            if self.coordinator.pending_guard_holds(view):
+                hi, at_hi = mid, True
+            else:
+                lo, at_hi = mid, False
+        if not at_hi:
+            self.release.put(frames.encode(frames.ROLLBACK, k, t))
+            arrivals, wait = self._release(k, t, hi, mode)
+            tries += 1
+        return hi, arrivals, wait, {"retries": tries, "window": [t + lo, t + hi]}
+
+    def _show(self, k: int, t: float, mode: str, lateness: float | None, holder: str, wait: float,
+              arrivals: dict[str, float], ages: dict[str, float | None]) -> float:
+        """Point k for the progress bar and the status answer; return when (perf_counter)."""
+        self.progress.step, self.progress.t, self.progress.mode = k, t, mode
+        self.progress.lateness_s = lateness
+        now = time.perf_counter()
+        self._recent.append((now, holder, wait, arrivals))
+        # Point k's values, whole (the outputs change while the nodes step).
+        self._shown = (k, t, mode, dict(self.outputs), {n: list(v) for n, v in self.router.inputs.items()},
+                       time.time())
+        self._history.append(self._shown)
+        self._ages = ages
+        return now
+
+    def _next_point(self, k: int, t: float, origin: float, j: int, short: bool) -> tuple[float, list[float] | None]:
+        """The time the step from point k (at t, the j-th of the grid from ``origin``) ends, and
+        for a batched release the base points it spans."""
+        cosim = self.cosim
+        H = cosim.stepSize
+        if short:  # interpolated inputs' start-up: steps of H / STARTUP_SPLIT until there are points enough
+            return min(cosim.startTime + (k + 1) * H / STARTUP_SPLIT, cosim.stopTime), None
+        if self.sizer is not None:
+            return min(t + self.sizer.h, cosim.stopTime), None
+        if self._span > 1:  # a batched release: its base points as single releases would have them
+            times = [min(origin + (j + i) * H, cosim.stopTime)
+                     for i in range(min(self._span, self._last_point - k) + 1)]
+            return times[-1], times
+        return min(origin + (j + 1) * H, cosim.stopTime), None
+
+    def _loop(self) -> None:
+        cosim = self.cosim
+        H = cosim.stepSize
+        rt = cosim.real_time_factor()
+        wall0 = time.time()
+        checkpoint = self._saves_states()
+        every = cosim.checkpointEvery
+        # Points lie on a grid origin + j·H; a located event starts a new grid at its time.
+        origin, j, k, t = cosim.startTime, 0, 0, cosim.startTime
+        localised: dict[str, Any] = {}
+        next_checkpoint = t
+        if self._resume is not None:
+            # Every node is a new process: each gets its state at the last checkpoint (the run's
+            # START follows, for asynchronous sources, with the clock from there).
+            self._start_frame = frames.encode(frames.START, self.recorder.run_dir.name, cosim.startTime, H, wall0,
+                                              rt, {"checkpoint": checkpoint})
+            self._checkpoints = every is not None
+            point, arrivals, wait = self._restore(_Recover("server", self._resume, "resumed"))
+            k, t, origin, j, localised = (point["step"], point["t"], point["origin"], point["j"],
+                                          dict(point["localised"]))
+            resumed_h = point["h"]
+            next_checkpoint = self._next_checkpoint(t)
+            clock = RealTimeClock(t, time.time(), rt) if rt is not None else None
+            if self.gateway is not None:
+                self.gateway.run_started()
+        else:
+            self._last_release = self._start_frame = frames.encode(
+                frames.START, self.recorder.run_dir.name, cosim.startTime, H, wall0, rt, {"checkpoint": checkpoint})
+            self.release.put(self._last_release)
+            released_at = time.perf_counter()
+            clock = RealTimeClock(cosim.startTime, wall0, rt) if rt is not None else None
+            if self.gateway is not None:
+                self.gateway.run_started()
+            self._expect_all(0, released_at)
+            arrivals = self._collect(0, released_at)
+            wait = time.perf_counter() - released_at
+        localise = self._localisation_plan()
+        self._retake_plan()
+        if self._resume is not None:
+            self._restore_track(point, f"the checkpoint at step {point['step']} resumed")
+        if self.sizer is not None and self._resume is not None:
+            self.sizer.h = resumed_h
+        # A bridge FMU through the gateway takes one release at a time (its node says no HELLO).
+        cannot = [n for n in self.stepping if self.capabilities.get(n, {}).get("batches") is not True]
+        self._span = 1 if cannot else self.coupling.batch
+        self.recorder.meta["coupling"] = self.coupling.describe(cannot if self.coupling.batch > 1 else None)
+        self._checkpoints = self._checkpoint_plan()
+        end = cosim.stopTime - 1e-9 * H
+        self._last_point = math.ceil((cosim.stopTime - cosim.startTime) / H - 1e-9)
+        # Gauss-Seidel and iteration replace outputs before point k is recorded: it keeps its own.
+        keep_outputs = self.coupling.scheme == "gauss-seidel" or self.iteration is not None or self._span > 1
+        takes = 1  # of the step that ended at the current point
+        perf0 = time.perf_counter()
+        k0 = k
+        last_progress = 0.0
+        while True:
+            self._point = k
+            # A multi-rate run's checkpoints wait for a point where no node is inside its step.
+            if self._checkpoints and next_checkpoint - 1e-9 * H <= t < end and k % self.coupling.period == 0:
+                self._take_checkpoint(k, t, origin, j, localised, self.sizer.h if self.sizer else H)
+                next_checkpoint = self._next_checkpoint(t)
+            for node, history in self.histories.items():
+                held = history.at(t)
+                if held is not None:
+                    self.outputs[node] = held[1]
+            view = OutputView(self.router.output_index, self.outputs)
+            try:
+                switch = self.coordinator.update(k, t, view)
+            except GuardEvaluationError as exc:
+                raise RunError(f"{exc} (at step {k}, t={t:g} s)") from None
+            if switch is not None:
+                entry = switch.as_record()
+                if localised:
+                    entry["localised"] = localised
+                self.recorder.event(entry)
+                self.switches.append(entry)
+                self._log.info("mode switch", step=k, t=t, name=switch.event, to=switch.to_mode, values=switch.values)
+            mode = self.coordinator.mode
+            ages = self.router.route(mode, t, self.outputs, self.histories)
+            lateness = None
+            if clock is not None:
+                ahead = clock.seconds_until(t)  # read once: a second reading may have passed t
+                lateness = max(0.0, -ahead)
+                if ahead > 0:
+                    time.sleep(ahead)
+            holder = max(arrivals, key=arrivals.get) if arrivals else ""
+            now = self._show(k, t, mode, lateness, holder, wait, arrivals, ages)
+            if self._on_progress is not None and now - last_progress >= self._progress_every:
+                last_progress = now
+                self.progress.steps_per_s = (k - k0) / (now - perf0) if now > perf0 else 0.0
+                self._on_progress(self.progress)
+
+            at_k = dict(self.outputs) if keep_outputs else self.outputs
+            stepped = self.coupling.due(k) if self.coupling.multirate and t < end else None
+            # Point k as it is now (its timing: of the step that ended here), and the inputs the
+            # step from it is taken on (an iterated step's last): written while the nodes step.
+            record = functools.partial(self._record_point, k, t, mode, at_k, stepped, wait, holder, lateness,
+                                       arrivals, ages, takes)
+            if t >= end or self._stop_requested.is_set():
+                record()
+                break
+            short = k < self._short_steps
+            next_t, times = self._next_point(k, t, origin, j, short)
+            h = h_used = next_t - t
+            watched = localise and self.coordinator.pending_guard_holds(view)
+            try:
+                if self.iteration is not None:
+                    try:
+                        arrivals, wait, takes = self._iterated(k, t, h, mode)
+                    finally:
+                        record()  # also when the step failed: point k stands
+                elif self.sizer is not None:
+                    h_used, arrivals, wait, takes = self._controlled(k, t, h, mode, record)
+                else:
+                    arrivals, wait = self._release(k, t, h, mode, meanwhile=record, times=times)
+                    if times is not None:
+                        self._record_inside(k, times, mode, at_k, arrivals)
+                localised = {}
+                if localise:
+                    h_used, arrivals, wait, localised = self._localise(k, t, h, mode, watched, arrivals, wait)
+            except _ModelEnded:
+                if self._ended_inside and times is not None:
+                    self._end_inside(k, times, mode, at_k)
+                break  # point k, or the last inside a batch that every node reached, is recorded
+            except _Recover as cause:
+                # Back to the last checkpoint: its point is taken again from the top, as it was.
+                point, arrivals, wait = self._restore(cause)
+                k, t, origin, j, localised = (point["step"], point["t"], point["origin"], point["j"],
+                                              dict(point["localised"]))
+                takes = 1
+                if self.sizer is not None:
+                    self.sizer.h = point["h"]
+                next_checkpoint = self._next_checkpoint(t)
+                if clock is not None:
+                    clock = RealTimeClock(t, time.time(), rt)
+                continue
+            if h_used != h:  # a located event, or a controlled step taken shorter
+                origin, j, next_t = t + h_used, -1, t + h_used
+            elif short:  # the grid of H starts where the short steps end
+                origin, j = next_t, -1
+            t = next_t
+            step_count = 1 if times is None else len(times) - 1
+            j += step_count
+            k += step_count
+        elapsed = time.perf_counter() - perf0
+        self.recorder.meta["steps_per_s"] = (k - k0) / elapsed if elapsed > 0 else None
+        if self._on_progress is not None:
+            self.progress.steps_per_s = self.recorder.meta["steps_per_s"] or 0.0
+            self._on_progress(self.progress)

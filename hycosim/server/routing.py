@@ -1,0 +1,115 @@
+"""Link routing: node outputs at a macro-step point → node inputs for the next step.
+
+The routes of every mode are resolved once, so routing a step is a flat loop. An input
+with no link active in the current mode keeps its last value (its start value at first).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, Iterator, Mapping
+
+from hycosim.core.config import LoadedProject, PortType
+
+from hycosim.server.async_sources import SampleHistory
+
+
+@dataclass(frozen=True)
+class _Hop:
+    dst_node: str
+    dst_index: int
+    src_node: str
+    src_index: int
+    extrapolation: str
+    convert: Callable[[Any], Any] | None
+    label: str  # "dst_node.dst_port", for ages
+
+
+def _linear(factor: float, offset: float) -> Callable[[Any], float]:
+    """A link's linear transformation: input = factor·output + offset."""
+    return lambda value: factor * value + offset
+
+
+class OutputView(Mapping[tuple[str, str], Any]):
+    """Read-only view of the outputs at a macro-step point, keyed (node, port), for guards."""
+
+    def __init__(self, index: Mapping[tuple[str, str], tuple[str, int]], outputs: Mapping[str, list[Any]]):
+        self._index = index
+        self._outputs = outputs
+
+    def __getitem__(self, key: tuple[str, str]) -> Any:
+        node, i = self._index[key]
+        return self._outputs[node][i]
+
+    def __iter__(self) -> Iterator[tuple[str, str]]:
+        return iter(self._index)
+
+    def __len__(self) -> int:
+        return len(self._index)
+
+
+class Router:
+    def __init__(self, loaded: LoadedProject):
+        project = loaded.project
+        self.inputs: dict[str, list[Any]] = {
+            n.nodeName: [p.start_value() for p in n.input] for n in project.nodeLists}
+        self.output_index = {(n.nodeName, p.name): (n.nodeName, i)
+                             for n in project.nodeLists for i, p in enumerate(n.output)}
+        self._async = {n.nodeName for n in project.async_nodes()}
+        self._plans: dict[str, list[_Hop]] = {}
+        for mode in project.modes():
+            hops = []
+            for r in loaded.routes:
+                if not r.active(mode):
+                    continue
+                dst = project.node(r.dst_node)
+                src = project.node(r.src_node)
+                dst_port = dst.port(r.dst_port)
+                src_port = src.port(r.src_port)
+                widen = None
+                if r.transform is not None:
+                    widen = _linear(*r.transform)
+                elif dst_port.type is PortType.REAL and src_port.type is not PortType.REAL:
+                    widen = float
+                elif dst_port.type is PortType.INTEGER and src_port.type is PortType.BOOLEAN:
+                    widen = int
+                hops.append(_Hop(r.dst_node, dst.input_names().index(r.dst_port), r.src_node,
+                                 src.output_names().index(r.src_port), r.extrapolation, widen,
+                                 f"{r.dst_node}.{r.dst_port}"))
+            self._plans[mode] = hops
+        # The same hops by destination node, for Gauss-Seidel's routing into one node at a time.
+        self._into = {mode: {n.nodeName: [h for h in hops if h.dst_node == n.nodeName] for n in project.nodeLists}
+                      for mode, hops in self._plans.items()}
+
+    def route(self, mode: str, t: float, outputs: Mapping[str, list[Any]],
+              histories: Mapping[str, SampleHistory]) -> dict[str, float | None]:
+        """Update ``self.inputs`` for the mode; return the age of every asynchronous value used."""
+        ages: dict[str, float | None] = {}
+        inputs = self.inputs
+        for hop in self._plans[mode]:
+            if hop.src_node in self._async:
+                value, age = histories[hop.src_node].value_at(hop.src_index, t, hop.extrapolation)
+                ages[hop.label] = age
+            else:
+                value = outputs[hop.src_node][hop.src_index]
+            inputs[hop.dst_node][hop.dst_index] = value if hop.convert is None else hop.convert(value)
+        return ages
+
+    def candidate(self, mode: str, outputs: Mapping[str, list[Any]]) -> dict[str, list[Any]]:
+        """The inputs :meth:`route` would give from stepping nodes' ``outputs`` now, as a copy
+        (``self.inputs`` unchanged; asynchronous values as the last route brought them)."""
+        inputs = {n: list(v) for n, v in self.inputs.items()}
+        for hop in self._plans[mode]:
+            if hop.src_node not in self._async:
+                value = outputs[hop.src_node][hop.src_index]
+                inputs[hop.dst_node][hop.dst_index] = value if hop.convert is None else hop.convert(value)
+        return inputs
+
+    def route_into(self, node: str, mode: str, outputs: Mapping[str, list[Any]]) -> None:
+        """Update ``self.inputs[node]`` alone from stepping nodes' outputs (Gauss-Seidel, within a
+        step: its asynchronous inputs stay as :meth:`route` brought them to the step's start)."""
+        inputs = self.inputs[node]
+        for hop in self._into[mode][node]:
+            if hop.src_node not in self._async:
+                value = outputs[hop.src_node][hop.src_index]
+                inputs[hop.dst_index] = value if hop.convert is None else hop.convert(value)
