@@ -14,7 +14,7 @@ import time
 import msgpack
 import zenoh
 
-from hycosim.core.config import polls_before_blocking
+from hycosim.core.schema import polls_before_blocking
 from hycosim.core.inbox import Inbox
 from hycosim.core.session import client_config, prefer_shared_runtime, router_config
 

@@ -10,7 +10,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from hycosim.core.config import project_json_schema  # noqa: E402
+from hycosim.core.schema import project_json_schema  # noqa: E402
 
 MARKER = "<!-- project-reference -->"
 # The objects of the file, in the order a reader meets them, with the key that holds them.

@@ -33,7 +33,7 @@ def test_a_sample_stamped_at_no_finite_time_is_dropped_before_it_can_freeze_its_
     import pytest
 
     from hycosim.core import frames
-    from hycosim.core.config import Node
+    from hycosim.core.schema import Node
     from hycosim.server.intake import Dropped, Intake
 
     camera = Node.model_validate({"nodeName": "camera", "UID": 3, "async": True, "model": "ramp_source",

@@ -68,7 +68,7 @@ def test_logs_are_json_for_collectors_and_text_on_a_terminal(tmp_path):
 
     from tests.helpers import env
 
-    script = ("import structlog; from core import logs; logs.configure(); "
+    script = ("import structlog; from hycosim.core import logs; logs.configure(); "
               "structlog.get_logger('x').info('server seen', node='rod', step=3)")
     piped = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env(), timeout=60)
     record = json.loads(piped.stderr)

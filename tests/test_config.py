@@ -11,8 +11,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hycosim.core.config import (ConfigError, gateway_address, load_project, parse_project, polls_before_blocking,
-                               server_endpoint)
+from hycosim.core.schema import polls_before_blocking
+
+from hycosim.core.config import ConfigError, gateway_address, load_project, parse_project, server_endpoint
 from hycosim.core.endpoints import PROTOCOLS, Address, EndpointError, parse_address, parse_endpoint
 from hycosim.core.session import zenoh_message
 from tests.helpers import REPO, hycosim, write_project

@@ -98,7 +98,7 @@ def test_every_shipped_model_gives_exactly_the_outputs_it_declares(tmp_path):
     must be the model's real outputs, not a list that drifted from its code."""
     from hycosim.clients.loader import REFERENCE_MODELS, model_class
     from hycosim.clients.node import AsyncSource, NodeContext
-    from hycosim.core.config import Node as NodeSpec
+    from hycosim.core.schema import Node as NodeSpec
 
     grasp = _grasp_parameters()
     for name in REFERENCE_MODELS:

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from jsonschema import Draft202012Validator
 
-from hycosim.core.config import project_json_schema
+from hycosim.core.schema import project_json_schema
 from tests.helpers import REPO
 
 DOCS = REPO / "docs"

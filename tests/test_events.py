@@ -62,7 +62,8 @@ def test_catch_and_release_of_a_falling_ball(tmp_path):
 
 
 def _coordinator(*events: dict):
-    from hycosim.core.config import Event, EventGuards
+    from hycosim.core.schema import Event
+    from hycosim.core.config import EventGuards
     from hycosim.core.guards import Guard
     from hycosim.server.coordinator import Coordinator
 

@@ -13,7 +13,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from hycosim.core.config import load_project
-from hycosim.fmu_bridge.fmu_loader import FmuError, FmuInstance, open_fmu
+from hycosim.fmu_bridge.fmu_loader import FmuError, FmuInstance
+from hycosim.fmu_bridge.fmu_open import open_fmu
 from hycosim.fmu_bridge.model_fmu import ModelFmuError, build_model_fmu
 from tests.helpers import REPO, column, hycosim, meta, read_rows, run_project, write_project
 

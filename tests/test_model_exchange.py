@@ -14,7 +14,8 @@ from fmpy import simulate_fmu
 
 from hycosim.clients.fmu_node import FmuNode
 from hycosim.clients.node import NodeContext
-from hycosim.core.config import Node, load_project
+from hycosim.core.schema import Node
+from hycosim.core.config import load_project
 from tests.helpers import column, hycosim, meta, read_rows, run_project, write_project
 from tests.me_fmus import build_me_fmus
 

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from hycosim.clients.loader import NodeLoadError, model_class
 from hycosim.clients.node import AsyncSource, NodeContext
-from hycosim.core.config import Node as NodeSpec
+from hycosim.core.schema import Node as NodeSpec
 from tests.helpers import hycosim, write_project
 
 # Each checked model, with values a user might write for its parameters: plausible numbers

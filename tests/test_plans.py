@@ -11,7 +11,7 @@ from __future__ import annotations
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hycosim.core.config import CoSimulation, Iterate, Node, StepControl
+from hycosim.core.schema import CoSimulation, Iterate, Node, StepControl
 from hycosim.server import plans
 from hycosim.server.intake import port_mismatch
 from tests.wire_strategies import values

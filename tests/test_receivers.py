@@ -21,7 +21,8 @@ from hypothesis import strategies as st
 
 from hycosim.core import frames
 from hycosim.fmu_bridge import gateway_protocol as gp
-from hycosim.core.config import WIRE_TYPES, PortType, load_project
+from hycosim.core.schema import WIRE_TYPES, PortType
+from hycosim.core.config import load_project
 from hycosim.core.drops import DropLog
 from hycosim.server.gateway import _Connection, translate_release
 from hycosim.server.intake import Dropped, Intake
@@ -637,7 +638,7 @@ def test_the_servers_intake_a_nodes_release_check_and_a_checkpoint_name_the_same
     inputs in a release the node, a checkpoint's values the server that resumes. Each takes the
     values exactly when every one is of its port's wire type, and otherwise names the first that
     is not."""
-    from hycosim.core.config import Node
+    from hycosim.core.schema import Node
     from hycosim.server.checkpoints import _wrong_values
 
     types, vals = given_

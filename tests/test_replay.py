@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from hycosim.clients.loader import NodeLoadError, check_node
 from hycosim.clients.replay import SamplePlayer
-from hycosim.core.config import CoSimulation, Node
+from hycosim.core.schema import CoSimulation, Node
 from hycosim.core.recordings import Recording, RecordingError, Sample, encode_sample
 from hycosim.clients.scene_fmus import build_scene_fmus
 from tests.helpers import REPO, hycosim, meta, read_rows, run_killing, run_project

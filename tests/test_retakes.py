@@ -118,7 +118,7 @@ def _plots_panels(run: Path, png: Path, ports: list[str], panels: int) -> None:
 
 def test_retakes_refuse_what_cannot_take_a_step_again_by_name(tmp_path):
     (tmp_path / "hold.py").write_text(
-        "from clients.node import Node\n"
+        "from hycosim.clients.node import Node\n"
         "class Hold(Node):\n"
         "    def outputs(self):\n        return {'y': 0.0}\n"
         "    def step(self, t, h, inputs):\n        pass\n")
@@ -171,7 +171,7 @@ def test_algebraic_loops_follow_feedthrough_inside_nodes_only():
 
 
 def test_the_step_size_control_and_the_change_it_reads():
-    from hycosim.core.config import StepControl
+    from hycosim.core.schema import StepControl
 
     labels = {"n": ["n.x", "n.F", "n.flag"]}
     change, port, absolute = input_change({"n": [0.1, 50.0, True]}, {"n": [0.0, 40.0, False]}, labels, 0.1)

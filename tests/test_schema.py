@@ -7,8 +7,8 @@ import json
 import pytest
 from jsonschema import Draft202012Validator
 
-from hycosim.core.config import project_json_schema
-from hycosim.cli import SCHEMA_FILE
+from hycosim.core.schema import project_json_schema
+from hycosim.cli.commands.project import SCHEMA_FILE
 from tests.helpers import REPO, hycosim
 
 CONFIGS = sorted((REPO / "configs").glob("*.json"))

@@ -9,8 +9,9 @@ from typing import Any
 
 import structlog
 
-from hycosim.core.config import Node as NodeSpec
-from hycosim.fmu_bridge.fmu_loader import FmuError, FmuInstance, FmuTerminated, open_fmu
+from hycosim.core.schema import Node as NodeSpec
+from hycosim.fmu_bridge.fmu_loader import FmuError, FmuInstance, FmuTerminated
+from hycosim.fmu_bridge.fmu_open import open_fmu
 
 from hycosim.clients.node import Node, NodeContext, NodeModelError, SimulationEnded
 

@@ -15,8 +15,9 @@ import sys
 from collections.abc import Iterable
 from pathlib import Path
 
-from hycosim.core.config import CoSimulation
-from hycosim.core.config import Node as NodeSpec
+from hycosim.core.schema import CoSimulation
+from hycosim.core.schema import Node as NodeSpec
+from hycosim.core.extras import extra_providing, install_hint
 from hycosim.core.hints import did_you_mean
 
 from hycosim.clients.node import AsyncSource, Node
@@ -78,6 +79,21 @@ def _import(module_name: str, project_dir: Path):
     return importlib.import_module(module_name)
 
 
+# The top-level packages hycosim installed before 0.2.0, when its modules moved under hycosim.
+_OLD_TOP_LEVEL = ("clients", "core", "server", "fmu_bridge", "dashboard")
+
+
+def _missing_module_hint(missing: str | None, module_name: str) -> str:
+    """What to do about a module that is not there: install the extra that brings it, or name
+    the module as hycosim names it now."""
+    extra = extra_providing(missing)
+    if extra is not None:
+        return f"; this model needs hycosim's [{extra}] extra: {install_hint(extra)}"
+    if missing is not None and missing.partition(".")[0] in _OLD_TOP_LEVEL and module_name.startswith(missing):
+        return f"; hycosim's modules are under hycosim. since 0.2.0: 'hycosim.{module_name}'"
+    return ""
+
+
 def model_class(spec: NodeSpec, project_dir: Path | None = None) -> type[Node] | type[AsyncSource]:
     """The class a Python node entry names, imported and checked against the entry: a Node
     for a stepping node, an AsyncSource for an asynchronous one, taking the parameters given.
@@ -94,6 +110,8 @@ def model_class(spec: NodeSpec, project_dir: Path | None = None) -> type[Node] |
         cls = getattr(_import(module_name, project_dir or Path.cwd()), class_name)
     except Exception as exc:  # the user's module may fail to import in any way (SyntaxError, its own errors)
         detail = str(exc) if isinstance(exc, (ImportError, AttributeError)) else f"{type(exc).__name__}: {exc}"
+        if isinstance(exc, ModuleNotFoundError):
+            detail += _missing_module_hint(exc.name, module_name)
         raise NodeLoadError(f"node {spec.nodeName!r}: cannot load model {spec.model!r}: {detail}") from None
     kind = AsyncSource if spec.asynchronous else Node
     if not (isinstance(cls, type) and issubclass(cls, kind)):

@@ -30,7 +30,7 @@ from typing import Any, ClassVar
 
 import msgpack
 
-from hycosim.core.config import Port
+from hycosim.core.schema import Port
 
 
 @dataclass

@@ -17,8 +17,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from hycosim.core.config import CoSimulation
-from hycosim.core.config import Node as NodeSpec
+from hycosim.core.schema import CoSimulation
+from hycosim.core.schema import Node as NodeSpec
 from hycosim.core.recordings import Recording, Sample
 
 from hycosim.clients.node import AsyncSource, Node, NodeContext, SimulationEnded, pack_state, unpack_state

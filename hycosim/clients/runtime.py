@@ -20,7 +20,8 @@ import structlog
 import zenoh
 
 from hycosim.core import frames, signals
-from hycosim.core.config import WIRE_TYPES, LoadedProject, PortType
+from hycosim.core.schema import WIRE_TYPES, PortType
+from hycosim.core.config import LoadedProject
 from hycosim.core.drops import DropLog
 from hycosim.core.inbox import LOCAL, Inbox
 from hycosim.core.keys import SERVER_TOKEN, ProjectKeys

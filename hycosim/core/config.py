@@ -1,12 +1,7 @@
-"""The project JSON: pydantic models of the paper's keys plus hycosim's optional ones.
-
-The paper's keys are accepted verbatim (``serverIP``, ``nodeNum``, ``nodeLists`` with
-``nodeName``/``UID``/``input``/``output``, ``linkNum``, ``linkLists``). Our additions are
-optional camelCase keys. Unknown keys are errors so that a typo cannot pass silently.
-
-Loading happens in two passes: pydantic checks the shape, then :func:`check_semantics`
-checks what spans entries (links against ports, modes, guards). Both report every error
-with its JSON path, so one run of ``hycosim validate`` lists all that is wrong.
+"""Loading a project file: the JSON read, its shape checked against the schema
+(:mod:`hycosim.core.schema`), then what spans entries (links against ports, modes, guards, the
+coupling) checked by :func:`check_semantics`. Both passes report every error with its JSON
+path, so one run of ``hycosim validate`` lists all that is wrong.
 """
 
 from __future__ import annotations
@@ -15,373 +10,15 @@ import hashlib
 import json
 from dataclasses import dataclass, field
 from functools import cached_property
-from enum import Enum
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, NamedTuple
+from typing import Any, NamedTuple
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import ValidationError
 
+from hycosim.core.coupling import CouplingPlan, coupling_issues, plan
 from hycosim.core.endpoints import GATEWAY_PORT, SERVER_PORT, Address, EndpointError, gateway_beside, parse_address, parse_endpoint
 from hycosim.core.guards import Guard, GuardError
-
-if TYPE_CHECKING:
-    from hycosim.core.coupling import CouplingPlan
-
-FREE_MODE = "free"
-
-
-class PortType(str, Enum):
-    REAL = "Real"
-    INTEGER = "Integer"
-    BOOLEAN = "Boolean"
-    STRING = "String"
-    BINARY = "Binary"
-
-
-# A link may widen a value (an Integer count into a Real input) but never narrow it.
-_ASSIGNABLE = {
-    PortType.REAL: {PortType.REAL, PortType.INTEGER, PortType.BOOLEAN},
-    PortType.INTEGER: {PortType.INTEGER, PortType.BOOLEAN},
-    PortType.BOOLEAN: {PortType.BOOLEAN},
-    PortType.STRING: {PortType.STRING},
-    PortType.BINARY: {PortType.BINARY},
-}
-
-# The Python types a port's values have on the wire, exactly as msgpack yields them (it never
-# yields subclasses, and a bool is no int there): a Real port takes integers too.
-WIRE_TYPES: dict[PortType, tuple[type, ...]] = {
-    PortType.REAL: (float, int),
-    PortType.INTEGER: (int,),
-    PortType.BOOLEAN: (bool,),
-    PortType.STRING: (str,),
-    PortType.BINARY: (bytes, list),
-}
-
-_DEFAULT_START = {
-    PortType.REAL: 0.0,
-    PortType.INTEGER: 0,
-    PortType.BOOLEAN: False,
-    PortType.STRING: "",
-    PortType.BINARY: b"",
-}
-
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", populate_by_name=True, frozen=True)
-
-
-class Port(_Strict):
-    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")
-    type: PortType = PortType.REAL
-    unit: str | None = None
-    start: Any = None
-    # For FMU nodes: the FMU variable this port maps to, when its name differs.
-    variable: str | None = None
-
-    def start_value(self) -> Any:
-        return _DEFAULT_START[self.type] if self.start is None else self.start
-
-
-def _as_port(value: Any) -> Any:
-    # The paper lists ports as bare names; hycosim also takes objects with a type.
-    return {"name": value} if isinstance(value, str) else value
-
-
-class Node(_Strict):
-    # No leading underscore: hycosim's own keys (_server, _local) start with one.
-    nodeName: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_\-]*$")
-    UID: int = Field(ge=0)
-    input: list[Port] = Field(default_factory=list)
-    output: list[Port] = Field(default_factory=list)
-    # What implements the node: a reference model name ("gain") or "module:Class".
-    model: str | None = None
-    # An FMU file (path relative to the project JSON) run through fmpy.
-    fmu: str | None = None
-    parameters: dict[str, Any] = Field(default_factory=dict)
-    # FMU nodes: an FMU input (Boolean, Integer or Real) set to true / 1 while an event drives
-    # the node and false / 0 otherwise: FMI has no call for it. Python nodes get set_mode.
-    drivenVariable: str | None = None
-    # Asynchronous sources publish timestamped samples instead of stepping.
-    asynchronous: bool = Field(default=False, alias="async")
-    rate: float | None = Field(default=None, gt=0)
-    # FMU nodes: which interface of an FMU that has both ("CoSimulation" unless said), and for
-    # Model Exchange how the node integrates it over each macro step.
-    interface: Literal["CoSimulation", "ModelExchange"] | None = None
-    solver: Literal["CVode", "Euler"] | None = None
-    relativeTolerance: float | None = Field(default=None, gt=0, lt=1)
-    maxStep: float | None = Field(default=None, gt=0)
-    # A run directory (relative to the project JSON): the node plays back what this node
-    # recorded there instead of running its model or FMU (kept in the entry, to go back to).
-    replay: str | None = Field(default=None, min_length=1)
-    # Multi-rate coupling: this node steps every stepSize seconds, an integer multiple of
-    # coSimulation.stepSize (the base); its outputs hold between its steps. None: the base.
-    stepSize: float | None = Field(default=None, gt=0, allow_inf_nan=False)
-
-    @field_validator("input", "output", mode="before")
-    @classmethod
-    def _ports(cls, value: Any) -> Any:
-        return [_as_port(v) for v in value] if isinstance(value, list) else value
-
-    def port(self, name: str) -> Port | None:
-        for p in (*self.input, *self.output):
-            if p.name == name:
-                return p
-        return None
-
-    def output_names(self) -> list[str]:
-        return [p.name for p in self.output]
-
-    def input_names(self) -> list[str]:
-        return [p.name for p in self.input]
-
-    def wire_ports(self) -> dict[str, list[str]]:
-        """The node's ports as frames carry them, ``name:Type`` in order: what the server and a
-        node must agree on, however else their copies of the project file differ."""
-        return {"input": [f"{p.name}:{p.type.value}" for p in self.input],
-                "output": [f"{p.name}:{p.type.value}" for p in self.output]}
-
-
-class Link(_Strict):
-    """Routes outputs of one node to inputs of another.
-
-    Either ``from``/``to`` name ports as ``node.port``, or they name nodes and ``pairs``
-    lists ``[output, input]`` pairs carried by the same link.
-    """
-
-    source: str = Field(alias="from")
-    target: str = Field(alias="to")
-    pairs: list[tuple[str, str]] | None = None
-    activeIn: list[str] | None = None
-    extrapolation: Literal["hold", "linear"] = "hold"
-    # A linear transformation on the way, input = factor·output + offset (SSP's
-    # LinearTransformation); Real inputs only.
-    factor: float | None = Field(default=None, allow_inf_nan=False)
-    offset: float | None = Field(default=None, allow_inf_nan=False)
-    description: str | None = None
-
-
-class Iterate(_Strict):
-    """Iterative coupling: each macro step is repeated, every node rolled back, until the inputs
-    routed from the step's end stop changing (each within ``tolerance``·max(1, |value|))."""
-
-    model_config = ConfigDict(allow_inf_nan=False)
-    # Takes of one step at most (the first included); a step still changing then is reported
-    # with its worst port, and the run goes on with it ("continue") or ends ("stop").
-    maxIterations: int = Field(default=10, ge=2, le=1000)
-    tolerance: float = Field(gt=0)
-    # Each retry steps on old + relaxation·(new − old): below 1 it damps a loop that overshoots.
-    relaxation: float = Field(default=1.0, gt=0, le=1)
-    onFailure: Literal["continue", "stop"] = "continue"
-    # The degree of the polynomial each Real input of a node that can interpolate its inputs
-    # (an FMI 2 FMU with canInterpolateInputs) follows over a step: through the end value the
-    # iteration solves for and the values at the points before. 0 holds the end value over the
-    # step (the implicit scheme, first order); n gives order n + 1, and 3 an RK4's fourth.
-    interpolate: int = Field(default=0, ge=0, le=3)
-
-
-class StepControl(_Strict):
-    """Error-controlled macro step: a step over which a coupled input held at its start value
-    was wrong by more than ``tolerance``·max(1, |value|) seconds (its change over the step times
-    the step, halved: the held value's error integrated over the step) is rolled back and taken
-    again shorter; steps grow while the error stays below. coSimulation.stepSize is the first
-    step tried."""
-
-    model_config = ConfigDict(allow_inf_nan=False)
-    tolerance: float = Field(gt=0)
-    minStep: float = Field(gt=0)
-    maxStep: float = Field(gt=0)
-
-
-MAX_WAIT_S = 1e6  # about 11 days: the longest wall-clock wait a project may ask for
-
-
-class CoSimulation(_Strict):
-    # Infinity or NaN in a time would make a run endless or its comparisons meaningless.
-    model_config = ConfigDict(allow_inf_nan=False)
-    stepSize: float = Field(default=0.01, gt=0)
-    startTime: float = 0.0
-    stopTime: float = Field(default=1.0)
-    # false: as fast as possible; true or a factor: wall time = simulated time * factor.
-    realTime: bool | float = False
-    # Wall-clock waits (s), bounded: Zenoh takes its connect timeout in whole milliseconds as a
-    # 64-bit integer, and a wait of years is a typo.
-    stepTimeout: float = Field(default=10.0, gt=0, le=MAX_WAIT_S)
-    # Locate guard crossings to within this many seconds by rolling steps back (when every
-    # stepping node can save and restore its state); None: fixed macro steps.
-    eventTolerance: float | None = Field(default=None, gt=0)
-    attachTimeout: float = Field(default=30.0, gt=0, le=MAX_WAIT_S)
-    # Take a checkpoint of the whole co-simulation every this many seconds of simulated time
-    # (at the first macro-step point at or after each multiple, and at the start). A node
-    # process that dies is then started again and the run goes on from the last checkpoint;
-    # a server that dies goes on with --resume. None: no checkpoints, a lost node ends the run.
-    checkpointEvery: float | None = Field(default=None, gt=0)
-    # A node (or the server) whose link drops may come back within this many seconds and
-    # the run resumes without losing a step; 0: a lost node stops the run at once.
-    linkGrace: float = Field(default=0.0, ge=0, le=MAX_WAIT_S)
-    # Zenoh's low-latency unicast transport: about 1.5x the macro steps/s of the standard one
-    # on loopback, but it cannot fragment, so every frame must stay within
-    # core.session.LOW_LATENCY_MAX_FRAME bytes. false: standard transport, any size.
-    lowLatency: bool = True
-    # How the server and each node wait for their next frame. "block": sleep in Zenoh's
-    # channel until it comes. "yield": poll it first, yielding the CPU between polls
-    # (core.inbox): faster when frames come quickly, slower when many more processes
-    # than cores compete. "auto": "yield" for up to 2 processes per core (the server and the
-    # project's nodes), else "block".
-    waitStrategy: Literal["auto", "block", "yield"] = "auto"
-    # The master algorithm. "jacobi": every node due at a macro-step point steps at once on the
-    # outputs at that point (the paper's scheme). "gauss-seidel": within a macro step the nodes
-    # step one after the other in ``order``, each on the outputs its predecessors have already
-    # advanced. ``order`` (Gauss-Seidel only): every stepping node once; default: derived from
-    # the links, a node after the nodes it reads from (a cycle of links must be broken here).
-    coupling: Literal["jacobi", "gauss-seidel"] = "jacobi"
-    order: list[str] | None = None
-    # Iterative coupling (Jacobi, every stepping node able to roll back): see Iterate.
-    iterate: Iterate | None = None
-    # An error-controlled macro step (Jacobi, every stepping node able to roll back and to take
-    # steps of any length): see StepControl. None: fixed macro steps of stepSize.
-    stepControl: StepControl | None = None
-    # Multi-rate runs only: release the nodes for several base steps at once where the links
-    # allow it (hycosim.core.coupling.batch_span); false: one release per base point, as single-rate.
-    batchReleases: bool = True
-
-    def real_time_factor(self) -> float | None:
-        if self.realTime is False:
-            return None
-        if self.realTime is True:
-            return 1.0
-        return float(self.realTime) if self.realTime > 0 else None
-
-
-class Event(_Strict):
-    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_\-]*$")
-    when: str
-    drives: str
-    until: str
-    # After a release the event fires again only once this guard has held at a macro-step
-    # point. Default: once `when` has been seen not to hold, so a `when` that still holds
-    # at the release does not switch straight back (guards fire on a rising edge).
-    rearm: str | None = None
-    description: str | None = None
-
-
-class Tls(_Strict):
-    """TLS on the server's ``tls/HOST:PORT`` endpoint; PEM files relative to the project JSON."""
-
-    # The CA that signed the server's certificate: what a node checks the server against.
-    rootCa: str
-    # The server's certificate (naming serverIP's host) and private key; only the server reads them.
-    certificate: str | None = None
-    privateKey: str | None = None
-
-
-class Security(_Strict):
-    """Remote attach: Zenoh user/password with per-node access control, TLS, or both."""
-
-    # Zenoh's dictionary file, "user:password" per line: "server", each node by its name,
-    # and any other user (a monitor for `hycosim status`). Relative to the project JSON.
-    credentials: str | None = None
-    # Access control at the router (with credentials): each node may publish only on its own keys.
-    acl: bool = True
-    tls: Tls | None = None
-
-
-class Project(_Strict):
-    # The JSON Schema an editor validates and completes the file against (hycosim schema); not read.
-    schema_ref: str | None = Field(default=None, alias="$schema")
-    projectName: str = Field(default="project", pattern=r"^[A-Za-z0-9_\-]+$")
-    serverIP: str = "127.0.0.1"
-    # The TCP gateway for bridge FMUs (HOST:PORT); default: serverIP's host, port + 1.
-    gatewayIP: str | None = None
-    nodeNum: int = Field(ge=1)
-    nodeLists: list[Node]
-    linkNum: int = Field(default=0, ge=0)
-    linkLists: list[Link] = Field(default_factory=list)
-    coSimulation: CoSimulation = Field(default_factory=CoSimulation)
-    events: list[Event] = Field(default_factory=list)
-    security: Security | None = None
-    description: str | None = None
-
-    def node(self, name: str) -> Node:
-        for n in self.nodeLists:
-            if n.nodeName == name:
-                return n
-        raise KeyError(name)
-
-    def modes(self) -> list[str]:
-        return [FREE_MODE, *(e.name for e in self.events)]
-
-    def stepping_nodes(self) -> list[Node]:
-        return [n for n in self.nodeLists if not n.asynchronous]
-
-    def async_nodes(self) -> list[Node]:
-        return [n for n in self.nodeLists if n.asynchronous]
-
-    def paced_nodes(self) -> list[Node]:
-        """Asynchronous nodes played back from a recording: each sends the samples the recorded
-        run had received by a macro-step point before that point, so the barrier waits for it."""
-        return [n for n in self.nodeLists if n.asynchronous and n.replay]
-
-    def polls_before_blocking(self, cpus: int | None) -> bool:
-        """Whether a hycosim process on a machine with ``cpus`` cores polls before it blocks."""
-        return polls_before_blocking(self.coSimulation.waitStrategy, len(self.nodeLists) + 1, cpus)
-
-
-def project_json_schema() -> dict[str, Any]:
-    """The JSON Schema (draft 2020-12) of the project file, from the models above: what ``hycosim
-    schema`` writes and project files may name with ``"$schema"``. A port may also be given as
-    its bare name, which the models take before they check (``_as_port``)."""
-    schema = Project.model_json_schema(by_alias=True)
-    schema["$schema"] = "https://json-schema.org/draft/2020-12/schema"
-    schema["title"] = "hycosim project"
-    port_name = Port.model_fields["name"].metadata[0].pattern
-    for key in ("input", "output"):
-        schema["$defs"]["Node"]["properties"][key]["items"] = {
-            "anyOf": [{"$ref": "#/$defs/Port"}, {"type": "string", "pattern": port_name}]}
-    return schema
-
-
-def polls_before_blocking(strategy: str, processes: int, cpus: int | None) -> bool:
-    """Resolve a ``waitStrategy`` for ``processes`` co-simulation processes on ``cpus`` cores.
-
-    Polling pays when the frame awaited comes while the poller yields its core to the peer
-    that sends it; with many more runnable processes than cores every yield is one more
-    context switch. Measured on 2 cores (barrier benchmark, 3 to 17 processes): polling
-    gave +20 to +50 % macro steps/s at 3 and 5 processes, lost a sixth at 9 and a fifth
-    at 17. On the same VM from 2026-11-26 on it paid nowhere: even at 3 and 4 processes,
-    and at 5 it lost 4 to 9 % in each of three sessions; hence up to two processes per core.
-    """
-    if strategy == "auto":
-        return processes <= 2 * (cpus or 1)
-    return strategy == "yield"
-
-
-@dataclass(frozen=True)
-class Route:
-    """One output→input pair of a link, resolved against the nodes."""
-
-    link_index: int
-    src_node: str
-    src_port: str
-    dst_node: str
-    dst_port: str
-    active_in: frozenset[str] | None  # None: active in every mode
-    extrapolation: str
-    # (factor, offset) of a linear transformation; None: the value as it is.
-    transform: tuple[float, float] | None = None
-
-    def active(self, mode: str) -> bool:
-        return self.active_in is None or mode in self.active_in
-
-
-@dataclass(frozen=True)
-class Issue:
-    path: str
-    message: str
-    hint: str = ""
-
-    def render(self) -> str:
-        hint = f" (hint: {self.hint})" if self.hint else ""
-        return f"{self.path}: {self.message}{hint}"
+from hycosim.core.schema import ASSIGNABLE, FREE_MODE, Issue, PortType, Project, Route
 
 
 class ConfigError(Exception):
@@ -419,8 +56,6 @@ class LoadedProject:
     @cached_property
     def coupling(self) -> CouplingPlan:
         """How the stepping nodes are coupled: their rates and, for Gauss-Seidel, their order."""
-        from hycosim.core.coupling import plan  # it reads Project and Route, defined here
-
         return plan(self.project, self.routes)
 
     def resolve(self, relative: str) -> Path:
@@ -505,7 +140,7 @@ def _resolve_routes(project: Project, issues: list[Issue]) -> list[Route]:
             if not ok:
                 continue
             st, dt = nodes[sn].port(sp).type, nodes[dn].port(dp).type
-            if st not in _ASSIGNABLE[dt]:
+            if st not in ASSIGNABLE[dt]:
                 issues.append(Issue(pw, f"type mismatch: {sn}.{sp} is {st.value}, {dn}.{dp} is {dt.value}",
                                     "a link may widen (Integer→Real) but not narrow"))
                 continue
@@ -667,8 +302,6 @@ def check_semantics(project: Project) -> tuple[list[Route], dict[str, EventGuard
         if len(compiled) == len(given):
             guards[e.name] = EventGuards(**compiled)
     routes = _resolve_routes(project, issues)
-    from hycosim.core.coupling import coupling_issues  # it reads Project and Route, defined here
-
     issues.extend(coupling_issues(project, routes))
     return routes, guards, issues
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from hycosim.core.config import Issue, PortType, Project, Route
+from hycosim.core.schema import Issue, PortType, Project, Route
 from hycosim.core.frames import MAX_BATCH
 
 # A BATCH carries one list of outputs per step of its node: on the low-latency transport

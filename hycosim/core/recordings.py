@@ -23,7 +23,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from hycosim.core import json_text
-from hycosim.core.config import CoSimulation, Node, PortType, Project
+from hycosim.core.schema import CoSimulation, Node, PortType, Project
 from hycosim.core.run_files import RunFileError, finished_lines, iter_csv_rows
 
 SAMPLES_FILE = "samples.jsonl"

@@ -1,4 +1,2 @@
 """FMUs for hycosim: loading (co-simulation and Model Exchange), model and bridge FMU building,
-the bridge FMUs' gateway protocol, SSP packages. The shared core is in ``core``."""
-
-__version__ = "0.1.0"
+the bridge FMUs' gateway protocol, SSP packages. The shared core is in ``hycosim.core``."""

@@ -25,7 +25,9 @@ from datetime import datetime, timezone
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
-from hycosim.core.config import CoSimulation, LoadedProject, Node, PortType, gateway_endpoint
+from hycosim.core.schema import CoSimulation, Node, PortType
+
+from hycosim.core.config import LoadedProject, gateway_endpoint
 from hycosim.core.folders import make_folder
 
 TEMPLATE = Path(__file__).with_name("templates") / "bridge_fmu.c"

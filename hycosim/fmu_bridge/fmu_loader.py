@@ -23,7 +23,7 @@ from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.model_description import ModelDescription, ScalarVariable
 
-from hycosim.core.config import Node, PortType
+from hycosim.core.schema import Node, PortType
 from hycosim.core.hints import did_you_mean
 
 # FMI 2 type names and their FMI 3 counterparts, per port type.
@@ -275,17 +275,6 @@ def check_fmu(path: Path, node: Node, parameters: dict[str, Any] | None = None) 
     driven = map_driven(md, node, path)
     check_parameters(md, node.nodeName, node.parameters if parameters is None else parameters, path)
     return FmuMapping(md, inputs, outputs, driven, interface)
-
-
-def open_fmu(path: Path, node: Node, parameters: dict[str, Any], stop_time: float | None = None) -> FmuInstance:
-    """Instantiate the FMU as the node's entry says: a co-simulation slave, or a Model Exchange
-    model with its integrator (``stop_time``: the run's, for the default largest step)."""
-    mapping = check_fmu(path, node, parameters)
-    if mapping.interface == MODEL_EXCHANGE:
-        from hycosim.fmu_bridge.fmu_me import MeInstance
-
-        return MeInstance(path, node, parameters, mapping, stop_time)
-    return FmuInstance(path, node, parameters, mapping)
 
 
 class FmuInstance:

@@ -26,7 +26,7 @@ from typing import Any
 
 from fmpy.fmi1 import FMICallException
 
-from hycosim.core.config import Node
+from hycosim.core.schema import Node
 from hycosim.fmu_bridge.fmu_loader import FmuError, FmuInstance, FmuMapping, FmuTerminated
 
 DEFAULT_RELATIVE_TOLERANCE = 1e-5  # FMPy's

@@ -28,7 +28,7 @@ import msgpack
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from hycosim.core import frames, json_text
-from hycosim.core.config import WIRE_TYPES, Port, Project
+from hycosim.core.schema import WIRE_TYPES, Port, Project
 from hycosim.server.interpolation import MAX_DEGREE, InputTrack
 
 KEEP = 2

@@ -20,7 +20,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-from hycosim.core.config import FREE_MODE, Event, EventGuards
+from hycosim.core.schema import FREE_MODE, Event
+
+from hycosim.core.config import EventGuards
 from hycosim.core.guards import Guard
 
 

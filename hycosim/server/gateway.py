@@ -24,7 +24,7 @@ import zenoh
 
 from hycosim.core import frames
 from hycosim.fmu_bridge import gateway_protocol as gp
-from hycosim.core.config import WIRE_TYPES, Node, PortType
+from hycosim.core.schema import WIRE_TYPES, Node, PortType
 from hycosim.core.endpoints import Address, listen_family
 from hycosim.core.keys import ProjectKeys
 from hycosim.core.session import token_held

@@ -19,7 +19,7 @@ from typing import Any
 import structlog
 
 from hycosim.core import frames
-from hycosim.core.config import WIRE_TYPES, Node
+from hycosim.core.schema import WIRE_TYPES, Node
 from hycosim.core.drops import DropLog
 
 

@@ -13,6 +13,7 @@ from typing import Any
 
 import structlog
 
+from hycosim import __version__
 from hycosim.core import json_text, logs, signals
 from hycosim.core.config import LoadedProject, gateway_address, server_endpoint
 from hycosim.core.endpoints import GATEWAY_PORT, EndpointError, parse_address, parse_endpoint
@@ -31,8 +32,8 @@ PROJECT_COPY = "project.json"
 
 
 def _versions() -> dict[str, str]:
-    found = {"python": platform.python_version()}
-    for dist in ("hycosim", "eclipse-zenoh", "fmpy", "msgpack", "pydantic", "mujoco", "torch"):
+    found = {"python": platform.python_version(), "hycosim": __version__}
+    for dist in ("eclipse-zenoh", "fmpy", "msgpack", "pydantic", "mujoco", "torch"):
         try:
             found[dist] = metadata.version(dist)
         except metadata.PackageNotFoundError:

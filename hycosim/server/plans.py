@@ -16,7 +16,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from hycosim.core.config import CoSimulation, Iterate, StepControl
+from hycosim.core.schema import CoSimulation, Iterate, StepControl
 from hycosim.server.interpolation import STARTUP_SPLIT
 
 Said = Mapping[str, Mapping[str, Any]]

@@ -23,7 +23,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from hycosim.core.config import LoadedProject, PortType
+from hycosim.core.schema import PortType
+
+from hycosim.core.config import LoadedProject
 from hycosim.core.recordings import SAMPLES_FILE, encode_sample
 
 

@@ -26,7 +26,8 @@ import structlog
 import zenoh
 
 from hycosim.core import frames, signals
-from hycosim.core.config import FREE_MODE, LoadedProject
+from hycosim.core.schema import FREE_MODE
+from hycosim.core.config import LoadedProject
 from hycosim.core.inbox import LOCAL, Inbox
 from hycosim.core.keys import SERVER_TOKEN, ProjectKeys
 from hycosim.core.session import FramePublisher, FrameTooLarge

@@ -27,7 +27,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-from hycosim.core.config import Iterate, StepControl
+from hycosim.core.schema import Iterate, StepControl
 
 SAFETY = 0.8  # aim below the tolerance, so that the next step is not rejected
 SHRINK_MOST, GROW_MOST = 0.2, 2.0  # a step changes by at most these factors at once

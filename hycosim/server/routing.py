@@ -9,7 +9,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Callable, Iterator, Mapping
 
-from hycosim.core.config import LoadedProject, PortType
+from hycosim.core.schema import PortType
+
+from hycosim.core.config import LoadedProject
 
 from hycosim.server.async_sources import SampleHistory
 

@@ -2,7 +2,7 @@
 
 import ctypes
 
-from clients.node import Node
+from hycosim.clients.node import Node
 
 
 class Crashing(Node):

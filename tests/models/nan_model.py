@@ -1,6 +1,6 @@
 """A model that diverges: its output turns NaN at t = 0.1 s, as an unstable integrator's does."""
 
-from clients.node import Node
+from hycosim.clients.node import Node
 
 
 class Diverging(Node):

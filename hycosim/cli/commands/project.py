@@ -1,0 +1,159 @@
+"""Commands on a project file: validate, schema, import (SSP in), export (SSP out)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any, Optional
+
+import typer
+
+import hycosim
+from hycosim.cli.options import finite
+from hycosim.cli.output import err, fail, out
+from hycosim.cli.projects import from_ssp, load, project_file
+
+app = typer.Typer()
+
+
+@app.command()
+def validate(
+    file: Path,
+    models: Annotated[bool, typer.Option(help="also check that each node's model or FMU exists and takes "
+                                              "the node's ports and parameters (imports the models)")] = True,
+) -> None:
+    """Check a project JSON (or an SSP package): print OK, or every error with its JSON path and a hint."""
+    loaded = load(project_file(file))
+    p = loaded.project
+    if models:
+        from hycosim.clients.loader import NodeLoadError, check_node
+
+        problems = []
+        for i, node in enumerate(p.nodeLists):
+            try:
+                check_node(node, loaded.path.parent, p.coSimulation)
+            except NodeLoadError as exc:
+                problems.append(f"{file}: nodeLists[{i}]: {exc}")
+        if problems:
+            err.print(f"[red]error:[/red] {file}: {len(problems)} node(s) cannot be loaded", highlight=False)
+            for line in problems:
+                err.print(f"  {line}", highlight=False, markup=False)
+            raise typer.Exit(2)
+        _check_retakes(file, loaded)
+    out.print(f"OK {file}: project {p.projectName!r}, {len(p.nodeLists)} nodes, {len(p.linkLists)} links, "
+              f"{len(loaded.routes)} routes, {len(p.events)} events" + ("" if models else " (models not checked)"),
+              highlight=False)
+    if models:
+        _warn_algebraic_loops(file, loaded)
+    if p.coSimulation.checkpointEvery is not None and models:
+        from hycosim.clients.loader import why_no_checkpoint
+
+        unable = [(n.nodeName, why) for n in p.nodeLists if (why := why_no_checkpoint(n, loaded.path.parent))]
+        for name, why in unable:
+            err.print(f"[yellow]warning:[/yellow] coSimulation.checkpointEvery: node {name!r} cannot take part in "
+                      f"checkpoints: {why}; the run takes none, and a lost node ends it", highlight=False)
+    bridged = [n.nodeName for n in p.nodeLists if not (n.model or n.fmu or n.replay or n.asynchronous)]
+    if bridged:
+        out.print(f"{len(bridged)} node(s) wait for a bridge FMU in some tool: {', '.join(bridged)} "
+                  f"(build them with: hycosim fmu build {file} -o fmus)", highlight=False)
+
+
+def _check_retakes(file: Path, loaded: Any) -> None:
+    """Iterative coupling and the error-controlled step need every stepping node to take a step
+    again: name each one that cannot, exit 2."""
+    from hycosim.clients.loader import why_no_retake
+
+    cosim = loaded.project.coSimulation
+    for key, variable in (("iterate", False), ("stepControl", True)):
+        if getattr(cosim, key) is None:
+            continue
+        unable = [(n.nodeName, why) for n in loaded.project.stepping_nodes()
+                  if (why := why_no_retake(n, loaded.path.parent, variable))]
+        if unable:
+            err.print(f"[red]error:[/red] {file}: coSimulation.{key}: every stepping node must be able to take a step "
+                      f"again{' with another length' if variable else ''}", highlight=False)
+            for name, why in unable:
+                err.print(f"  node {name!r}: {why}", highlight=False, markup=False)
+            raise typer.Exit(2)
+    if cosim.iterate is not None and cosim.iterate.interpolate:
+        from hycosim.clients.loader import why_no_interpolation
+
+        for n in loaded.project.stepping_nodes():
+            if n.input and (why := why_no_interpolation(n, loaded.path.parent)):
+                err.print(f"[yellow]warning:[/yellow] {file}: coSimulation.iterate.interpolate: node "
+                          f"{n.nodeName!r} holds its inputs at the step's end value: {why}", highlight=False)
+
+
+def _warn_algebraic_loops(file: Path, loaded: Any) -> None:
+    """Name each cycle of direct feedthrough, which a step-by-step scheme takes a step late."""
+    from hycosim.clients.loader import feedthrough_of
+    from hycosim.core.coupling import algebraic_loops
+
+    p = loaded.project
+    feedthrough = {n.nodeName: feedthrough_of(n, loaded.path.parent) for n in p.stepping_nodes()}
+    for loop in algebraic_loops(loaded.routes, feedthrough):
+        if p.coSimulation.iterate is None:
+            err.print(f"[yellow]warning:[/yellow] {file}: algebraic loop {' → '.join(loop)}: "
+                      f"{p.coSimulation.coupling.replace('gauss-seidel', 'Gauss-Seidel').replace('jacobi', 'Jacobi')} "
+                      "coupling takes it a macro step late; coSimulation.iterate solves it at each step",
+                      highlight=False)
+        else:
+            out.print(f"algebraic loop {' → '.join(loop)}: solved at each step by coSimulation.iterate",
+                      highlight=False)
+
+
+@app.command()
+def schema(
+    output: Annotated[Optional[Path], typer.Option("-o", "--output", help="write it here (default: stdout)")] = None,
+) -> None:
+    """The JSON Schema of the project file: name it in a project with "$schema" and an editor
+    checks and completes the file as you type."""
+    from hycosim.core.schema import project_json_schema
+
+    text = json.dumps(project_json_schema(), indent=1) + "\n"
+    if output is None:
+        out.print(text, highlight=False, markup=False, end="")
+        return
+    output.write_text(text)
+    out.print(f"{output}: the JSON Schema of hycosim's project file (a copy ships as {SCHEMA_FILE})", highlight=False)
+
+
+@app.command("import")
+def import_ssp(
+    package: Path,
+    output: Annotated[Path, typer.Option("-o", "--output", help="the project JSON to write (its FMUs go in a "
+                                                                 "folder beside it)")] = Path("project.json"),
+    side: Annotated[Optional[Path], typer.Option(help="JSON with what SSP has no word for: serverIP, events, "
+                                                      "asynchronous nodes, coSimulation keys")] = None,
+    step: Annotated[Optional[float], typer.Option(min=0.0, callback=finite,
+                                                  help="the macro step, when the package gives none")] = None,
+    stop: Annotated[Optional[float], typer.Option(callback=finite,
+                                                  help="the stop time, when the package gives none")] = None,
+) -> None:
+    """Turn an SSP package into a project JSON to edit and keep: components become nodes,
+    connections links, parameter bindings parameters, the default experiment coSimulation."""
+    written = from_ssp(package, output, side=side, step=step, stop=stop)
+    loaded = load(written)
+    out.print(f"{written}: project {loaded.project.projectName!r}, {len(loaded.project.nodeLists)} nodes, "
+              f"{len(loaded.routes)} routes (FMUs in {written.parent / (written.stem + '-fmus')})", highlight=False)
+
+
+@app.command("export")
+def export_ssp(
+    file: Path,
+    output: Annotated[Path, typer.Option("-o", "--output", help="the .ssp package to write")] = Path("system.ssp"),
+) -> None:
+    """Write a project whose nodes are all FMUs as an SSP 1.0 package (FMPy's simulate_ssp reads it)."""
+    from hycosim.fmu_bridge.ssp import SspError, write_ssp
+
+    loaded = load(file)
+    try:
+        written = write_ssp(loaded, output)
+    except SspError as exc:
+        fail(str(exc))
+    out.print(f"{written}: {len(loaded.project.nodeLists)} components, {len(loaded.routes)} connections",
+              highlight=False)
+
+
+# The schema as shipped: package data of hycosim, named by the shipped configs.
+SCHEMA_FILE = Path(hycosim.__file__).resolve().parent / "project.schema.json"

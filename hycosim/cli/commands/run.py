@@ -1,0 +1,160 @@
+"""Commands that run a co-simulation or ask a running one: server, node, run, status."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from hycosim.cli.extras import require_extra
+from hycosim.cli.options import checked_endpoint, monitor_credentials
+from hycosim.cli.output import end_process, err, fail, out, print_summary, say_outcome
+from hycosim.cli.projects import load, project_file
+from hycosim.core.signals import ignore_stops
+
+app = typer.Typer()
+
+
+@app.command()
+def server(
+    file: Path,
+    listen: Annotated[Optional[str], typer.Option(help="Zenoh endpoint to listen on (default: serverIP)")] = None,
+    runs_dir: Annotated[Path, typer.Option(help="where run directories are made")] = Path("runs"),
+    run_dir: Annotated[Optional[Path], typer.Option(help="exact run directory to write")] = None,
+    progress_jsonl: Annotated[bool, typer.Option(help="print progress as JSON lines (for launchers)")] = False,
+    gateway: Annotated[Optional[str], typer.Option(help="HOST:PORT for bridge FMUs (default: gatewayIP, "
+                                                        "or the server's port + 1)")] = None,
+    resume: Annotated[Optional[Path], typer.Option(help="go on with the run in this directory (its server died) "
+                                                       "from its last checkpoint")] = None,
+) -> None:
+    """Run the relay server for one co-simulation (Zenoh nodes and bridge FMUs)."""
+    from hycosim.server.main import serve
+
+    loaded = load(file)
+    code, rdir, message = serve(loaded, listen=listen, runs_dir=runs_dir, run_dir=run_dir,
+                                progress_jsonl=progress_jsonl, gateway=gateway, resume=resume)
+    if code:
+        say_outcome(err, f"[red]error:[/red] {message}" + (f"\n  results so far: {rdir}" if rdir else ""))
+    elif not progress_jsonl:
+        say_outcome(out, f"{message}; results in {rdir}")
+    end_process(code)
+
+
+@app.command()
+def node(
+    name: str,
+    file: Path,
+    connect: Annotated[Optional[str], typer.Option(help="server endpoint, e.g. tcp/HOST:7447")] = None,
+    log_file: Annotated[Optional[Path], typer.Option(help="append JSON-lines logs here (default: stderr)")] = None,
+    password_file: Annotated[Optional[Path], typer.Option(help="this node's password (user = node name), "
+                                                               "when the project has 'security'")] = None,
+) -> None:
+    """Attach one node of the project to a running server (local or on another host)."""
+    from hycosim.clients.main import run_node
+
+    loaded = load(file)
+    code, message = run_node(loaded, name, connect, log_file, password_file)
+    say_outcome(err if code else out, ("[red]error:[/red] " if code else "") + message)
+    end_process(code)
+
+
+@app.command()
+def run(
+    file: Path,
+    listen: Annotated[Optional[str], typer.Option(help="endpoint for the server (default: a free loopback port)")] = None,
+    runs_dir: Annotated[Path, typer.Option(help="where run directories are made")] = Path("runs"),
+    progress: Annotated[bool, typer.Option(help="show the progress bar")] = True,
+    restarts: Annotated[int, typer.Option(min=0, help="with checkpoints: how often a node process that dies "
+                                                       "is started again")] = 3,
+    resume: Annotated[Optional[Path], typer.Option(help="go on with the run in this directory (its server died) "
+                                                       "from its last checkpoint")] = None,
+    dashboard: Annotated[bool, typer.Option(help="watch the run in a browser (hycosim dashboard)")] = False,
+    dashboard_port: Annotated[int, typer.Option(min=0, max=65535, help="the dashboard's port on 127.0.0.1")] = 8050,
+) -> None:
+    """Run the server and every node as local processes on loopback (FILE: a project JSON or an SSP package)."""
+    from hycosim.core.security import SecurityError, router_security
+    from hycosim.embedded import run_embedded
+    from hycosim.server.report import summarise
+
+    file = project_file(file)
+    loaded = load(file)
+    listen = checked_endpoint("--listen", listen) if listen else None
+    if resume is not None and not (resume / "meta.json").is_file():
+        fail(f"--resume: {resume} is not a run directory (no meta.json)")
+    if dashboard:
+        require_extra("dashboard", "hycosim run --dashboard")
+    if dashboard and loaded.project.security is not None and loaded.project.security.credentials:
+        fail("--dashboard: this project's server requires credentials; attach a dashboard "
+             "with its own: hycosim dashboard ENDPOINT --user NAME --password-file FILE")
+    try:
+        # The server reads these again; read here, a missing file is named before a run directory is made.
+        router_security(loaded, listen or "")
+    except SecurityError as exc:
+        fail(str(exc))
+    result = run_embedded(loaded, file, listen=listen, runs_dir=runs_dir, console=err, show_progress=progress,
+                          restarts=restarts, resume=resume, dashboard_port=dashboard_port if dashboard else None)
+    if result.code >= 128:
+        ignore_stops()  # a Ctrl-C pressed twice: the run is over, say so
+    if result.code:
+        err.print(f"[red]error:[/red] {result.message}\n  results so far: {result.run_dir}", highlight=False)
+        raise typer.Exit(result.code)
+    summary = summarise(result.run_dir)
+    print_summary(summary)
+
+
+@app.command()
+def status(
+    endpoint: str,
+    project: Annotated[str, typer.Option(help="project name")] = "*",
+    timeout: Annotated[float, typer.Option(min=0.1, max=3600.0, help="seconds to wait for an answer")] = 3.0,
+    user: Annotated[Optional[str], typer.Option(help="user, when the server requires credentials")] = None,
+    password_file: Annotated[Optional[Path], typer.Option(help="that user's password")] = None,
+    tls_ca: Annotated[Optional[Path], typer.Option(help="CA certificate (PEM) for a tls/ endpoint")] = None,
+) -> None:
+    """Ask a running server who is attached."""
+    from hycosim.core import json_text
+    from hycosim.core.keys import ProjectKeys
+    from hycosim.core.session import ConnectError, client_config, open_session
+
+    endpoint = checked_endpoint("endpoint", endpoint)
+    tls, password = monitor_credentials(endpoint, tls_ca, password_file)
+    try:
+        session = open_session(client_config(endpoint, timeout_s=timeout, user=user, password=password, tls=tls),
+                               endpoint)
+    except ConnectError as exc:
+        fail(str(exc), 3)
+    answers, busy = [], []
+    try:
+        for reply in session.get(ProjectKeys(project).status, timeout=timeout):
+            if reply.ok is None:  # a server over its budget of answers says so (server.answer_budget)
+                said = reply.err.payload.to_bytes()[:200].decode(errors="replace") if reply.err is not None else ""
+                busy += [said] if said.startswith("busy: ") else []
+            else:
+                try:
+                    answer = json_text.loads(reply.ok.payload.to_bytes())
+                except ValueError:
+                    continue  # not a hycosim server's answer (anyone may answer on the key)
+                if _is_status(answer):
+                    answers.append(answer)
+    finally:
+        session.close()
+    if not answers and busy:
+        shown = "".join(c for c in busy[0] if c.isprintable())  # anyone may answer on the key
+        fail(f"the server on {endpoint} is {shown}", 3)
+    if not answers:
+        fail(f"no hycosim server answered on {endpoint} within {timeout:g} s", 3)
+    for a in answers:
+        out.print(f"{a['project']}: step {a['step']} t={a['t']:g} s mode={a['mode']}; "
+                  f"attached {len(a['attached'])}/{len(a['expected'])}: {', '.join(a['attached'])}", highlight=False)
+
+
+def _is_status(answer: object) -> bool:
+    """Whether a reply on the status key reads as a hycosim server's (anyone may answer there)."""
+    if not isinstance(answer, dict):
+        return False
+    number = (int, float)
+    return (isinstance(answer.get("project"), str) and isinstance(answer.get("mode"), str)
+            and type(answer.get("step")) is int and type(answer.get("t")) in number
+            and all(isinstance(answer.get(k), list) and all(isinstance(n, str) for n in answer[k])
+                    for k in ("attached", "expected")))

@@ -1,0 +1,95 @@
+"""The ``hycosim`` application: every command registered, and the console entry point."""
+
+from __future__ import annotations
+
+import sys
+from typing import Annotated
+
+import typer
+
+from hycosim import __version__
+from hycosim.cli.commands import fmu, krl, policy, project, results, run, scene
+from hycosim.cli.output import err, fail, out
+from hycosim.core import signals
+
+
+def _show_version(value: bool) -> None:
+    if value:
+        out.print(f"hycosim {__version__}", highlight=False)
+        raise typer.Exit()
+
+
+app = typer.Typer(add_completion=False, no_args_is_help=True,
+                  help="hycosim: hybrid time/event co-simulation on FMI, relayed over Zenoh.")
+
+
+@app.callback()
+def _options(version: Annotated[bool, typer.Option("--version", callback=_show_version, is_eager=True,
+                                                   help="print hycosim's version and exit")] = False) -> None:
+    pass
+
+
+# The commands in the order `hycosim --help` lists them: a project, a run, its results, FMUs,
+# then the paper's scenario (its scene, camera, trials, policy and controller).
+for commands in (project.app, run.app, results.app, scene.app, policy.app):
+    app.add_typer(commands)
+app.add_typer(fmu.app, name="fmu")
+app.add_typer(scene.scene_app, name="scene")
+app.add_typer(krl.app, name="krl")
+
+
+def _is_option(arg: str) -> bool:
+    # "-o" is an option; "-5" is a (negative) angle, left for trials to refuse.
+    return arg.startswith("-") and not arg[1:2].isdigit()
+
+
+def _join_multi_value_options(argv: list[str]) -> list[str]:
+    # `--angles 30 40 50 60` as the paper's trials are written; click options take one value.
+    out, i = [], 0
+    while i < len(argv):
+        out.append(argv[i])
+        if argv[i] == "--angles":
+            values = []
+            while i + 1 < len(argv) and not _is_option(argv[i + 1]):
+                i += 1
+                values.append(argv[i])
+            out.append(",".join(values))
+        i += 1
+    return out
+
+
+def main() -> None:
+    """Console entry point."""
+    import faulthandler
+
+    from hycosim.core.session import prefer_shared_runtime
+
+    # A model that crashes in native code (an FMU's binary, an extension) kills the process
+    # without a word from Python; the fault handler at least prints the stack it was at.
+    faulthandler.enable()
+    heard: list[int] = []  # the stop signals that came
+    signals.raise_on_stop(heard)  # SIGTERM and SIGHUP (a supervisor, a closed terminal) are ways out like Ctrl-C
+    prefer_shared_runtime()  # before any session opens; the server and nodes it starts inherit it
+    try:
+        app(args=_join_multi_value_options(sys.argv[1:]), prog_name="hycosim")
+    except SystemExit as exc:
+        # Typer ends a command a stop signal interrupted with 130 whatever the signal; a
+        # supervisor's SIGTERM (143) or a closed terminal's SIGHUP (129) is told apart, as
+        # the server, the nodes and the launcher tell it.
+        stop = signals.stop_behind(exc) if exc.code == 130 else None
+        if stop is not None:
+            sys.exit(signals.exit_code(stop))
+        raise
+    except Exception as exc:
+        if heard:  # Ctrl-C while MuJoCo's or torch's extension initialised surfaces as an ImportError
+            stop = signals.Stopped(heard[0])
+            err.print(signals.describe(stop), highlight=False)
+            sys.exit(signals.exit_code(stop))
+        if not isinstance(exc, OSError) or exc.filename is None:
+            raise
+        # The last resort for a file a command could not read or write (an output folder
+        # that cannot be made, a PNG path in a missing folder): name it instead of a traceback.
+        try:
+            fail(f"{exc.filename}: {exc.strerror or exc}")
+        except typer.Exit as stop:
+            sys.exit(stop.exit_code)

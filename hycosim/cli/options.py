@@ -1,0 +1,40 @@
+"""Checks of command-line values that Typer's own types do not make."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import typer
+
+from hycosim.cli.output import fail
+from hycosim.core.endpoints import EndpointError, parse_endpoint
+
+
+def finite(value: float | None) -> float | None:
+    """A float option's check where its range does not make one: Typer refuses nan for an option
+    with a bound, but takes nan and inf without one and inf past a lower bound alone."""
+    if value is not None and not math.isfinite(value):
+        raise typer.BadParameter(f"{value} is not a finite number")
+    return value
+
+
+def checked_endpoint(option: str, value: str, parse=parse_endpoint) -> str:
+    """An address given on the command line, normalised; exit 2 naming the option if unusable."""
+    try:
+        return str(parse(value))
+    except EndpointError as exc:
+        fail(f"{option}: {exc}")
+
+
+def monitor_credentials(endpoint: str, tls_ca: Path | None, password_file: Path | None) -> tuple[dict | None, str | None]:
+    """A monitor's TLS settings and password (``status``, ``dashboard``); exit 2 naming what is wrong."""
+    from hycosim.core.security import SecurityError, ca_settings, read_password
+
+    if endpoint.startswith("tls/") and tls_ca is None:
+        fail(f"{endpoint} is a TLS endpoint: give --tls-ca with the CA that signed "
+             "the server's certificate")
+    try:
+        return ca_settings(tls_ca) if tls_ca else None, read_password(password_file) if password_file else None
+    except SecurityError as exc:
+        fail(str(exc))
