@@ -14,7 +14,7 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip setuptools wheel
 	$(PY) -m pip install --quiet "torch==2.13.0"
-	$(PY) -m pip install --quiet -e ".[test]"
+	$(PY) -m pip install --quiet -e ".[scenario,dashboard,models,test,docs]"
 	touch $(STAMP)
 
 # Every run starts a process per node and one for the server, each importing the package. Where
@@ -22,7 +22,7 @@ $(STAMP): pyproject.toml
 # source: 0.1 s of a process's 0.75 s of imports. Written here, they are read; a stale file is
 # not (its source is newer), so this only ever costs the time to compile what changed.
 bytecode: $(STAMP)
-	$(PY) -m compileall -q hycosim benchmarks >/dev/null
+	$(PY) -m compileall -q -x "hycosim/build" hycosim benchmarks >/dev/null
 
 # The whole scenario on loopback: one trial at 40° with the pretrained policy, camera
 # correction, EthernetKRL export and the emulated controller; ends with the table and figure.
@@ -57,7 +57,7 @@ test-long: $(STAMP) bytecode
 	$(PY) -m pytest -q -p no:cacheprovider -m long
 
 bench: $(STAMP) bytecode chromium
-	$(PY) -m pip install --quiet -e ".[test,bench]"
+	$(PY) -m pip install --quiet -e ".[scenario,dashboard,models,test,docs,bench]"
 	$(PY) benchmarks/barrier.py
 	$(PY) benchmarks/fmu_overhead.py
 	$(PY) benchmarks/scene_fmus.py
@@ -72,9 +72,9 @@ bench: $(STAMP) bytecode chromium
 docs: $(STAMP)
 	$(PY) -m mkdocs build --strict -d site
 
-# The rod and robot-scene FMUs that configs/grasp-fmu.json uses.
+# The rod and robot-scene FMUs that hycosim/configs/grasp-fmu.json uses.
 fmus: $(STAMP) bytecode
-	$(VENV)/bin/hycosim scene fmus -o build/fmus
+	$(VENV)/bin/hycosim scene fmus -o hycosim/build/fmus
 
 clean:
 	rm -rf $(VENV) build site *.egg-info

@@ -1,7 +1,7 @@
 """The paper's trials (Table 2), rerun: ``hycosim trials --angles 30 40 50 60 --trials 20``.
 
 Per trial: the full distributed co-simulation (server and every node as processes over
-Zenoh on loopback: the rod twin and the robot scene, as FMUs by default (``configs/grasp-paper.json``)
+Zenoh on loopback: the rod twin and the robot scene, as FMUs by default (the shipped ``hycosim/configs/grasp-paper.json``)
 or as Python nodes, the policy, and, with correction on, the camera watching the emulated
 physical rod), then the robot's path exported as
 EthernetKRL files and streamed over TCP to the emulated controller, which executes it
@@ -32,7 +32,11 @@ from hycosim.core.config import parse_project
 from hycosim.core.folders import make_folder
 
 PAPER = {30: (3.2, 14.8, 95), 40: (3.8, 15.6, 95), 50: (5.0, 15.4, 90), 60: (5.8, 16.6, 80)}
-REPO = Path(__file__).resolve().parents[1]
+# The scenario's project files ship in the package (package data), so an installed wheel runs the trials.
+CONFIGS = Path(__file__).resolve().parent / "configs"
+# Where the rod and robot-scene FMUs are built when no other folder is given (beside the run, as
+# `hycosim scene fmus` builds them): never inside the installed package.
+FMU_DIR = Path("build") / "fmus"
 
 
 @dataclass
@@ -83,19 +87,32 @@ def _port_name(port) -> str:
     return port if isinstance(port, str) else port["name"]
 
 
+class ScenarioMissing(RuntimeError):
+    """A shipped scenario file that is not there (a damaged install); names the file."""
+
+
+def scenario_file(nodes: str, driver: str) -> Path:
+    """The shipped project file of that node kind and driver; ScenarioMissing if it is gone."""
+    path = CONFIGS / _BASES[nodes, driver]
+    if not path.is_file():
+        raise ScenarioMissing(f"{path}: the scenario's project file is missing from the installed package "
+                              "(reinstall hycosim)")
+    return path
+
+
 def trial_project(angle: float, physical: RodParams, correction: bool, driver: str, seed: int,
-                  nodes: str = "fmu") -> dict:
+                  nodes: str = "fmu", fmu_dir: Path = FMU_DIR) -> dict:
     """The project JSON of one trial: the shipped scenario of that node kind and driver, released
-    at ``angle``, with the camera on the trial's physical rod (with correction) or without it."""
-    configs = REPO / "configs"
-    base = json.loads((configs / _BASES[nodes, driver]).read_text())
+    at ``angle``, with the camera on the trial's physical rod (with correction) or without it;
+    the scene FMUs (``nodes='fmu'``) are taken from ``fmu_dir``."""
+    base = json.loads(scenario_file(nodes, driver).read_text())
     base["projectName"] = f"trial-{angle:g}-{seed}"
     camera = {"source": "emulated", "noise_sigma": 25, "seed": seed,
               "physical": {"length": physical.length, "damping": physical.damping,
                            "initial_angle_deg": math.degrees(physical.initial_angle)}}
     for node in base["nodeLists"]:
-        if "fmu" in node:  # FMU paths are relative to the shipped config; the trial's file lies elsewhere
-            node["fmu"] = str((configs / node["fmu"]).resolve())
+        if "fmu" in node:  # the trial's file lies elsewhere than the shipped one: the FMUs by absolute path
+            node["fmu"] = str((fmu_dir / Path(node["fmu"]).name).resolve())
         params = node.get("parameters")
         if node["nodeName"] == "camera":
             node["parameters"] = dict(params, **camera)
@@ -127,12 +144,12 @@ def trial_project(angle: float, physical: RodParams, correction: bool, driver: s
 
 
 def run_trial(angle: float, trial: int, out: Path, correction: bool = True, driver: str = "policy",
-              seed_base: int = 1000, nodes: str = "fmu") -> TrialResult:
+              seed_base: int = 1000, nodes: str = "fmu", fmu_dir: Path = FMU_DIR) -> TrialResult:
     from hycosim.embedded import run_embedded
 
     seed = trial_seed(angle, trial, seed_base)
     physical = physical_rod(angle, seed)
-    doc = trial_project(angle, physical, correction, driver, seed, nodes)
+    doc = trial_project(angle, physical, correction, driver, seed, nodes, fmu_dir)
     folder = out / f"{angle:g}deg-{trial:02d}"
     folder.mkdir(parents=True, exist_ok=True)
     cfg = folder / "project.json"
@@ -250,23 +267,26 @@ class TrialsInterrupted(Exception):
 
 
 def run_trials(angles: list[float], trials: int, out: Path, correction: bool = True, driver: str = "policy",
-               progress: Callable[[TrialResult], None] | None = None, nodes: str = "fmu") -> list[TrialResult]:
+               progress: Callable[[TrialResult], None] | None = None, nodes: str = "fmu",
+               fmu_dir: Path = FMU_DIR) -> list[TrialResult]:
     """Every trial, in order; one that fails to run is recorded as not grasped, with its error,
-    and the others go on. ``trials.csv`` is rewritten after each trial. Ctrl-C stops them:
+    and the others go on. The scene FMUs (``nodes='fmu'``) are built into ``fmu_dir`` when missing
+    or older than their sources; ScenarioMissing if the shipped scenario is not there. ``trials.csv`` is rewritten after each trial. Ctrl-C stops them:
     TrialsInterrupted carries the finished ones (the interrupted trial is not counted)."""
     from hycosim.core import logs
 
+    scenario_file(nodes, driver)  # a damaged install is named before anything runs
     make_folder(out)
     logs.configure(out / "trials.log.jsonl")
     if nodes == "fmu":
         from hycosim.clients.scene_fmus import ensure_scene_fmus
 
-        ensure_scene_fmus(REPO / "build" / "fmus")
+        ensure_scene_fmus(fmu_dir)
     results = []
     for angle in angles:
         for i in range(trials):
             try:
-                r = run_trial(angle, i, out, correction, driver, nodes=nodes)
+                r = run_trial(angle, i, out, correction, driver, nodes=nodes, fmu_dir=fmu_dir)
             except KeyboardInterrupt as stop:
                 raise TrialsInterrupted(results, stop) from None
             except (RuntimeError, OSError, ValueError) as exc:

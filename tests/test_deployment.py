@@ -32,7 +32,7 @@ def test_compose_file_is_valid_against_the_compose_schema():
     assert res.returncode == 0, res.stdout + res.stderr
     spec = yaml.safe_load(COMPOSE.read_text())
     assert set(spec["services"]) == {"server", "rod", "robot", "policy", "camera"}
-    grasp = json.loads((REPO / "configs" / "grasp-paper.json").read_text())
+    grasp = json.loads((REPO / "hycosim" / "configs" / "grasp-paper.json").read_text())
     assert {n["nodeName"] for n in grasp["nodeLists"]} == set(spec["services"]) - {"server"}
     assert all("/config/grasp-paper.json" in s["command"] for s in spec["services"].values())
     # The image builds the FMUs where the config names them from /config.
@@ -48,7 +48,7 @@ def test_compose_services_run_together_as_local_processes(tmp_path):
     spec = yaml.safe_load(COMPOSE.read_text())
     endpoint = free_endpoint()
     port = endpoint.rsplit(":", 1)[1]
-    doc = json.loads((REPO / "configs" / "grasp-paper.json").read_text())
+    doc = json.loads((REPO / "hycosim" / "configs" / "grasp-paper.json").read_text())
     doc["coSimulation"]["stopTime"] = 1.5
     config_dir = tmp_path / "config"
     config_dir.mkdir()

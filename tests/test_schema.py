@@ -11,7 +11,7 @@ from hycosim.core.schema import project_json_schema
 from hycosim.cli.commands.project import SCHEMA_FILE
 from tests.helpers import REPO, hycosim
 
-CONFIGS = sorted((REPO / "configs").glob("*.json"))
+CONFIGS = sorted((REPO / "hycosim" / "configs").glob("*.json"))
 
 
 def test_the_shipped_schema_is_the_models_and_hycosim_schema_prints_it():
@@ -33,7 +33,7 @@ def test_every_shipped_config_names_the_schema_and_meets_it(config):
 def test_the_schema_refuses_what_the_loader_refuses():
     """Not a schema that takes anything: a misspelt key, a wrong type, a bad port name fail it."""
     validator = Draft202012Validator(project_json_schema())
-    good = json.loads((REPO / "configs" / "default.json").read_text())
+    good = json.loads((REPO / "hycosim" / "configs" / "default.json").read_text())
     assert validator.is_valid(good)
     for change in ({"nodeNum": "two"}, {"coSimulation": {"stepSize": -1}}, {"stopTime": 3},
                    {"nodeLists": [{**good["nodeLists"][0], "input": ["9lives"]}]},

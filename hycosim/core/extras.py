@@ -2,7 +2,8 @@
 
 ``pip install hycosim`` is what coupling FMUs and Python nodes needs. The paper's scenario
 (``[scenario]``: MuJoCo, OpenCV, torch, gymnasium, pythonfmu), the dashboard's web stack
-(``[dashboard]``) and figures (``[plot]``, matplotlib) are extras; a command or a node that
+(``[dashboard]``), figures (``[plot]``, matplotlib) and packaging Python models as FMUs
+(``[models]``: pythonfmu, pythonfmu3) are extras; a command or a node that
 needs one that is missing names the extra to install instead of failing on an import.
 Keep this table in step with ``[project.optional-dependencies]`` in ``pyproject.toml``
 (a test compares them).
@@ -16,6 +17,7 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "scenario": ("mujoco", "cv2", "torch", "gymnasium", "pythonfmu", "matplotlib"),
     "dashboard": ("starlette", "uvicorn", "websockets"),
     "plot": ("matplotlib",),
+    "models": ("pythonfmu", "pythonfmu3"),
 }
 
 

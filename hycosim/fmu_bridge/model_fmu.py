@@ -11,10 +11,13 @@ writes no InitialUnknowns unless outputs are registered with ``initial=exact``.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import subprocess
 import sys
 from pathlib import Path
+
+from hycosim.core.extras import install_hint
 
 
 class ModelFmuError(RuntimeError):
@@ -35,6 +38,9 @@ def build_model_fmu(script: Path, dest: Path, *, resources: list[Path] | None = 
     if not script.is_file():
         raise ModelFmuError(f"{script}: no such model script")
     module, flag = ("pythonfmu3", "FMUState") if fmi_version.startswith("3") else ("pythonfmu", "FMUstate")
+    if importlib.util.find_spec(module) is None:
+        raise ModelFmuError(f"{script}: packaging as FMI {fmi_version} needs {module}, in hycosim's [models] extra: "
+                            f"{install_hint('models')}")
     job = {"script": str(script.resolve()), "dest": str(Path(dest).resolve()),
            "resources": [str(Path(r).resolve()) for r in resources or []],
            "flags": {f"canGetAndSet{flag}": can_get_and_set_state, f"canSerialize{flag}": can_get_and_set_state}}

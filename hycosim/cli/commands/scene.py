@@ -139,10 +139,12 @@ def trials(
     nodes: Annotated[str, typer.Option(help="the rod and the robot scene as 'fmu' (the FMUs `hycosim scene fmus` "
                                             "builds, built when missing) or as 'python' nodes")] = "fmu",
     output: Annotated[Path, typer.Option("-o", "--output")] = Path("runs/trials"),
+    fmus: Annotated[Path, typer.Option(help="where the rod and robot-scene FMUs are, built there when missing "
+                                            "or older than hycosim's sources")] = Path("build/fmus"),
 ) -> None:
     """Rerun the paper's trials: co-simulation, EthernetKRL export, emulated controller, Table 2."""
     require_extra("scenario", "hycosim trials")
-    from hycosim.trials import NODE_KINDS, PAPER, TrialsInterrupted, run_trials, summarise, write_outputs
+    from hycosim.trials import NODE_KINDS, PAPER, ScenarioMissing, TrialsInterrupted, run_trials, summarise, write_outputs
 
     if driver not in ("policy", "reference"):
         fail("--driver is 'policy' or 'reference'")
@@ -166,7 +168,9 @@ def trials(
 
     interrupted = None
     try:
-        results = run_trials(angle_list, n, output, correction, driver, progress, nodes)
+        results = run_trials(angle_list, n, output, correction, driver, progress, nodes, fmus)
+    except ScenarioMissing as exc:
+        fail(str(exc))
     except TrialsInterrupted as exc:
         # Ctrl-C again must not cut short the table and files of the finished trials (a second or two).
         signal.signal(signal.SIGINT, signal.SIG_IGN)
