@@ -32,7 +32,8 @@ def test_barrier_benchmark_json_reports_medians_of_its_runs():
 
 
 def test_barrier_benchmark_kills_a_run_past_its_timeout_and_says_so():
-    res = subprocess.run([sys.executable, "benchmarks/barrier.py", "--n", "2", "--steps", "200", "--repeat", "1",
+    # Steps enough that neither finishes in 0.5 s (200 floor steps did, on a machine at rest).
+    res = subprocess.run([sys.executable, "benchmarks/barrier.py", "--n", "2", "--steps", "1000000", "--repeat", "1",
                           "--systems", "hycosim", "zenoh-floor", "--timeout", "0.5"],
                          capture_output=True, text=True, timeout=120, cwd=REPO, env=env())
     assert res.returncode == 1

@@ -26,7 +26,7 @@ FMU's count of its own steps: 0 at the start, n after its n-th STEP; the gateway
 only as the answer to the n-th STEP it sent (a node is sent only the STEPs of its own steps).
 STEP's step and t are the server's, at the start of the node's step. Integer and Boolean
 ports travel as f64 (exact up to 2^53). A payload is at most 1 MiB. The C side of this
-file is ``fmu_bridge/templates/bridge_fmu.c``; keep the two in step.
+file is ``hycosim/fmu_bridge/templates/bridge_fmu.c``; keep the two in step.
 """
 
 from __future__ import annotations
