@@ -6,10 +6,18 @@ the node runtime and the nodes; ``hycosim.dashboard`` the web dashboard; ``hycos
 command line.
 """
 
-from importlib.metadata import PackageNotFoundError, version
 
-try:
-    # One version string: the package's metadata, written from pyproject.toml at install.
-    __version__ = version("hycosim")
-except PackageNotFoundError:  # the source tree on the import path, never installed
-    __version__ = "0+unknown"
+def __getattr__(name: str) -> str:
+    # ``__version__`` is read from the installed metadata when first asked for, not at import:
+    # importlib.metadata takes about 30 ms to import, and every node process imports hycosim.
+    if name != "__version__":
+        raise AttributeError(f"module 'hycosim' has no attribute {name!r}")
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        # One version string: the package's metadata, written from pyproject.toml at install.
+        found = version("hycosim")
+    except PackageNotFoundError:  # the source tree on the import path, never installed
+        found = "0+unknown"
+    globals()["__version__"] = found
+    return found

@@ -14,11 +14,14 @@ import os
 import re
 import subprocess
 import sys
+import tarfile
 import time
 import zipfile
 from pathlib import Path
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from hycosim.core.extras import EXTRAS
 from tests.helpers import REPO
@@ -57,7 +60,7 @@ class Installed:
         return self.run(str(self.venv / "bin" / "python"), "-c", code)
 
     def pip_install(self, requirement: str, label: str) -> None:
-        # torch first and pinned, as the Makefile does: pip then keeps the CPU build it finds.
+        # [scenario] pins torch==2.13.0, the CPU build that pip finds here (as the Makefile installs it).
         started = time.monotonic()
         res = self.run(str(self.venv / "bin" / "python"), "-m", "pip", "install", "--quiet", requirement,
                        timeout=PIP_TIMEOUT)
@@ -105,7 +108,7 @@ def test_the_wheel_holds_only_the_hycosim_package_its_data_and_licence(installed
     assert "License-Expression: Apache-2.0" in metadata
     assert re.search(r"^Requires-Dist: torch.*extra == .scenario.", metadata, re.M), "torch is no core dependency"
     assert not re.search(r"^Requires-Dist: (torch|mujoco|opencv|starlette)[^;]*$", metadata, re.M)
-    with __import__("tarfile").open(installed.sdist) as sdist:
+    with tarfile.open(installed.sdist) as sdist:
         members = sdist.getnames()
     assert any(m.endswith("/LICENSE") for m in members) and any(m.endswith("/hycosim/configs/grasp.json")
                                                                 for m in members)
@@ -184,3 +187,18 @@ def test_the_scenario_extra_runs_a_grasp_trial_from_the_installed_package(instal
     # Built where the user is, not inside the installed package.
     assert not list(installed.venv.glob("lib/python*/site-packages/hycosim/build"))
     print(f"\ninstall times (s): {installed.timings}")
+
+
+@given(st.one_of(st.none(), st.text(max_size=40), st.sampled_from(["cv2", "torch.nn", "clients", "clients.rod",
+                                                                    "matplotlib.pyplot", "starlette"])),
+       st.text(max_size=40))
+def test_a_missing_modules_hint_is_total_and_names_an_extra_only_for_its_packages(missing, module_name):
+    """The name an ImportError carries comes from whatever a user's model imports."""
+    from hycosim.clients.loader import _missing_module_hint
+    from hycosim.core.extras import extra_providing
+
+    extra = extra_providing(missing)
+    assert extra is None or (missing or "").partition(".")[0] in EXTRAS[extra]
+    hint = _missing_module_hint(missing, module_name)
+    assert isinstance(hint, str)
+    assert (f"[{extra}] extra" in hint) if extra else ("extra" not in hint)

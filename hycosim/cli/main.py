@@ -7,14 +7,15 @@ from typing import Annotated
 
 import typer
 
-from hycosim import __version__
 from hycosim.cli.commands import fmu, krl, policy, project, results, run, scene
-from hycosim.cli.output import err, fail, out
+from hycosim.cli.output import err, out, say_error
 from hycosim.core import signals
 
 
 def _show_version(value: bool) -> None:
     if value:
+        from hycosim import __version__  # read from the metadata only when asked (every node process imports this)
+
         out.print(f"hycosim {__version__}", highlight=False)
         raise typer.Exit()
 
@@ -89,7 +90,5 @@ def main() -> None:
             raise
         # The last resort for a file a command could not read or write (an output folder
         # that cannot be made, a PNG path in a missing folder): name it instead of a traceback.
-        try:
-            fail(f"{exc.filename}: {exc.strerror or exc}")
-        except typer.Exit as stop:
-            sys.exit(stop.exit_code)
+        say_error(f"{exc.filename}: {exc.strerror or exc}")
+        sys.exit(2)

@@ -22,13 +22,18 @@ out = Console(soft_wrap=True)
 err = Console(stderr=True, soft_wrap=True)
 
 
-def fail(message: str, code: int = 2, details: Iterable[str] = ()) -> NoReturn:
-    """Say what went wrong on stderr (``error: message``, then each detail on a line of its own)
-    and end the command with ``code``. The text is shown as it is: a file name or a value the
-    user gave may hold brackets, which rich would take for markup."""
+def say_error(message: str, details: Iterable[str] = ()) -> None:
+    """Say what went wrong on stderr: ``error: message``, then each detail on a line of its own.
+    The text is shown as it is: a file name or a value the user gave may hold brackets, which
+    rich would take for markup."""
     err.print(Text.assemble(("error:", "red"), " ", message), highlight=False)
     for line in details:
         err.print(Text(f"  {line}"), highlight=False)
+
+
+def fail(message: str, code: int = 2, details: Iterable[str] = ()) -> NoReturn:
+    """Say what went wrong (:func:`say_error`) and end the command with ``code``."""
+    say_error(message, details)
     raise typer.Exit(code)
 
 

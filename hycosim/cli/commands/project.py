@@ -10,7 +10,7 @@ import typer
 
 import hycosim
 from hycosim.cli.options import finite
-from hycosim.cli.output import err, fail, out
+from hycosim.cli.output import fail, out, warn
 from hycosim.cli.projects import from_ssp, load, project_file
 
 app = typer.Typer()
@@ -35,10 +35,7 @@ def validate(
             except NodeLoadError as exc:
                 problems.append(f"{file}: nodeLists[{i}]: {exc}")
         if problems:
-            err.print(f"[red]error:[/red] {file}: {len(problems)} node(s) cannot be loaded", highlight=False)
-            for line in problems:
-                err.print(f"  {line}", highlight=False, markup=False)
-            raise typer.Exit(2)
+            fail(f"{file}: {len(problems)} node(s) cannot be loaded", details=problems)
         _check_retakes(file, loaded)
     out.print(f"OK {file}: project {p.projectName!r}, {len(p.nodeLists)} nodes, {len(p.linkLists)} links, "
               f"{len(loaded.routes)} routes, {len(p.events)} events" + ("" if models else " (models not checked)"),
@@ -50,8 +47,8 @@ def validate(
 
         unable = [(n.nodeName, why) for n in p.nodeLists if (why := why_no_checkpoint(n, loaded.path.parent))]
         for name, why in unable:
-            err.print(f"[yellow]warning:[/yellow] coSimulation.checkpointEvery: node {name!r} cannot take part in "
-                      f"checkpoints: {why}; the run takes none, and a lost node ends it", highlight=False)
+            warn(f"coSimulation.checkpointEvery: node {name!r} cannot take part in checkpoints: {why}; "
+                 "the run takes none, and a lost node ends it")
     bridged = [n.nodeName for n in p.nodeLists if not (n.model or n.fmu or n.replay or n.asynchronous)]
     if bridged:
         out.print(f"{len(bridged)} node(s) wait for a bridge FMU in some tool: {', '.join(bridged)} "
@@ -70,18 +67,15 @@ def _check_retakes(file: Path, loaded: Any) -> None:
         unable = [(n.nodeName, why) for n in loaded.project.stepping_nodes()
                   if (why := why_no_retake(n, loaded.path.parent, variable))]
         if unable:
-            err.print(f"[red]error:[/red] {file}: coSimulation.{key}: every stepping node must be able to take a step "
-                      f"again{' with another length' if variable else ''}", highlight=False)
-            for name, why in unable:
-                err.print(f"  node {name!r}: {why}", highlight=False, markup=False)
-            raise typer.Exit(2)
+            fail(f"{file}: coSimulation.{key}: every stepping node must be able to take a step again"
+                 f"{' with another length' if variable else ''}", details=[f"node {name!r}: {why}" for name, why in unable])
     if cosim.iterate is not None and cosim.iterate.interpolate:
         from hycosim.clients.loader import why_no_interpolation
 
         for n in loaded.project.stepping_nodes():
             if n.input and (why := why_no_interpolation(n, loaded.path.parent)):
-                err.print(f"[yellow]warning:[/yellow] {file}: coSimulation.iterate.interpolate: node "
-                          f"{n.nodeName!r} holds its inputs at the step's end value: {why}", highlight=False)
+                warn(f"{file}: coSimulation.iterate.interpolate: node {n.nodeName!r} holds its inputs at the "
+                     f"step's end value: {why}")
 
 
 def _warn_algebraic_loops(file: Path, loaded: Any) -> None:
@@ -93,10 +87,9 @@ def _warn_algebraic_loops(file: Path, loaded: Any) -> None:
     feedthrough = {n.nodeName: feedthrough_of(n, loaded.path.parent) for n in p.stepping_nodes()}
     for loop in algebraic_loops(loaded.routes, feedthrough):
         if p.coSimulation.iterate is None:
-            err.print(f"[yellow]warning:[/yellow] {file}: algebraic loop {' → '.join(loop)}: "
-                      f"{p.coSimulation.coupling.replace('gauss-seidel', 'Gauss-Seidel').replace('jacobi', 'Jacobi')} "
-                      "coupling takes it a macro step late; coSimulation.iterate solves it at each step",
-                      highlight=False)
+            warn(f"{file}: algebraic loop {' → '.join(loop)}: "
+                 f"{p.coSimulation.coupling.replace('gauss-seidel', 'Gauss-Seidel').replace('jacobi', 'Jacobi')} "
+                 "coupling takes it a macro step late; coSimulation.iterate solves it at each step")
         else:
             out.print(f"algebraic loop {' → '.join(loop)}: solved at each step by coSimulation.iterate",
                       highlight=False)
