@@ -31,6 +31,8 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import threading
+import time
 from pathlib import Path
 
 from _procs import free_port, kill_group, start
@@ -77,12 +79,13 @@ def one_run(kind: str, steps: int, timeout: float) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         cfg = ring_config(2, steps, Path(tmp) / "ring.json")
         endpoint = f"tcp/127.0.0.1:{free_port()}"
-        beside = None
+        beside, lines = None, []
         if kind == "busy core":
             beside = start([sys.executable, "-c", "while True: pass"])
         elif kind.startswith("flood"):
             beside = start([sys.executable, "-c", _FLOODER, endpoint, json.loads(cfg.read_text())["projectName"],
                             "waits" if kind == "flood, waiting" else "fires"], cwd=REPO, stdout=subprocess.PIPE, text=True)
+            threading.Thread(target=lambda: lines.extend(beside.stdout), daemon=True).start()
         try:
             run = start([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", tmp, "--no-progress",
                          "--listen", endpoint], cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
@@ -93,13 +96,17 @@ def one_run(kind: str, steps: int, timeout: float) -> dict:
                 raise RuntimeError(f"{kind}: the run passed --timeout {timeout:g} s") from None
         finally:
             if beside is not None:
+                # A short run can end before the flooder's first tally: wait for the tally it
+                # prints after the run (its questions time out once the server is gone).
+                seen, until = len(lines), time.monotonic() + 3.0
+                while kind.startswith("flood") and len(lines) == seen and time.monotonic() < until and run.poll() is not None:
+                    time.sleep(0.05)
                 kill_group(beside)
-                tally = beside.communicate()[0] if kind.startswith("flood") else ""
+                beside.wait()
         if run.returncode:
             raise RuntimeError(f"{kind}: the run failed ({run.returncode}): {err[-600:]}")
         meta = json.loads(next(Path(tmp).glob("ring*/meta.json")).read_text())
-        last = (tally or "").split("\n")[-2:-1] if kind.startswith("flood") else []
-        ok, busy = (int(x) for x in last[0].split()) if last else (0, 0)
+        ok, busy = (int(x) for x in lines[-1].split()) if lines else (0, 0)
         return {"steps_per_s": float(meta["steps_per_s"]), "answered": ok, "busy": busy,
                 "counted": meta.get("dropped_frames", {}).get("status over budget", 0)}
 
