@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup run test test-long bench fmus trials train baseline docs clean chromium bytecode
+.PHONY: setup run test test-long bench fmus trials train baseline docs clean chromium tbb bytecode
 
 setup: $(STAMP)
 
@@ -45,7 +45,7 @@ baseline: $(STAMP) bytecode
 # Two test processes, each taking whole files (a file's module fixtures are built once): most
 # tests wait on processes and sockets, so on 2 cores the suite took 12.5–14 minutes instead of 19.
 TEST_WORKERS ?= 2
-test: $(STAMP) bytecode chromium
+test: $(STAMP) bytecode chromium tbb
 	$(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile --durations=25
 
 # The dashboard's tests drive Debian's chromium through Playwright (no browser download).
@@ -53,12 +53,18 @@ chromium:
 	@command -v chromium >/dev/null 2>&1 || { apt-get update -qq && \
 		DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium; }
 
+# ECOS, the reference engine of benchmarks/inprocess.py and its test, loads Debian's libtbb12.
+tbb:
+	@ldconfig -p | grep -q 'libtbb\.so\.12' || { apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends libtbb12; }
+
 test-long: $(STAMP) bytecode
 	$(PY) -m pytest -q -p no:cacheprovider -m long
 
-bench: $(STAMP) bytecode chromium
+bench: $(STAMP) bytecode chromium tbb
 	$(PY) -m pip install --quiet -e ".[scenario,dashboard,models,test,docs,bench]"
 	$(PY) benchmarks/barrier.py
+	$(PY) benchmarks/inprocess.py
 	$(PY) benchmarks/fmu_overhead.py
 	$(PY) benchmarks/scene_fmus.py
 	$(PY) benchmarks/memory.py

@@ -55,3 +55,21 @@ class FailingSource(AsyncSource):
             out.append((self.t0 + self.next_index / 20.0, {"y": self.t0 + self.next_index / 20.0}))
             self.next_index += 1
         return out
+
+
+class FailsAt(Node):
+    """A model that raises at t = 0.5 s (its ``at`` parameter), as a model's bug would."""
+
+    OUTPUTS = frozenset({"y"})
+
+    def setup(self, ctx):
+        self.at = float(ctx.parameters.get("at", 0.5))
+        self.t = ctx.start_time
+
+    def outputs(self):
+        return {"y": self.t}
+
+    def step(self, t, h, inputs):
+        if t + h > self.at + 1e-9:
+            raise ZeroDivisionError("the model divided by zero")
+        self.t = t + h

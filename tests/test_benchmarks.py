@@ -262,3 +262,16 @@ def test_dashboard_cost_benchmark_reports_the_cost_the_latency_and_what_watching
     assert w["cores"] >= 1
     big = got["big_run"]
     assert 0 < big["usable_s"] <= big["plot_s"] and big["points_sent"] > 100
+
+
+def test_inprocess_benchmark_reports_ratios_against_the_distributed_run_and_ecos_and_identical_values():
+    res = subprocess.run([sys.executable, "benchmarks/inprocess.py", "--n", "2", "--ring-steps", "1500",
+                          "--fmu-steps", "1500", "--repeat", "1", "--json"],
+                         capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
+    assert res.returncode == 0, res.stderr
+    r = json.loads(res.stdout)
+    assert r["ecos"], "ECOS is a test dependency (ecospy, libtbb12): the comparison must run"
+    assert r["values_identical"] == {"ring N=2": True, "3 FMUs": True}
+    assert set(r["ratios"]) == {"ring N=2 in process / processes", "3 FMUs hycosim in process / ECOS",
+                                "3 FMUs hycosim processes / ECOS", "3 FMUs fmpy loop / ECOS"}
+    assert all(v > 0 for v in r["median_steps_per_s"].values())

@@ -14,6 +14,7 @@ import os
 import signal
 import socket
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import structlog
@@ -25,6 +26,7 @@ from hycosim.core.config import LoadedProject
 from hycosim.core.drops import DropLog
 from hycosim.core.inbox import LOCAL, Inbox
 from hycosim.core.keys import SERVER_TOKEN, ProjectKeys
+from hycosim.core.local_bus import LocalBus
 from hycosim.core.security import client_tls
 from hycosim.core.session import ConnectError, FramePublisher, FrameTooLarge, client_config, open_session, token_held
 from hycosim.core.sim_clock import RealTimeClock
@@ -77,6 +79,14 @@ class NodeRuntime:
         self.steps = 0
         self._server_lost: float | None = None
         self._server_seen = False  # its liveliness token, which tells this node when it goes
+        # Zenoh: the inbox the blocking loops read. In process (host) there is none: the
+        # master calls deliver with each frame, and nothing is waited for.
+        self.inbox: Inbox | None = None
+        self._bus: LocalBus | None = None
+        self._stepping: _Stepping | None = None
+        self._played: _Played | None = None
+        self._started = False
+        self.failure: str | None = None  # in process: why this node ended the run, if it failed
 
     def context(self) -> NodeContext:
         params = dict(self.spec.parameters)
@@ -98,7 +108,7 @@ class NodeRuntime:
     def _on_server_liveliness(self, sample: zenoh.Sample) -> None:
         self.inbox.inject(frames.encode(frames.LIVE, SERVER_TOKEN, sample.kind == zenoh.SampleKind.PUT))
 
-    def run(self) -> None:
+    def _setup(self) -> None:
         try:
             self.impl.setup(self.context())
         except Exception as exc:
@@ -107,6 +117,10 @@ class NodeRuntime:
             if isinstance(exc, NodeModelError):  # a clear message of its own
                 raise NodeRunError(str(exc)) from None
             raise NodeRunError(f"node {self.name!r}: its model failed to set up: {type(exc).__name__}: {exc}") from exc
+
+    def run(self) -> None:
+        """Attach to the server over Zenoh and take part in the run until its STOP."""
+        self._setup()
         conf = client_config(self.endpoint, timeout_s=self.cosim.attachTimeout, low_latency=self.cosim.lowLatency,
                              user=self.name if self.password is not None else None, password=self.password,
                              tls=client_tls(self.loaded, self.endpoint))
@@ -253,7 +267,10 @@ class NodeRuntime:
     def _accept(self, local: bool, payload: bytes) -> frames.Frame | None:
         """A frame from ``down`` (or this process's own liveliness news) that this node can act
         on; None for one meant for another node; FrameError for anything else."""
-        frame = frames.decode(payload)
+        return self._accept_frame(local, frames.decode(payload))
+
+    def _accept_frame(self, local: bool, frame: frames.Frame) -> frames.Frame | None:
+        """:meth:`_accept` of a frame decoded already."""
         kind = frame.kind
         if local:
             return frame  # liveliness news from this process's own subscriber
@@ -322,7 +339,8 @@ class NodeRuntime:
         message = message[:2000]
         try:
             self._send(frames.encode(frames.END, self.spec.UID, step, t, clean, message, earlier or []))
-            deadline = time.monotonic() + min(10.0, self.cosim.stepTimeout)
+            # In process the master reads the END once this call returns: there is nothing to wait for.
+            deadline = time.monotonic() + (min(10.0, self.cosim.stepTimeout) if self.inbox is not None else 0.0)
             while (left := deadline - time.monotonic()) > 0:
                 frame = self._next_frame(left)
                 if frame is None or frame.kind == frames.STOP:
@@ -433,96 +451,107 @@ class NodeRuntime:
         return None if out is None else (step, t, out)
 
     def _run_stepping(self, checkpoint: bool, restore: frames.Frame | None = None) -> None:
+        if not self._begin_stepping(checkpoint, restore):
+            return
+        # The server enforces step timeouts; a node only needs to notice the server is gone,
+        # which liveliness tells; this bound is the last resort for a frozen server.
+        silence = self.cosim.stepTimeout + 30.0
+        while not self._on_release(self._wait(silence, "release")):
+            pass
+
+    def _begin_stepping(self, checkpoint: bool, restore: frames.Frame | None = None) -> bool:
+        """Answer the START (HELLO and the outputs at t0) or restore the state a RESTORE begins;
+        False if the model ended the simulation there."""
         impl = self.impl
         assert isinstance(impl, Node)
-        checkpoint = checkpoint and impl.can_rollback
-        saved_step, saved = -1, None
+        at = self._stepping = _Stepping(checkpoint and impl.can_rollback)
         if restore is None:
             self._send(self._hello(impl.can_rollback))
-            last_out = self._step_model(impl, -1, self.cosim.startTime, None, {})
-            if last_out is None:
-                return
-            done = -1  # the last step integrated
+            out = self._step_model(impl, -1, self.cosim.startTime, None, {})
+            if out is None:
+                return False
+            at.last_out = out
         else:
             restored = self._restore(impl, restore)
             if restored is None:
                 raise NodeRunError(f"node {self.name!r}: the state the server sent to restore could not be set "
                                    f"(see {self.name}'s log)")
-            k, _, last_out = restored
-            self.steps, done = k, k - 1
-        pending_state: tuple[int, bytes] | None = None  # a checkpoint's state, sent after the next outputs
-        # The server enforces step timeouts; a node only needs to notice the server is gone,
-        # which liveliness tells; this bound is the last resort for a frozen server.
-        silence = self.cosim.stepTimeout + 30.0
-        mode, driven = None, False
-        while True:
-            frame = self._wait(silence, "release")
-            if frame.kind == frames.STOP:
-                self._on_stop(frame)
-                return
-            if frame.kind == frames.REPLAY:
-                # Back after a link cut: the release we may have missed, or already answered.
-                inner = frame.fields[1]
-                if inner.kind in (frames.STEP, frames.STEPS) and inner.fields[0] > done:
-                    frame = inner
-                else:
-                    self._send(last_out)
-                    self._log.info("outputs re-sent", step=done + 1)
-                    continue
-            if frame.kind == frames.CHECKPOINT:
-                if frame.fields[0] == done + self._rate:  # at the end of this node's last step
-                    pending_state = self._checkpoint_state(impl, frame.fields[0])
-                continue
-            if frame.kind == frames.RESTORE:
-                restored = self._restore(impl, frame)
-                if restored is not None:
-                    # The whole run went back to a checkpoint: this node's saved states are of the future.
-                    k, _, last_out = restored
-                    self.steps, done, mode, saved_step, pending_state = k, k - 1, None, -1, None
-                continue
-            if frame.kind == frames.ROLLBACK:
-                k, t = frame.fields
-                if saved_step != k:
-                    # Not from this run's server, which rolls back only to the step it just released.
-                    self.drops.drop("not a release", f"ROLLBACK to step {k}; the state saved is of step {saved_step}",
-                                    self.steps)
-                    continue
-                impl.set_state(saved)
-                self._log.info("rollback", step=k, t=t)
-                continue
-            if frame.kind == frames.STEPS:
-                k, times, new_mode, inputs, driven_nodes = frame.fields
-            elif frame.kind == frames.STEP:
-                k, t, h, new_mode, inputs, driven_nodes, slopes = frame.fields
-            else:  # a START: this run has started already
-                self.drops.drop("not a release", "a START while the run is under way", self.steps)
-                continue
-            if checkpoint and saved_step != k:
-                saved, saved_step = impl.get_state(), k
-            now_driven = self.name in driven_nodes
-            if (new_mode, now_driven) != (mode, driven):
-                mode, driven = new_mode, now_driven
-                impl.set_mode(mode, driven)
-                self._log.info("mode", step=k, mode=mode, driven=driven)
-            values = dict(zip(self._in_names, inputs[self.name]))
-            if frame.kind == frames.STEPS:
-                out = self._step_batch(impl, k, times, values)
-                if out is None:
-                    return
-                self.steps, done, last_out = k + len(times) - 1, k + len(times) - 2, out
-                continue
-            if self._rate > 1:  # its own step, the last one cut at stopTime as the base's is
-                h = min(self._rate * self.cosim.stepSize, self.cosim.stopTime - t)
-            if self.name in slopes:  # iterative coupling's interpolated inputs (check_release checked them)
-                impl.set_input_derivatives({n: d for n, d in zip(self._in_names, slopes[self.name]) if d})
-            out = self._step_model(impl, k, t, h, values)
+            k, _, at.last_out = restored
+            self.steps, at.done = k, k - 1
+        return True
+
+    def _on_release(self, frame: frames.Frame) -> bool:
+        """Act on one frame from the server while stepping; True once this node is done (the
+        run's STOP, or its model ended the simulation)."""
+        impl, at = self.impl, self._stepping
+        assert isinstance(impl, Node) and at is not None
+        if frame.kind == frames.STOP:
+            self._on_stop(frame)
+            return True
+        if frame.kind == frames.REPLAY:
+            # Back after a link cut: the release we may have missed, or already answered.
+            inner = frame.fields[1]
+            if inner.kind in (frames.STEP, frames.STEPS) and inner.fields[0] > at.done:
+                frame = inner
+            else:
+                self._send(at.last_out)
+                self._log.info("outputs re-sent", step=at.done + 1)
+                return False
+        if frame.kind == frames.CHECKPOINT:
+            if frame.fields[0] == at.done + self._rate:  # at the end of this node's last step
+                at.pending_state = self._checkpoint_state(impl, frame.fields[0])
+            return False
+        if frame.kind == frames.RESTORE:
+            restored = self._restore(impl, frame)
+            if restored is not None:
+                # The whole run went back to a checkpoint: this node's saved states are of the future.
+                k, _, at.last_out = restored
+                self.steps, at.done, at.mode, at.saved_step, at.pending_state = k, k - 1, None, -1, None
+            return False
+        if frame.kind == frames.ROLLBACK:
+            k, t = frame.fields
+            if at.saved_step != k:
+                # Not from this run's server, which rolls back only to the step it just released.
+                self.drops.drop("not a release", f"ROLLBACK to step {k}; the state saved is of step {at.saved_step}",
+                                self.steps)
+                return False
+            impl.set_state(at.saved)
+            self._log.info("rollback", step=k, t=t)
+            return False
+        if frame.kind == frames.STEPS:
+            k, times, new_mode, inputs, driven_nodes = frame.fields
+        elif frame.kind == frames.STEP:
+            k, t, h, new_mode, inputs, driven_nodes, slopes = frame.fields
+        else:  # a START: this run has started already
+            self.drops.drop("not a release", "a START while the run is under way", self.steps)
+            return False
+        if at.checkpoint and at.saved_step != k:
+            at.saved, at.saved_step = impl.get_state(), k
+        now_driven = self.name in driven_nodes
+        if (new_mode, now_driven) != (at.mode, at.driven):
+            at.mode, at.driven = new_mode, now_driven
+            impl.set_mode(new_mode, now_driven)
+            self._log.info("mode", step=k, mode=new_mode, driven=now_driven)
+        values = dict(zip(self._in_names, inputs[self.name]))
+        if frame.kind == frames.STEPS:
+            out = self._step_batch(impl, k, times, values)
             if out is None:
-                return
-            self.steps, done, last_out = k + 1, k, out
-            if pending_state is not None and pending_state[0] == k:
-                for i, chunk in enumerate(chunks := frames.state_chunks(pending_state[1])):
-                    self._send(frames.encode(frames.STATE, self.spec.UID, k, i, len(chunks), chunk))
-                pending_state = None
+                return True
+            self.steps, at.done, at.last_out = k + len(times) - 1, k + len(times) - 2, out
+            return False
+        if self._rate > 1:  # its own step, the last one cut at stopTime as the base's is
+            h = min(self._rate * self.cosim.stepSize, self.cosim.stopTime - t)
+        if self.name in slopes:  # iterative coupling's interpolated inputs (check_release checked them)
+            impl.set_input_derivatives({n: d for n, d in zip(self._in_names, slopes[self.name]) if d})
+        out = self._step_model(impl, k, t, h, values)
+        if out is None:
+            return True
+        self.steps, at.done, at.last_out = k + 1, k, out
+        if at.pending_state is not None and at.pending_state[0] == k:
+            for i, chunk in enumerate(chunks := frames.state_chunks(at.pending_state[1])):
+                self._send(frames.encode(frames.STATE, self.spec.UID, k, i, len(chunks), chunk))
+            at.pending_state = None
+        return False
 
     def _other_projects(self, session: zenoh.Session) -> str:
         """A hint for a node that heard nothing from its server: the endpoint may serve another project."""
@@ -564,7 +593,8 @@ class NodeRuntime:
     def _on_stop(self, frame: frames.Frame) -> None:
         """The server's STOP: the end of the run, or of a failed one, which is this node's failure too."""
         reason = frame.fields[1]
-        self._log.info("stop", step=self.steps, reason=reason, waits=self.inbox.waits, dropped=dict(self.drops.counts))
+        self._log.info("stop", step=self.steps, reason=reason, waits=self.inbox.waits if self.inbox else None,
+                       dropped=dict(self.drops.counts))
         if reason not in frames.CLEAN_STOPS:  # the reason names the step where it matters
             raise RunFailedElsewhere(f"node {self.name!r}: the server stopped the run: {reason}")
 
@@ -620,33 +650,124 @@ class NodeRuntime:
         OUTPUTS for k, the word that they are all sent (it waits for that as for a stepping
         node's outputs). A release seen again (a located event's retry, a replay after a link
         cut) sends no sample twice; a restore goes on from its point."""
-        impl = self.impl
-        assert isinstance(impl, SamplePlayer)
-        self._send(self._hello(False, restart=restart))
-        held = self._pack_outputs({p.name: p.start_value() for p in self.spec.output})  # the server ignores them
-        # The last point whose samples are sent: by the process this one replaces, if any.
-        sent = frame.fields[0] if restart and frame.kind == frames.STEP else -1
-        seq, silence = 0, self.cosim.stepTimeout + 30.0
-        while True:
-            if frame.kind == frames.STOP:
-                self._on_stop(frame)
-                return
-            if frame.kind == frames.REPLAY:
-                frame = frame.fields[1]
-            point: int | None = None
-            if frame.kind == frames.START and sent < 0:
-                point, t = 0, frame.fields[1]
-            elif frame.kind == frames.STEP:
-                point, t = frame.fields[0] + 1, frame.fields[1] + frame.fields[2]
-            elif frame.kind == frames.RESTORE:
-                point, t = frame.fields[1], frame.fields[2]
-                sent = point  # the server's restored histories hold what came before
-            if point is not None:  # not a CHECKPOINT, ROLLBACK or the START a resume sends again
-                for sample in impl.due(sent, point):
-                    self._send(frames.encode(frames.SAMPLE, self.spec.UID, seq, sample.t,
-                                             self._pack_outputs(impl.values(sample))))
-                    seq += 1
-                sent = max(sent, point)
-                self._send(frames.encode(frames.OUTPUTS, self.spec.UID, point, t, held))
-                self.steps = point
+        self._begin_played(frame, restart)
+        silence = self.cosim.stepTimeout + 30.0
+        while not self._on_played(frame):
             frame = self._wait(silence, "release")
+
+    def _begin_played(self, frame: frames.Frame, restart: bool) -> None:
+        self._send(self._hello(False, restart=restart))
+        # The outputs it sends are held start values (the server ignores them); the last point
+        # whose samples are sent: by the process this one replaces, if any.
+        self._played = _Played(self._pack_outputs({p.name: p.start_value() for p in self.spec.output}),
+                               frame.fields[0] if restart and frame.kind == frames.STEP else -1)
+
+    def _on_played(self, frame: frames.Frame) -> bool:
+        """Send the samples due by the point a release reaches, then the word that they are
+        sent; True at the run's STOP."""
+        impl, at = self.impl, self._played
+        assert isinstance(impl, SamplePlayer) and at is not None
+        if frame.kind == frames.STOP:
+            self._on_stop(frame)
+            return True
+        if frame.kind == frames.REPLAY:
+            frame = frame.fields[1]
+        point: int | None = None
+        if frame.kind == frames.START and at.sent < 0:
+            point, t = 0, frame.fields[1]
+        elif frame.kind == frames.STEP:
+            point, t = frame.fields[0] + 1, frame.fields[1] + frame.fields[2]
+        elif frame.kind == frames.RESTORE:
+            point, t = frame.fields[1], frame.fields[2]
+            at.sent = point  # the server's restored histories hold what came before
+        if point is not None:  # not a CHECKPOINT, ROLLBACK or the START a resume sends again
+            for sample in impl.due(at.sent, point):
+                self._send(frames.encode(frames.SAMPLE, self.spec.UID, at.seq, sample.t,
+                                         self._pack_outputs(impl.values(sample))))
+                at.seq += 1
+            at.sent = max(at.sent, point)
+            self._send(frames.encode(frames.OUTPUTS, self.spec.UID, point, t, at.held))
+            self.steps = point
+        return False
+
+    # --- in process -----------------------------------------------------------------
+
+    def host(self, bus: LocalBus) -> None:
+        """Set the model up and attach this node to an in-process run (its master in this
+        process): from now on :meth:`deliver` acts on each frame the master releases, in the
+        master's thread. A stepping node or a played recording; an asynchronous source keeps
+        its own clock and is run distributed."""
+        if isinstance(self.impl, AsyncSource) and not isinstance(self.impl, SamplePlayer):
+            raise NodeRunError(f"node {self.name!r}: an asynchronous source samples on its own clock beside the "
+                               "run, which one process stepping every node cannot give it; run it without "
+                               "--in-process")
+        self._setup()
+        self._publisher = bus.publisher(self.name)
+        self._bus = bus
+        bus.attach(self.name, self.deliver)
+
+    def deliver(self, frame: frames.Frame) -> None:
+        """Act on one frame the in-process master released, checked as one from the network is.
+        A node that fails sends its END (the master stops the run with its words), keeps the
+        message in :attr:`failure` and takes no more frames."""
+        try:
+            frame = self._accept_frame(False, frame)
+        except frames.FrameError as exc:
+            self.drops.drop("not a release", str(exc), self.steps)
+            return
+        if frame is None:
+            return
+        try:
+            done = self._on_hosted(frame)
+        except NodeRunError as exc:
+            self.failure, done = str(exc), True
+        if done and self._bus is not None:
+            self._bus.leave(self.name)
+
+    def _on_hosted(self, frame: frames.Frame) -> bool:
+        if isinstance(self.impl, SamplePlayer):
+            if not self._started:
+                self._started = True
+                self._begin_played(frame, False)
+            return self._on_played(frame)
+        if self._started:
+            return self._on_release(frame)
+        if frame.kind == frames.STOP:
+            self._on_stop(frame)
+            return True
+        if frame.kind != frames.START:
+            self.drops.drop("not a release", f"a {frames.KIND_NAMES[frame.kind]} frame before the run's START",
+                            self.steps)
+            return False
+        self._started = True
+        return not self._begin_stepping(bool(frame.fields[5].get("checkpoint")))
+
+    def close(self) -> None:
+        """An in-process node's end: its model's teardown (a Zenoh node's run does its own)."""
+        self.impl.teardown()
+
+
+@dataclass
+class _Stepping:
+    """A stepping node's state between frames: whether it saves its state before each step,
+    the state saved and its step, the last step integrated and the outputs sent after it, a
+    checkpoint's state to send after the next outputs, and the mode it steps in."""
+
+    checkpoint: bool
+    saved_step: int = -1
+    saved: Any = None
+    done: int = -1
+    last_out: bytes = b""
+    pending_state: tuple[int, bytes] | None = None
+    mode: str | None = None
+    driven: bool = False
+
+
+@dataclass
+class _Played:
+    """A played recording's state between frames: the held outputs it sends, the last point
+    whose samples are sent, and the next sample's sequence number."""
+
+    held: list[Any]
+    sent: int
+    seq: int = 0

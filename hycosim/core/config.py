@@ -214,6 +214,10 @@ def check_semantics(project: Project) -> tuple[list[Route], dict[str, EventGuard
     if project.linkNum != len(project.linkLists):
         issues.append(Issue("linkNum", f"linkNum is {project.linkNum} but linkLists has {len(project.linkLists)} entries",
                             "make linkNum equal the number of links"))
+    if project.coSimulation.transport == "inprocess":
+        for name, why in in_process_refusals(project).items():
+            issues.append(Issue("coSimulation.transport", f"an in-process run cannot host node {name!r}: {why}",
+                                'run it in processes: "transport": "zenoh"'))
     names: dict[str, int] = {}
     uids: dict[int, int] = {}
     for i, n in enumerate(project.nodeLists):
@@ -362,3 +366,17 @@ def gateway_address(project: Project, server_ip: str | None = None) -> Address:
 def gateway_endpoint(project: Project, server_ip: str | None = None) -> str:
     """``HOST:PORT`` of the TCP gateway for bridge FMUs (see :func:`gateway_address`)."""
     return str(gateway_address(project, server_ip))
+
+
+def in_process_refusals(project: Project) -> dict[str, str]:
+    """Each node an in-process run (``hycosim run --in-process``) cannot host, and why: one
+    thread steps every node when the master releases it, so a node must be stepped by the
+    master (an FMU, a Python model, a played recording)."""
+    refused = {}
+    for n in project.nodeLists:
+        if n.asynchronous and not n.replay:
+            refused[n.nodeName] = ("an asynchronous source samples on its own clock beside the run, which one "
+                                   "thread stepping every node cannot give it")
+        elif not (n.fmu or n.model or n.replay):
+            refused[n.nodeName] = "a bridge FMU's node is stepped by another tool through the gateway"
+    return refused

@@ -219,6 +219,11 @@ class CoSimulation(_Strict):
     # than cores compete. "auto": "yield" for up to 2 processes per core (the server and the
     # project's nodes), else "block".
     waitStrategy: Literal["auto", "block", "yield"] = "auto"
+    # How ``hycosim run`` carries the frames. "zenoh": the server and each node a process of
+    # its own, over Zenoh on loopback. "inprocess": the master and every node in one process,
+    # each release a call (as ``hycosim run --in-process``): no sockets, no per-node restarts,
+    # no asynchronous sources or bridge FMUs. ``hycosim server``/``node`` always use Zenoh.
+    transport: Literal["zenoh", "inprocess"] = "zenoh"
     # The master algorithm. "jacobi": every node due at a macro-step point steps at once on the
     # outputs at that point (the paper's scheme). "gauss-seidel": within a macro step the nodes
     # step one after the other in ``order``, each on the outputs its predecessors have already

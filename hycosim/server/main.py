@@ -9,7 +9,7 @@ import sys
 from dataclasses import asdict
 from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import structlog
 
@@ -18,6 +18,7 @@ from hycosim.core import json_text, logs, signals
 from hycosim.core.config import LoadedProject, gateway_address, server_endpoint
 from hycosim.core.endpoints import GATEWAY_PORT, EndpointError, parse_address, parse_endpoint
 from hycosim.core.folders import make_folder, run_dir_for
+from hycosim.core.local_bus import LocalBus
 from hycosim.core.security import SecurityError, router_security
 from hycosim.core.session import open_session, router_config
 
@@ -25,10 +26,13 @@ from hycosim.server import checkpoints
 from hycosim.server.coordinator import GuardEvaluationError
 from hycosim.server.recorder import Recorder, RecordError
 from hycosim.server.relay import Relay, RunError
+from hycosim.server.transport import InProcessTransport, Transport, ZenohTransport
 
 
 # The project file as the run began, in its run directory.
 PROJECT_COPY = "project.json"
+# What meta.json's endpoint says of an in-process run.
+IN_PROCESS = "inprocess"
 
 
 def _versions() -> dict[str, str]:
@@ -96,13 +100,16 @@ def _resume_plan(loaded: LoadedProject, run_dir: Path) -> tuple[dict[str, Any], 
 
 def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = Path("runs"),
           run_dir: Path | None = None, progress_jsonl: bool = False,
-          gateway: str | None = None, resume: Path | None = None) -> tuple[int, Path | None, str]:
+          gateway: str | None = None, resume: Path | None = None,
+          bus: LocalBus | None = None, on_progress: Callable[[Any], None] | None = None) -> tuple[int, Path | None, str]:
     """Run one co-simulation as its server; return (exit code, run directory, message).
 
     Addresses and the credentials and certificate files are checked before anything is
     written: one that cannot be used gives exit code 2 and no run directory. ``resume``: go
     on with the run in that directory, whose server died, from its last complete checkpoint
-    (exit code 2 if it cannot be).
+    (exit code 2 if it cannot be). ``bus``: the nodes are hosted in this process and attached
+    to it (an in-process run): no session, no gateway, no status queryable. ``on_progress``:
+    called with the relay's Progress about ten times a second.
     """
     def done(code: int, run_dir: Path | None, message: str) -> tuple[int, Path | None, str]:
         # A launcher reading --progress-jsonl learns the outcome from this line, on every path.
@@ -111,21 +118,24 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
                   flush=True)
         return code, run_dir, message
 
-    try:
-        endpoint = str(parse_endpoint(listen)) if listen else server_endpoint(loaded.project.serverIP)
-    except EndpointError as exc:
-        return done(2, None, f"{'--listen' if listen else 'serverIP'}: {exc}")
-    try:
-        gw = parse_address(gateway, GATEWAY_PORT) if gateway else gateway_address(loaded.project, endpoint)
-    except EndpointError as exc:
-        return done(2, None, f"{'--gateway' if gateway else 'gatewayIP'}: {exc}")
-    gateway_required = bool(gateway or loaded.project.gatewayIP)
-    try:
-        # Read before the run directory is made: a missing or unreadable credentials or
-        # certificate file is bad input (exit 2), like an address, not a failed run.
-        security = router_security(loaded, endpoint)
-    except SecurityError as exc:
-        return done(2, None, str(exc))
+    if bus is not None:
+        endpoint, gw, gateway_required, security = IN_PROCESS, None, False, None
+    else:
+        try:
+            endpoint = str(parse_endpoint(listen)) if listen else server_endpoint(loaded.project.serverIP)
+        except EndpointError as exc:
+            return done(2, None, f"{'--listen' if listen else 'serverIP'}: {exc}")
+        try:
+            gw = parse_address(gateway, GATEWAY_PORT) if gateway else gateway_address(loaded.project, endpoint)
+        except EndpointError as exc:
+            return done(2, None, f"{'--gateway' if gateway else 'gatewayIP'}: {exc}")
+        gateway_required = bool(gateway or loaded.project.gatewayIP)
+        try:
+            # Read before the run directory is made: a missing or unreadable credentials or
+            # certificate file is bad input (exit 2), like an address, not a failed run.
+            security = router_security(loaded, endpoint)
+        except SecurityError as exc:
+            return done(2, None, str(exc))
     resume_at, recorded = None, None
     if resume is not None:
         try:
@@ -161,21 +171,26 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         return done(3, run_dir, f"cannot write {run_dir / PROJECT_COPY}: {exc.strerror or exc}")
     except RecordError as exc:
         return done(3, run_dir, str(exc))
-    on_progress = None
     if progress_jsonl:
         def on_progress(p: Any) -> None:
             print(json.dumps({"progress": asdict(p), "run_dir": str(run_dir)}), flush=True)
-    try:
-        session = open_session(router_config(endpoint, security=security,
-                                             low_latency=loaded.project.coSimulation.lowLatency), endpoint)
-    except KeyboardInterrupt as exc:
-        recorder.close("interrupted", reason=f"{signals.describe(exc)} before the run started")
-        return done(signals.exit_code(exc), run_dir, f"{signals.describe(exc)} before the run started")
-    except Exception as exc:  # ConnectError (or what Zenoh made of the security settings), with its message
-        recorder.close("failed", reason=str(exc))
-        return done(3, run_dir, str(exc))
-    relay = Relay(loaded, session, recorder, progress_every_s=0.1, on_progress=on_progress,
-                  gateway_address=(gw.host, gw.port), gateway_required=gateway_required, resume=recorded)
+    session = None
+    if bus is not None:
+        transport: Transport = InProcessTransport(bus)
+    else:
+        try:
+            session = open_session(router_config(endpoint, security=security,
+                                                 low_latency=loaded.project.coSimulation.lowLatency), endpoint)
+        except KeyboardInterrupt as exc:
+            recorder.close("interrupted", reason=f"{signals.describe(exc)} before the run started")
+            return done(signals.exit_code(exc), run_dir, f"{signals.describe(exc)} before the run started")
+        except Exception as exc:  # ConnectError (or what Zenoh made of the security settings), with its message
+            recorder.close("failed", reason=str(exc))
+            return done(3, run_dir, str(exc))
+        transport = ZenohTransport(session)
+    relay = Relay(loaded, transport, recorder, progress_every_s=0.1, on_progress=on_progress,
+                  gateway_address=(gw.host, gw.port) if gw is not None else None,
+                  gateway_required=gateway_required, resume=recorded)
     try:
         relay.run()
         code, message = 0, f"completed {recorder.meta['steps']} macro steps"
@@ -193,7 +208,8 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         log.exception("internal error")
         code, message = 4, f"internal error {type(exc).__name__}: {exc} (traceback in {run_dir / 'server.log.jsonl'})"
     finally:
-        session.close()
+        if session is not None:
+            session.close()
     return done(code, run_dir, message)
 
 

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import collections
 import functools
-import json
 import math
 import os
 import threading
@@ -23,14 +22,13 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import structlog
-import zenoh
 
 from hycosim.core import frames, signals
 from hycosim.core.schema import FREE_MODE
 from hycosim.core.config import LoadedProject
-from hycosim.core.inbox import LOCAL, Inbox
-from hycosim.core.keys import SERVER_TOKEN, ProjectKeys
-from hycosim.core.session import FramePublisher, FrameTooLarge
+from hycosim.core.inbox import LOCAL
+from hycosim.core.keys import ProjectKeys
+from hycosim.core.session import FrameTooLarge
 from hycosim.core.sim_clock import RealTimeClock
 
 from hycosim.server import checkpoints, plans
@@ -44,6 +42,7 @@ from hycosim.server.recorder import Recorder, RecordError
 from hycosim.server.retakes import IterationLog, StepSizer, input_change, relaxed
 from hycosim.server.routing import OutputView, Router
 from hycosim.server.status_view import Recent, barrier_window, points_since
+from hycosim.server.transport import Transport
 
 RECENT_KEPT = 4096  # the latest points kept for the status answers
 
@@ -92,7 +91,7 @@ class Progress:
 
 
 class Relay:
-    def __init__(self, loaded: LoadedProject, session: zenoh.Session, recorder: Recorder,
+    def __init__(self, loaded: LoadedProject, transport: Transport, recorder: Recorder,
                  progress_every_s: float = 0.0, on_progress: Any = None,
                  gateway_address: tuple[str, int] | None = None, gateway_required: bool = False,
                  resume: int | None = None):
@@ -100,7 +99,7 @@ class Relay:
         self.project = loaded.project
         self.cosim = self.project.coSimulation
         self.keys = ProjectKeys(self.project.projectName)
-        self.session = session
+        self.transport = transport
         self.recorder = recorder
         self.coordinator = Coordinator(self.project.events, loaded.guards)
         self.router = Router(loaded)
@@ -178,30 +177,12 @@ class Relay:
         self._progress_every = progress_every_s
         self._on_progress = on_progress
         self._log = structlog.get_logger("server").bind(project=self.project.projectName)
-        self._local_key = f"{self.keys.root}/up/_local"
         self._stop_requested = threading.Event()
         self._gateway_address = gateway_address
         self._gateway_required = gateway_required
         self.gateway: Gateway | None = None
 
     # --- wiring -------------------------------------------------------------------
-
-    def _on_liveliness(self, sample: zenoh.Sample) -> None:
-        node = ProjectKeys.last_chunk(str(sample.key_expr))
-        alive = sample.kind == zenoh.SampleKind.PUT
-        self.inbox.inject(frames.encode(frames.LIVE, node, alive))
-
-    def _on_status(self, query: zenoh.Query) -> None:
-        if not self.answers.take():
-            query.reply_err(f"busy: over {self.answers.per_s:g} status answers a second; ask again".encode())
-            return
-        since = query.parameters.get("since")
-        try:
-            after = int(since) if since is not None and len(since) < 20 else None
-        except ValueError:
-            after = None  # anyone may ask: a selector that is no step asks for no points
-        # A byte port's value is no JSON: it goes as null (the dashboard plots numbers only).
-        query.reply(self.keys.status, json.dumps(self.status(after), default=lambda _: None))
 
     def _dropped(self) -> dict[str, int]:
         """What was dropped, by reason: the frames the intake refused, the status questions over budget."""
@@ -240,11 +221,8 @@ class Relay:
     def run(self) -> None:
         polls = self.project.polls_before_blocking(os.cpu_count())
         self.recorder.meta["server_polls"] = polls
-        self.inbox = Inbox(self.session, self.keys.up_all, self._local_key, poll=polls)
-        self.release = FramePublisher(self.session, self.keys.down, low_latency=self.cosim.lowLatency)
-        token = self.session.liveliness().declare_token(self.keys.alive(SERVER_TOKEN))
-        watcher = self.session.liveliness().declare_subscriber(self.keys.alive_all, self._on_liveliness, history=True)
-        status = self.session.declare_queryable(self.keys.status, self._on_status)
+        self.inbox, self.release = self.transport.open(self.keys, polls, self.cosim.lowLatency, self.status,
+                                                       self.answers)
         status_text, reason = "failed", ""
         signals.stop_once()
         try:
@@ -279,11 +257,7 @@ class Relay:
                                 messages=dict(self.messages),
                                 checkpoints_taken=self.checkpoints_taken,
                                 samples_received={n: h.received for n, h in self.histories.items()})
-            for decl in (status, watcher, token):
-                try:
-                    decl.undeclare()
-                except Exception:
-                    pass
+            self.transport.close()
             self.inbox.close()
 
     def _await_departures(self, timeout: float = 3.0) -> None:
@@ -308,7 +282,7 @@ class Relay:
         host, port = self._gateway_address
         try:
             self.gateway = Gateway(
-                self.project.stepping_nodes(), self.session, self.keys, host, port,
+                self.project.stepping_nodes(), self.transport.session, self.keys, host, port,
                 drop=self.intake.drop, rates=self.coupling.rates, stop_time=self.cosim.stopTime)
         except GatewayError as exc:
             if self._gateway_required:

@@ -49,10 +49,24 @@ def validate(
         for name, why in unable:
             warn(f"coSimulation.checkpointEvery: node {name!r} cannot take part in checkpoints: {why}; "
                  "the run takes none, and a lost node ends it")
+    _say_in_process(loaded)
     bridged = [n.nodeName for n in p.nodeLists if not (n.model or n.fmu or n.replay or n.asynchronous)]
     if bridged:
         out.print(f"{len(bridged)} node(s) wait for a bridge FMU in some tool: {', '.join(bridged)} "
                   f"(build them with: hycosim fmu build {file} -o fmus)", highlight=False)
+
+
+def _say_in_process(loaded: Any) -> None:
+    """Whether ``hycosim run --in-process`` can host the project, and what one process does not give."""
+    from hycosim.core.config import in_process_refusals
+
+    refused = in_process_refusals(loaded.project)
+    if refused:
+        out.print("in one process (--in-process): no, " + "; ".join(f"node {n!r}: {why}" for n, why in refused.items()),
+                  highlight=False)
+    else:
+        out.print("in one process (--in-process): yes; there a node that crashes takes the run down, and no "
+                  "node is started again", highlight=False)
 
 
 def _check_retakes(file: Path, loaded: Any) -> None:

@@ -71,14 +71,22 @@ def run(
                                                        "from its last checkpoint")] = None,
     dashboard: Annotated[bool, typer.Option(help="watch the run in a browser (hycosim dashboard)")] = False,
     dashboard_port: Annotated[int, typer.Option(min=0, max=65535, help="the dashboard's port on 127.0.0.1")] = 8050,
+    in_process: Annotated[Optional[bool], typer.Option("--in-process/--processes", help="the master and every node "
+                          "in this process, no sockets (default: coSimulation.transport)", show_default=False)] = None,
 ) -> None:
-    """Run the server and every node as local processes on loopback (FILE: a project JSON or an SSP package)."""
+    """Run the server and every node as local processes on loopback, or all in this process
+    (FILE: a project JSON or an SSP package)."""
     from hycosim.core.security import SecurityError, router_security
     from hycosim.embedded import run_embedded
     from hycosim.server.report import summarise
 
     file = project_file(file)
     loaded = load(file)
+    if in_process is None:
+        in_process = loaded.project.coSimulation.transport == "inprocess"
+    if in_process:
+        _run_in_process(loaded, runs_dir, progress, listen=listen, resume=resume, dashboard=dashboard)
+        return
     listen = checked_endpoint("--listen", listen) if listen else None
     if resume is not None and not (resume / "meta.json").is_file():
         fail(f"--resume: {resume} is not a run directory (no meta.json)")
@@ -101,6 +109,39 @@ def run(
         raise typer.Exit(result.code)
     summary = summarise(result.run_dir)
     print_summary(summary)
+
+
+def _run_in_process(loaded, runs_dir: Path, progress: bool, *, listen: Optional[str], resume: Optional[Path],
+                    dashboard: bool) -> None:
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from hycosim.inprocess import CannotHost, check_hostable, run_in_process
+    from hycosim.server.report import summarise
+
+    for option, given in (("--listen", listen), ("--resume", resume), ("--dashboard", dashboard)):
+        if given:  # each needs a network or processes an in-process run has not
+            fail(f"{option} is for a run in processes; an in-process run has no server to attach to or go on "
+                 f"with (run without --in-process)")
+    try:
+        check_hostable(loaded)
+    except CannotHost as exc:
+        fail(str(exc))
+    cosim = loaded.project.coSimulation
+    bar = Progress(TextColumn("[bold]{task.description}"), BarColumn(),
+                   TextColumn("t={task.fields[t]:.3f}/{task.total:.3f} s"),
+                   TextColumn("{task.fields[rate]:.0f} steps/s"), TextColumn("mode={task.fields[mode]}"),
+                   TimeElapsedColumn(), console=err, disable=not progress)
+    with bar:
+        task = bar.add_task(loaded.name, total=cosim.stopTime - cosim.startTime, t=0.0, rate=0.0, mode="free")
+
+        def show(p: dict) -> None:
+            elapsed = p["t"] - cosim.startTime
+            bar.update(task, completed=elapsed, t=elapsed, rate=p["steps_per_s"], mode=p["mode"])
+
+        code, run_dir, message = run_in_process(loaded, runs_dir=runs_dir, on_progress=show)
+    if code:
+        fail(message, code, [f"results so far: {run_dir}"] if run_dir else [])
+    print_summary(summarise(run_dir))
 
 
 @app.command()
