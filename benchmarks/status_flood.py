@@ -54,7 +54,7 @@ while session is None:
     try:
         session = open_session(client_config(endpoint, timeout_s=2.0), endpoint)
     except Exception:
-        time.sleep(0.05)
+        time.sleep(0.01)
 waits = sys.argv[3] == "waits"
 key, tally, shown = ProjectKeys(project).status, [0, 0], time.monotonic()
 def count(reply):  # an answer, or the server's "busy" (a timeout's error, as the run ends, is neither)

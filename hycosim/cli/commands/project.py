@@ -49,7 +49,8 @@ def validate(
         for name, why in unable:
             warn(f"coSimulation.checkpointEvery: node {name!r} cannot take part in checkpoints: {why}; "
                  "the run takes none, and a lost node ends it")
-    _say_in_process(loaded)
+    if models:
+        _say_in_process(loaded)
     bridged = [n.nodeName for n in p.nodeLists if not (n.model or n.fmu or n.replay or n.asynchronous)]
     if bridged:
         out.print(f"{len(bridged)} node(s) wait for a bridge FMU in some tool: {', '.join(bridged)} "
