@@ -10,12 +10,12 @@ iterative coupling with interpolated inputs sends.
 
 from __future__ import annotations
 
-import platform
-import shutil
-import subprocess
-import tempfile
-import zipfile
+import sys
 from pathlib import Path
+
+# Run by the benchmarks from their folder, and imported by the tests as benchmarks._mass_fmu.
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _fmu_build import native_fmu  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE / "_mass_fmu.c"
@@ -79,31 +79,7 @@ def model_description() -> str:
 
 def build(out_dir: Path) -> Path:
     """Compile benchmarks/_mass_fmu.c and zip it with its model description into ``out_dir/Mass.fmu``."""
-    import fmpy
-
-    if platform.system() != "Linux":
-        raise RuntimeError("the benchmark's mass FMU is built for linux64 only")
-    cc = shutil.which("gcc") or shutil.which("cc")
-    if cc is None:
-        raise RuntimeError("building the mass FMU needs a C compiler (gcc or cc) on PATH")
-    out_dir.mkdir(parents=True, exist_ok=True)
-    headers = Path(fmpy.__file__).parent / "c-code"
-    with tempfile.TemporaryDirectory() as tmp:
-        root = Path(tmp)
-        binary = root / "binaries" / "linux64" / f"{IDENT}.so"
-        binary.parent.mkdir(parents=True)
-        res = subprocess.run([cc, "-shared", "-fPIC", "-O2", "-std=c99", "-Wall", "-Wextra", "-Werror",
-                              f"-I{headers}", "-o", str(binary), str(SOURCE), "-lm"],
-                             capture_output=True, text=True)
-        if res.returncode:
-            raise RuntimeError(f"compiling {SOURCE.name} failed:\n{res.stderr.strip()}")
-        (root / "modelDescription.xml").write_text(model_description())
-        path = out_dir / f"{IDENT}.fmu"
-        with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zf:
-            for f in sorted(root.rglob("*")):
-                if f.is_file():
-                    zf.write(f, f.relative_to(root).as_posix())
-    return path
+    return native_fmu(SOURCE, IDENT, model_description(), out_dir / f"{IDENT}.fmu", ["-Wall", "-Wextra", "-Werror"])
 
 
 if __name__ == "__main__":

@@ -10,13 +10,10 @@ package carries hycosim's macro step in an annotation; ECOS is given the same st
 from __future__ import annotations
 
 import json
-import platform
-import shutil
-import subprocess
 import sys
-import tempfile
-import zipfile
 from pathlib import Path
+
+from _fmu_build import native_fmu
 
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE / "_small_fmus.c"
@@ -66,33 +63,9 @@ def model_description(name: str) -> str:
 
 def build(out_dir: Path) -> dict[str, Path]:
     """Compile each model and zip it with its model description as ``out_dir/<Name>.fmu``."""
-    import fmpy
-
-    if platform.system() != "Linux":
-        raise RuntimeError("the benchmark's FMUs are built for linux64 only")
-    cc = shutil.which("gcc") or shutil.which("cc")
-    if cc is None:
-        raise RuntimeError("building the benchmark's FMUs needs a C compiler (gcc or cc) on PATH")
-    out_dir.mkdir(parents=True, exist_ok=True)
-    headers = Path(fmpy.__file__).parent / "c-code"
-    built = {}
-    for name, (number, _) in MODELS.items():
-        with tempfile.TemporaryDirectory() as tmp:
-            root = Path(tmp)
-            binary = root / "binaries" / "linux64" / f"{name}.so"
-            binary.parent.mkdir(parents=True)
-            res = subprocess.run([cc, "-shared", "-fPIC", "-O2", "-std=c99", "-Wall", "-Wno-unused-parameter",
-                                  "-Werror", f"-DMODEL={number}", f"-I{headers}", "-o", str(binary), str(SOURCE)],
-                                 capture_output=True, text=True)
-            if res.returncode:
-                raise RuntimeError(f"compiling {SOURCE.name} for {name} failed:\n{res.stderr.strip()}")
-            (root / "modelDescription.xml").write_text(model_description(name))
-            built[name] = out_dir / f"{name}.fmu"
-            with zipfile.ZipFile(built[name], "w", zipfile.ZIP_DEFLATED) as zf:
-                for f in sorted(root.rglob("*")):
-                    if f.is_file():
-                        zf.write(f, f.relative_to(root).as_posix())
-    return built
+    return {name: native_fmu(SOURCE, name, model_description(name), out_dir / f"{name}.fmu",
+                             ["-Wall", "-Wno-unused-parameter", "-Werror", f"-DMODEL={number}"])
+            for name, (number, _) in MODELS.items()}
 
 
 def project(fmus: dict[str, Path], steps: int, step_size: float = 0.01) -> dict:

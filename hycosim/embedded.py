@@ -18,6 +18,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
@@ -90,6 +91,22 @@ def _record_failure(run_dir: Path, message: str) -> None:
         pass  # the message still reaches the user
 
 
+def run_progress(loaded: LoadedProject, console: Console, show: bool) -> tuple[Progress, Callable[[dict], None]]:
+    """The progress bar of a run (time, steps/s, mode), and the function that moves it to a
+    progress report (the relay's Progress as a dict)."""
+    start = loaded.project.coSimulation.startTime
+    bar = Progress(TextColumn("[bold]{task.description}"), BarColumn(),
+                   TextColumn("t={task.fields[t]:.3f}/{task.total:.3f} s"),
+                   TextColumn("{task.fields[rate]:.0f} steps/s"), TextColumn("mode={task.fields[mode]}"),
+                   TimeElapsedColumn(), console=console, disable=not show)
+    task = bar.add_task(loaded.name, total=loaded.project.coSimulation.stopTime - start, t=0.0, rate=0.0, mode="free")
+
+    def update(p: dict) -> None:
+        bar.update(task, completed=p["t"] - start, t=p["t"] - start, rate=p["steps_per_s"], mode=p["mode"])
+
+    return bar, update
+
+
 def _pump(stream, sink: queue.Queue) -> None:
     for line in stream:
         sink.put(line)
@@ -135,17 +152,11 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
     restarted: dict[str, int] = {}
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=_pump, args=(server.stdout, lines), daemon=True).start()
-    cosim = loaded.project.coSimulation
-    total = cosim.stopTime - cosim.startTime
     code, message, failures = None, "", {}
     user_stopped = server_stopped = started = False
-    progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(),
-                        TextColumn("t={task.fields[t]:.3f}/{task.total:.3f} s"),
-                        TextColumn("{task.fields[rate]:.0f} steps/s"), TextColumn("mode={task.fields[mode]}"),
-                        TimeElapsedColumn(), console=console, disable=not show_progress)
+    progress, show = run_progress(loaded, console, show_progress)
     try:
         with progress:
-            task = progress.add_task(loaded.name, total=total, t=0.0, rate=0.0, mode="free")
             while code is None:
                 try:
                     line = lines.get(timeout=0.2)
@@ -160,9 +171,7 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
                         continue
                     if "progress" in msg:
                         started = True
-                        p = msg["progress"]
-                        progress.update(task, completed=p["t"] - cosim.startTime, t=p["t"] - cosim.startTime,
-                                        rate=p["steps_per_s"], mode=p["mode"])
+                        show(msg["progress"])
                     elif "done" in msg:
                         code, message = msg["done"], msg["message"]
                 for name, proc in list(nodes.items()):

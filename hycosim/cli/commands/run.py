@@ -113,8 +113,7 @@ def run(
 
 def _run_in_process(loaded, runs_dir: Path, progress: bool, *, listen: Optional[str], resume: Optional[Path],
                     dashboard: bool) -> None:
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
+    from hycosim.embedded import run_progress
     from hycosim.inprocess import CannotHost, check_hostable, run_in_process
     from hycosim.server.report import summarise
 
@@ -126,18 +125,8 @@ def _run_in_process(loaded, runs_dir: Path, progress: bool, *, listen: Optional[
         check_hostable(loaded)
     except CannotHost as exc:
         fail(str(exc))
-    cosim = loaded.project.coSimulation
-    bar = Progress(TextColumn("[bold]{task.description}"), BarColumn(),
-                   TextColumn("t={task.fields[t]:.3f}/{task.total:.3f} s"),
-                   TextColumn("{task.fields[rate]:.0f} steps/s"), TextColumn("mode={task.fields[mode]}"),
-                   TimeElapsedColumn(), console=err, disable=not progress)
+    bar, show = run_progress(loaded, err, progress)
     with bar:
-        task = bar.add_task(loaded.name, total=cosim.stopTime - cosim.startTime, t=0.0, rate=0.0, mode="free")
-
-        def show(p: dict) -> None:
-            elapsed = p["t"] - cosim.startTime
-            bar.update(task, completed=elapsed, t=elapsed, rate=p["steps_per_s"], mode=p["mode"])
-
         code, run_dir, message = run_in_process(loaded, runs_dir=runs_dir, on_progress=show)
     if code:
         fail(message, code, [f"results so far: {run_dir}"] if run_dir else [])
