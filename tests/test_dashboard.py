@@ -51,6 +51,23 @@ def _catch(tmp_path: Path) -> Path:
         cosim={"stepSize": 0.01, "stopTime": 4.0, "realTime": 2.0}, name="catch")
 
 
+def _rows_while_running(page, run, runs_dir: Path, nodes: tuple[str, ...], timeout: float = 40) -> None:
+    """Wait for the page's row of each node; if the run ends first or the time passes, fail
+    with what the run, its server and its dashboard said (a bare selector timeout says nothing)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and run.poll() is None:
+        if all(page.query_selector(f"tr[data-node='{n}']") for n in nodes):
+            return
+        page.wait_for_timeout(100)
+    said = []
+    for f in sorted(runs_dir.glob("*/*.stderr.txt")):
+        said.append(f"--- {f.name}:\n{f.read_text(errors='replace')[-2000:]}")
+    exit_status = run.poll()
+    err = run.stderr.read() if exit_status is not None and run.stderr else ""
+    raise AssertionError(f"the page showed no row for some of {nodes} (run's exit status {exit_status}; "
+                         f"page state {page.text_content('#state')!r}); the run said: {err[-2000:]}\n" + "\n".join(said))
+
+
 def _get(port: int, path: str) -> int:
     """The status of a GET sent as written (no client-side normalisation of ``..``)."""
     conn = http.client.HTTPConnection("127.0.0.1", port, timeout=5)
@@ -74,8 +91,7 @@ def test_a_run_watched_live_and_then_opened_finished_in_a_real_browser(tmp_path)
             browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
             page = browser.new_page(viewport={"width": 1400, "height": 900})
             page.goto(f"http://127.0.0.1:{port}/?ports=ball.h")
-            for node in ("ball", "hand", "arm", "clock"):
-                page.wait_for_selector(f"tr[data-node='{node}']", timeout=30_000)
+            _rows_while_running(page, run, tmp_path / "runs", ("ball", "hand", "arm", "clock"))
             page.wait_for_function("Number(document.getElementById('step').textContent) > 0", timeout=30_000)
             first = int(page.text_content("#step"))
             page.wait_for_timeout(600)
@@ -233,6 +249,42 @@ def test_a_dashboard_whose_server_is_busy_answering_others_says_so_and_keeps_try
         finally:
             feed.close()
             busy.undeclare()
+
+
+def test_a_feed_that_fails_on_an_answer_says_so_and_connects_again():
+    """Whatever goes wrong while the feed watches a server, its thread stays up: the page says
+    the server was lost and shows the run once an answer is taken (a feed thread that died left
+    the page waiting on an empty table for good)."""
+    import zenoh
+
+    from hycosim.core.keys import ProjectKeys
+    from hycosim.core.session import router_config
+
+    class FailsOnce(LiveFeed):
+        failed = False
+
+        def take(self, status):
+            if not self.failed:
+                self.failed = True
+                raise RuntimeError("a fault in taking an answer")
+            super().take(status)
+
+    answer = json.dumps({"project": "p", "nodes": [{"name": "a", "uid": 1, "input": [], "output": ["y"]}],
+                         "attached": ["a"], "step": 0}).encode()
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with zenoh.open(router_config(endpoint)) as server:
+        said = server.declare_queryable(ProjectKeys("p").status, lambda q: q.reply(q.key_expr, answer))
+        feed = FailsOnce(endpoint, "p", retry_s=0.2)
+        messages = []
+        feed.watchers.notify = lambda: messages.append(feed.message)
+        feed.start()
+        try:
+            wait_for(lambda: [n["name"] for n in feed.snapshot([])["nodes"]] == ["a"], 20, "the feed to show node a")
+            assert any("lost the server" in m and "a fault in taking an answer" in m for m in messages), messages
+            assert feed._thread.is_alive()
+        finally:
+            feed.close()
+            said.undeclare()
 
 
 def test_bad_dashboard_targets_are_refused_by_name(tmp_path):

@@ -165,6 +165,9 @@ class LiveFeed:
                 continue
             try:
                 self._watch(session)
+            except Exception as exc:  # noqa: BLE001 - the feed outlives whatever a session does; the page says so
+                self._log.warning("feed lost the server", error=repr(exc))
+                self._say("connecting", f"lost the server at {self.endpoint} ({exc}); retrying")
             finally:
                 session.close()
             self._stop.wait(self._retry_s)
