@@ -13,7 +13,9 @@ import json
 import sys
 from pathlib import Path
 
-from _fmu_build import native_fmu
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # tests import this as benchmarks._small_fmus
+
+from _fmu_build import native_fmu  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE / "_small_fmus.c"

@@ -175,9 +175,10 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
                     elif "done" in msg:
                         code, message = msg["done"], msg["message"]
                 for name, proc in list(nodes.items()):
-                    # Before the run starts no node has a reason to end: exit status 0 included.
+                    # Before the run starts no node has a reason to end (exit status 0 included),
+                    # unless the launcher stopped the server for another node's failure.
                     if name not in failures and proc.poll() is not None and (
-                            proc.returncode not in (0, FAILED_ELSEWHERE) or not started):
+                            proc.returncode not in (0, FAILED_ELSEWHERE) or not (started or server_stopped)):
                         if restartable and started and restarted.get(name, 0) < restarts and code is None:
                             # The server holds the barrier and restores the run from its last
                             # checkpoint once the new process says HELLO.

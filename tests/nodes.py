@@ -73,3 +73,29 @@ class FailsAt(Node):
         if t + h > self.at + 1e-9:
             raise ZeroDivisionError("the model divided by zero")
         self.t = t + h
+
+
+class Static(Node):
+    """``y = k·u + b`` at every instant, the start included (its start_feedthrough: y reads u),
+    held over a step as a co-simulation FMU's direct feedthrough is; ``k`` 1.0, ``b`` 0.0."""
+
+    INPUTS = frozenset({"u"})
+    OUTPUTS = frozenset({"y"})
+    FEEDTHROUGH = {"y": frozenset({"u"})}
+
+    def setup(self, ctx: NodeContext) -> None:
+        self.k, self.b = float(ctx.parameter("k", 1.0)), float(ctx.parameter("b", 0.0))
+        self.y = self.k * (ctx.inputs[0].start_value() if ctx.inputs else 0.0) + self.b
+
+    @property
+    def start_feedthrough(self) -> dict[str, list[str]]:
+        return {"y": ["u"]}
+
+    def start_inputs(self, inputs: dict[str, Any]) -> None:
+        self.y = self.k * inputs["u"] + self.b
+
+    def outputs(self) -> dict[str, Any]:
+        return {"y": self.y}
+
+    def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
+        self.y = self.k * inputs["u"] + self.b

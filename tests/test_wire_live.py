@@ -170,8 +170,8 @@ def _replay_for_someone(payload: bytes) -> bool:
 
 
 def _passed_over(payload: bytes) -> bool:
-    """A frame on ``down`` a node passes over without counting it dropped: a REPLAY or RESTORE
-    for another node, or a CHECKPOINT of a point in range (the server sends each to every
+    """A frame on ``down`` a node passes over without counting it dropped: a REPLAY, RESTORE or
+    INIT for another node, or a CHECKPOINT of a point in range (the server sends each to every
     node, and a node whose step does not end there leaves it, as a slower one does)."""
     try:
         frame = frames.decode(payload)
@@ -179,6 +179,8 @@ def _passed_over(payload: bytes) -> bool:
         return False
     if frame.kind == frames.CHECKPOINT:
         return 0 <= frame.fields[0] < frames.MAX_STEP
+    if frame.kind == frames.INIT:  # an initialisation of other nodes (each node it names drops it)
+        return True
     return _replay_for_someone(payload)
 
 

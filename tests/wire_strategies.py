@@ -66,6 +66,7 @@ _PLAUSIBLE: dict[int, tuple[st.SearchStrategy, ...]] = {
                    names, st.dictionaries(names, port_values, max_size=3), st.lists(names, max_size=3)),
     frames.BATCH: (uids, steps, times, port_values, st.lists(port_values | scalars, max_size=3)
                    | st.just([[0.0]] * frames.MAX_BATCH)),
+    frames.INIT: (times, st.dictionaries(names, port_values, max_size=3)),
 }
 
 
@@ -77,7 +78,8 @@ def frame_arrays(kinds: list[int] | None = None) -> st.SearchStrategy:
     def draw(draw_) -> list:
         kind = draw_(st.sampled_from(chosen))
         if kind == frames.REPLAY:
-            inner = draw_(frame_arrays([frames.START, frames.STEP, frames.STEPS, frames.STOP, frames.OUTPUTS]))
+            inner = draw_(frame_arrays([frames.START, frames.STEP, frames.STEPS, frames.STOP, frames.OUTPUTS,
+                                             frames.INIT]))
             fields = [draw_(_or_any(names)), draw_(st.just(msgpack.packb(inner)) | st.binary(max_size=16))]
         else:
             fields = [draw_(_or_any(s)) for s in _PLAUSIBLE[kind]]

@@ -66,6 +66,16 @@ class FmuNode(Node):
         # the values set last, and an FMU may take a new value as one held over the step.
         self._derivatives = derivatives
 
+    @property
+    def start_feedthrough(self) -> dict[str, list[str]]:
+        return {out: sorted(ins) for out, ins in self.fmu.start_feedthrough().items() if ins} if self.fmu else {}
+
+    def start_inputs(self, inputs: dict[str, Any]) -> None:
+        # After exitInitializationMode, before the first doStep: inputs may be set and outputs
+        # read at the start time (FMI 2 slaveInitialized, FMI 3 Step Mode).
+        with _node_errors():
+            self.fmu.set_inputs(inputs)
+
     def outputs(self) -> dict[str, Any]:
         with _node_errors():
             return self.fmu.get_outputs()

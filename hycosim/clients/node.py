@@ -109,6 +109,21 @@ class Node(ABC):
     def set_mode(self, mode: str, driven: bool) -> None:
         """The coordinator entered ``mode``; ``driven`` says whether this node now follows another."""
 
+    # Initialisation: between setup and the first step the master gives each node whose outputs
+    # at the start depend directly on inputs those inputs, as the links carry its peers' start
+    # outputs, in the order the dependencies give (a cycle: until a fixed point), so that the
+    # run's first point is consistent. A node takes part by naming those outputs here (output →
+    # the inputs it reads at the start) and taking the inputs in start_inputs; by default it does
+    # not (its outputs at the start are what setup made them).
+    @property
+    def start_feedthrough(self) -> dict[str, list[str]]:
+        return {}
+
+    def start_inputs(self, inputs: dict[str, Any]) -> None:
+        """Take the inputs at the start (every input port, by name) without stepping: outputs()
+        then gives the start outputs they make. Called only for a node whose start_feedthrough
+        names an output, possibly several times (a loop iterated to its fixed point)."""
+
     def teardown(self) -> None:
         """Release resources; called once at the end, also after a failure."""
 

@@ -279,6 +279,10 @@ class NodeRuntime:
             return None  # a release of other nodes (this one is not due, or not yet in Gauss-Seidel order)
         if kind in (frames.START, frames.STEP, frames.STEPS):
             return frames.check_release(frame, self._release_for, self._in_types, self._interpolates())
+        if kind == frames.INIT:
+            if self.name not in frame.fields[1]:
+                return None  # the initialisation of other nodes
+            return frames.check_release(frame, self.name, self._in_types)
         if kind == frames.REPLAY:
             if frame.fields[0] != self.name:
                 return None
@@ -518,6 +522,8 @@ class NodeRuntime:
             impl.set_state(at.saved)
             self._log.info("rollback", step=k, t=t)
             return False
+        if frame.kind == frames.INIT:
+            return self._on_init(impl, at, frame)
         if frame.kind == frames.STEPS:
             k, times, new_mode, inputs, driven_nodes = frame.fields
         elif frame.kind == frames.STEP:
@@ -551,6 +557,25 @@ class NodeRuntime:
             for i, chunk in enumerate(chunks := frames.state_chunks(at.pending_state[1])):
                 self._send(frames.encode(frames.STATE, self.spec.UID, k, i, len(chunks), chunk))
             at.pending_state = None
+        return False
+
+    def _on_init(self, impl: Node, at: _Stepping, frame: frames.Frame) -> bool:
+        """The initialisation phase's inputs at t0: take them and answer with the outputs at step
+        0 they make. True if the model failed or ended the simulation there."""
+        t0, inputs = frame.fields
+        if at.done != -1 or not self._start_feedthrough():
+            self.drops.drop("not a release", "an INIT " + ("after the run's first step" if at.done != -1 else
+                            "for a node whose start outputs depend on no input"), self.steps)
+            return False
+        try:
+            impl.start_inputs(dict(zip(self._in_names, inputs[self.name])))
+        except Exception as exc:
+            self._step_failed(exc, -1, t0)
+            return True
+        out = self._step_model(impl, -1, t0, None, {})
+        if out is None:
+            return True
+        at.last_out = out
         return False
 
     def _other_projects(self, session: zenoh.Session) -> str:
@@ -587,8 +612,16 @@ class NodeRuntime:
         return frames.encode(frames.HELLO, self.spec.UID, {
             "rollback": rollback, "serialize": stepping and self.impl.can_serialize,
             "variableStep": stepping and self.impl.can_vary_step, "restart": restart, "batches": stepping,
-            "interpolates": self._interpolates(),
+            "interpolates": self._interpolates(), "startFeedthrough": self._start_feedthrough(),
             "ports": self.spec.wire_ports(), "host": socket.gethostname()[:64]})
+
+    def _start_feedthrough(self) -> dict[str, list[str]]:
+        """The model's start_feedthrough within this node's ports, for the server's initialisation."""
+        if not isinstance(self.impl, Node):
+            return {}
+        ins, outs = set(self._in_names), set(self.spec.output_names())
+        return {out: [i for i in reads if i in ins] for out, reads in self.impl.start_feedthrough.items()
+                if out in outs and any(i in ins for i in reads)}
 
     def _on_stop(self, frame: frames.Frame) -> None:
         """The server's STOP: the end of the run, or of a failed one, which is this node's failure too."""

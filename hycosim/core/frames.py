@@ -44,6 +44,10 @@ Kinds and layouts (after version and kind):
 * ``BATCH``    node → server: ``uid, step, t, values, earlier``: the answer to a STEPS (labelled
   as OUTPUTS are); ``values`` at the end of the node's last step, ``earlier`` the outputs at
   the end of each of its steps before that, in order
+* ``INIT``     server → nodes, between the START's answers and the first release: ``t0, inputs
+  {node: [values]}``: the initialisation phase gives each node named in ``inputs`` its inputs at
+  t0 as the links carry its peers' start outputs; it takes them without stepping and answers
+  with its OUTPUTS at step 0 again (their values now on those inputs)
 
 :func:`decode` checks every field's type (exactly as msgpack yields them: a bool is no
 number, a float no step), so that no receiver meets a list where it reads a name or an
@@ -77,6 +81,7 @@ STATE = 12
 RESTORE = 13
 STEPS = 14
 BATCH = 15
+INIT = 16
 
 # STOP reasons of a run that ended as asked; any other reason is a failure.
 STOP_COMPLETED = "completed"
@@ -85,7 +90,8 @@ CLEAN_STOPS = (STOP_COMPLETED, STOP_STOPPED)
 
 KIND_NAMES = {OUTPUTS: "OUTPUTS", SAMPLE: "SAMPLE", START: "START", STEP: "STEP", STOP: "STOP", LIVE: "LIVE",
               HELLO: "HELLO", ROLLBACK: "ROLLBACK", REPLAY: "REPLAY", END: "END",
-              CHECKPOINT: "CHECKPOINT", STATE: "STATE", RESTORE: "RESTORE", STEPS: "STEPS", BATCH: "BATCH"}
+              CHECKPOINT: "CHECKPOINT", STATE: "STATE", RESTORE: "RESTORE", STEPS: "STEPS", BATCH: "BATCH",
+              INIT: "INIT"}
 
 # Steps and sequence numbers stay well inside int64 (the gateway packs them as such).
 MAX_STEP = 1 << 62
@@ -140,6 +146,7 @@ _SHAPES: dict[int, tuple[int, Callable[[tuple], bool]]] = {
             and type(f[4]) is list),
     BATCH: (5, lambda f: type(f[0]) is int and type(f[1]) is int and type(f[2]) in _NUM and type(f[3]) is list
             and type(f[4]) is list),
+    INIT: (2, lambda f: type(f[0]) in _NUM and type(f[1]) is dict),
 }
 
 _SHORT = reprlib.Repr()
@@ -194,11 +201,11 @@ def decode(payload: bytes) -> Frame:
 
 def check_release(frame: Frame, node: str | None = None, input_types: tuple[tuple[type, ...], ...] | None = None,
                   interpolates: bool = False) -> Frame:
-    """Return a START, STEP or STEPS frame a node can act on; raise FrameError otherwise.
+    """Return a START, STEP, STEPS or INIT frame a node can act on; raise FrameError otherwise.
 
     :func:`decode` has checked the field types. Here: times finite, a step size above zero
     (STEPS: 2 to MAX_BATCH + 1 times, each a number, rising), a step number in range, and
-    with ``node``, a STEP or STEPS that gives that node its inputs, exactly
+    with ``node``, a STEP, STEPS or INIT that gives that node its inputs, exactly
     ``len(input_types)`` of them, each of one of its port's types (``input_types``: per input,
     the Python types msgpack yields for it). A STEP's slopes for that node only if it
     ``interpolates``: one entry per input, None or 1 to MAX_SLOPE_ORDER finite numbers, and
@@ -213,7 +220,11 @@ def check_release(frame: Frame, node: str | None = None, input_types: tuple[tupl
             raise FrameError(f"START frame with times that are not finite or a step size not above 0: "
                              f"{short(list(f[1:5]))}")
         return frame
-    if frame.kind == STEPS:
+    if frame.kind == INIT:
+        k, (_, inputs) = 0, f
+        if not isfinite(f[0]):
+            raise FrameError(f"INIT frame at t0 {short(f[0])}: not finite")
+    elif frame.kind == STEPS:
         k, times, _, inputs, _ = f
         if not (0 <= k < MAX_STEP and 2 <= len(times) <= MAX_BATCH + 1 and all(type(x) in _NUM for x in times)
                 and all(isfinite(x) for x in times) and all(a < b for a, b in zip(times, times[1:]))):
@@ -229,13 +240,15 @@ def check_release(frame: Frame, node: str | None = None, input_types: tuple[tupl
     if node is not None:
         mine = inputs.get(node)
         if type(mine) is not list:
-            raise FrameError(f"STEP {k} gives node {node!r} no inputs")
+            raise FrameError(f"{KIND_NAMES[frame.kind]} {k} gives node {node!r} no inputs")
         if input_types is not None:
             if len(mine) != len(input_types):
-                raise FrameError(f"STEP {k} gives node {node!r} {len(mine)} inputs, it has {len(input_types)}")
+                raise FrameError(f"{KIND_NAMES[frame.kind]} {k} gives node {node!r} {len(mine)} inputs, "
+                                 f"it has {len(input_types)}")
             i = first_misfit(mine, input_types)
             if i is not None:
-                raise FrameError(f"STEP {k} gives node {node!r} a {type(mine[i]).__name__} for input {i}")
+                raise FrameError(f"{KIND_NAMES[frame.kind]} {k} gives node {node!r} a {type(mine[i]).__name__} "
+                                 f"for input {i}")
     return frame
 
 

@@ -183,6 +183,19 @@ class StepControl(_Strict):
     maxStep: float = Field(gt=0)
 
 
+class Initialize(_Strict):
+    """The initialisation phase before the first step: each node whose outputs at the start
+    depend directly on inputs is given those inputs as the links carry its peers' start
+    outputs, in the order the dependencies give; a cycle of such nodes (an algebraic loop at
+    the start) is swept until no output changes by more than ``tolerance``·max(1, |value|),
+    at most ``maxIterations`` sweeps, or the run fails naming the loop."""
+
+    model_config = ConfigDict(allow_inf_nan=False)
+    enabled: bool = True
+    tolerance: float = Field(default=1e-10, gt=0)
+    maxIterations: int = Field(default=100, ge=1, le=10000)
+
+
 MAX_WAIT_S = 1e6  # about 11 days: the longest wall-clock wait a project may ask for
 
 
@@ -233,6 +246,8 @@ class CoSimulation(_Strict):
     order: list[str] | None = None
     # Iterative coupling (Jacobi, every stepping node able to roll back): see Iterate.
     iterate: Iterate | None = None
+    # The initialisation phase (consistent start outputs): see Initialize.
+    initialize: Initialize = Field(default_factory=Initialize)
     # An error-controlled macro step (Jacobi, every stepping node able to roll back and to take
     # steps of any length): see StepControl. None: fixed macro steps of stepSize.
     stepControl: StepControl | None = None

@@ -262,6 +262,31 @@ class FmuMapping:
                 out[port] = {ports_of[v.name] for v in unknown.dependencies if v.name in ports_of}
         return out
 
+    def start_feedthrough(self) -> dict[str, set[str]]:
+        """Each mapped output port → the mapped input ports its value at the start depends on,
+        for the initialisation phase: an output listed in ``InitialUnknowns`` depends on what
+        that lists (every input without ``dependencies``); an output with ``initial="exact"``
+        that is not listed there starts at its start value and depends on none; any other on
+        what ``Outputs`` lists for it (every input where the model structure says nothing)."""
+        ports_of = {p.variable: p.port for p in self.inputs}
+        every = set(ports_of.values())
+        listed = {getattr(u.variable, "name", None): u for u in self.md.initialUnknowns}
+        listed_outputs = {getattr(u.variable, "name", None): u for u in self.md.outputs}
+        out: dict[str, set[str]] = {}
+        for p in self.outputs:
+            unknown = listed.get(p.variable)
+            if unknown is None:
+                variable = next((v for v in self.md.modelVariables if v.name == p.variable), None)
+                if variable is not None and getattr(variable, "initial", None) == "exact":
+                    out[p.port] = set()
+                    continue
+                unknown = listed_outputs.get(p.variable)
+            if unknown is None or unknown.dependencies is None:
+                out[p.port] = set(every)
+            else:
+                out[p.port] = {ports_of[v.name] for v in unknown.dependencies if v.name in ports_of}
+        return out
+
 
 def check_fmu(path: Path, node: Node, parameters: dict[str, Any] | None = None) -> FmuMapping:
     """Everything checked before an FMU's binary loads: the FMU is readable, FMI 2.0 or 3.0
@@ -286,6 +311,7 @@ class FmuInstance:
         mapping = mapping or check_fmu(path, node, parameters)
         self.md, self.inputs, self.outputs, self.driven_variable = (
             mapping.md, mapping.inputs, mapping.outputs, mapping.driven)
+        self.start_feedthrough = mapping.start_feedthrough
         self.fmi3 = self.md.fmiVersion.startswith("3")
         cs = mapping.capabilities
         self.can_rollback = bool(getattr(cs, "canGetAndSetFMUstate", False))

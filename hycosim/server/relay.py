@@ -31,7 +31,7 @@ from hycosim.core.keys import ProjectKeys
 from hycosim.core.session import FrameTooLarge
 from hycosim.core.sim_clock import RealTimeClock
 
-from hycosim.server import checkpoints, plans
+from hycosim.server import checkpoints, initialisation, plans
 from hycosim.server.answer_budget import AnswerBudget
 from hycosim.server.async_sources import SampleHistory
 from hycosim.server.coordinator import Coordinator, GuardEvaluationError
@@ -589,12 +589,14 @@ class Relay:
             self._released_at[node] = released_at
         self._early.clear()
 
-    def _collect(self, step: int, released_at: float, nodes: set[str] | None = None) -> dict[str, float]:
+    def _collect(self, step: int, released_at: float, nodes: set[str] | None = None,
+                 paced: bool = True) -> dict[str, float]:
         """Gather the outputs due at point ``step`` (every stepping node's whose step ends there,
-        or just ``nodes``'), and a played source's word that its samples for ``step`` are sent;
-        return arrival offsets (s), each from its node's release."""
+        or just ``nodes``'), and a played source's word that its samples for ``step`` are sent
+        (unless not ``paced``: the initialisation's answers); return arrival offsets (s), each
+        from its node's release."""
         if nodes is not None:
-            pending = set(nodes) | set(self.paced)
+            pending = set(nodes) | (set(self.paced) if paced else set())
         elif self.coupling.multirate:
             pending = {n for n, at in self._due_at.items() if at == step} | set(self.paced)
         else:
@@ -694,6 +696,46 @@ class Relay:
         self._log.info("node ended the simulation", node=node, step=k, t=t, message=message)
         if not inside:
             raise _ModelEnded
+
+    def _initialise(self) -> None:
+        """The initialisation phase (server.initialisation): each node whose start outputs read
+        linked inputs is given them at t0 and answers with its outputs again, in dependency
+        order; a loop is swept until its outputs settle, or the run fails naming it."""
+        mode, t0, settings = self.coordinator.mode, self.cosim.startTime, self.cosim.initialize
+        feedthrough = {n: initialisation.checked_feedthrough(self.capabilities.get(n, {}).get("startFeedthrough"),
+                                                             self.project.node(n).input_names(),
+                                                             self.project.node(n).output_names())
+                       for n in self.stepping}
+        groups = initialisation.plan(self.loaded.routes, mode, feedthrough, self.stepping)
+        done: list[dict[str, Any]] = []
+        self.recorder.meta["initialisation"] = done
+        if not groups:
+            return
+        self.router.route(mode, t0, self.outputs, self.histories)  # the sources' values at t0 too
+        names = {n: self.project.node(n).output_names() for n in self.stepping}
+        for group in groups:
+            for sweep in range(1, (settings.maxIterations if group.loop else 1) + 1):
+                before = {n: list(self.outputs[n]) for n in group.nodes}
+                for node in group.nodes:
+                    self.router.route_into(node, mode, self.outputs)
+                    self.release.put(frames.encode(frames.INIT, t0, {node: list(self.router.inputs[node])}))
+                    self.messages["releases"] += 1
+                    self._collect(0, time.perf_counter(), {node}, paced=False)
+                if not group.loop:
+                    break
+                change = initialisation.residuals(before, self.outputs, names)
+                if max(change.values(), default=0.0) <= settings.tolerance:
+                    break
+            else:
+                worst = sorted(change.items(), key=lambda item: -item[1])[:4]
+                loop = initialisation.describe_loop(group, self.loaded.routes, feedthrough)
+                raise RunError(
+                    f"initialisation: the algebraic loop {loop} did not settle in {settings.maxIterations} "
+                    "sweeps (coSimulation.initialize.maxIterations); "
+                    "its last changes: " + ", ".join(f"{port} {value:.3g}" for port, value in worst)
+                    + f" (tolerance {settings.tolerance:g})")
+            done.append({"nodes": list(group.nodes), "loop": group.loop, "sweeps": sweep})
+            self._log.info("initialised", nodes=list(group.nodes), sweeps=sweep)
 
     def _localisation_plan(self) -> bool:
         """Whether steps may be rolled back to locate guard crossings; say why not in the metadata."""
@@ -996,6 +1038,8 @@ class Relay:
                 self.gateway.run_started()
             self._expect_all(0, released_at)
             arrivals = self._collect(0, released_at)
+            if cosim.initialize.enabled:
+                self._initialise()
             wait = time.perf_counter() - released_at
         localise = self._localisation_plan()
         self._retake_plan()
