@@ -65,6 +65,7 @@ bench: $(STAMP) bytecode chromium tbb
 	$(PY) -m pip install --quiet -e ".[scenario,dashboard,models,test,docs,bench]"
 	$(PY) benchmarks/barrier.py
 	$(PY) benchmarks/inprocess.py
+	$(PY) benchmarks/crosscheck.py
 	$(PY) benchmarks/fmu_overhead.py
 	$(PY) benchmarks/scene_fmus.py
 	$(PY) benchmarks/memory.py

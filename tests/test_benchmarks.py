@@ -277,3 +277,17 @@ def test_inprocess_benchmark_reports_ratios_against_the_distributed_run_and_ecos
     assert set(r["ratios"]) == {"ring N=2 in process / processes", "3 FMUs hycosim in process / ECOS",
                                 "3 FMUs hycosim processes / ECOS", "3 FMUs fmpy loop / ECOS"}
     assert all(v > 0 for v in r["median_steps_per_s"].values())
+
+
+def test_crosscheck_benchmark_finds_hycosim_and_ecos_equal_at_t0_and_within_rounding_after():
+    res = subprocess.run([sys.executable, "benchmarks/crosscheck.py", "--steps", "80", "--json"],
+                         capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
+    assert res.returncode == 0, res.stderr
+    r = json.loads(res.stdout)
+    assert set(r) == {"chain", "vdp"} and set(r["vdp"]) == {"hycosim in process", "ECOS", "fmpy.simulate_fmu"}
+    for system in r.values():
+        assert all(v["max_abs_diff"] == 0.0 for v in system["hycosim in process"].values())
+        assert all(v["t0_diff"] == 0.0 and v["max_rel_diff"] <= 1e-12 and v["points"] == 81
+                   for v in system["ECOS"].values())
+    assert r["chain"]["ECOS"]["ft.y"]["compared"].startswith("one point earlier")
+    assert all(v["max_abs_diff"] == 0.0 for v in r["vdp"]["fmpy.simulate_fmu"].values())

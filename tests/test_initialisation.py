@@ -157,3 +157,27 @@ def test_the_plan_puts_each_node_after_those_it_reads_and_loops_together(order, 
 def test_a_hellos_start_feedthrough_is_taken_only_within_the_nodes_ports(said):
     checked = initialisation.checked_feedthrough(said, ["u"], ["y", "z"])
     assert set(checked) <= {"y", "z"} and all(reads and reads <= {"u"} for reads in checked.values())
+
+
+def test_validate_names_an_fmu_output_whose_start_dependencies_are_unsaid_and_the_run_reads_them_all(tmp_path):
+    """A model structure without ``dependencies`` (pythonfmu's unless told): validate warns, and
+    the initialisation takes the output as reading every input, which for y = u is right."""
+    from benchmarks._fmu_build import native_fmu
+    from benchmarks._small_fmus import MODELS, SOURCE, model_description
+
+    md = model_description("Feedthrough").replace(' dependencies="1"', "")
+    md = md[:md.index("    <InitialUnknowns>")] + md[md.index("</InitialUnknowns>\n") + len("</InitialUnknowns>\n"):]
+    assert "dependencies" not in md and "InitialUnknowns" not in md
+    fmus = {"Feedthrough": native_fmu(SOURCE, "Feedthrough", md, tmp_path / "Feedthrough.fmu",
+                                      [f"-DMODEL={MODELS['Feedthrough'][0]}"]),
+            "Dahlquist": native_fmu(SOURCE, "Dahlquist", model_description("Dahlquist"), tmp_path / "Dahlquist.fmu",
+                                    [f"-DMODEL={MODELS['Dahlquist'][0]}"])}
+    cfg = _chain(tmp_path / "chain.json", fmus)
+    res = hycosim("validate", str(cfg))
+    assert res.returncode == 0, res.stderr
+    for node in ("ft", "ft2"):
+        assert (f"node {node!r}: its FMU's model structure does not say which inputs y depends on at the start"
+                in res.stderr)
+    assert "node 'dahlquist'" not in res.stderr  # no input: nothing unsaid
+    first = read_rows(run_project(cfg, tmp_path / "runs"))[0]
+    assert (float(first["ft.y"]), float(first["ft2.y"])) == (3.0, 3.0)

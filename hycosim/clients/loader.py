@@ -14,6 +14,7 @@ import importlib.util
 import sys
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 from hycosim.core.schema import CoSimulation
 from hycosim.core.schema import Node as NodeSpec
@@ -234,6 +235,13 @@ def why_no_interpolation(spec: NodeSpec, project_dir: Path) -> str | None:
             return f"its model {cls.__name__} has no set_input_derivatives"
         return None
     return "a recording or a bridge FMU holds its inputs"
+
+
+def fmu_mapping(spec: NodeSpec, project_dir: Path) -> Any:
+    """The checked mapping of an FMU node's ports onto its FMU's variables (fmu_bridge.fmu_loader.FmuMapping)."""
+    from hycosim.fmu_bridge.fmu_loader import check_fmu
+
+    return check_fmu(_fmu_path(spec, project_dir), spec)
 
 
 def feedthrough_of(spec: NodeSpec, project_dir: Path) -> dict[str, set[str]]:

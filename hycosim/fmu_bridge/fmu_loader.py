@@ -268,23 +268,32 @@ class FmuMapping:
         that lists (every input without ``dependencies``); an output with ``initial="exact"``
         that is not listed there starts at its start value and depends on none; any other on
         what ``Outputs`` lists for it (every input where the model structure says nothing)."""
+        return {port: reads for port, (reads, _) in self._start_dependencies().items()}
+
+    def unstated_start_dependencies(self) -> list[str]:
+        """The mapped output ports whose start dependencies the model structure does not state
+        (no ``dependencies`` where it lists them, as pythonfmu writes unless told): taken as
+        reading every input, which may make a loop at the start where the model has none."""
+        return [port for port, (_, stated) in self._start_dependencies().items() if not stated]
+
+    def _start_dependencies(self) -> dict[str, tuple[set[str], bool]]:
         ports_of = {p.variable: p.port for p in self.inputs}
         every = set(ports_of.values())
         listed = {getattr(u.variable, "name", None): u for u in self.md.initialUnknowns}
         listed_outputs = {getattr(u.variable, "name", None): u for u in self.md.outputs}
-        out: dict[str, set[str]] = {}
+        variables = {v.name: v for v in self.md.modelVariables}
+        out: dict[str, tuple[set[str], bool]] = {}
         for p in self.outputs:
             unknown = listed.get(p.variable)
             if unknown is None:
-                variable = next((v for v in self.md.modelVariables if v.name == p.variable), None)
-                if variable is not None and getattr(variable, "initial", None) == "exact":
-                    out[p.port] = set()
+                if getattr(variables.get(p.variable), "initial", None) == "exact":
+                    out[p.port] = (set(), True)
                     continue
                 unknown = listed_outputs.get(p.variable)
             if unknown is None or unknown.dependencies is None:
-                out[p.port] = set(every)
+                out[p.port] = (set(every), not every)
             else:
-                out[p.port] = {ports_of[v.name] for v in unknown.dependencies if v.name in ports_of}
+                out[p.port] = ({ports_of[v.name] for v in unknown.dependencies if v.name in ports_of}, True)
         return out
 
 

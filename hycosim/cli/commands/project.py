@@ -42,6 +42,7 @@ def validate(
               highlight=False)
     if models:
         _warn_algebraic_loops(file, loaded)
+        _warn_unstated_start_dependencies(file, loaded)
     if p.coSimulation.checkpointEvery is not None and models:
         from hycosim.clients.loader import why_no_checkpoint
 
@@ -91,6 +92,22 @@ def _check_retakes(file: Path, loaded: Any) -> None:
             if n.input and (why := why_no_interpolation(n, loaded.path.parent)):
                 warn(f"{file}: coSimulation.iterate.interpolate: node {n.nodeName!r} holds its inputs at the "
                      f"step's end value: {why}")
+
+
+def _warn_unstated_start_dependencies(file: Path, loaded: Any) -> None:
+    """Name each linked FMU output whose start dependencies its model structure leaves unsaid:
+    the initialisation takes it as reading every input."""
+    from hycosim.clients.loader import fmu_mapping
+
+    p = loaded.project
+    fed = {r.dst_node for r in loaded.routes}
+    for n in p.stepping_nodes():
+        if n.fmu and n.nodeName in fed and p.coSimulation.initialize.enabled:
+            ports = fmu_mapping(n, loaded.path.parent).unstated_start_dependencies()
+            if ports:
+                warn(f"{file}: node {n.nodeName!r}: its FMU's model structure does not say which inputs "
+                     f"{', '.join(ports)} depend{'s' if len(ports) == 1 else ''} on at the start (no dependencies in "
+                     "InitialUnknowns or Outputs): the initialisation takes every input as read")
 
 
 def _warn_algebraic_loops(file: Path, loaded: Any) -> None:
