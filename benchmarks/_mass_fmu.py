@@ -52,8 +52,10 @@ def model_description() -> str:
         feeds = FEEDS.get(name)
         deps = str(index[feeds]) if feeds else ""
         unknowns.append(f'      <Unknown index="{index[name]}" dependencies="{deps}"/>')
-    # Fl and Fr are calculated at initialisation, from the start values (all of them: no dependencies).
-    initial = "\n".join(f'      <Unknown index="{index[n]}"/>' for n in OUTPUTS if n not in ("x", "v"))
+    # Fl and Fr are calculated at initialisation, each from the input its spring reads: listed, so
+    # that the initialisation phase (and validate) need not take them as reading every input.
+    initial = "\n".join(f'      <Unknown index="{index[n]}" dependencies="{index[FEEDS[n]]}"/>'
+                        for n in OUTPUTS if n not in ("x", "v"))
     variables, outputs = "\n".join(rows), "\n".join(unknowns)
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName="Mass" guid="{GUID}" generationTool="hycosim benchmarks"
