@@ -50,9 +50,9 @@ from hycosim.core.keys import ProjectKeys
 from hycosim.core.session import client_config, open_session
 endpoint, project = sys.argv[1], sys.argv[2]
 session = None
-while session is None:
+while session is None:  # a short attempt, again and again: one of 2 s could outlast a short run
     try:
-        session = open_session(client_config(endpoint, timeout_s=2.0), endpoint)
+        session = open_session(client_config(endpoint, timeout_s=0.1), endpoint)
     except Exception:
         time.sleep(0.01)
 waits = sys.argv[3] == "waits"

@@ -123,14 +123,15 @@ def _from_the_server(draw, node: str, wrong: str | None = "any") -> tuple[bytes,
     kind and what is wrong (``wrong``: that, or any of _RELEASE_WRONGS)."""
     if wrong == "any":  # a right frame one time in three: the properties hold of what is acted on
         wrong = draw(st.sampled_from([None] * 5 + _RELEASE_WRONGS))
-    only = {"value": [frames.STEP, frames.STEPS, frames.REPLAY], "ports": [frames.STEP, frames.STEPS, frames.REPLAY],
-            "others": [frames.STEP, frames.STEPS, frames.REPLAY, frames.RESTORE],
+    only = {"value": [frames.STEP, frames.STEPS, frames.REPLAY, frames.INIT],
+            "ports": [frames.STEP, frames.STEPS, frames.REPLAY, frames.INIT],
+            "others": [frames.STEP, frames.STEPS, frames.REPLAY, frames.RESTORE, frames.INIT],
             "step": [frames.STEP, frames.STEPS, frames.ROLLBACK, frames.CHECKPOINT, frames.RESTORE, frames.REPLAY],
-            "t": [frames.START, frames.STEP, frames.STEPS, frames.ROLLBACK, frames.RESTORE, frames.REPLAY],
+            "t": [frames.START, frames.STEP, frames.STEPS, frames.ROLLBACK, frames.RESTORE, frames.REPLAY, frames.INIT],
             "slopes": [frames.STEP], "chunk": [frames.RESTORE], "replay": [frames.REPLAY],
             "kind": _NOT_FOR_A_NODE}.get(wrong)
     kind = draw(st.sampled_from(only or [frames.START, frames.STEP, frames.STEPS, frames.STOP, frames.ROLLBACK,
-                                         frames.CHECKPOINT, frames.REPLAY, frames.RESTORE]))
+                                         frames.CHECKPOINT, frames.REPLAY, frames.RESTORE, frames.INIT]))
     if kind in _NOT_FOR_A_NODE:  # its own version and kind, so that it is decoded as one
         return draw(frame_arrays([kind]).map(lambda a: frames.msgpack.packb([frames.VERSION, kind, *a[2:]]))), \
             kind, wrong
@@ -179,6 +180,8 @@ def _from_the_server(draw, node: str, wrong: str | None = "any") -> tuple[bytes,
             if wrong == "t":  # a time not finite, or a step size or real-time factor not above 0
                 at = draw(st.integers(1, 4))
                 fields[at] = draw(bad_t | st.sampled_from([0.0, -0.1]) if at in (2, 4) else bad_t)
+        elif inner == frames.INIT:  # the initialisation's inputs at t0
+            fields = [draw(bad_t) if wrong == "t" else t, inputs]
         elif inner == frames.STEP:
             others = {n: [draw(st.floats(-1, 1))] for n in draw(st.sets(st.sampled_from(["clock", "src"])))}
             fields = [k, t, h, mode, inputs, driven, others]  # slopes only for nodes that interpolate
@@ -311,7 +314,7 @@ def test_a_node_acts_only_on_releases_that_give_it_exactly_its_inputs(loaded, no
     _quiet()
     runtime = NodeRuntime(loaded, node, impl=None, endpoint="tcp/127.0.0.1:1")
     payload = data.draw(payloads | frame_arrays([frames.STEP, frames.STEPS, frames.REPLAY, frames.RESTORE,
-                                                 frames.CHECKPOINT]).map(frames.msgpack.packb)
+                                                 frames.CHECKPOINT, frames.INIT]).map(frames.msgpack.packb)
                         | _from_the_server(node).map(lambda sent: sent[0])
                         | _from_the_server(node).map(lambda sent: sent[0]))
     try:
@@ -321,7 +324,7 @@ def test_a_node_acts_only_on_releases_that_give_it_exactly_its_inputs(loaded, no
     if frame is None:
         return  # a replay for another node, or a release of others (this node is not due)
     assert frame.kind in (frames.START, frames.STEP, frames.STEPS, frames.REPLAY, frames.ROLLBACK, frames.STOP,
-                          frames.CHECKPOINT, frames.RESTORE)
+                          frames.CHECKPOINT, frames.RESTORE, frames.INIT)
     if frame.kind == frames.RESTORE:
         name, step, t, index, count, chunk, _ = frame.fields
         assert name == node and 0 <= step < frames.MAX_STEP and 0 <= index < count and math.isfinite(t)
@@ -330,8 +333,10 @@ def test_a_node_acts_only_on_releases_that_give_it_exactly_its_inputs(loaded, no
         assert 0 <= frame.fields[0] < frames.MAX_STEP
         return
     release = frame.fields[1] if frame.kind == frames.REPLAY else frame
-    if release.kind in (frames.STEP, frames.STEPS):
-        mine = release.fields[4 if release.kind == frames.STEP else 3][node]
+    if release.kind == frames.INIT:
+        assert math.isfinite(release.fields[0])
+    if release.kind in (frames.STEP, frames.STEPS, frames.INIT):
+        mine = release.fields[{frames.STEP: 4, frames.STEPS: 3, frames.INIT: 1}[release.kind]][node]
         spec = loaded.project.node(node)
         assert len(mine) == len(spec.input)
         assert all(type(v) in WIRE_TYPES[p.type] for v, p in zip(mine, spec.input))
