@@ -70,11 +70,14 @@ def test_an_fmu_that_asks_to_terminate_ends_the_run_cleanly_naming_node_and_time
     run = next((tmp_path / "runs").iterdir())
     m = meta(run)
     assert m["status"] == "completed" and m["ended_by"]["node"] == "e"
-    assert m["ended_by"]["t"] == pytest.approx(ended_at) and m["ended_by"]["step"] == 2
+    assert m["ended_by"]["t"] == pytest.approx(ended_at) and m["ended_by"]["step"] == 3
     rows = read_rows(run)
-    # T_0..T_2: the step from 0.2 is the one the FMU ended in; nothing after it is recorded
-    assert column(rows, "t") == pytest.approx([0.0, 0.1, 0.2])
-    assert column(rows, "e.x") == pytest.approx([0.0, 0.1, 0.2])
+    # T_0..T_2, then the point the FMU ended at with its outputs there (as FMPy records it).
+    # The FMI 2 FMU ended inside the step from 0.2: the clock's outputs are held from 0.2. The
+    # FMI 3 FMU said it ended at the step's end: the clock's outputs there are recorded.
+    assert column(rows, "t") == pytest.approx([0.0, 0.1, 0.2, ended_at])
+    assert column(rows, "e.x") == pytest.approx([0.0, 0.1, 0.2, 0.25])
+    assert column(rows, "clock.y") == pytest.approx([0.0, 0.1, 0.2, 0.2 if fmi == "2" else 0.3])
 
 
 @pytest.mark.parametrize("fmi", ["2", "3"])
@@ -95,8 +98,8 @@ def test_a_discard_without_termination_is_a_failure_whose_headline_names_the_dis
 def test_an_fmu_ending_inside_a_batched_release_ends_the_records_where_one_release_a_step_would(
         tmp_path, fmus, end_at, points):
     """The clock steps every 5 base steps and nothing links the two, so releases span 5 base
-    steps; the FMU ends inside one: the run ends cleanly, naming it, and the records and
-    ended_by stop at the last point it reached (its steps before the last came with its END),
+    steps; the FMU ends inside one: the run ends cleanly, naming it, and the records hold the
+    points it reached (its steps before the last came with its END) and the point it ended at,
     exactly as with one release per base step."""
     runs = {}
     for batch in (True, False):
@@ -110,7 +113,28 @@ def test_an_fmu_ending_inside_a_batched_release_ends_the_records_where_one_relea
         runs[batch] = next((tmp_path / f"runs-{batch}").iterdir())
     m = meta(runs[True])
     assert m["coupling"].endswith("releases batched over 5 base steps")
-    assert m["status"] == "completed" and m["ended_by"]["node"] == "e" and m["ended_by"]["step"] == points
-    assert column(read_rows(runs[True]), "t") == pytest.approx([0.1 * i for i in range(points + 1)])
+    # The points every node reached, then the one the FMU ended at (its x there is end_at).
+    assert m["status"] == "completed" and m["ended_by"]["node"] == "e" and m["ended_by"]["step"] == points + 1
+    rows = read_rows(runs[True])
+    assert column(rows, "t") == pytest.approx([0.1 * i for i in range(points + 1)] + [end_at])
+    assert column(rows, "e.x")[-1] == pytest.approx(end_at)
     assert (runs[True] / "values.csv").read_bytes() == (runs[False] / "values.csv").read_bytes()
-    assert meta(runs[False])["ended_by"]["step"] == points
+    assert meta(runs[False])["ended_by"]["step"] == points + 1
+
+
+@pytest.mark.parametrize("fmi", ["2", "3"])
+def test_the_records_of_an_fmu_that_terminates_are_fmpys_point_for_point(tmp_path, fmus, fmi):
+    """FMPy's simulate_fmu records an FMU that asks to terminate at the time it ended, with its
+    outputs there; a hycosim run of the FMU alone records the same points and values."""
+    from fmpy import simulate_fmu
+
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "e", "UID": 1, "fmu": str(fmus[fmi]), "parameters": {"end_at": 0.25}, "output": ["x"]}],
+        cosim={"stepSize": 0.1, "stopTime": 1.0, "stepTimeout": 10.0})
+    res = hycosim("run", str(cfg), "--runs-dir", str(tmp_path / "runs"), "--no-progress")
+    assert res.returncode == 0, res.stderr
+    rows = read_rows(next((tmp_path / "runs").iterdir()))
+    ref = simulate_fmu(str(fmus[fmi]), start_values={"end_at": 0.25}, stop_time=1.0, step_size=0.1,
+                       output_interval=0.1, output=["x"])
+    assert column(rows, "t") == list(ref["time"]) and column(rows, "e.x") == list(ref["x"])
+    assert len(rows) == 4

@@ -110,6 +110,10 @@ def test_inputs_time_events_and_termination_inside_a_macro_step(tmp_path, fmus):
     bounce2 = math.sqrt(2 / 9.81) * (1 + 2 * 0.7)  # the second floor contact, analytically
     assert ended["node"] == "ball" and ended["t"] == pytest.approx(bounce2, abs=1e-4)
     assert "BallME.fmu asked to terminate the simulation" in ended["message"]
+    # The last row is the contact the FMU ended at, as FMPy records it: the ball on the floor.
+    last = read_rows(run)[-1]
+    assert float(last["t"]) == ended["t"] and abs(float(last["ball.h"])) < 1e-6
+    assert int(last["step"]) == ended["step"] == math.floor(bounce2 / 0.01) + 1
 
 
 def test_an_fmu_with_both_interfaces_runs_as_co_simulation_unless_told(tmp_path, fmus):

@@ -93,14 +93,16 @@ def _from_a_node(draw, wrong: str | None = "any") -> tuple[str, bytes, int, str 
     elif wrong == "ports":  # a value too few or too many
         outputs = outputs.flatmap(lambda vs: st.sampled_from([vs[:-1], vs + [0.5]]))
     # A source's END only says it failed or was stopped: unclean, no batch.
-    end = ([st.just(False), st.text(max_size=20), st.just([])] if source else
-           [st.booleans(), st.text(max_size=20), st.just([]) | st.lists(outputs, min_size=1, max_size=3)])
+    # Anyone else's: clean or not, a batch's earlier outputs or none, its outputs where it ended or none.
+    end = ([st.just(False), st.text(max_size=20), st.just([]), st.none()] if source else
+           [st.booleans(), st.text(max_size=20), st.just([]) | st.lists(outputs, min_size=1, max_size=3),
+            st.none() | outputs])
     tail = {frames.OUTPUTS: [outputs], frames.SAMPLE: [outputs], frames.END: end,
             frames.BATCH: [outputs, st.lists(outputs, max_size=3)],
             frames.STATE: [st.integers(0, 2), st.just(3), st.binary(max_size=16)]}[kind]
     fields = [uid, step] + ([] if kind == frames.STATE else [t]) + [draw(part) for part in tail]
     if wrong == "batch" and kind in (frames.END, frames.BATCH):  # one step more than a batch may hold
-        fields[-1] = [draw(outputs)] * frames.MAX_BATCH
+        fields[-2 if kind == frames.END else -1] = [draw(outputs)] * frames.MAX_BATCH
     if wrong == "field":
         fields[draw(st.integers(0, len(fields) - 1))] = draw(values)
     return node, frames.encode(kind, *fields), kind, wrong
@@ -604,11 +606,12 @@ def test_a_batched_release_is_gathered_whole_from_each_nodes_answer_whatever_els
 
 @given(clean=st.booleans(), earlier=st.just([]) | st.lists(st.lists(st.floats(), max_size=2), max_size=2),
        message=st.text(max_size=40), step=st.integers(-2, 40) | st.integers(-(2 ** 63), 2 ** 64 - 1),
-       t=st.floats(allow_nan=True, allow_infinity=True))
-def test_a_source_stops_a_gathering_only_with_an_unclean_unbatched_end(relay, clean, earlier, message, step, t):
+       t=st.floats(allow_nan=True, allow_infinity=True), last=st.none() | st.lists(st.floats(), max_size=2))
+def test_a_source_stops_a_gathering_only_with_an_unclean_unbatched_end(relay, clean, earlier, message, step, t, last):
     """A source's END says it was stopped or failed, whatever point the run is gathering: then
     the run stops with the source's words and the run's step. Any other END from it (clean, with
-    batch outputs, a step or time out of range) is dropped and counted, and the point is gathered."""
+    batch outputs or outputs where it ended, a step or time out of range) is dropped and counted,
+    and the point is gathered."""
     from hycosim.server.relay import RunError
 
     relay._early.clear()
@@ -617,10 +620,11 @@ def test_a_source_stops_a_gathering_only_with_an_unclean_unbatched_end(relay, cl
         relay._label[node] = relay._due_at[node] = 30
     genuine = [(f"hycosim/recv/up/{node}", frames.encode(frames.OUTPUTS, uid, 30, 0.3, values))
                for (node, uid), values in zip(_UIDS.items(), ([0.0, 1.0], [1.0, 2, True, "x", b"y"], [1.0]))]
-    relay.inbox = _Queued([("hycosim/recv/up/src", frames.encode(frames.END, 4, step, t, clean, message, earlier)),
+    relay.inbox = _Queued([("hycosim/recv/up/src", frames.encode(frames.END, 4, step, t, clean, message, earlier,
+                                                                       last)),
                            *genuine])
     dropped = sum(relay.intake.dropped.values())
-    valid = not clean and earlier == [] and 0 <= step < frames.MAX_STEP and math.isfinite(t)
+    valid = not clean and earlier == [] and last is None and 0 <= step < frames.MAX_STEP and math.isfinite(t)
     try:
         arrivals = relay._collect(30, 0.0)
     except RunError as exc:

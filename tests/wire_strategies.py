@@ -55,7 +55,7 @@ _PLAUSIBLE: dict[int, tuple[st.SearchStrategy, ...]] = {
                                                 "ports": values}) | values),
     frames.ROLLBACK: (steps, times),
     frames.END: (uids, steps, times, st.booleans(), st.text(max_size=30),
-                 st.just([]) | st.lists(port_values | scalars, max_size=3)),
+                 st.just([]) | st.lists(port_values | scalars, max_size=3), st.none() | port_values),
     frames.CHECKPOINT: (steps,),
     frames.STATE: (uids, steps, st.integers(-1, 3), st.integers(-1, 3) | st.integers(0, 2 ** 20), st.binary(max_size=24)),
     frames.RESTORE: (names, steps, times, st.integers(-1, 3), st.integers(-1, 3), st.binary(max_size=24),

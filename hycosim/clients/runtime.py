@@ -323,7 +323,7 @@ class NodeRuntime:
                 if isinstance(self.impl, AsyncSource) else
                 f"node {self.name!r} {signals.describe(exc)} after step {self.steps}")
         try:
-            self._send(frames.encode(frames.END, self.spec.UID, self.steps + 1, 0.0, False, said, []))
+            self._send(frames.encode(frames.END, self.spec.UID, self.steps + 1, 0.0, False, said, [], None))
             # The token goes as this process leaves, and the server can learn that before it
             # reads the END (it did on a loaded machine, and named a lost token): wait for its
             # STOP, which says it has read it. A second signal ends the wait.
@@ -335,14 +335,16 @@ class NodeRuntime:
         except Exception:  # on its way out: the token's loss still tells the server
             pass
 
-    def _end(self, step: int, t: float, clean: bool, message: str, earlier: list[list[Any]] | None = None) -> None:
+    def _end(self, step: int, t: float, clean: bool, message: str, earlier: list[list[Any]] | None = None,
+             last: list[Any] | None = None) -> None:
         """Tell the server this node's model ended the run (``clean``) or failed, in place of its
-        outputs for ``step`` (``earlier``: those of its steps inside a batch before that), and
+        outputs for ``step`` (``earlier``: those of its steps inside a batch before that;
+        ``last``: its outputs at ``t``, where the model ended, if it could give them), and
         wait for the server's STOP (so that it hears this first, not that the node's token
         went). A failure is raised as this node's own."""
         message = message[:2000]
         try:
-            self._send(frames.encode(frames.END, self.spec.UID, step, t, clean, message, earlier or []))
+            self._send(frames.encode(frames.END, self.spec.UID, step, t, clean, message, earlier or [], last))
             # In process the master reads the END once this call returns: there is nothing to wait for.
             deadline = time.monotonic() + (min(10.0, self.cosim.stepTimeout) if self.inbox is not None else 0.0)
             while (left := deadline - time.monotonic()) > 0:
@@ -367,15 +369,17 @@ class NodeRuntime:
             self._send(frame)
             return frame
         except Exception as exc:
-            self._step_failed(exc, k, t)
+            self._step_failed(exc, k, t, impl=impl)
             return None  # the model ended the simulation (_step_failed raises for a failure)
 
-    def _step_failed(self, exc: Exception, k: int, t: float, earlier: list[list[Any]] | None = None) -> None:
+    def _step_failed(self, exc: Exception, k: int, t: float, earlier: list[list[Any]] | None = None,
+                     impl: Node | None = None) -> None:
         """Tell the server, in place of the outputs of the release at point k (from t), how the
         model's step ended: a model that ended the simulation returns (with ``earlier``, the
-        outputs of its steps before inside a batch); a failure is raised."""
+        outputs of its steps before inside a batch, and its outputs where it ended); a failure
+        is raised."""
         if isinstance(exc, SimulationEnded):
-            self._end(k + 1, exc.t, True, f"{exc}", earlier)
+            self._end(k + 1, exc.t, True, f"{exc}", earlier, self._outputs_at_end(impl))
         elif isinstance(exc, NodeRunError):
             self._end(k + 1, t, False, str(exc))
         elif isinstance(exc, NodeModelError):
@@ -384,6 +388,18 @@ class NodeRuntime:
             self._log.exception("model failed", step=k)
             self._end(k + 1, t, False, f"node {self.name!r}: its model failed at step {k} (t={t:g} s): "
                                        f"{type(exc).__name__}: {exc}")
+
+    def _outputs_at_end(self, impl: Node | None) -> list[Any] | None:
+        """The outputs of a model that ended the simulation, at the time it ended (FMPy records
+        them there too: an FMU may be asked for its values after it discarded a step), or None
+        where the model cannot give them."""
+        if impl is None:
+            return None
+        try:
+            return self._pack_outputs(impl.outputs())
+        except Exception as exc:  # noqa: BLE001 - a model that ended may refuse; the END still goes
+            self._log.info("no outputs where the model ended", error=f"{type(exc).__name__}: {exc}")
+            return None
 
     def _step_batch(self, impl: Node, k: int, times: list[float], inputs: dict[str, Any]) -> bytes | None:
         """A batched release (STEPS) from point k over the base points ``times``: this node's own
@@ -404,7 +420,7 @@ class NodeRuntime:
             self._send(frame)
             return frame
         except Exception as exc:
-            self._step_failed(exc, k, t, outs)
+            self._step_failed(exc, k, t, outs, impl=impl)
             return None  # the model ended the simulation (_step_failed raises for a failure)
 
     def _await_restore(self, step: int) -> frames.Frame | None:

@@ -23,12 +23,14 @@ Kinds and layouts (after version and kind):
 * ``ROLLBACK`` server → nodes: ``step, t``: restore the state saved before that step
 * ``REPLAY``   server → one node: ``node, release``: the last START/STEP again, for a node that
   came back after a link cut (it may have missed the release, or the server its outputs)
-* ``END``      node → server, in place of its outputs: ``uid, step, t, clean, message, earlier``: its
-  model ended the simulation at ``t`` (``clean``: an FMU that asked to terminate) or failed (the
-  message says how); the server stops the run with the node's own words. ``earlier``: inside a
-  batched release (STEPS), the outputs after each of its steps before the one it ended in, as
-  a BATCH's (the server records the points they reach); otherwise empty. An asynchronous source
-  sends one only to say it failed or was stopped (``clean`` false, ``earlier`` empty)
+* ``END``      node → server, in place of its outputs: ``uid, step, t, clean, message, earlier, last``:
+  its model ended the simulation at ``t`` (``clean``: an FMU that asked to terminate) or failed
+  (the message says how); the server stops the run with the node's own words. ``earlier``:
+  inside a batched release (STEPS), the outputs after each of its steps before the one it ended
+  in, as a BATCH's (the server records the points they reach); otherwise empty. ``last``: a
+  clean end's outputs at ``t`` (the server records them as the run's last point), or None. An
+  asynchronous source sends one only to say it failed or was stopped (``clean`` false,
+  ``earlier`` empty, ``last`` None)
 * ``CHECKPOINT`` server → nodes, just before a release: ``step``: serialise the state at this
   macro-step point (before integrating ``step``) and send it after the step's outputs
 * ``STATE``    node → server: ``uid, step, index, count, chunk``: chunk ``index`` of ``count`` of
@@ -136,8 +138,8 @@ _SHAPES: dict[int, tuple[int, Callable[[tuple], bool]]] = {
     HELLO: (2, lambda f: _int(f[0]) and type(f[1]) is dict),
     ROLLBACK: (2, lambda f: _int(f[0]) and _num(f[1])),
     REPLAY: (2, lambda f: _str(f[0]) and type(f[1]) is bytes),
-    END: (6, lambda f: _int(f[0]) and _int(f[1]) and _num(f[2]) and type(f[3]) is bool and _str(f[4])
-          and type(f[5]) is list),
+    END: (7, lambda f: _int(f[0]) and _int(f[1]) and _num(f[2]) and type(f[3]) is bool and _str(f[4])
+          and type(f[5]) is list and (f[6] is None or type(f[6]) is list)),
     CHECKPOINT: (1, lambda f: _int(f[0])),
     STATE: (5, lambda f: _int(f[0]) and _int(f[1]) and _int(f[2]) and _int(f[3]) and type(f[4]) is bytes),
     RESTORE: (7, lambda f: _str(f[0]) and _int(f[1]) and _num(f[2]) and _int(f[3]) and _int(f[4])

@@ -101,9 +101,9 @@ class Intake:
         if frame.kind == frames.END:
             # A source never ends a run cleanly (it has no end of its own), but it says that it
             # was stopped or failed; it steps in no batch.
-            if spec.asynchronous and (frame.fields[3] or frame.fields[5]):
+            if spec.asynchronous and (frame.fields[3] or frame.fields[5] or frame.fields[6] is not None):
                 raise Dropped("wrong kind", f"{node} is asynchronous: it does not end a run, only fails")
-            self._check_batch(node, frame, t, frame.fields[5], last=None)
+            self._check_batch(node, frame, t, frame.fields[5], last=frame.fields[6])
             return frame
         if frame.kind == frames.BATCH:
             if spec.asynchronous:

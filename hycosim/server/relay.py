@@ -149,10 +149,12 @@ class Relay:
         self.lost: dict[str, float] = {}  # node → when its token went, while within linkGrace
         self.reattached: dict[str, int] = {}
         self.ended_by: dict[str, Any] | None = None  # the node whose model ended the run, when, and why
-        # The nodes whose models ended the run inside a batched release, and the batch's
-        # arrivals: the points their steps before reached are recorded once all batches are in.
+        # The nodes whose models ended the run in the release being gathered, and its arrivals:
+        # the others' outputs are gathered first (inside a batched release: the points the
+        # ended steps before reached are recorded), then the values where the model ended.
         self._ended_inside: set[str] = set()
         self._ended_arrivals: dict[str, float] = {}
+        self._end_values: list[Any] | None = None  # the ended node's outputs at its end (its END's)
         self.switches: collections.deque[dict[str, Any]] = collections.deque(maxlen=200)  # the latest mode switches
         # The latest points as (time, holder, wait, arrivals): the status answer's last second.
         self._recent: collections.deque[Recent] = collections.deque(maxlen=RECENT_KEPT)
@@ -650,8 +652,9 @@ class Relay:
                 continue
             batched = self._batch_steps.get(node)
             if frame.kind == frames.END:
-                self._on_end(node, step, frame, inside=batched is not None)
-                # Inside a batch: the others' batches hold the points its earlier steps reached.
+                self._on_end(node, step, frame)
+                # The others' outputs at the step's end (inside a batch: their batches, which
+                # hold the points its earlier steps reached) are gathered before the run ends.
                 pending.discard(node)
                 self._earlier[node] = frame.fields[5]
                 arrivals[node] = time.perf_counter() - self._released_at.get(node, released_at)
@@ -677,10 +680,10 @@ class Relay:
             raise _ModelEnded
         return arrivals
 
-    def _on_end(self, node: str, step: int, frame: frames.Frame, inside: bool = False) -> None:
-        """A node's END instead of its outputs for ``step``: its model ended the run, or failed.
-        ``inside`` a batched release the caller gathers the others' batches before it ends."""
-        _, _, t, clean, message, _ = frame.fields
+    def _on_end(self, node: str, step: int, frame: frames.Frame) -> None:
+        """A node's END instead of its outputs for ``step``: its model ended the run (the caller
+        gathers the others' outputs of the release before it ends), or failed."""
+        _, _, t, clean, message, _, last = frame.fields
         # The point the run's records end at (inside a batched release: its first, until the
         # points its steps before reached are recorded).
         message, k = message[:_MESSAGE_MAX], self._point
@@ -690,12 +693,11 @@ class Relay:
             at = f" (the run at step {k}, t={self._time(k):g} s)" if self.project.node(node).asynchronous else ""
             raise RunError(message + at if message.startswith(f"node {node!r}")
                            else f"node {node!r} failed at step {k} (t={self._time(k):g} s): {message}")
-        if inside and self._ended_inside:
-            return  # another node ended inside this batch first: the run ends by its word
+        if self._ended_inside:
+            return  # another node ended in this release first: the run ends by its word
         self.ended_by = {"node": node, "step": k, "t": t, "message": message}
+        self._end_values = last
         self._log.info("node ended the simulation", node=node, step=k, t=t, message=message)
-        if not inside:
-            raise _ModelEnded
 
     def _initialise(self) -> None:
         """The initialisation phase (server.initialisation): each node whose start outputs read
@@ -918,12 +920,12 @@ class Relay:
         self.recorder.timing(k, t, wait, holder, lateness, arrivals, ages, takes)
 
     def _record_inside(self, k: int, times: list[float], mode: str, at_k: dict[str, list[Any]],
-                       arrivals: dict[str, float]) -> None:
+                       arrivals: dict[str, float]) -> dict[str, list[Any]]:
         """The base points inside the batched release from point k, each with the outputs every
         node had there (a node's after each of its own steps, held between) and the inputs
         they route to: what a release per base point would have recorded. Their timing: no
         wait of their own (the batch's is at its end), and for each node whose step ended
-        there, when the frame with its outputs came."""
+        there, when the frame with its outputs came. Return the outputs at the last."""
         outputs = dict(at_k)
         holder = max(arrivals, key=arrivals.get) if arrivals else ""
         for i in range(1, len(times) - 1):
@@ -936,16 +938,51 @@ class Relay:
             self.router.route(mode, times[i], outputs, self.histories)
             self.recorder.row(k + i, times[i], mode, outputs, self.router.inputs, self.coupling.due(k + i))
             self.recorder.timing(k + i, times[i], 0.0, holder, None, came, {})
+        return outputs
 
-    def _end_inside(self, k: int, times: list[float], mode: str, at_k: dict[str, list[Any]]) -> None:
-        """A node's model ended the run inside the batched release from point k: record the
-        points inside it that its steps before reached (every other node's batch reached
-        them too), as one release per base point would have."""
-        assert self.ended_by is not None
-        reached = min([len(self._earlier[n]) * self.coupling.rates[n] for n in self._ended_inside] + [len(times) - 2])
-        if reached > 0:
-            self._record_inside(k, times[:reached + 2], mode, at_k, self._ended_arrivals)
-            self.ended_by["step"] = k + reached
+    def _record_end(self, k: int, mode: str, at_k: dict[str, list[Any]], times: list[float]) -> None:
+        """A node's model ended the run in the release from point k over the base points
+        ``times`` ([t, t + h] for one step). Inside a batch, record the points its steps before
+        reached (every other node's batch reached them too), as one release per base point
+        would have. Then the point where it ended, as FMPy records an FMU that terminates: its
+        outputs there; the others' at that point if it is the next one (their outputs for the
+        step that ends there came), else held from the last recorded point, as the links hold
+        them between points. Nothing is added where the node gave no outputs or ended outside
+        the step after the last recorded point (a slower node's)."""
+        ended = self.ended_by
+        assert ended is not None
+        reached, held = 0, at_k
+        if len(times) > 2:
+            reached = min([len(self._earlier[n]) * self.coupling.rates[n] for n in self._ended_inside]
+                          + [len(times) - 2])
+            if reached > 0:
+                held = self._record_inside(k, times[:reached + 2], mode, at_k, self._ended_arrivals)
+                ended["step"] = k + reached
+        tol = 1e-9 * self.cosim.stepSize
+        after, t_end = reached + 1, ended["t"]
+        if self._end_values is None or not times[reached] + tol < t_end <= times[after] + tol:
+            return
+        on_grid = t_end >= times[after] - tol
+        outputs = dict(self._outputs_inside(after, times, held) if on_grid else held)
+        outputs[ended["node"]] = self._end_values
+        at = times[after] if on_grid else t_end
+        self.router.route(mode, at, outputs, self.histories)
+        self.recorder.row(k + after, at, mode, outputs, self.router.inputs, None)
+        self.recorder.timing(k + after, at, 0.0, ended["node"], None, self._ended_arrivals if on_grid else {}, {})
+        ended["step"] = k + after
+
+    def _outputs_inside(self, i: int, times: list[float], held: dict[str, list[Any]]) -> dict[str, list[Any]]:
+        """Every node's outputs at base point i of the release over ``times`` that ended early
+        (``held``: at point i - 1): the release's end is what the nodes answered; inside a
+        batch, those of each node whose own step ended there."""
+        if i == len(times) - 1:
+            return self.outputs
+        outputs = dict(held)
+        for node, earlier in self._earlier.items():
+            m = self.coupling.rates[node]
+            if node not in self._ended_inside and i % m == 0 and i // m - 1 < len(earlier):
+                outputs[node] = earlier[i // m - 1]
+        return outputs
 
     def _localise(self, k: int, t: float, h: float, mode: str, watched_at_start: bool,
                   arrivals: dict[str, float], wait: float) -> tuple[float, dict[str, float], float, dict[str, Any]]:
@@ -1054,8 +1091,6 @@ class Relay:
         self._checkpoints = self._checkpoint_plan()
         end = cosim.stopTime - 1e-9 * H
         self._last_point = math.ceil((cosim.stopTime - cosim.startTime) / H - 1e-9)
-        # Gauss-Seidel and iteration replace outputs before point k is recorded: it keeps its own.
-        keep_outputs = self.coupling.scheme == "gauss-seidel" or self.iteration is not None or self._span > 1
         takes = 1  # of the step that ended at the current point
         perf0 = time.perf_counter()
         k0 = k
@@ -1097,7 +1132,7 @@ class Relay:
                 self.progress.steps_per_s = (k - k0) / (now - perf0) if now > perf0 else 0.0
                 self._on_progress(self.progress)
 
-            at_k = dict(self.outputs) if keep_outputs else self.outputs
+            at_k = dict(self.outputs)  # kept: the step replaces outputs before its point is recorded
             stepped = self.coupling.due(k) if self.coupling.multirate and t < end else None
             # Point k as it is now (its timing: of the step that ended here), and the inputs the
             # step from it is taken on (an iterated step's last): written while the nodes step.
@@ -1126,9 +1161,8 @@ class Relay:
                 if localise:
                     h_used, arrivals, wait, localised = self._localise(k, t, h, mode, watched, arrivals, wait)
             except _ModelEnded:
-                if self._ended_inside and times is not None:
-                    self._end_inside(k, times, mode, at_k)
-                break  # point k, or the last inside a batch that every node reached, is recorded
+                self._record_end(k, mode, at_k, times or [t, next_t])
+                break
             except _Recover as cause:
                 # Back to the last checkpoint: its point is taken again from the top, as it was.
                 point, arrivals, wait = self._restore(cause)
