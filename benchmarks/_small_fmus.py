@@ -1,5 +1,6 @@
-"""Build the in-process benchmark's three FMI 2.0 co-simulation FMUs (benchmarks/_small_fmus.c)
-and the SSP package that couples them:
+"""Build the small FMI 2.0 co-simulation FMUs of benchmarks/_small_fmus.c (the in-process
+benchmark's three, and the cross-check's typed feedthrough and bouncing ball) and the SSP
+package the in-process benchmark runs:
 
     Dahlquist.x --(factor 2, offset 1)--> Feedthrough.u,   VanDerPol on its own,
 
@@ -20,31 +21,55 @@ from _fmu_build import native_fmu  # noqa: E402
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE / "_small_fmus.c"
 
-# name → (model number in the C source, [(variable, causality, start)])
+# name → (model number in the C source, [(variable, causality, type, start, dependencies)]):
+# an output's dependencies are the inputs it reads at once (None: not an output). A start of
+# None is calculated (the model gives it at initialisation).
 MODELS = {
-    "Dahlquist": (1, [("k", "parameter", 1.0), ("x", "output", 1.0)]),
-    "Feedthrough": (2, [("u", "input", 0.0), ("y", "output", None)]),
-    "VanDerPol": (3, [("mu", "parameter", 1.0), ("x0", "output", 2.0), ("x1", "output", 0.0)]),
+    "Dahlquist": (1, [("k", "parameter", "Real", 1.0, None), ("x", "output", "Real", 1.0, [])]),
+    "Feedthrough": (2, [("u", "input", "Real", 0.0, None), ("y", "output", "Real", None, ["u"])]),
+    "VanDerPol": (3, [("mu", "parameter", "Real", 1.0, None), ("x0", "output", "Real", 2.0, []),
+                      ("x1", "output", "Real", 0.0, [])]),
+    "Types": (4, [("gain", "parameter", "Real", 1.0, None), ("ru", "input", "Real", 0.0, None),
+                  ("ry", "output", "Real", None, ["ru"]), ("offset", "parameter", "Integer", 0, None),
+                  ("iu", "input", "Integer", 0, None), ("iy", "output", "Integer", None, ["iu"]),
+                  ("bu", "input", "Boolean", False, None), ("by", "output", "Boolean", None, ["bu"])]),
+    "Ball": (5, [("h", "output", "Real", 1.0, []), ("v", "output", "Real", 0.0, []),
+                 ("g", "parameter", "Real", 9.81, None), ("e", "parameter", "Real", 0.8, None),
+                 ("bounces", "output", "Integer", 0, []), ("falling", "output", "Boolean", None, [])]),
 }
+# Value references: each type's variables in order from its first (benchmarks/_small_fmus.c).
+_FIRST_VR = {"Real": 0, "Integer": 100, "Boolean": 200}
+
+
+def _start(type_: str, start: object) -> str:
+    if start is None:
+        return ""
+    return f' start="{str(start).lower()}"' if type_ == "Boolean" else f' start="{start!r}"'
 
 
 def model_description(name: str) -> str:
     number, variables = MODELS[name]
-    rows, outputs = [], []
-    for vr, (var, causality, start) in enumerate(variables):
+    rows, outputs, initial = [], [], []
+    index = {var: i + 1 for i, (var, *_) in enumerate(variables)}
+    counts = dict.fromkeys(_FIRST_VR, 0)
+    for var, causality, type_, start, deps in variables:
+        vr = _FIRST_VR[type_] + counts[type_]
+        counts[type_] += 1
         if causality == "parameter":
             attrs = 'causality="parameter" variability="fixed" initial="exact"'
         elif causality == "input":
-            attrs = 'causality="input"'
+            attrs = 'causality="input"' + (' variability="discrete"' if type_ != "Real" else "")
         else:
-            attrs = 'causality="output" ' + ('initial="exact"' if start is not None else 'initial="calculated"')
-            # y = u at once: the Feedthrough's output depends on its input.
-            deps = "1" if name == "Feedthrough" else ""
-            outputs.append(f'      <Unknown index="{vr + 1}" dependencies="{deps}"/>')
-        value = f'<Real start="{start!r}"/>' if start is not None else "<Real/>"
-        rows.append(f'    <ScalarVariable name="{var}" valueReference="{vr}" {attrs}>{value}</ScalarVariable>')
-    initial = "" if name != "Feedthrough" else '    <InitialUnknowns>\n      <Unknown index="2" dependencies="1"/>\n    </InitialUnknowns>\n'
+            attrs = ('causality="output" ' + (' variability="discrete" ' if type_ != "Real" else "")
+                     + ('initial="exact"' if start is not None else 'initial="calculated"'))
+            unknown = f'      <Unknown index="{index[var]}" dependencies="{" ".join(str(index[d]) for d in deps)}"/>'
+            outputs.append(unknown)
+            if start is None:  # FMI 2 lists a calculated output among the initial unknowns
+                initial.append(unknown)
+        rows.append(f'    <ScalarVariable name="{var}" valueReference="{vr}" {attrs}>'
+                    f'<{type_}{_start(type_, start)}/></ScalarVariable>')
     nl = "\n"
+    initial_block = f"    <InitialUnknowns>{nl}{nl.join(initial)}{nl}    </InitialUnknowns>{nl}" if initial else ""
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName="{name}" guid="{{hycosim-small-{number}}}"
   generationTool="hycosim benchmarks" variableNamingConvention="flat" numberOfEventIndicators="0">
@@ -58,7 +83,7 @@ def model_description(name: str) -> str:
     <Outputs>
 {nl.join(outputs)}
     </Outputs>
-{initial}  </ModelStructure>
+{initial_block}  </ModelStructure>
 </fmiModelDescription>
 """
 

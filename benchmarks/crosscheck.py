@@ -1,26 +1,38 @@
 """hycosim against other engines, point by point, on systems of FMUs this benchmark builds.
 
 Systems (benchmarks/_small_fmus.c, FMI 2 co-simulation FMUs, packed as SSP 1.0 by hycosim's
-export, linear transformations included):
+export: parameters bound inline, linear transformations on links):
 
 * **chain**: Dahlquist.x --(2x + 1)--> ft (y = u) --> ft2 (y = u), a direct-feedthrough chain;
-* **vdp**: a Van der Pol oscillator on its own.
+* **ball**: a bouncing ball (a state event located inside its steps; e = 0.7 bound by the
+  package, 0.8 in its FMU) whose h (--(100 h)-->), bounce count (Integer) and falling flag
+  (Boolean) feed a feedthrough of each type (gain = 2 and offset = 10 bound by the package);
+* **vdp** and **bounce**: a Van der Pol oscillator, and the ball, on their own.
 
 Engines: hycosim in processes (``hycosim run``) and in one process (``--in-process``), ECOS
-(``ecospy``: an in-process C++ master that reads SSP; its log lines go to stdout, so it runs
-in a child process), and for the single FMU ``fmpy.simulate_fmu``. For each engine and
-variable: the largest difference from hycosim in processes over every point, and the time of
-it. Where the schemes differ by design the comparison says so and makes it exactly:
+(``ecospy``: an in-process C++ master that reads SSP), libcosim (``libcosimpy``: from the
+unpacked package's folder, the step in integer nanoseconds), each in a child process (both
+write their log lines to stdout), and for a single FMU ``fmpy.simulate_fmu``. For each
+engine and variable: the largest difference from hycosim in processes over every point, and
+the time of it. Where the engines record a variable at another moment by design, it is
+compared where the values are the same quantity, and the comparison says so:
 
-* a direct-feedthrough output (ft.y, ft2.y): ECOS reads it after it set the point's inputs,
-  y(t) = u(t); hycosim records what the FMU gave at the end of its step, y(t) = u(t − H). It is
-  compared with ECOS's one point earlier (and at t0, where both initialise, at the same point).
+* ECOS reads a direct-feedthrough output after it set the point's inputs, y(t) = u(t);
+  hycosim records what the FMU gave at the end of its step, y(t) = u(t − H): ECOS's value one
+  point earlier;
+* libcosim records every variable after the step, before it passes the outputs on: an input
+  at t is what the links carried at t − H, so hycosim's input is compared with libcosim's one
+  point later. libcosimpy reads Booleans only as last values and the execution initialises in
+  its first step, so a Boolean's t0 is not compared there.
+
+At t0 every engine initialises (ECOS and libcosim in the FMUs' initialisation mode, hycosim in
+its initialisation phase) and the same point is compared.
 
 Goal (issue 58): 0 at every point, t0 included, for every variable of every system, or at most
 1e-12 relative where the arithmetic differs: hycosim steps from grid point to grid point, each
 step t_(j+1) − t_j with t_j = t0 + j·H (no rounding accumulates in the clock over a long run),
 where ECOS passes H itself; the two step sizes differ in their last bit at some points, and so
-do the states integrated over them.
+do the states integrated over them. libcosim keeps time in integer nanoseconds.
 
     python benchmarks/crosscheck.py [--steps 400] [--h 0.01] [--json]
 """
@@ -32,6 +44,7 @@ import csv
 import json
 import sys
 import tempfile
+import zipfile
 from pathlib import Path
 
 from _procs import run
@@ -42,19 +55,50 @@ sys.path.insert(0, str(REPO))
 
 import _small_fmus  # noqa: E402
 
-FEEDTHROUGH = {"ft.y", "ft2.y"}  # outputs that pass an input through at once
-
+# Each engine's child: argv = package, steps, h, then name:type for each variable; prints one
+# line "ROWS <json>", a row per point (None where the engine cannot say).
 _ECOS = r"""
 import json, sys
 from ecospy import EcosSimulation
-ssp, steps, h, names = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), sys.argv[4].split(",")
+ssp, steps, h, names = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), [a.split(":") for a in sys.argv[4:]]
 rows = []
 with EcosSimulation(ssp_path=ssp, step_size=h) as sim:
-    sim.init()
+    get = {"Real": sim.get_real, "Integer": sim.get_integer, "Boolean": sim.get_bool}
+    sim.init(parameter_set="parameters")  # ECOS binds parameters by set name: hycosim's export names them so
     for k in range(steps + 1):
         if k:
             sim.step(1)
-        rows.append([sim.get_real(n.replace(".", "::")) for n in names])
+        rows.append([get[t](n.replace(".", "::")) for n, t in names])
+print("ROWS " + json.dumps(rows))
+"""
+
+_LIBCOSIM = r"""
+import json, sys
+from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+log_output_level(CosimLogLevel.ERROR)
+from libcosimpy.CosimEnums import CosimVariableType
+from libcosimpy.CosimExecution import CosimExecution
+from libcosimpy.CosimObserver import CosimObserver
+folder, steps, h, names = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), [a.split(":") for a in sys.argv[4:]]
+ex = CosimExecution.from_ssp_file(folder, step_size=round(h * 1e9))
+last, series = CosimObserver.create_last_value(), CosimObserver.create_time_series(steps + 2)
+ex.add_observer(last)
+ex.add_observer(series)
+index = {i.name.decode(): i.index for i in ex.slave_infos()}
+refs = {f"{s}.{v.name.decode()}": (index[s], v.reference) for s in index for v in ex.slave_variables(index[s])}
+kinds = {"Real": CosimVariableType.REAL, "Integer": CosimVariableType.INTEGER}
+for n, t in names:
+    if t in kinds:
+        series.start_time_series(*refs[n], kinds[t])
+read = {"Real": last.last_real_values, "Integer": last.last_integer_values, "Boolean": last.last_boolean_values}
+rows = []
+for k in range(1, steps + 1):
+    ex.step(1)
+    rows.append([read[t](refs[n][0], [refs[n][1]])[0] for n, t in names])
+# t0 from the time series (libcosimpy's sample reader drops what follows a step number 0, so one
+# sample past it is asked for)
+first = {"Real": series.time_series_real_samples, "Integer": series.time_series_integer_samples}
+rows.insert(0, [first[t](*refs[n], 0, 2)[2][0] if t in first else None for n, t in names])
 print("ROWS " + json.dumps(rows))
 """
 
@@ -67,15 +111,40 @@ def systems(fmus: dict[str, Path], steps: int, h: float) -> dict[str, dict]:
         return {"projectName": name, "serverIP": "127.0.0.1:7447", "nodeNum": len(nodes), "nodeLists": nodes,
                 "linkNum": len(links), "linkLists": links, "coSimulation": cosim}
 
+    ball = {"nodeName": "ball", "UID": 1, "fmu": str(fmus["Ball"]), "parameters": {"e": 0.7}, "input": [],
+            "output": ["h", "v", {"name": "bounces", "type": "Integer"}, {"name": "falling", "type": "Boolean"}]}
     return {
         "chain": project("chain", [
             {"nodeName": "dahlquist", "UID": 1, "fmu": str(fmus["Dahlquist"]), "input": [], "output": ["x"]},
             {"nodeName": "ft", "UID": 2, "fmu": str(fmus["Feedthrough"]), "input": ["u"], "output": ["y"]},
             {"nodeName": "ft2", "UID": 3, "fmu": str(fmus["Feedthrough"]), "input": ["u"], "output": ["y"]},
         ], [{"from": "dahlquist.x", "to": "ft.u", "factor": 2.0, "offset": 1.0}, {"from": "ft.y", "to": "ft2.u"}]),
+        "ball": project("ball", [
+            ball,
+            {"nodeName": "types", "UID": 2, "fmu": str(fmus["Types"]), "parameters": {"gain": 2.0, "offset": 10},
+             "input": ["ru", {"name": "iu", "type": "Integer"}, {"name": "bu", "type": "Boolean"}],
+             "output": ["ry", {"name": "iy", "type": "Integer"}, {"name": "by", "type": "Boolean"}]},
+        ], [{"from": "ball.h", "to": "types.ru", "factor": 100.0}, {"from": "ball.bounces", "to": "types.iu"},
+            {"from": "ball.falling", "to": "types.bu"}]),
         "vdp": project("vdp", [
             {"nodeName": "vdp", "UID": 1, "fmu": str(fmus["VanDerPol"]), "input": [], "output": ["x0", "x1"]}], []),
+        "bounce": project("bounce", [ball], []),
     }
+
+
+def kinds(doc: dict) -> dict[str, tuple[str, str]]:
+    """Each recorded variable's FMI type and role: "feedthrough" (an output that reads an input at
+    once, by its FMU's model structure), "input" or "output"."""
+    out = {}
+    for node in doc["nodeLists"]:
+        model = Path(node["fmu"]).stem
+        deps = {var: d for var, _, _, _, d in _small_fmus.MODELS[model][1]}
+        for role in ("output", "input"):
+            for port in node[role]:
+                name, type_ = (port, "Real") if isinstance(port, str) else (port["name"], port["type"])
+                what = "feedthrough" if role == "output" and deps.get(name) else role
+                out[f"{node['nodeName']}.{name}"] = (type_, what)
+    return out
 
 
 def hycosim(cfg: Path, runs: Path, in_process: bool, timeout: float) -> dict[str, list[float]]:
@@ -90,42 +159,72 @@ def hycosim(cfg: Path, runs: Path, in_process: bool, timeout: float) -> dict[str
     return {c: [float(r[c]) for r in rows] for c in rows[0] if c not in ("step", "mode")}
 
 
-def ecos(ssp: Path, steps: int, h: float, names: list[str], timeout: float) -> dict[str, list[float]] | None:
+def _engine(script: str, what: str, package: Path, steps: int, h: float, variables: dict[str, tuple[str, str]],
+            timeout: float) -> dict[str, list[float | None]]:
+    res = run([sys.executable, "-c", script, str(package), str(steps), str(h),
+               *(f"{n}:{t}" for n, (t, _) in variables.items())], timeout)
+    if res.returncode:
+        raise RuntimeError(f"{what}: {res.stderr[-800:]}")
+    rows = json.loads(next(line for line in res.stdout.splitlines() if line.startswith("ROWS "))[5:])
+    return {n: [None if r[i] is None else float(r[i]) for r in rows] for i, n in enumerate(variables)}
+
+
+def ecos(ssp: Path, steps: int, h: float, variables: dict[str, tuple[str, str]],
+         timeout: float) -> dict[str, list[float | None]] | None:
     """ECOS's value of each variable at every point, or None where ecospy (or libtbb12) is missing."""
     try:
         import ecospy  # noqa: F401
     except (ImportError, OSError):
         return None
-    res = run([sys.executable, "-c", _ECOS, str(ssp), str(steps), str(h), ",".join(names)], timeout)
-    if res.returncode:
-        raise RuntimeError(f"ECOS: {res.stderr[-800:]}")
-    rows = json.loads(next(line for line in res.stdout.splitlines() if line.startswith("ROWS "))[5:])
-    return {n: [r[i] for r in rows] for i, n in enumerate(names)}
+    return _engine(_ECOS, "ECOS", ssp, steps, h, variables, timeout)
 
 
-def fmpy_single(fmu: Path, steps: int, h: float, names: list[str]) -> dict[str, list[float]]:
-    """``fmpy.simulate_fmu`` of one FMU, its outputs at every macro-step point."""
+def libcosim(ssp: Path, steps: int, h: float, variables: dict[str, tuple[str, str]],
+             timeout: float) -> dict[str, list[float | None]] | None:
+    """libcosim's value of each variable at every point (from the package unpacked beside it),
+    or None where libcosimpy is missing."""
+    try:
+        import libcosimpy  # noqa: F401
+    except (ImportError, OSError):
+        return None
+    folder = ssp.with_suffix("")
+    with zipfile.ZipFile(ssp) as z:
+        z.extractall(folder)
+    return _engine(_LIBCOSIM, "libcosim", folder, steps, h, variables, timeout)
+
+
+def fmpy_single(node: dict, steps: int, h: float, names: list[str]) -> dict[str, list[float]]:
+    """``fmpy.simulate_fmu`` of one FMU with the node's parameters, its outputs at every point."""
     import fmpy
 
-    result = fmpy.simulate_fmu(str(fmu), stop_time=steps * h, step_size=h, output_interval=h,
+    result = fmpy.simulate_fmu(node["fmu"], stop_time=steps * h, step_size=h, output_interval=h,
+                               start_values=node.get("parameters", {}),
                                output=[n.split(".", 1)[1] for n in names])
     return {n: [float(v) for v in result[n.split(".", 1)[1]]] for n in names}
 
 
-def compare(ours: dict[str, list[float]], theirs: dict[str, list[float]], reads_after_inputs: bool) -> dict[str, dict]:
-    """Per variable: the largest |difference| over the points, its time, and how it was compared
-    (``reads_after_inputs``: an engine that reads outputs after setting the point's inputs)."""
+# Per engine and role: theirs at point k + shift is ours at point k (the moments they record at).
+SHIFTS = {"ECOS": {"feedthrough": -1}, "libcosim": {"input": 1}}
+_SAID = {-1: "one point earlier (feedthrough, by design)", 1: "one point later (inputs after the step, by design)",
+         0: "same point"}
+
+
+def compare(ours: dict[str, list[float]], theirs: dict[str, list[float | None]], shifts: dict[str, int],
+            roles: dict[str, tuple[str, str]]) -> dict[str, dict]:
+    """Per variable: the largest |difference| over the points, its time, its relative size, the
+    difference at t0, and how the points were paired."""
     t = ours["t"]
     out = {}
     for name, values in theirs.items():
-        mine = ours[name]
-        shifted = reads_after_inputs and name in FEEDTHROUGH
-        pairs = [(0, mine[0], values[0])] + [(k, mine[k], values[k - 1 if shifted else k]) for k in range(1, len(mine))]
-        worst = max(pairs, key=lambda p: abs(p[1] - p[2]))
-        out[name] = {"max_abs_diff": abs(worst[1] - worst[2]), "at_t": t[worst[0]], "points": len(pairs),
-                     "max_rel_diff": max(abs(a - b) / max(1.0, abs(b)) for _, a, b in pairs),
-                     "t0_diff": abs(pairs[0][1] - pairs[0][2]),
-                     "compared": "one point earlier (feedthrough, by design)" if shifted else "same point"}
+        mine, d = ours[name], shifts.get(roles[name][1], 0)
+        pairs = [(0, 0)] + [(k, k + d) for k in range(len(mine)) if 0 <= k + d < len(values) and (k, k + d) != (0, 0)]
+        diffs = [(k, abs(mine[k] - values[j]), abs(values[j])) for k, j in pairs if values[j] is not None]
+        worst = max(diffs, key=lambda p: p[1])
+        out[name] = {"max_abs_diff": worst[1], "at_t": t[worst[0]], "points": len(diffs),
+                     "max_rel_diff": max(a / max(1.0, b) for _, a, b in diffs),
+                     "t0_diff": diffs[0][1] if diffs[0][0] == 0 and pairs[0] == (0, 0) and values[0] is not None
+                     else None,
+                     "compared": _SAID[d]}
     return out
 
 
@@ -147,26 +246,31 @@ def main() -> None:
         for name, doc in systems(fmus, args.steps, args.h).items():
             cfg = root / f"{name}.json"
             cfg.write_text(json.dumps(doc))
+            roles = kinds(doc)
             ours = hycosim(cfg, root / f"runs-{name}", False, args.timeout)
-            names = [c for c in ours if c != "t"]
-            engines = {"hycosim in process": hycosim(cfg, root / f"inproc-{name}", True, args.timeout)}
-            theirs = ecos(write_ssp(load_project(cfg), root / f"{name}.ssp"), args.steps, args.h, names, args.timeout)
-            if theirs is not None:
-                engines["ECOS"] = theirs
+            engines: dict[str, dict[str, list[float | None]]] = {
+                "hycosim in process": hycosim(cfg, root / f"inproc-{name}", True, args.timeout)}
+            ssp = write_ssp(load_project(cfg), root / f"{name}.ssp")
+            for engine, read in (("ECOS", ecos), ("libcosim", libcosim)):
+                theirs = read(ssp, args.steps, args.h, roles, args.timeout)
+                if theirs is not None:
+                    engines[engine] = theirs
             if len(doc["nodeLists"]) == 1:
                 node = doc["nodeLists"][0]
-                engines["fmpy.simulate_fmu"] = fmpy_single(Path(node["fmu"]), args.steps, args.h,
-                                                           [n for n in names if n.startswith(node["nodeName"] + ".")])
-            result[name] = {engine: compare(ours, {n: v for n, v in values.items() if n in names}, engine == "ECOS")
+                engines["fmpy.simulate_fmu"] = fmpy_single(node, args.steps, args.h, list(roles))
+            result[name] = {engine: compare(ours, {n: v for n, v in values.items() if n in roles},
+                                            SHIFTS.get(engine, {}), roles)
                             for engine, values in engines.items()}
     if args.json:
         print(json.dumps(result, indent=1))
         return
-    print(f"{'system':7} {'engine':20} {'variable':12} {'at t0':>6} {'max |diff|':>11} {'at t':>7} {'relative':>9}  compared")
+    print(f"{'system':7} {'engine':19} {'variable':13} {'at t0':>6} {'max |diff|':>11} {'at t':>7} {'relative':>9}"
+          "  compared")
     for system, engines in result.items():
         for engine, variables in engines.items():
             for var, r in variables.items():
-                print(f"{system:7} {engine:20} {var:12} {r['t0_diff']:6.3g} {r['max_abs_diff']:11.3g} {r['at_t']:7.3f} "
+                t0 = "-" if r["t0_diff"] is None else f"{r['t0_diff']:.3g}"
+                print(f"{system:7} {engine:19} {var:13} {t0:>6} {r['max_abs_diff']:11.3g} {r['at_t']:7.3f} "
                       f"{r['max_rel_diff']:9.2g}  {r['compared']}")
 
 

@@ -181,3 +181,24 @@ def test_validate_names_an_fmu_output_whose_start_dependencies_are_unsaid_and_th
     assert "node 'dahlquist'" not in res.stderr  # no input: nothing unsaid
     first = read_rows(run_project(cfg, tmp_path / "runs"))[0]
     assert (float(first["ft.y"]), float(first["ft2.y"])) == (3.0, 3.0)
+
+
+def test_fmi3_fmus_take_part_in_the_initialisation_as_fmi2_ones_do(tmp_path, small):
+    """An FMI 3 feedthrough (pythonfmu3, y = 2u read at once) behind the Dahlquist and before a
+    second one: the first row is consistent through both; without the phase it starts late."""
+    from hycosim.fmu_bridge.model_fmu import build_model_fmu
+    from tests.helpers import REPO
+
+    ft3 = build_model_fmu(REPO / "tests" / "models" / "feedthrough_model3.py", tmp_path, fmi_version="3.0")
+    nodes = [{"nodeName": "dahlquist", "UID": 1, "fmu": str(small["Dahlquist"]), "input": [], "output": ["x"]},
+             {"nodeName": "a", "UID": 2, "fmu": str(ft3), "input": ["u"], "output": ["y"]},
+             {"nodeName": "b", "UID": 3, "fmu": str(ft3), "input": ["u"], "output": ["y"]}]
+    links = [{"from": "dahlquist.x", "to": "a.u", "factor": 2.0, "offset": 1.0}, {"from": "a.y", "to": "b.u"}]
+    firsts = {}
+    for enabled in (True, False):
+        cfg = write_project(tmp_path / f"p-{enabled}.json", nodes, links, name="fmi3",
+                            cosim={"stepSize": 0.01, "stopTime": 0.03, "initialize": {"enabled": enabled}})
+        firsts[enabled] = {k: float(v) for k, v in read_rows(_run(cfg, tmp_path / f"runs-{enabled}"))[0].items()
+                           if k not in ("step", "mode")}
+    assert (firsts[True]["a.u"], firsts[True]["a.y"], firsts[True]["b.u"], firsts[True]["b.y"]) == (3.0, 6.0, 6.0, 12.0)
+    assert (firsts[False]["a.y"], firsts[False]["b.y"]) == (0.0, 0.0)

@@ -37,6 +37,10 @@ SSD = "SystemStructure.ssd"
 ANNOTATION = "org.hycosim"
 HYCOSIM_NS = "https://hycosim.org/ssp"
 FMU_TYPE = "application/x-fmu-sharedlibrary"
+# The name of every component's parameter set in an exported package: one name across the
+# package, since a tool may apply sets by name to every component at once (ECOS's
+# ``init(parameter_set=...)``).
+PARAMETER_SET = "parameters"
 _PORT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 
@@ -481,7 +485,7 @@ def write_ssp(loaded: Any, out: Path) -> Path:
         if values:
             binding = ET.SubElement(ET.SubElement(comp, _q("ssd", "ParameterBindings")), _q("ssd", "ParameterBinding"))
             pset = ET.SubElement(ET.SubElement(binding, _q("ssd", "ParameterValues")), _q("ssv", "ParameterSet"),
-                                 version="1.0", name=f"{n.nodeName}-parameters")
+                                 version="1.0", name=PARAMETER_SET)
             params = ET.SubElement(pset, _q("ssv", "Parameters"))
             for name, (kind, value) in values.items():
                 text = ("true" if value else "false") if kind == "Boolean" else repr(value) if kind == "Real" else str(value)
