@@ -48,7 +48,7 @@ def test_a_sample_stamped_at_no_finite_time_is_dropped_before_it_can_freeze_its_
     hist.add(math.inf, [9.0])
     assert not hist.add(0.1, [1.0]) and hist.value_at(0, 0.1, "hold")[0] == 9.0
     accepted = intake.accept("camera", frames.encode(frames.SAMPLE, 3, 8, 0.1, [1.0]))
-    assert accepted.fields[2:] == (0.1, [1.0])
+    assert (accepted.t, accepted.values) == (0.1, [1.0])
 
 
 def test_extrapolated_and_held_samples_over_zenoh(tmp_path):

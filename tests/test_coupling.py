@@ -336,9 +336,9 @@ def test_a_forged_batch_of_another_number_of_steps_is_dropped_and_the_run_record
                 while (payload := releases.get()) is not None:
                     release = frames.decode(payload)
                     if release.kind == frames.STEPS:
-                        session.put(keys.up("fast"), frames.encode(frames.BATCH, 1, release.fields[0] + 1,
-                                                                   release.fields[1][-1], [0.0, 1.0], []))
-                        forged.append(release.fields[0])
+                        session.put(keys.up("fast"), frames.encode(frames.BATCH, 1, release.step + 1,
+                                                                   release.times[-1], [0.0, 1.0], []))
+                        forged.append(release.step)
 
             forger = threading.Thread(target=forge)
             forger.start()

@@ -169,7 +169,7 @@ def test_a_hosted_node_takes_anything_released_without_raising_into_the_master(g
     for f in answered[3:]:
         assert f.kind in (frames.OUTPUTS, frames.BATCH, frames.END, frames.LIVE), f
         if f.kind == frames.OUTPUTS:  # a release it took: its step's outputs, labelled as the master expects
-            assert type(f.fields[3][0]) is float and f.fields[0] == 1
+            assert type(f.values[0]) is float and f.uid == 1
 
 
 @pytest.fixture(scope="module")

@@ -220,7 +220,7 @@ def test_decode_returns_a_well_typed_frame_or_raises_frame_error(payload):
         assert len(str(exc)) < 400  # a hostile payload's size never reaches a message
         return
     arity, fits = frames._SHAPES[frame.kind]
-    assert len(frame.fields) == arity and fits(frame.fields)
+    assert type(frame) is frames.TYPES[frame.kind] and len(frame) == arity and fits(frame)
 
 
 @given(st.one_of(st.tuples(st.sampled_from(["clock", "g", "h", "src", "nobody", "_local"]) | names, payloads),
@@ -235,25 +235,25 @@ def test_the_servers_intake_accepts_only_frames_it_can_use(loaded, sent):
         assert exc.reason and intake.dropped == {}  # counted by the caller
         return
     spec = loaded.project.node(node)
-    assert frame.fields[0] == spec.UID
+    assert frame.uid == spec.UID
     if frame.kind in (frames.OUTPUTS, frames.SAMPLE):
-        assert 0 <= frame.fields[1] < frames.MAX_STEP and math.isfinite(frame.fields[2])
-        assert [type(v) in WIRE_TYPES[p.type] for v, p in zip(frame.fields[3], spec.output)] == [True] * len(spec.output)
+        number = frame.seq if frame.kind == frames.SAMPLE else frame.step
+        assert 0 <= number < frames.MAX_STEP and math.isfinite(frame.t)
+        assert [type(v) in WIRE_TYPES[p.type] for v, p in zip(frame.values, spec.output)] == [True] * len(spec.output)
     elif frame.kind == frames.BATCH:
-        assert not spec.asynchronous and 0 <= frame.fields[1] < frames.MAX_STEP and math.isfinite(frame.fields[2])
-        assert len(frame.fields[4]) < frames.MAX_BATCH
-        for values in [*frame.fields[4], frame.fields[3]]:  # each step's outputs, all of its ports, each typed
+        assert not spec.asynchronous and 0 <= frame.step < frames.MAX_STEP and math.isfinite(frame.t)
+        assert len(frame.earlier) < frames.MAX_BATCH
+        for values in [*frame.earlier, frame.values]:  # each step's outputs, all of its ports, each typed
             assert type(values) is list and len(values) == len(spec.output)
             assert all(type(v) in WIRE_TYPES[p.type] for v, p in zip(values, spec.output))
     elif frame.kind == frames.STATE:
-        _, step, index, count, chunk = frame.fields
-        assert not spec.asynchronous and 0 <= step < frames.MAX_STEP and 0 <= index < count <= frames.MAX_CHUNKS
-        assert len(chunk) <= frames.STATE_CHUNK
+        assert not spec.asynchronous and 0 <= frame.step < frames.MAX_STEP
+        assert 0 <= frame.index < frame.count <= frames.MAX_CHUNKS and len(frame.chunk) <= frames.STATE_CHUNK
     elif frame.kind == frames.END:  # the outputs of its steps inside a batch before it ended, as a BATCH's
         # A source only says that it stopped or failed: it neither ends a run nor steps in a batch.
-        assert not spec.asynchronous or (frame.fields[3] is False and frame.fields[5] == [])
-        assert len(frame.fields[5]) < frames.MAX_BATCH
-        for values in frame.fields[5]:
+        assert not spec.asynchronous or (frame.clean is False and frame.earlier == [] and frame.last is None)
+        assert len(frame.earlier) < frames.MAX_BATCH
+        for values in [*frame.earlier, *([] if frame.last is None else [frame.last])]:
             assert type(values) is list and len(values) == len(spec.output)
             assert all(type(v) in WIRE_TYPES[p.type] for v, p in zip(values, spec.output))
     else:
@@ -307,7 +307,7 @@ def test_the_relay_drops_what_it_cannot_use_and_never_stops_on_a_payload(relay, 
         return  # dropped (counted) or a sample taken into its history
     name, frame = got
     assert name == node and frame.kind in (frames.OUTPUTS, frames.END, frames.BATCH)
-    assert type(frame.fields[1]) is int and sum(relay.intake.dropped.values()) == before
+    assert type(frame.step) is int and sum(relay.intake.dropped.values()) == before
 
 
 @pytest.mark.parametrize("node", ["g", "h"])
@@ -328,25 +328,25 @@ def test_a_node_acts_only_on_releases_that_give_it_exactly_its_inputs(loaded, no
     assert frame.kind in (frames.START, frames.STEP, frames.STEPS, frames.REPLAY, frames.ROLLBACK, frames.STOP,
                           frames.CHECKPOINT, frames.RESTORE, frames.INIT)
     if frame.kind == frames.RESTORE:
-        name, step, t, index, count, chunk, _ = frame.fields
-        assert name == node and 0 <= step < frames.MAX_STEP and 0 <= index < count and math.isfinite(t)
+        assert frame.node == node and 0 <= frame.step < frames.MAX_STEP and 0 <= frame.index < frame.count
+        assert math.isfinite(frame.t)
         return
     if frame.kind == frames.CHECKPOINT:
-        assert 0 <= frame.fields[0] < frames.MAX_STEP
+        assert 0 <= frame.step < frames.MAX_STEP
         return
-    release = frame.fields[1] if frame.kind == frames.REPLAY else frame
+    release = frame.release if frame.kind == frames.REPLAY else frame
     if release.kind == frames.INIT:
-        assert math.isfinite(release.fields[0])
+        assert math.isfinite(release.t0)
     if release.kind in (frames.STEP, frames.STEPS, frames.INIT):
-        mine = release.fields[{frames.STEP: 4, frames.STEPS: 3, frames.INIT: 1}[release.kind]][node]
+        mine = release.inputs[node]
         spec = loaded.project.node(node)
         assert len(mine) == len(spec.input)
         assert all(type(v) in WIRE_TYPES[p.type] for v, p in zip(mine, spec.input))
     if release.kind == frames.STEP:
-        assert math.isfinite(release.fields[1]) and release.fields[2] > 0
-        assert node not in release.fields[6]  # this node holds its inputs: derivatives for it are refused
+        assert math.isfinite(release.t) and release.h > 0
+        assert node not in release.slopes  # this node holds its inputs: derivatives for it are refused
     if release.kind == frames.STEPS:  # base points a node can step between, in order, a bounded number
-        times = release.fields[1]
+        times = release.times
         assert 2 <= len(times) <= frames.MAX_BATCH + 1 and all(math.isfinite(x) for x in times)
         assert all(a < b for a, b in zip(times, times[1:]))
 
@@ -386,7 +386,7 @@ def test_a_node_that_interpolates_takes_only_finite_derivatives_of_its_float_inp
         return
     if frame.kind != frames.STEP:  # a START or a STEPS: releases too, with no derivatives
         return
-    mine = frame.fields[6].get("g")
+    mine = frame.slopes.get("g")
     if mine is None:
         return
     assert type(mine) is list and len(mine) == len(types)
@@ -416,7 +416,7 @@ def test_only_this_process_can_speak_as_the_local_key(loaded):
     live = frames.encode(frames.LIVE, "_server", False)
     with pytest.raises(frames.FrameError, match="LIVE frame is not for a node"):
         runtime._accept(False, live)
-    assert runtime._accept(True, live).fields == ("_server", False)
+    assert runtime._accept(True, live) == frames.Live(node="_server", alive=False)
 
 
 def _gateway_connections(loaded) -> list[_Connection]:
@@ -439,7 +439,7 @@ def test_the_gateway_translates_only_releases_each_bridge_fmu_can_take(loaded, p
         assert magic == gp.MAGIC and length == len(out) - gp.HEADER.size
         if kind == gp.STEP:  # a STEP for a bridge FMU it gives inputs, each of its port's type
             k, t, h, _, values = gp.parse_step(out[gp.HEADER.size:])
-            mine = frame.fields[4][conn.node.nodeName]
+            mine = frame.inputs[conn.node.nodeName]
             assert frame.kind == frames.STEP and len(values) == len(mine) == len(conn.node.input)
             assert all(type(v) in types for v, types in zip(mine, conn.input_types))
             assert 0 <= k < frames.MAX_STEP and math.isfinite(t) and h > 0

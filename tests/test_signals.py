@@ -153,16 +153,16 @@ def test_a_node_stopped_by_sigterm_holds_its_token_until_the_server_has_read_its
         try:
             wait_for(g_holds_its_token, 30, "node g's token")
             router.put(keys.down, frames.encode(frames.START, "run", 0.0, 0.01, time.time(), None, {"checkpoint": False}))
-            assert next_from_g(frames.OUTPUTS).fields[1] == 0
+            assert next_from_g(frames.OUTPUTS).step == 0
             router.put(keys.down, frames.encode(frames.STEP, 0, 0.0, 0.01, "free", {"g": [1.5]}, [], {}))
-            assert next_from_g(frames.OUTPUTS).fields[1] == 1
+            assert next_from_g(frames.OUTPUTS).step == 1
             node.send_signal(signal.SIGTERM)
             end = next_from_g(frames.END)
-            assert end.fields[3] is False and "node 'g' stopped by SIGTERM after step 1" in end.fields[4]
+            assert end.clean is False and "node 'g' stopped by SIGTERM after step 1" in end.message
             time.sleep(0.5)
             assert g_holds_its_token() and node.poll() is None  # waiting for the server's word
             if answered:
-                router.put(keys.down, frames.encode(frames.STOP, 1, end.fields[4]))
+                router.put(keys.down, frames.encode(frames.STOP, 1, end.message))
             _, err = node.communicate(timeout=20)
             assert node.returncode == 143 and "node 'g' stopped by SIGTERM" in err
             wait_for(lambda: not g_holds_its_token(), 10, "node g's token to go")

@@ -164,7 +164,7 @@ def _replay_for_someone(payload: bytes) -> bool:
         return len(obj) == 4 and type(obj[3]) is bytes
     # A RESTORE names its node too: one for another node is passed over, as a REPLAY is.
     try:
-        return obj[1] == frames.RESTORE and frames.decode(payload).fields[0] not in ("g", "h")
+        return obj[1] == frames.RESTORE and frames.decode(payload).node not in ("g", "h")
     except frames.FrameError:
         return False
 
@@ -178,7 +178,7 @@ def _passed_over(payload: bytes) -> bool:
     except frames.FrameError:
         return False
     if frame.kind == frames.CHECKPOINT:
-        return 0 <= frame.fields[0] < frames.MAX_STEP
+        return 0 <= frame.step < frames.MAX_STEP
     if frame.kind == frames.INIT:  # an initialisation of other nodes (each node it names drops it)
         return True
     return _replay_for_someone(payload)

@@ -156,7 +156,7 @@ class NodeRuntime:
                 # replaces one that died, the run's START (a source) or last release (a player).
                 returning = start.kind == frames.REPLAY
                 if returning:
-                    start = start.fields[1]
+                    start = start.release
                 if start.kind == frames.STOP:
                     self._on_stop(start)
                     return
@@ -164,13 +164,13 @@ class NodeRuntime:
                     # The run is under way: this process is a restart. Say so at once (a node
                     # process says HELLO once per run); a server that takes checkpoints
                     # restores the run, and this node with it; one that does not stops the run.
-                    start = self._await_restore(start.fields[0])
+                    start = self._await_restore(start.step)
                     if start is None:
                         return
                 played = isinstance(self.impl, SamplePlayer)
                 if not played and (start.kind not in (frames.START, frames.RESTORE) or (
                         start.kind == frames.RESTORE and isinstance(self.impl, AsyncSource))):
-                    at = f" (step {start.fields[0]})" if start.kind in (frames.STEP, frames.STEPS) else ""
+                    at = f" (step {start.step})" if start.kind in (frames.STEP, frames.STEPS) else ""
                     raise NodeRunError(f"node {self.name!r}: the run on {self.endpoint} was already under way{at} "
                                        "when it attached; a node joins before the run starts")
                 try:
@@ -179,9 +179,9 @@ class NodeRuntime:
                     elif isinstance(self.impl, AsyncSource):
                         self._run_async(start, returning)
                     elif start.kind == frames.RESTORE:
-                        self._run_stepping(bool(start.fields[6].get("checkpoint")), restore=start)
+                        self._run_stepping(bool(start.options.get("checkpoint")), restore=start)
                     else:
-                        self._run_stepping(bool(start.fields[5].get("checkpoint")))
+                        self._run_stepping(bool(start.options.get("checkpoint")))
                 except KeyboardInterrupt as exc:
                     self._say_stopped(exc)
                     raise
@@ -211,7 +211,7 @@ class NodeRuntime:
             self._publisher.put(payload)
         except FrameTooLarge as exc:
             frame = frames.decode(payload)
-            values = frame.fields[3] if frame.kind in (frames.OUTPUTS, frames.SAMPLE, frames.BATCH) else []
+            values = frame.values if frame.kind in (frames.OUTPUTS, frames.SAMPLE, frames.BATCH) else []
             largest = frames.largest_values(zip((port for port, _ in self._out_ports), values))
             raise NodeRunError(f"node {self.name!r}: its outputs at step {self.steps} are {exc}; "
                                f"largest: {largest}") from None
@@ -253,7 +253,7 @@ class NodeRuntime:
             if frame is None:
                 continue
             if frame.kind == frames.LIVE:
-                if frame.fields[1]:
+                if frame.alive:
                     self._log.info("server back" if self._server_seen else "server seen", step=self.steps)
                     self._server_lost, self._server_seen = None, True
                 elif grace > 0:
@@ -275,40 +275,39 @@ class NodeRuntime:
         if local:
             return frame  # liveliness news from this process's own subscriber
         if kind in (frames.STEP, frames.STEPS) and self._release_for is not None and \
-                self._release_for not in frame.fields[4 if kind == frames.STEP else 3]:
+                self._release_for not in frame.inputs:
             return None  # a release of other nodes (this one is not due, or not yet in Gauss-Seidel order)
         if kind in (frames.START, frames.STEP, frames.STEPS):
             return frames.check_release(frame, self._release_for, self._in_types, self._interpolates())
         if kind == frames.INIT:
-            if self.name not in frame.fields[1]:
+            if self.name not in frame.inputs:
                 return None  # the initialisation of other nodes
             return frames.check_release(frame, self.name, self._in_types)
         if kind == frames.REPLAY:
-            if frame.fields[0] != self.name:
+            if frame.node != self.name:
                 return None
-            inner = frames.decode(frame.fields[1])
+            inner = frames.decode(frame.release)
             if inner.kind not in (frames.START, frames.STEP, frames.STEPS):
                 raise frames.FrameError(f"a replay of a {frames.KIND_NAMES[inner.kind]} frame")
-            return frames.Frame(frames.REPLAY, (self.name, frames.check_release(inner, self._release_for, self._in_types,
-                                                                                self._interpolates())))
+            return frames.Replay(self.name, frames.check_release(inner, self._release_for, self._in_types,
+                                                              self._interpolates()))
         if kind == frames.ROLLBACK:
-            k, t = frame.fields
+            k, t = frame.step, frame.t
             if not (0 <= k < frames.MAX_STEP and math.isfinite(t)):
                 raise frames.FrameError(f"ROLLBACK frame to step {k}, t {t}: out of range")
             return frame
         if kind == frames.STOP:
             return frame
         if kind == frames.CHECKPOINT:
-            if not 0 <= frame.fields[0] < frames.MAX_STEP:
-                raise frames.FrameError(f"CHECKPOINT frame at step {frame.fields[0]}: out of range")
+            if not 0 <= frame.step < frames.MAX_STEP:
+                raise frames.FrameError(f"CHECKPOINT frame at step {frame.step}: out of range")
             return frame
         if kind == frames.RESTORE:
-            node, step, t, index, count, chunk, _ = frame.fields
-            if node != self.name:
+            if frame.node != self.name:
                 return None
-            frames.check_chunk(step, index, count, chunk)
-            if not math.isfinite(t):
-                raise frames.FrameError(f"RESTORE frame to t {t}: not finite")
+            frames.check_chunk(frame.step, frame.index, frame.count, frame.chunk)
+            if not math.isfinite(frame.t):
+                raise frames.FrameError(f"RESTORE frame to t {frame.t}: not finite")
             return frame
         raise frames.FrameError(f"a {frames.KIND_NAMES[kind]} frame is not for a node")
 
@@ -451,8 +450,8 @@ class NodeRuntime:
         chunks = frames.Chunks()
         frame = first
         while True:
-            node, step, t, index, count, chunk, _ = frame.fields
-            data = chunks.add(step, index, count, chunk)
+            step, t = frame.step, frame.t
+            data = chunks.add(step, frame.index, frame.count, frame.chunk)
             if data is not None:
                 break
             frame = self._next_frame(self.cosim.stepTimeout)
@@ -510,16 +509,16 @@ class NodeRuntime:
             return True
         if frame.kind == frames.REPLAY:
             # Back after a link cut: the release we may have missed, or already answered.
-            inner = frame.fields[1]
-            if inner.kind in (frames.STEP, frames.STEPS) and inner.fields[0] > at.done:
+            inner = frame.release
+            if inner.kind in (frames.STEP, frames.STEPS) and inner.step > at.done:
                 frame = inner
             else:
                 self._send(at.last_out)
                 self._log.info("outputs re-sent", step=at.done + 1)
                 return False
         if frame.kind == frames.CHECKPOINT:
-            if frame.fields[0] == at.done + self._rate:  # at the end of this node's last step
-                at.pending_state = self._checkpoint_state(impl, frame.fields[0])
+            if frame.step == at.done + self._rate:  # at the end of this node's last step
+                at.pending_state = self._checkpoint_state(impl, frame.step)
             return False
         if frame.kind == frames.RESTORE:
             restored = self._restore(impl, frame)
@@ -529,7 +528,7 @@ class NodeRuntime:
                 self.steps, at.done, at.mode, at.saved_step, at.pending_state = k, k - 1, None, -1, None
             return False
         if frame.kind == frames.ROLLBACK:
-            k, t = frame.fields
+            k, t = frame.step, frame.t
             if at.saved_step != k:
                 # Not from this run's server, which rolls back only to the step it just released.
                 self.drops.drop("not a release", f"ROLLBACK to step {k}; the state saved is of step {at.saved_step}",
@@ -540,31 +539,30 @@ class NodeRuntime:
             return False
         if frame.kind == frames.INIT:
             return self._on_init(impl, at, frame)
-        if frame.kind == frames.STEPS:
-            k, times, new_mode, inputs, driven_nodes = frame.fields
-        elif frame.kind == frames.STEP:
-            k, t, h, new_mode, inputs, driven_nodes, slopes = frame.fields
-        else:  # a START: this run has started already
+        if frame.kind not in (frames.STEP, frames.STEPS):  # a START: this run has started already
             self.drops.drop("not a release", "a START while the run is under way", self.steps)
             return False
+        k = frame.step
         if at.checkpoint and at.saved_step != k:
             at.saved, at.saved_step = impl.get_state(), k
-        now_driven = self.name in driven_nodes
-        if (new_mode, now_driven) != (at.mode, at.driven):
-            at.mode, at.driven = new_mode, now_driven
-            impl.set_mode(new_mode, now_driven)
-            self._log.info("mode", step=k, mode=new_mode, driven=now_driven)
-        values = dict(zip(self._in_names, inputs[self.name]))
+        now_driven = self.name in frame.driven
+        if (frame.mode, now_driven) != (at.mode, at.driven):
+            at.mode, at.driven = frame.mode, now_driven
+            impl.set_mode(frame.mode, now_driven)
+            self._log.info("mode", step=k, mode=frame.mode, driven=now_driven)
+        values = dict(zip(self._in_names, frame.inputs[self.name]))
         if frame.kind == frames.STEPS:
+            times = frame.times
             out = self._step_batch(impl, k, times, values)
             if out is None:
                 return True
             self.steps, at.done, at.last_out = k + len(times) - 1, k + len(times) - 2, out
             return False
+        t, h = frame.t, frame.h
         if self._rate > 1:  # its own step, the last one cut at stopTime as the base's is
             h = min(self._rate * self.cosim.stepSize, self.cosim.stopTime - t)
-        if self.name in slopes:  # iterative coupling's interpolated inputs (check_release checked them)
-            impl.set_input_derivatives({n: d for n, d in zip(self._in_names, slopes[self.name]) if d})
+        if self.name in frame.slopes:  # iterative coupling's interpolated inputs (check_release checked them)
+            impl.set_input_derivatives({n: d for n, d in zip(self._in_names, frame.slopes[self.name]) if d})
         out = self._step_model(impl, k, t, h, values)
         if out is None:
             return True
@@ -578,7 +576,7 @@ class NodeRuntime:
     def _on_init(self, impl: Node, at: _Stepping, frame: frames.Frame) -> bool:
         """The initialisation phase's inputs at t0: take them and answer with the outputs at step
         0 they make. True if the model failed or ended the simulation there."""
-        t0, inputs = frame.fields
+        t0, inputs = frame.t0, frame.inputs
         if at.done != -1 or not self._start_feedthrough():
             self.drops.drop("not a release", "an INIT " + ("after the run's first step" if at.done != -1 else
                             "for a node whose start outputs depend on no input"), self.steps)
@@ -641,7 +639,7 @@ class NodeRuntime:
 
     def _on_stop(self, frame: frames.Frame) -> None:
         """The server's STOP: the end of the run, or of a failed one, which is this node's failure too."""
-        reason = frame.fields[1]
+        reason = frame.reason
         self._log.info("stop", step=self.steps, reason=reason, waits=self.inbox.waits if self.inbox else None,
                        dropped=dict(self.drops.counts))
         if reason not in frames.CLEAN_STOPS:  # the reason names the step where it matters
@@ -651,7 +649,7 @@ class NodeRuntime:
         impl = self.impl
         assert isinstance(impl, AsyncSource)
         self._send(self._hello(False, restart=restart))
-        _, t0, _, wall0, rt, _ = start.fields
+        t0, wall0, rt = start.t0, start.wall_t0, start.real_time_factor
         clock = RealTimeClock(t0, wall0, rt) if rt else None
         sim_now, seq = t0, 0
         period = 1.0 / float(self.spec.rate or 30.0)
@@ -671,11 +669,10 @@ class NodeRuntime:
                 # As fast as possible: the server's releases are the clock.
                 frame = self._wait(self.cosim.stepTimeout + 30.0, "release")
                 if frame.kind == frames.REPLAY:
-                    frame = frame.fields[1]
+                    frame = frame.release
                 if frame.kind == frames.STEP:
-                    _, t, h, *_ = frame.fields
-                    sim_now = t + h
-                    self.steps = frame.fields[0] + 1
+                    sim_now = frame.t + frame.h
+                    self.steps = frame.step + 1
             if frame is not None and frame.kind == frames.STOP:
                 self._on_stop(frame)
                 return
@@ -709,7 +706,7 @@ class NodeRuntime:
         # The outputs it sends are held start values (the server ignores them); the last point
         # whose samples are sent: by the process this one replaces, if any.
         self._played = _Played(self._pack_outputs({p.name: p.start_value() for p in self.spec.output}),
-                               frame.fields[0] if restart and frame.kind == frames.STEP else -1)
+                               frame.step if restart and frame.kind == frames.STEP else -1)
 
     def _on_played(self, frame: frames.Frame) -> bool:
         """Send the samples due by the point a release reaches, then the word that they are
@@ -720,14 +717,14 @@ class NodeRuntime:
             self._on_stop(frame)
             return True
         if frame.kind == frames.REPLAY:
-            frame = frame.fields[1]
+            frame = frame.release
         point: int | None = None
         if frame.kind == frames.START and at.sent < 0:
-            point, t = 0, frame.fields[1]
+            point, t = 0, frame.t0
         elif frame.kind == frames.STEP:
-            point, t = frame.fields[0] + 1, frame.fields[1] + frame.fields[2]
+            point, t = frame.step + 1, frame.t + frame.h
         elif frame.kind == frames.RESTORE:
-            point, t = frame.fields[1], frame.fields[2]
+            point, t = frame.step, frame.t
             at.sent = point  # the server's restored histories hold what came before
         if point is not None:  # not a CHECKPOINT, ROLLBACK or the START a resume sends again
             for sample in impl.due(at.sent, point):
@@ -789,7 +786,7 @@ class NodeRuntime:
                             self.steps)
             return False
         self._started = True
-        return not self._begin_stepping(bool(frame.fields[5].get("checkpoint")))
+        return not self._begin_stepping(bool(frame.options.get("checkpoint")))
 
     def close(self) -> None:
         """An in-process node's end: its model's teardown (a Zenoh node's run does its own)."""

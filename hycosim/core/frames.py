@@ -2,15 +2,17 @@
 
 Arrays rather than maps keep frames small and decoding cheap on the hot path. Every
 frame starts with ``[VERSION, KIND, ...]``; :func:`decode` rejects anything else with a
-:class:`FrameError`, so random bytes never reach the coordinator.
+:class:`FrameError`, so random bytes never reach the coordinator. What it returns is one
+named tuple per kind (:class:`Step`, :class:`Outputs`, ...; ``frame.kind`` on each), whose
+fields are named as below: code reads ``step.inputs``, never a position.
 
 Kinds and layouts (after version and kind):
 
 * ``OUTPUTS``  node → server: ``uid, step, t, values`` (values in the node's output order)
 * ``SAMPLE``   async node → server: ``uid, seq, t, values``
-* ``START``    server → nodes: ``run_id, t0, H, wall_t0, real_time_factor, options``
+* ``START``    server → nodes: ``run_id, t0, h, wall_t0, real_time_factor, options``
   (options: ``{"checkpoint": bool}``: save state before each step, for rollback)
-* ``STEP``     server → nodes: ``step, t, H, mode, inputs {node: [values]}, driven [nodes], slopes``
+* ``STEP``     server → nodes: ``step, t, h, mode, inputs {node: [values]}, driven [nodes], slopes``
   (``slopes {node: [None or [d1, …, dn]]}``: for a node that interpolates its inputs, per input
   its time derivatives at ``t``, orders 1 to MAX_SLOPE_ORDER; None holds it. Empty but for
   iterative coupling with ``interpolate``)
@@ -166,11 +168,129 @@ class FrameError(ValueError):
     """Bytes that are not a well-formed hycosim frame."""
 
 
-class Frame(NamedTuple):
-    """One decoded frame (a named tuple: decoded for every message, it must be cheap to make)."""
+# One small named tuple per kind, its fields in wire order (after version and kind): code reads
+# ``step.inputs``, not a position. :func:`decode` builds them as cheaply as a plain tuple.
 
-    kind: int
-    fields: tuple[Any, ...]
+
+class Outputs(NamedTuple):
+    uid: int
+    step: int
+    t: float
+    values: list[Any]
+
+
+class Sample(NamedTuple):
+    uid: int
+    seq: int
+    t: float
+    values: list[Any]
+
+
+class Start(NamedTuple):
+    run_id: str
+    t0: float
+    h: float
+    wall_t0: float
+    real_time_factor: float | None
+    options: dict[str, Any]
+
+
+class Step(NamedTuple):
+    step: int
+    t: float
+    h: float
+    mode: str
+    inputs: dict[str, list[Any]]
+    driven: list[str]
+    slopes: dict[str, Any]
+
+
+class Stop(NamedTuple):
+    step: int
+    reason: str
+
+
+class Live(NamedTuple):
+    node: str
+    alive: bool
+
+
+class Hello(NamedTuple):
+    uid: int
+    capabilities: dict[str, Any]
+
+
+class Rollback(NamedTuple):
+    step: int
+    t: float
+
+
+class Replay(NamedTuple):
+    node: str
+    release: Any  # on the wire the release's bytes; a node's check_release gives the frame
+
+
+class End(NamedTuple):
+    uid: int
+    step: int
+    t: float
+    clean: bool
+    message: str
+    earlier: list[list[Any]]
+    last: list[Any] | None
+
+
+class Checkpoint(NamedTuple):
+    step: int
+
+
+class State(NamedTuple):
+    uid: int
+    step: int
+    index: int
+    count: int
+    chunk: bytes
+
+
+class Restore(NamedTuple):
+    node: str
+    step: int
+    t: float
+    index: int
+    count: int
+    chunk: bytes
+    options: dict[str, Any]
+
+
+class Steps(NamedTuple):
+    step: int
+    times: list[float]
+    mode: str
+    inputs: dict[str, list[Any]]
+    driven: list[str]
+
+
+class Batch(NamedTuple):
+    uid: int
+    step: int
+    t: float
+    values: list[Any]
+    earlier: list[list[Any]]
+
+
+class Init(NamedTuple):
+    t0: float
+    inputs: dict[str, list[Any]]
+
+
+TYPES: dict[int, type] = {OUTPUTS: Outputs, SAMPLE: Sample, START: Start, STEP: Step, STOP: Stop, LIVE: Live,
+                          HELLO: Hello, ROLLBACK: Rollback, REPLAY: Replay, END: End, CHECKPOINT: Checkpoint,
+                          STATE: State, RESTORE: Restore, STEPS: Steps, BATCH: Batch, INIT: Init}
+for _kind, _type in TYPES.items():
+    _type.kind = _kind  # a class attribute, not a field: ``frame.kind`` on any frame
+
+Frame = (Outputs | Sample | Start | Step | Stop | Live | Hello | Rollback | Replay | End | Checkpoint | State
+         | Restore | Steps | Batch | Init)
 
 
 def encode(kind: int, *fields: Any) -> bytes:
@@ -192,13 +312,16 @@ def decode(payload: bytes) -> Frame:
     shape = _SHAPES.get(kind) if type(kind) is int else None
     if shape is None:
         raise FrameError(f"unknown frame kind {short(kind)}")
-    fields = tuple(obj[2:])
+    fields = obj[2:]
     arity, fits = shape
     if len(fields) != arity:
         raise FrameError(f"{KIND_NAMES[kind]} frame with {len(fields)} fields, expected {arity}")
     if not fits(fields):
-        raise FrameError(f"{KIND_NAMES[kind]} frame with fields of the wrong types: {short(list(fields))}")
-    return Frame(kind, fields)
+        raise FrameError(f"{KIND_NAMES[kind]} frame with fields of the wrong types: {short(fields)}")
+    return _make(TYPES[kind], fields)
+
+
+_make = tuple.__new__  # a named tuple from the checked fields, without its __new__'s argument handling
 
 
 def check_release(frame: Frame, node: str | None = None, input_types: tuple[tuple[type, ...], ...] | None = None,
@@ -214,29 +337,29 @@ def check_release(frame: Frame, node: str | None = None, input_types: tuple[tupl
     numbers only for an input that takes floats. A release anyone on an unsecured network may
     have written is checked before a node acts on it.
     """
-    f = frame.fields
     isfinite = math.isfinite
     if frame.kind == START:
-        if not (isfinite(f[1]) and isfinite(f[2]) and isfinite(f[3]) and f[2] > 0
-                and (f[4] is None or (isfinite(f[4]) and f[4] > 0))):
+        t0, h, wall0, rt = frame.t0, frame.h, frame.wall_t0, frame.real_time_factor
+        if not (isfinite(t0) and isfinite(h) and isfinite(wall0) and h > 0
+                and (rt is None or (isfinite(rt) and rt > 0))):
             raise FrameError(f"START frame with times that are not finite or a step size not above 0: "
-                             f"{short(list(f[1:5]))}")
+                             f"{short([t0, h, wall0, rt])}")
         return frame
     if frame.kind == INIT:
-        k, (_, inputs) = 0, f
-        if not isfinite(f[0]):
-            raise FrameError(f"INIT frame at t0 {short(f[0])}: not finite")
+        k, inputs = 0, frame.inputs
+        if not isfinite(frame.t0):
+            raise FrameError(f"INIT frame at t0 {short(frame.t0)}: not finite")
     elif frame.kind == STEPS:
-        k, times, _, inputs, _ = f
+        k, times, inputs = frame.step, frame.times, frame.inputs
         if not (0 <= k < MAX_STEP and 2 <= len(times) <= MAX_BATCH + 1 and all(type(x) in _NUM for x in times)
                 and all(isfinite(x) for x in times) and all(a < b for a, b in zip(times, times[1:]))):
             raise FrameError(f"STEPS frame with step {short(k)}, times {short(times)}: out of range or not rising")
     elif frame.kind == STEP:
-        k, t, h, _, inputs, _, slopes = f
+        k, t, h, inputs = frame.step, frame.t, frame.h, frame.inputs
         if not (0 <= k < MAX_STEP and isfinite(t) and isfinite(h) and h > 0):
             raise FrameError(f"STEP frame with step {short(k)}, t {short(t)}, h {short(h)}: out of range")
-        if node is not None and node in slopes:
-            _check_slopes(k, node, slopes[node], input_types, interpolates)
+        if node is not None and node in frame.slopes:
+            _check_slopes(k, node, frame.slopes[node], input_types, interpolates)
     else:
         raise FrameError(f"a {KIND_NAMES.get(frame.kind, frame.kind)} frame is not a release")
     if node is not None:

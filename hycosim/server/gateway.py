@@ -91,10 +91,10 @@ def translate_release(payload: bytes, conns: list[_Connection], stop_time: float
     is not a release each bridge FMU it names can act on, whatever the bytes."""
     frame = frames.decode(payload)
     if frame.kind == frames.START:
-        _, t0, h, _, _, _ = frames.check_release(frame).fields
-        return {c: gp.start(t0, c.rate * h) for c in conns}
+        start = frames.check_release(frame)
+        return {c: gp.start(start.t0, c.rate * start.h) for c in conns}
     if frame.kind == frames.STEP:
-        k, t, h, _, inputs, driven, _ = frame.fields
+        k, t, h, inputs, driven = frame.step, frame.t, frame.h, frame.inputs, frame.driven
         data = {}
         for c in conns:
             if c.node.nodeName not in inputs:
@@ -104,7 +104,7 @@ def translate_release(payload: bytes, conns: list[_Connection], stop_time: float
             data[c] = gp.step(k, t, own, c.node.nodeName in driven, [float(v) for v in inputs[c.node.nodeName]])
         return data
     if frame.kind == frames.STOP:
-        return {c: gp.text(gp.STOP, frame.fields[1]) for c in conns}
+        return {c: gp.text(gp.STOP, frame.reason) for c in conns}
     return {}
 
 

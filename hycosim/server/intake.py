@@ -78,42 +78,42 @@ class Intake:
             raise Dropped("malformed", f"from {node}: {exc}") from None
         if frame.kind not in (frames.OUTPUTS, frames.SAMPLE, frames.HELLO, frames.END, frames.STATE, frames.BATCH):
             raise Dropped("wrong kind", f"from {node}: a {frames.KIND_NAMES[frame.kind]} frame is not for the server")
-        uid = frame.fields[0]
+        uid = frame.uid
         if uid != spec.UID:
             raise Dropped("not owner", f"frame on {node}'s key carries UID {uid}, {node} owns UID {spec.UID}")
         if frame.kind == frames.HELLO:
             return frame
         if frame.kind == frames.STATE:
-            _, step, index, count, chunk = frame.fields
             try:
-                frames.check_chunk(step, index, count, chunk)
+                frames.check_chunk(frame.step, frame.index, frame.count, frame.chunk)
             except frames.FrameError as exc:
                 raise Dropped("wrong step", f"from {node}: {exc}") from None
             if spec.asynchronous:
                 raise Dropped("wrong kind", f"{node} is asynchronous: it has no state to checkpoint")
             return frame
-        if not 0 <= frame.fields[1] < frames.MAX_STEP:
-            raise Dropped("wrong step", f"from {node}: step or sequence number {frame.fields[1]} out of range")
-        t = frame.fields[2]
+        number = frame.seq if frame.kind == frames.SAMPLE else frame.step
+        if not 0 <= number < frames.MAX_STEP:
+            raise Dropped("wrong step", f"from {node}: step or sequence number {number} out of range")
+        t = frame.t
         if not math.isfinite(t):
             # An infinite sample time would outrank every later sample (held for ever); NaN breaks the order.
             raise Dropped("wrong type", f"from {node}: time {t!r} is not finite")
         if frame.kind == frames.END:
             # A source never ends a run cleanly (it has no end of its own), but it says that it
             # was stopped or failed; it steps in no batch.
-            if spec.asynchronous and (frame.fields[3] or frame.fields[5] or frame.fields[6] is not None):
+            if spec.asynchronous and (frame.clean or frame.earlier or frame.last is not None):
                 raise Dropped("wrong kind", f"{node} is asynchronous: it does not end a run, only fails")
-            self._check_batch(node, frame, t, frame.fields[5], last=frame.fields[6])
+            self._check_batch(node, frame, t, frame.earlier, last=frame.last)
             return frame
         if frame.kind == frames.BATCH:
             if spec.asynchronous:
                 raise Dropped("wrong kind", f"{node} is asynchronous: it takes no batched steps")
-            self._check_batch(node, frame, t, frame.fields[4], last=frame.fields[3])
+            self._check_batch(node, frame, t, frame.earlier, last=frame.values)
             return frame
         # A played asynchronous node also sends OUTPUTS: its word that a point's samples are all sent.
         if (frame.kind == frames.SAMPLE) != spec.asynchronous and not (spec.replay and spec.asynchronous):
             raise Dropped("wrong kind", f"{node} is {'' if spec.asynchronous else 'not '}asynchronous")
-        self._check_values(node, frame, t, frame.fields[3])
+        self._check_values(node, frame, t, frame.values)
         return frame
 
     def _check_batch(self, node: str, frame: frames.Frame, t: float, earlier: list[Any], last: object) -> None:
@@ -146,6 +146,6 @@ class Intake:
     def _note_non_finite(self, label: str, frame: frames.Frame, t: float, value: float) -> None:
         if label in self.non_finite:
             return
-        first = {"t": t} if frame.kind == frames.SAMPLE else {"step": frame.fields[1], "t": t}
+        first = {"t": t} if frame.kind == frames.SAMPLE else {"step": frame.step, "t": t}
         self.non_finite[label] = first
         self._log.warning("non-finite value", port=label, value=repr(value), **first)

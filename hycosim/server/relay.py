@@ -272,9 +272,9 @@ class Relay:
                 if msg is None:
                     break
                 if msg[0] == LOCAL:
-                    node, alive = frames.decode(msg[1]).fields
-                    if not alive:
-                        self.alive.discard(node)
+                    live = frames.decode(msg[1])
+                    if not live.alive:
+                        self.alive.discard(live.node)
         except Exception:  # shutting down: never mask the run's own outcome
             pass
 
@@ -315,9 +315,9 @@ class Relay:
     def _handle_side_message(self, key: str, payload: bytes, step: int, collecting: bool) -> tuple[str, frames.Frame] | None:
         """Liveliness and samples are handled here; stepping outputs are returned to the caller."""
         if key == LOCAL:
-            node, alive = frames.decode(payload).fields
-            if node in self._names:  # not the server's own token, nor one no node of this project holds
-                self._on_live(node, alive, step, collecting)
+            live = frames.decode(payload)
+            if live.node in self._names:  # not the server's own token, nor one no node of this project holds
+                self._on_live(live.node, live.alive, step, collecting)
             return None
         node = ProjectKeys.last_chunk(key)
         try:
@@ -326,16 +326,15 @@ class Relay:
             self.intake.drop(exc.reason, exc.detail, step, node if node in self._names else "")
             return None
         if frame.kind == frames.SAMPLE:
-            _, _, t, values = frame.fields
-            self.histories[node].add(float(t), values)
+            self.histories[node].add(float(frame.t), frame.values)
             # Received while point ``step`` is gathered: usable from that point on.
-            self.recorder.sample(node, max(step, 0), float(t), values)
+            self.recorder.sample(node, max(step, 0), float(frame.t), frame.values)
             return None
         if frame.kind == frames.STATE:
             self._on_state(node, frame, step)
             return None
         if frame.kind == frames.HELLO:
-            self._on_hello(node, frame.fields[1], step)
+            self._on_hello(node, frame.capabilities, step)
             return None
         self.messages["received"] += 1
         return node, frame
@@ -416,13 +415,13 @@ class Relay:
     def _on_state(self, node: str, frame: frames.Frame, step: int) -> None:
         """A piece of a node's state for the checkpoint being gathered; the checkpoint is written
         once every stepping node's state is whole."""
-        _, at, index, count, chunk = frame.fields
+        at = frame.step
         p = self._pending
         if p is None or at != p.step or self.project.node(node).asynchronous:
             self.intake.drop("stale state", f"{node} sent its state at step {at}, no checkpoint of it is gathered",
                              step, node)
             return
-        data = p.chunks.setdefault(node, frames.Chunks()).add(at, index, count, chunk)
+        data = p.chunks.setdefault(node, frames.Chunks()).add(at, frame.index, frame.count, frame.chunk)
         if data is None:
             return
         p.states[node] = data
@@ -491,8 +490,8 @@ class Relay:
                 self._fresh.update(self.stepping)
                 self._send_restore(cp)
                 if cause.node == "server" and self._start_frame is not None:
-                    start = frames.decode(self._start_frame).fields
-                    self._start_frame = frames.encode(frames.START, start[0], cp.server["t"], *start[2:])
+                    start = frames.decode(self._start_frame)._replace(t0=cp.server["t"])
+                    self._start_frame = frames.encode(frames.START, *start)
                     self.release.put(self._start_frame)
                 released = time.perf_counter()
                 self._expect_all(cp.step, released)
@@ -608,9 +607,9 @@ class Relay:
         def take(node: str, frame: frames.Frame) -> None:
             pending.discard(node)
             if node not in self.histories:  # a played source's values are its samples'
-                self.outputs[node] = frame.fields[3]
+                self.outputs[node] = frame.values
             if frame.kind == frames.BATCH:
-                self._earlier[node] = frame.fields[4]
+                self._earlier[node] = frame.earlier
             arrivals[node] = time.perf_counter() - self._released_at.get(node, released_at)
 
         if self._early:
@@ -641,9 +640,9 @@ class Relay:
             node, frame = got
             if frame.kind == frames.END and self.project.node(node).asynchronous:
                 self._on_end(node, step, frame)  # a source stopped or failed (never clean: the intake)
-            frame_step = frame.fields[1]
+            frame_step = frame.step
             label = step if node in self.paced else self._label.get(node, step)
-            if frame.kind == frames.END and frame_step == label + 1 and not frame.fields[3]:
+            if frame.kind == frames.END and frame_step == label + 1 and not frame.clean:
                 # A node stopped (SIGTERM) while waiting for a release: it names the next step.
                 self._on_end(node, step, frame)
             if frame_step != label:
@@ -656,7 +655,7 @@ class Relay:
                 # The others' outputs at the step's end (inside a batch: their batches, which
                 # hold the points its earlier steps reached) are gathered before the run ends.
                 pending.discard(node)
-                self._earlier[node] = frame.fields[5]
+                self._earlier[node] = frame.earlier
                 arrivals[node] = time.perf_counter() - self._released_at.get(node, released_at)
                 self._ended_inside.add(node)
                 self._ended_arrivals = arrivals
@@ -666,8 +665,8 @@ class Relay:
                                  f"{frame_step}, which it was released for {'in' if batched is None else 'as'} "
                                  "a batch", step, node)
                 continue
-            if batched is not None and len(frame.fields[4]) != batched:
-                self.intake.drop("wrong step", f"{node} sent the outputs of {len(frame.fields[4]) + 1} steps for "
+            if batched is not None and len(frame.earlier) != batched:
+                self.intake.drop("wrong step", f"{node} sent the outputs of {len(frame.earlier) + 1} steps for "
                                  f"a batch of {batched + 1} of its steps", step, node)
                 continue
             if node in pending:
@@ -683,7 +682,7 @@ class Relay:
     def _on_end(self, node: str, step: int, frame: frames.Frame) -> None:
         """A node's END instead of its outputs for ``step``: its model ended the run (the caller
         gathers the others' outputs of the release before it ends), or failed."""
-        _, _, t, clean, message, _, last = frame.fields
+        t, clean, message, last = frame.t, frame.clean, frame.message, frame.last
         # The point the run's records end at (inside a batched release: its first, until the
         # points its steps before reached are recorded).
         message, k = message[:_MESSAGE_MAX], self._point
