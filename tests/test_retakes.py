@@ -130,7 +130,44 @@ def test_retakes_refuse_what_cannot_take_a_step_again_by_name(tmp_path):
         res = hycosim("validate", str(cfg))
         assert res.returncode == 2, res.stdout
         assert f"coSimulation.{key}: every stepping node must be able to take a step again" in res.stderr
-        assert "node 'h': its model Hold has no get_state/set_state" in res.stderr and "Traceback" not in res.stderr
+        assert "node 'h': its model Hold has no get_state or set_state" in res.stderr and "Traceback" not in res.stderr
+
+
+_SAVED = """
+from hycosim.clients.node import Node, pack_state, unpack_state
+
+class Saved(Node):  # saves its state and says nothing of can_rollback: the default follows the methods
+    def setup(self, ctx):
+        self.x = 0.0
+    def outputs(self):
+        return {"y": self.x}
+    def step(self, t, h, inputs):
+        self.x += h * inputs["u"]
+    def get_state(self):
+        return pack_state({"x": self.x})
+{set_state}
+"""
+
+
+def test_a_python_node_that_saves_its_state_is_retried_and_checkpointed_without_saying_can_rollback(tmp_path):
+    """A model with get_state and set_state (and no can_rollback of its own) takes part in
+    iterative coupling and in checkpoints; one with get_state alone is named by validate."""
+    (tmp_path / "saved.py").write_text(_SAVED.replace("{set_state}", (
+        "    def set_state(self, state):\n        self.x = unpack_state(state, {'x'})['x']\n")))
+    (tmp_path / "half.py").write_text(_SAVED.replace("{set_state}", "").replace("class Saved", "class Half"))
+    nodes = [{"nodeName": "src", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+             {"nodeName": "s", "UID": 2, "model": "saved.py:Saved", "input": ["u"], "output": ["y"]}]
+    cfg = write_project(tmp_path / "p.json", nodes, [{"from": "src.y", "to": "s.u"}],
+                        cosim={"stopTime": 0.5, "iterate": {"tolerance": 1e-9}, "checkpointEvery": 0.1})
+    res = hycosim("validate", str(cfg))
+    assert res.returncode == 0 and "checkpoints" not in res.stderr, res.stderr
+    m = meta(run_project(cfg, tmp_path / "runs"))
+    assert m["checkpoints_taken"] >= 4 and m["iteration"].startswith("up to"), m
+    nodes[1]["model"] = "half.py:Half"
+    cfg = write_project(tmp_path / "h.json", nodes, [{"from": "src.y", "to": "s.u"}],
+                        cosim={"stopTime": 0.5, "iterate": {"tolerance": 1e-9}})
+    res = hycosim("validate", str(cfg))
+    assert res.returncode == 2 and "node 's': its model Half has no set_state" in res.stderr
 
 
 @pytest.mark.parametrize("cosim, expected", [

@@ -21,7 +21,7 @@ from hycosim.core.schema import Node as NodeSpec
 from hycosim.core.extras import extra_providing, install_hint
 from hycosim.core.hints import did_you_mean
 
-from hycosim.clients.node import AsyncSource, Node
+from hycosim.clients.node import AsyncSource, Node, missing_state_methods
 
 REFERENCE_MODELS = {
     "gain": "hycosim.clients.reference.gain:Gain",
@@ -180,9 +180,10 @@ def why_no_checkpoint(spec: NodeSpec, project_dir: Path) -> str | None:
         return None
     if spec.model:
         cls = model_class(spec, project_dir)
-        if cls.get_state is Node.get_state and cls.serialize_state is Node.serialize_state:
-            return f"its model {cls.__name__} has no get_state/set_state"
-        return None
+        if cls.serialize_state is not Node.serialize_state:
+            return None  # a model that serialises its own way
+        # A model that overrides can_rollback answers only once set up: its HELLO tells the run.
+        return missing_state_methods(cls)
     return "a bridge FMU cannot serialise the state of the tool it runs in"
 
 
@@ -203,8 +204,8 @@ def why_no_retake(spec: NodeSpec, project_dir: Path, variable: bool) -> str | No
     if spec.replay:
         return None  # a player's state is its time
     cls = model_class(spec, project_dir)
-    if cls.get_state is Node.get_state:
-        return f"its model {cls.__name__} has no get_state/set_state"
+    if (why := missing_state_methods(cls)) is not None:
+        return why
     if variable:
         try:
             fixed = not cls().can_vary_step  # a model says so before its setup

@@ -127,11 +127,12 @@ class Node(ABC):
     def teardown(self) -> None:
         """Release resources; called once at the end, also after a failure."""
 
-    # Rollback, for event localisation: a node that can save and restore its state lets
-    # the coordinator retry a macro step with a smaller step size.
+    # Rollback, for event localisation, iterative coupling and the controlled step: a node that
+    # can save and restore its state lets the coordinator retry a macro step. A model that
+    # overrides get_state and set_state can; one that must not be retried all the same says False.
     @property
     def can_rollback(self) -> bool:
-        return False
+        return saves_state(type(self))
 
     # Variable steps, for the error-controlled macro step (and event localisation): a node whose
     # step assumes one fixed h returns False, and the run keeps fixed steps.
@@ -177,6 +178,17 @@ class Node(ABC):
     def deserialize_state(self, data: bytes) -> None:
         """Restore what :meth:`serialize_state` gave."""
         self.set_state(data)
+
+
+def saves_state(cls: type) -> bool:
+    """Whether a model class saves and restores its state: it overrides both get_state and set_state."""
+    return cls.get_state is not Node.get_state and cls.set_state is not Node.set_state
+
+
+def missing_state_methods(cls: type) -> str | None:
+    """What a model class lacks to save and restore its state, said for a message; None if nothing."""
+    lacks = [m for m in ("get_state", "set_state") if getattr(cls, m) is getattr(Node, m)]
+    return f"its model {cls.__name__} has no {' or '.join(lacks)}" if lacks else None
 
 
 def pack_state(state: dict[str, Any]) -> bytes:
