@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hycosim.fmu_bridge.model_fmu import build_model_fmu
-from tests.helpers import REPO, free_endpoint, hycosim, run_project, write_project
+from tests.helpers import REPO, free_endpoint, hycosim, read_rows, run_project, write_project
 
 _SSD = """<?xml version="1.0" encoding="UTF-8"?>
 <ssd:SystemStructureDescription xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
@@ -126,6 +126,25 @@ def test_a_package_runs_to_the_values_of_the_project_it_stands_for(tmp_path, gai
     row = dict(zip(header.split(","), second.split(",")))
     assert float(row["g2.u"]) == pytest.approx(2 * float(row["g1.y"]) + 0.5)
     assert float(row["g1.u"]) == pytest.approx(-0.25 * float(row["Sub_g3.y"]))
+
+
+def test_run_and_validate_take_the_step_a_package_without_one_needs(tmp_path, gain):
+    """A package from another tool has no macro step (SSP 1.0 has none): run and validate take
+    --step (and --stop) as import does, instead of asking for a side file; a project file,
+    which says its own, refuses them by name."""
+    package = _package(tmp_path / "chain.ssp", gain)
+    res = hycosim("validate", str(package))
+    assert res.returncode == 2 and "give --step" in res.stderr
+    res = hycosim("validate", str(package), "--step", "0.1")
+    assert res.returncode == 0, res.stderr
+    run = tmp_path / "runs"
+    res = hycosim("run", str(package), "--step", "0.1", "--stop", "0.5", "--runs-dir", str(run), "--no-progress")
+    assert res.returncode == 0, res.stderr
+    rows = read_rows(next(run.iterdir()))
+    assert [float(r["t"]) for r in rows] == pytest.approx([0.1 * i for i in range(6)])
+    cfg = tmp_path / ".chain.ssp.d" / "project.json"
+    res = hycosim("validate", str(cfg), "--step", "0.1")
+    assert res.returncode == 2 and "--step and --stop are for an SSP package" in res.stderr
 
 
 def test_import_export_round_trip_and_fmpy_reads_the_package(tmp_path, gain):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Annotated, Optional
 
 import typer
 
@@ -17,6 +18,14 @@ def finite(value: float | None) -> float | None:
     if value is not None and not math.isfinite(value):
         raise typer.BadParameter(f"{value} is not a finite number")
     return value
+
+
+# An SSP package's macro step and stop time (SSP 1.0 has no step), for the commands that take a
+# package as they take a project file; the side file's coSimulation has the last word.
+SspStep = Annotated[Optional[float], typer.Option("--step", min=0.0, callback=finite,
+                                                  help="an SSP package's macro step (SSP 1.0 has none)")]
+SspStop = Annotated[Optional[float], typer.Option("--stop", callback=finite,
+                                                  help="an SSP package's stop time, in place of its own")]
 
 
 def checked_endpoint(option: str, value: str, parse=parse_endpoint) -> str:

@@ -49,10 +49,14 @@ def from_ssp(package: Path, project_file: Path, side: Path | None = None, step: 
     return project_file
 
 
-def project_file(file: Path) -> Path:
+def project_file(file: Path, step: float | None = None, stop: float | None = None) -> Path:
     """The project file to use for FILE: itself, or for an SSP package the project imported from
-    it (into a hidden folder beside it, remade each time)."""
+    it (into a hidden folder beside it, remade each time), with the macro step and stop time
+    ``step`` and ``stop`` where the package gives none."""
     if file.suffix.lower() != ".ssp":
+        if step is not None or stop is not None:
+            fail(f"{file}: --step and --stop are for an SSP package; a project file says "
+                 "coSimulation.stepSize and stopTime")
         return file
     folder = file.parent / f".{file.name}.d"
     try:
@@ -60,4 +64,4 @@ def project_file(file: Path) -> Path:
     except OSError as exc:
         fail(f"{folder}: cannot make the folder the package is imported into "
              f"({exc.strerror or exc}); import it elsewhere with: hycosim import {file} -o DIR/project.json")
-    return from_ssp(file, folder / "project.json")
+    return from_ssp(file, folder / "project.json", step=step, stop=stop)

@@ -9,7 +9,7 @@ from typing import Annotated, Any, Optional
 import typer
 
 import hycosim
-from hycosim.cli.options import finite
+from hycosim.cli.options import SspStep, SspStop, finite
 from hycosim.cli.output import fail, out, warn
 from hycosim.cli.projects import from_ssp, load, project_file
 
@@ -21,9 +21,11 @@ def validate(
     file: Path,
     models: Annotated[bool, typer.Option(help="also check that each node's model or FMU exists and takes "
                                               "the node's ports and parameters (imports the models)")] = True,
+    step: SspStep = None,
+    stop: SspStop = None,
 ) -> None:
     """Check a project JSON (or an SSP package): print OK, or every error with its JSON path and a hint."""
-    loaded = load(project_file(file))
+    loaded = load(project_file(file, step, stop))
     p = loaded.project
     if models:
         from hycosim.clients.loader import NodeLoadError, check_node

@@ -8,7 +8,7 @@ from typing import Annotated, Optional
 import typer
 
 from hycosim.cli.extras import require_extra
-from hycosim.cli.options import checked_endpoint, monitor_credentials
+from hycosim.cli.options import SspStep, SspStop, checked_endpoint, monitor_credentials
 from hycosim.cli.output import end_process, err, fail, out, print_summary, say_outcome
 from hycosim.cli.projects import load, project_file
 from hycosim.core.signals import ignore_stops
@@ -73,6 +73,8 @@ def run(
     dashboard_port: Annotated[int, typer.Option(min=0, max=65535, help="the dashboard's port on 127.0.0.1")] = 8050,
     in_process: Annotated[Optional[bool], typer.Option("--in-process/--processes", help="the master and every node "
                           "in this process, no sockets (default: coSimulation.transport)", show_default=False)] = None,
+    step: SspStep = None,
+    stop: SspStop = None,
 ) -> None:
     """Run the server and every node as local processes on loopback, or all in this process
     (FILE: a project JSON or an SSP package)."""
@@ -80,7 +82,7 @@ def run(
     from hycosim.embedded import run_embedded
     from hycosim.server.report import summarise
 
-    file = project_file(file)
+    file = project_file(file, step, stop)
     loaded = load(file)
     if in_process is None:
         in_process = loaded.project.coSimulation.transport == "inprocess"
