@@ -32,6 +32,17 @@ from hycosim.core.config import parse_project
 from hycosim.core.folders import make_folder
 
 PAPER = {30: (3.2, 14.8, 95), 40: (3.8, 15.6, 95), 50: (5.0, 15.4, 90), 60: (5.8, 16.6, 80)}
+
+
+def paper_figures(angle: float) -> tuple[float, float, int] | None:
+    """The paper's Table 2 row for a release angle (error mm, time s, success %), or None for an
+    angle it did not try (30.5° is not 30°)."""
+    return PAPER.get(int(angle)) if float(angle).is_integer() else None
+
+
+def figure_text(value: float, spec: str) -> str:
+    """A table's figure, or "–" where there is none (no grasp to measure, no paper row)."""
+    return "–" if math.isnan(value) else format(value, spec)
 # The scenario's project files ship in the package (package data), so an installed wheel runs the trials.
 CONFIGS = Path(__file__).resolve().parent / "configs"
 # Where the rod and robot-scene FMUs are built when no other folder is given (beside the run, as
@@ -219,7 +230,8 @@ def plot(results: list[TrialResult], path: Path) -> Path:
     for ax, key, label, paper_i in ((axes[0], "success_pct", "success (%)", 2), (axes[1], "error_mm", "grasp error (mm)", 0),
                                     (axes[2], "time_s", "execution time (s)", 1)):
         ax.bar(x - 0.2, [table[a][key] for a in angles], 0.4, label="hycosim")
-        ax.bar(x + 0.2, [PAPER.get(int(a), (np.nan,) * 3)[paper_i] for a in angles], 0.4, label="paper (real robot)")
+        ax.bar(x + 0.2, [(paper_figures(a) or (np.nan,) * 3)[paper_i] for a in angles], 0.4,
+               label="paper (real robot)")
         ax.set_xticks(x, [f"{a:g}°" for a in angles])
         ax.set_title(label)
         ax.legend(fontsize=7)

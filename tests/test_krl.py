@@ -417,3 +417,14 @@ def test_an_eki_file_is_read_whole_or_refused_by_name_and_its_frames_read_or_rej
             parse_frame(text, config)
         except EkiError:
             pass
+
+
+def test_the_trials_table_shows_a_dash_where_the_paper_or_the_run_has_no_figure():
+    """Table 2 has 30°, 40°, 50° and 60°: another angle (30.5° included) has no paper row, and
+    an angle with no grasp has no error or time; the table says "–", never nan."""
+    from hycosim.trials import PAPER, figure_text, paper_figures
+
+    assert paper_figures(30) == paper_figures(30.0) == PAPER[30]
+    assert paper_figures(30.5) is None and paper_figures(45) is None
+    assert [figure_text(v, "g") for v in paper_figures(50)] == ["5", "15.4", "90"]
+    assert figure_text(float("nan"), ".1f") == "–" and figure_text(3.25, ".1f") == "3.2"

@@ -144,7 +144,8 @@ def trials(
 ) -> None:
     """Rerun the paper's trials: co-simulation, EthernetKRL export, emulated controller, Table 2."""
     require_extra("scenario", "hycosim trials")
-    from hycosim.trials import NODE_KINDS, PAPER, ScenarioMissing, TrialsInterrupted, run_trials, summarise, write_outputs
+    from hycosim.trials import (NODE_KINDS, ScenarioMissing, TrialsInterrupted, figure_text, paper_figures,
+                                run_trials, summarise, write_outputs)
 
     if driver not in ("policy", "reference"):
         fail("--driver is 'policy' or 'reference'")
@@ -184,9 +185,10 @@ def trials(
     for col in ("angle", "mm", "s", "success", "paper mm", "paper s", "paper %"):
         table.add_column(col, no_wrap=True)
     for angle, row in summarise(results).items():
-        p = PAPER.get(int(angle), (float("nan"),) * 3)
-        table.add_row(f"{angle:g}°", f"{row['error_mm']:.1f}", f"{row['time_s']:.2f}",
-                      f"{row['success_pct']:.0f} % of {row['trials']}", f"{p[0]}", f"{p[1]}", f"{p[2]}")
+        p = paper_figures(angle) or (float("nan"),) * 3
+        table.add_row(f"{angle:g}°", figure_text(row["error_mm"], ".1f"), figure_text(row["time_s"], ".2f"),
+                      f"{row['success_pct']:.0f} % of {row['trials']}",
+                      *(figure_text(v, "g") for v in p))
     out.print(table)
     out.print(f"wrote {csv_path} and {png}", highlight=False)
     if interrupted is not None:
