@@ -222,8 +222,7 @@ def compare(ours: dict[str, list[float]], theirs: dict[str, list[float | None]],
         worst = max(diffs, key=lambda p: p[1])
         out[name] = {"max_abs_diff": worst[1], "at_t": t[worst[0]], "points": len(diffs),
                      "max_rel_diff": max(a / max(1.0, b) for _, a, b in diffs),
-                     "t0_diff": diffs[0][1] if diffs[0][0] == 0 and pairs[0] == (0, 0) and values[0] is not None
-                     else None,
+                     "t0_diff": None if values[0] is None else abs(mine[0] - values[0]),
                      "compared": _SAID[d]}
     return out
 

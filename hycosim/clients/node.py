@@ -132,7 +132,7 @@ class Node(ABC):
     # overrides get_state and set_state can; one that must not be retried all the same says False.
     @property
     def can_rollback(self) -> bool:
-        return saves_state(type(self))
+        return missing_state_methods(type(self)) is None
 
     # Variable steps, for the error-controlled macro step (and event localisation): a node whose
     # step assumes one fixed h returns False, and the run keeps fixed steps.
@@ -178,11 +178,6 @@ class Node(ABC):
     def deserialize_state(self, data: bytes) -> None:
         """Restore what :meth:`serialize_state` gave."""
         self.set_state(data)
-
-
-def saves_state(cls: type) -> bool:
-    """Whether a model class saves and restores its state: it overrides both get_state and set_state."""
-    return cls.get_state is not Node.get_state and cls.set_state is not Node.set_state
 
 
 def missing_state_methods(cls: type) -> str | None:

@@ -169,10 +169,12 @@ class FrameError(ValueError):
 
 
 # One small named tuple per kind, its fields in wire order (after version and kind): code reads
-# ``step.inputs``, not a position. :func:`decode` builds them as cheaply as a plain tuple.
+# ``step.inputs``, not a position. ``kind`` is a class attribute, not a field. :func:`decode`
+# builds them as cheaply as a plain tuple.
 
 
 class Outputs(NamedTuple):
+    kind = OUTPUTS
     uid: int
     step: int
     t: float
@@ -180,6 +182,7 @@ class Outputs(NamedTuple):
 
 
 class Sample(NamedTuple):
+    kind = SAMPLE
     uid: int
     seq: int
     t: float
@@ -187,6 +190,7 @@ class Sample(NamedTuple):
 
 
 class Start(NamedTuple):
+    kind = START
     run_id: str
     t0: float
     h: float
@@ -196,6 +200,7 @@ class Start(NamedTuple):
 
 
 class Step(NamedTuple):
+    kind = STEP
     step: int
     t: float
     h: float
@@ -206,31 +211,37 @@ class Step(NamedTuple):
 
 
 class Stop(NamedTuple):
+    kind = STOP
     step: int
     reason: str
 
 
 class Live(NamedTuple):
+    kind = LIVE
     node: str
     alive: bool
 
 
 class Hello(NamedTuple):
+    kind = HELLO
     uid: int
     capabilities: dict[str, Any]
 
 
 class Rollback(NamedTuple):
+    kind = ROLLBACK
     step: int
     t: float
 
 
 class Replay(NamedTuple):
+    kind = REPLAY
     node: str
     release: Any  # on the wire the release's bytes; a node's check_release gives the frame
 
 
 class End(NamedTuple):
+    kind = END
     uid: int
     step: int
     t: float
@@ -241,10 +252,12 @@ class End(NamedTuple):
 
 
 class Checkpoint(NamedTuple):
+    kind = CHECKPOINT
     step: int
 
 
 class State(NamedTuple):
+    kind = STATE
     uid: int
     step: int
     index: int
@@ -253,6 +266,7 @@ class State(NamedTuple):
 
 
 class Restore(NamedTuple):
+    kind = RESTORE
     node: str
     step: int
     t: float
@@ -263,6 +277,7 @@ class Restore(NamedTuple):
 
 
 class Steps(NamedTuple):
+    kind = STEPS
     step: int
     times: list[float]
     mode: str
@@ -271,6 +286,7 @@ class Steps(NamedTuple):
 
 
 class Batch(NamedTuple):
+    kind = BATCH
     uid: int
     step: int
     t: float
@@ -279,6 +295,7 @@ class Batch(NamedTuple):
 
 
 class Init(NamedTuple):
+    kind = INIT
     t0: float
     inputs: dict[str, list[Any]]
 
@@ -286,11 +303,11 @@ class Init(NamedTuple):
 TYPES: dict[int, type] = {OUTPUTS: Outputs, SAMPLE: Sample, START: Start, STEP: Step, STOP: Stop, LIVE: Live,
                           HELLO: Hello, ROLLBACK: Rollback, REPLAY: Replay, END: End, CHECKPOINT: Checkpoint,
                           STATE: State, RESTORE: Restore, STEPS: Steps, BATCH: Batch, INIT: Init}
-for _kind, _type in TYPES.items():
-    _type.kind = _kind  # a class attribute, not a field: ``frame.kind`` on any frame
-
 Frame = (Outputs | Sample | Start | Step | Stop | Live | Hello | Rollback | Replay | End | Checkpoint | State
          | Restore | Steps | Batch | Init)
+
+
+_make = tuple.__new__  # a named tuple from the checked fields, without its __new__'s argument handling
 
 
 def encode(kind: int, *fields: Any) -> bytes:
@@ -319,9 +336,6 @@ def decode(payload: bytes) -> Frame:
     if not fits(fields):
         raise FrameError(f"{KIND_NAMES[kind]} frame with fields of the wrong types: {short(fields)}")
     return _make(TYPES[kind], fields)
-
-
-_make = tuple.__new__  # a named tuple from the checked fields, without its __new__'s argument handling
 
 
 def check_release(frame: Frame, node: str | None = None, input_types: tuple[tuple[type, ...], ...] | None = None,

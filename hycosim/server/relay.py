@@ -19,7 +19,7 @@ import os
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import structlog
 
@@ -70,8 +70,8 @@ class _PendingCheckpoint:
 
 
 class _ModelEnded(Exception):
-    """A node's model ended the simulation (an FMU that asked to terminate): the run ends at
-    the last macro-step point every node reached."""
+    """A node's model ended the simulation (an FMU that asked to terminate): the run's records
+    end at the last macro-step point every node reached, then the point where it ended."""
 
 
 # A node's own words about why it ended or failed are shown and recorded up to this length.
@@ -929,11 +929,9 @@ class Relay:
         holder = max(arrivals, key=arrivals.get) if arrivals else ""
         for i in range(1, len(times) - 1):
             came = {}
-            for node, earlier in self._earlier.items():
-                m = self.coupling.rates[node]
-                if i % m == 0:
-                    outputs[node] = earlier[i // m - 1]
-                    came[node] = arrivals[node]
+            for node, values in self._steps_ending_at(i):
+                outputs[node] = values
+                came[node] = arrivals[node]
             self.router.route(mode, times[i], outputs, self.histories)
             self.recorder.row(k + i, times[i], mode, outputs, self.router.inputs, self.coupling.due(k + i))
             self.recorder.timing(k + i, times[i], 0.0, holder, None, came, {})
@@ -976,12 +974,15 @@ class Relay:
         batch, those of each node whose own step ended there."""
         if i == len(times) - 1:
             return self.outputs
-        outputs = dict(held)
+        return {**held, **dict(self._steps_ending_at(i))}
+
+    def _steps_ending_at(self, i: int) -> Iterator[tuple[str, list[Any]]]:
+        """Inside the batched release being gathered: each node whose own step ends at base
+        point i (a node that ended the run, up to its last step before), and its outputs there."""
         for node, earlier in self._earlier.items():
             m = self.coupling.rates[node]
-            if node not in self._ended_inside and i % m == 0 and i // m - 1 < len(earlier):
-                outputs[node] = earlier[i // m - 1]
-        return outputs
+            if i % m == 0 and i // m - 1 < len(earlier):
+                yield node, earlier[i // m - 1]
 
     def _localise(self, k: int, t: float, h: float, mode: str, watched_at_start: bool,
                   arrivals: dict[str, float], wait: float) -> tuple[float, dict[str, float], float, dict[str, Any]]:
