@@ -43,12 +43,16 @@ class EmbeddedResult:
     node_failures: dict[str, str] = field(default_factory=dict)
 
 
+_LAUNCHER_LINE = "[hycosim run]"  # what the launcher itself writes into a node's stderr file
+
+
 def _tail(path: Path, lines: int = 5) -> str:
     try:
-        text = "\n".join(path.read_text(errors="replace").strip().splitlines()[-lines:])
+        said = [line for line in path.read_text(errors="replace").strip().splitlines()
+                if not line.startswith(_LAUNCHER_LINE)]  # a process's last words, not the launcher's
     except OSError:
         return ""
-    return text.removeprefix("error: ")  # the CLI's prefix: the launcher adds its own
+    return "\n".join(said[-lines:]).strip().removeprefix("error: ")  # the CLI's prefix: the launcher adds its own
 
 
 def _signal_name(number: int) -> str:
@@ -117,8 +121,9 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
                  runs_dir: Path = Path("runs"), console: Console | None = None,
                  show_progress: bool = True, restarts: int = 3, resume: Path | None = None,
                  dashboard_port: int | None = None) -> EmbeddedResult:
-    """Run the server and every node on loopback. With checkpoints (coSimulation.checkpointEvery)
-    a node process that dies mid-run is started again, at most ``restarts`` times per node;
+    """Run the server and every node on loopback. A node process that dies before the run starts,
+    or with checkpoints (coSimulation.checkpointEvery) during it, is started again, at most
+    ``restarts`` times per node (before the start: not after two alike failures);
     ``resume``: go on with the run in that directory from its last checkpoint;
     ``dashboard_port``: serve the dashboard of the run on that port of 127.0.0.1 while it runs."""
     console = console or Console(stderr=True)
@@ -150,6 +155,7 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
                                           for spec in loaded.project.nodeLists}
     restartable = loaded.project.coSimulation.checkpointEvery is not None
     restarted: dict[str, int] = {}
+    last_cause: dict[str, str] = {}  # node → why its last process before the start ended
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=_pump, args=(server.stdout, lines), daemon=True).start()
     code, message, failures = None, "", {}
@@ -179,16 +185,21 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
                     # unless the launcher stopped the server for another node's failure.
                     if name not in failures and proc.poll() is not None and (
                             proc.returncode not in (0, FAILED_ELSEWHERE) or not (started or server_stopped)):
-                        if restartable and started and restarted.get(name, 0) < restarts and code is None:
-                            # The server holds the barrier and restores the run from its last
-                            # checkpoint once the new process says HELLO.
+                        cause = _node_failure(run_dir, name, proc.returncode, before_start=not started)
+                        # Before the start nothing of the node's is lost: its new process attaches as
+                        # the first did. During the run the server restores it from the last
+                        # checkpoint once the new process says HELLO. A process that fails before the
+                        # start as the one before it did (a broken model) is not tried again.
+                        again = (restarted.get(name, 0) < restarts and code is None and not server_stopped
+                                 and (restartable if started else last_cause.get(name) != cause))
+                        if again:
                             restarted[name] = restarted.get(name, 0) + 1
-                            cause = _node_failure(run_dir, name, proc.returncode)
+                            last_cause[name] = cause
                             with open(run_dir / f"node-{name}.stderr.txt", "a") as log:
-                                log.write(f"\n[hycosim run] started again ({restarted[name]} of {restarts}): {cause}\n")
+                                log.write(f"\n{_LAUNCHER_LINE} started again ({restarted[name]} of {restarts}): {cause}\n")
                             nodes[name] = start_node(name, "a")
                             continue
-                        failures[name] = _node_failure(run_dir, name, proc.returncode, before_start=not started)
+                        failures[name] = cause + (f" (after {restarted[name]} restart(s))" if name in restarted else "")
                 # A node failed: stop the server, once it has started its records (a server
                 # stopped while it still imports would leave no meta.json to say what happened).
                 if failures and not server_stopped and server.poll() is None and (run_dir / "meta.json").exists():

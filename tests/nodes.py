@@ -99,3 +99,14 @@ class Static(Node):
 
     def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
         self.y = self.k * inputs["u"] + self.b
+
+
+class SlowStart(Clock):
+    """A Clock whose setup takes ``setup_s`` seconds (a model that loads for a while): the run
+    cannot start before it has attached."""
+
+    def setup(self, ctx: NodeContext) -> None:
+        import time
+
+        time.sleep(float(ctx.parameter("setup_s", 5.0)))
+        super().setup(ctx)

@@ -17,7 +17,8 @@ from hypothesis import strategies as st
 from hycosim.core import frames
 from hycosim.server import checkpoints
 from hycosim.server.interpolation import MAX_DEGREE, InputTrack
-from tests.helpers import REPO, hycosim, meta, run_killing, run_project, write_project
+from tests.helpers import (REPO, hycosim, kill_process, meta, reap, recorded_rows, run_killing, run_project, spawn, wait_for,
+                           write_project)
 from tests.wire_strategies import deep_json
 
 from hycosim.clients.node import NodeContext
@@ -66,6 +67,37 @@ def test_a_run_whose_nodes_are_killed_records_what_a_run_never_killed_does(tmp_p
         assert r["restored"] <= r["step"] and r["restored"] % 50 == 0  # back to a checkpoint at most 0.5 s old
     assert len(checkpoints.steps(run)) == checkpoints.KEEP
     assert "started again (1 of 2)" in (run / "node-rod.stderr.txt").read_text()
+
+
+def test_a_node_killed_before_the_run_starts_is_started_again_without_checkpoints(tmp_path):
+    """Issue 59, part 6: the rod's process is killed once it has attached, while a slow node
+    still loads (the run cannot have started). Nothing of it is lost: its new process attaches
+    as the first did, and the run records what a run never killed does."""
+    cfg = _project(tmp_path, every=None)
+    doc = json.loads(cfg.read_text())
+    doc["coSimulation"]["stopTime"] = 2.0
+    doc["nodeLists"].append({"nodeName": "late", "UID": 5, "model": "tests.nodes:SlowStart",
+                             "parameters": {"setup_s": 6.0}, "input": [], "output": ["y"]})
+    doc["nodeNum"] = len(doc["nodeLists"])
+    cfg.write_text(json.dumps(doc))
+    reference = run_project(cfg, tmp_path / "reference")
+    runs = tmp_path / "runs"
+    proc = spawn("run", str(cfg), "--runs-dir", str(runs), "--no-progress", "--restarts", "2")
+    try:
+        log = lambda: next(runs.iterdir()) / "node-rod.log.jsonl"  # noqa: E731
+        wait_for(lambda: runs.exists() and any(runs.iterdir()) and log().exists()
+                 and "server seen" in log().read_text(), 60, "the rod attached")
+        assert recorded_rows(runs) == 0  # the run has not started
+        kill_process(f"hycosim node rod {cfg}")
+        _, err = proc.communicate(timeout=120)
+    finally:
+        reap(proc)
+    assert proc.returncode == 0, err
+    run = next(runs.iterdir())
+    assert (run / "values.csv").read_bytes() == (reference / "values.csv").read_bytes()
+    said = (run / "node-rod.stderr.txt").read_text()
+    assert "started again (1 of 2): its process died of SIGKILL before the run started" in said
+    assert meta(run)["status"] == "completed"
 
 
 def test_a_resumed_server_goes_on_from_its_last_good_checkpoint_and_records_the_same(tmp_path, reference):

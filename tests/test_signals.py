@@ -223,8 +223,12 @@ def test_a_node_process_that_ends_before_it_attaches_is_reported_at_once(tmp_pat
     assert time.monotonic() - started < 30  # not the attachTimeout of 60 s
     assert res.returncode == 3, res.stderr
     assert f"q: {expected}" in res.stderr
-    m = meta(next((tmp_path / "runs").iterdir()))  # the run directory says what the user was told
+    run = next((tmp_path / "runs").iterdir())
+    m = meta(run)  # the run directory says what the user was told
     assert m["status"] == "failed" and expected in m["reason"]
+    # Started again once (the default --restarts is 3); it failed alike, so not a third time.
+    said = (run / "node-q.stderr.txt").read_text()
+    assert "started again (1 of 3)" in said and "(2 of 3)" not in said and "(after 1 restart(s))" in res.stderr
 
 
 def _dashboard(tmp_path) -> list[str]:

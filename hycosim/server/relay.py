@@ -168,6 +168,7 @@ class Relay:
         # Checkpoints (coSimulation.checkpointEvery): on once every stepping node said it can
         # serialise its state; the one being gathered; restores done (node, steps, cause, time).
         self._checkpoints = False
+        self._starting = False  # the START's answers are gathered: a lost node may be started again
         self._pending: _PendingCheckpoint | None = None
         self.checkpoints_taken = 0
         self.recoveries: list[dict[str, Any]] = []
@@ -362,6 +363,12 @@ class Relay:
         elif node in self.alive:
             self.alive.discard(node)
             self._went[node] = time.monotonic()
+            if step < 0:
+                # Gone before the run started: nothing of it is lost, and a new process of it
+                # attaches as the first did (its HELLO is taken as a first one).
+                self.capabilities.pop(node, None)
+                self._fresh.discard(node)
+                return
             if step >= 0 and self._grace() > 0:
                 self.lost[node] = time.monotonic()
                 self._log.warning("node lost, waiting for it", node=node, step=step, grace_s=self._grace())
@@ -394,9 +401,10 @@ class Relay:
         self._check_ports(node, self.capabilities[node].get("ports"))
 
     def _grace(self) -> float:
-        """How long a lost node is waited for: its linkGrace, or with checkpoints its restart
-        (attachTimeout: a new process attaches as a first one does)."""
-        return max(self.cosim.linkGrace, self.cosim.attachTimeout if self._checkpoints else 0.0)
+        """How long a lost node is waited for: its linkGrace, or with checkpoints (and while the
+        START is answered, when no node has stepped) its restart (attachTimeout: a new process
+        attaches as a first one does)."""
+        return max(self.cosim.linkGrace, self.cosim.attachTimeout if self._checkpoints or self._starting else 0.0)
 
     def _restarted(self, node: str, step: int) -> None:
         """A node's new process said HELLO mid-run: go back to the last checkpoint, or say why not."""
@@ -1074,7 +1082,11 @@ class Relay:
             if self.gateway is not None:
                 self.gateway.run_started()
             self._expect_all(0, released_at)
-            arrivals = self._collect(0, released_at)
+            self._starting = True
+            try:
+                arrivals = self._collect(0, released_at)
+            finally:
+                self._starting = False
             if cosim.initialize.enabled:
                 self._initialise()
             wait = time.perf_counter() - released_at

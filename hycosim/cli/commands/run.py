@@ -65,8 +65,8 @@ def run(
     listen: Annotated[Optional[str], typer.Option(help="endpoint for the server (default: a free loopback port)")] = None,
     runs_dir: Annotated[Path, typer.Option(help="where run directories are made")] = Path("runs"),
     progress: Annotated[bool, typer.Option(help="show the progress bar")] = True,
-    restarts: Annotated[int, typer.Option(min=0, help="with checkpoints: how often a node process that dies "
-                                                       "is started again")] = 3,
+    restarts: Annotated[int, typer.Option(min=0, help="how often a node process that dies before the start (or, "
+                                                       "with checkpoints, during the run) is started again")] = 3,
     resume: Annotated[Optional[Path], typer.Option(help="go on with the run in this directory (its server died) "
                                                        "from its last checkpoint")] = None,
     dashboard: Annotated[bool, typer.Option(help="watch the run in a browser (hycosim dashboard)")] = False,
