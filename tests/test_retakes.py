@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import math
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -168,6 +169,33 @@ def test_a_python_node_that_saves_its_state_is_retried_and_checkpointed_without_
                         cosim={"stopTime": 0.5, "iterate": {"tolerance": 1e-9}})
     res = hycosim("validate", str(cfg))
     assert res.returncode == 2 and "node 's': its model Half has no set_state" in res.stderr
+
+
+def test_validate_lists_what_each_node_takes_part_in_and_warns_where_the_project_asks_more(tmp_path):
+    """Issue 59, part 2: per stepping node, checkpoints / iteration / localisation /
+    interpolation; a warning names each node that cannot give what the project asks for."""
+    (tmp_path / "saved.py").write_text(_SAVED.replace("{set_state}", (
+        "    def set_state(self, state):\n        self.x = unpack_state(state, {'x'})['x']\n")))
+    (tmp_path / "half.py").write_text(_SAVED.replace("{set_state}", "").replace("class Saved", "class Half"))
+    nodes = [{"nodeName": "src", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+             {"nodeName": "s", "UID": 2, "model": "saved.py:Saved", "input": ["u"], "output": ["y"]},
+             {"nodeName": "half", "UID": 3, "model": "half.py:Half", "input": ["u"], "output": ["y"]}]
+    links = [{"from": "src.y", "to": "s.u"}, {"from": "src.y", "to": "half.u"}]
+    events = [{"name": "e", "when": "src.y > 0.2", "drives": "s", "until": "src.y > 0.4"}]
+    cfg = write_project(tmp_path / "p.json", nodes, links, events=events,
+                        cosim={"stopTime": 0.5, "checkpointEvery": 0.1, "eventTolerance": 1e-4})
+    res = hycosim("validate", str(cfg))
+    assert res.returncode == 0, res.stderr
+    rows = {cells[0]: cells[1:] for line in res.stdout.splitlines()
+            if len(cells := [c.strip() for c in re.split("[│┃]", line.strip("│┃ \n"))]) == 5}
+    assert rows["node"] == ["checkpoints", "iteration", "localisation", "interpolation"]
+    assert rows["s"] == ["yes", "yes", "yes", "no: its model Saved has no set_input_derivatives"]
+    assert rows["half"][:3] == ["no: its model Half has no set_state"] * 3
+    assert rows["src"][3] == "no: it has no inputs"
+    assert ("coSimulation.checkpointEvery: node 'half' cannot take part in checkpoints: its model Half has no "
+            "set_state") in res.stderr
+    assert "coSimulation.eventTolerance: node 'half' cannot take a step again with another length" in res.stderr
+    assert "node 's'" not in res.stderr and "node 'src'" not in res.stderr
 
 
 @pytest.mark.parametrize("cosim, expected", [

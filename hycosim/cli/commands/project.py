@@ -45,19 +45,46 @@ def validate(
     if models:
         _warn_algebraic_loops(file, loaded)
         _warn_unstated_start_dependencies(file, loaded)
-    if p.coSimulation.checkpointEvery is not None and models:
-        from hycosim.clients.loader import why_no_checkpoint
-
-        unable = [(n.nodeName, why) for n in p.nodeLists if (why := why_no_checkpoint(n, loaded.path.parent))]
-        for name, why in unable:
-            warn(f"coSimulation.checkpointEvery: node {name!r} cannot take part in checkpoints: {why}; "
-                 "the run takes none, and a lost node ends it")
     if models:
+        _say_what_nodes_take_part_in(loaded)
         _say_in_process(loaded)
     bridged = [n.nodeName for n in p.nodeLists if not (n.model or n.fmu or n.replay or n.asynchronous)]
     if bridged:
         out.print(f"{len(bridged)} node(s) wait for a bridge FMU in some tool: {', '.join(bridged)} "
                   f"(build them with: hycosim fmu build {file} -o fmus)", highlight=False)
+
+
+def _say_what_nodes_take_part_in(loaded: Any) -> None:
+    """A table of what each stepping node can take part in (checkpoints, iteration, localisation,
+    interpolation: each needs something of its model), and a warning where the project asks
+    for checkpoints or localisation that a node cannot give (the run goes without, and says so
+    in meta.json). Iteration a node cannot take is refused, and interpolation warned of, by
+    :func:`_check_retakes`."""
+    from rich.table import Table
+
+    from hycosim.cli.output import print_table
+    from hycosim.clients.loader import why_no_checkpoint, why_no_interpolation, why_no_retake
+
+    p, folder = loaded.project, loaded.path.parent
+    cosim = p.coSimulation
+    nodes = p.stepping_nodes()
+    if not nodes:
+        return
+    table = Table("node", "checkpoints", "iteration", "localisation", "interpolation",
+                  title="what each stepping node can take part in")
+    for n in nodes:
+        checkpoint = why_no_checkpoint(n, folder)
+        localise = why_no_retake(n, folder, True)
+        cells = [checkpoint, why_no_retake(n, folder, False), localise,
+                 why_no_interpolation(n, folder) if n.input else "it has no inputs"]
+        table.add_row(n.nodeName, *("yes" if why is None else f"no: {why}" for why in cells))
+        if checkpoint is not None and cosim.checkpointEvery is not None:
+            warn(f"coSimulation.checkpointEvery: node {n.nodeName!r} cannot take part in checkpoints: "
+                 f"{checkpoint}; the run takes none, and a lost node ends it")
+        if localise is not None and cosim.eventTolerance is not None and p.events:
+            warn(f"coSimulation.eventTolerance: node {n.nodeName!r} cannot take a step again with another "
+                 f"length: {localise}; guards are located at macro-step points only")
+    print_table(table)
 
 
 def _say_in_process(loaded: Any) -> None:
