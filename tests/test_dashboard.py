@@ -77,6 +77,36 @@ def _get(port: int, path: str) -> int:
     return status
 
 
+def _browse_the_finished_run(page, port: int, run_dir: Path) -> None:
+    """Issue 59, part 4: a finished run opened without a selection shows its guards' ports
+    plotted, its t and mode where it ended, and a list of every port with its value; a click
+    plots one, a second takes it off, and the URL keeps the selection."""
+    import csv
+
+    page.goto(f"http://127.0.0.1:{port}/")
+    page.wait_for_function("window.hycosim.plots['ball.h'] && window.hycosim.plots['hand.y']", timeout=20_000)
+    assert page.url.endswith("/?ports=ball.h,hand.y")  # the catch's guards: ball.h <= hand.y, hand.y >= 1.2
+    *_, last = csv.DictReader((run_dir / "values.csv").open())
+    assert page.text_content("#t") == f"{float(last['t']):.3f}" and page.text_content("#mode") == last["mode"]
+    groups = page.eval_on_selector_all("#portlist details", "ds => ds.map(d => d.dataset.node)")
+    assert groups == ["ball", "hand", "arm", "clock"]
+    shown = page.text_content("#portlist li[data-port='ball.impacts'] .v")
+    assert shown == last["ball.impacts"]  # an Integer, as the run ended
+    assert "source:" in page.text_content("tr[data-node='clock']")  # the source's row says what it did
+    page.fill("#filter", "omega")
+    visible = page.eval_on_selector_all("#portlist li:not([hidden])", "ls => ls.map(l => l.dataset.port)")
+    assert visible == ["arm.omega_in"]
+    page.click("#portlist li[data-port='arm.omega_in'] button")
+    page.wait_for_function("window.hycosim.plots['arm.omega_in'] && window.hycosim.plots['arm.omega_in'].drawn > 10",
+                           timeout=20_000)
+    assert page.url.endswith("?ports=ball.h,hand.y,arm.omega_in")
+    page.fill("#filter", "")
+    page.click("#portlist li[data-port='hand.y'] button")  # a second click takes it off
+    page.wait_for_function("!window.hycosim.plots['hand.y']", timeout=5_000)
+    assert page.url.endswith("?ports=ball.h,arm.omega_in")
+    assert page.eval_on_selector_all(".plot", "ps => ps.map(p => p.dataset.port)") == ["ball.h", "arm.omega_in"]
+
+
 @pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is installed by `make test`")
 def test_a_run_watched_live_and_then_opened_finished_in_a_real_browser(tmp_path):
     from playwright.sync_api import sync_playwright
@@ -96,6 +126,9 @@ def test_a_run_watched_live_and_then_opened_finished_in_a_real_browser(tmp_path)
             first = int(page.text_content("#step"))
             page.wait_for_timeout(600)
             assert int(page.text_content("#step")) > first  # updated live, several times a second
+            # The port list holds every node's ports, each with its value at the latest point.
+            page.wait_for_function("""Number(document.querySelector("#portlist li[data-port='hand.y'] .v")
+                                   .textContent) >= 0.5""", timeout=10_000)  # the ramp 0.2·t + 0.5
             page.wait_for_function("window.hycosim.plots['ball.h'] && window.hycosim.plots['ball.h'].drawn > 5",
                                    timeout=20_000)
             page.wait_for_selector("#switches li", timeout=20_000)
@@ -130,6 +163,7 @@ def test_a_run_watched_live_and_then_opened_finished_in_a_real_browser(tmp_path)
             assert page.text_content("#cursor-t") == "t = 0.0000 s"
             assert page.text_content(".plot .value") == "= 2.000000"  # dropped from 2 m
             page.screenshot(path=str(tmp_path / "finished.png"))
+            _browse_the_finished_run(browser.new_page(viewport={"width": 1400, "height": 900}), port2, run_dir)
             browser.close()
         # Nothing outside the package's static folder is served, however the path is spelt.
         for path in ("/static/../meta.json", "/static/%2e%2e/%2e%2e/meta.json", "/static//etc/passwd",
@@ -573,3 +607,26 @@ def test_a_plot_whose_values_barely_differ_draws_at_once_in_a_real_browser():
             browser.close()
     finally:
         reap(board)
+
+
+@given(tail=st.binary(max_size=300), doc=deep_json)
+def test_a_finished_runs_last_row_and_guards_are_read_from_whatever_the_files_hold(tmp_path_factory, tail, doc):
+    """The files of a run directory may be torn or edited: the last row and the guards' ports
+    are read from anything without an error, and hold only this run's ports."""
+    from hycosim.dashboard.finished import guard_ports, last_row
+
+    folder = tmp_path_factory.mktemp("run")
+    columns = ["step", "t", "mode", "a.y", "b.u"]
+    (folder / "values.csv").write_bytes(b"step,t,mode,a.y,b.u\n0,0.0,free,1.5,x\n" + tail)
+    (folder / "project.json").write_text(json.dumps(doc) if not isinstance(doc, dict) else json.dumps(
+        {**doc, "events": [{"when": "a.y > 1 and c.z < 2", "until": [doc]}, doc]}))
+    end = last_row(folder / "values.csv", columns)
+    if b"\n" not in tail:  # the row above is the last whole one
+        assert end == {"t": 0.0, "mode": "free", "values": {"a.y": 1.5, "b.u": "x"}}
+    else:
+        assert set(end) <= {"t", "mode", "values"} and set(end.get("values", {})) <= {"a.y", "b.u"}
+    guarded = guard_ports(folder / "project.json", ["a.y", "b.u"])
+    if isinstance(doc, dict):  # c.z is no port of this run; whatever else the edited file says is passed over
+        assert guarded[0] == "a.y" and set(guarded) <= {"a.y", "b.u"}
+    else:
+        assert guarded == []

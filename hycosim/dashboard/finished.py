@@ -21,6 +21,8 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
+from hycosim.core import json_text
+from hycosim.core.guards import Guard, GuardError
 from hycosim.core.lifetime import end_with
 from hycosim.core.run_files import RunFileError, finished_lines
 from hycosim.dashboard.changes import Watchers
@@ -66,9 +68,70 @@ def read_summary(run_dir: Path) -> tuple[dict[str, Any] | None, str]:
             "steps_per_s": s.steps_per_s, "steps": s.steps}, ""
 
 
+_TAIL_BYTES = 1 << 20  # the last row is looked for in this much of values.csv's end
+MAX_GUARDED = 8  # the guards' ports a finished run opens plotted, at most
+
+
+def _float(cell: str) -> float | None:
+    try:
+        return float(cell)
+    except ValueError:
+        return None
+
+
 # The report's figures wait this long after a page first looks, for its first plots to be asked
 # for: read after those, not before (a million rows take seconds each).
 SUMMARY_DELAY_S = 3.0
+
+
+def last_row(path: Path, columns: list[str]) -> dict[str, Any]:
+    """The last whole row of a run's ``values.csv`` (whose header is ``columns``): the run's t
+    and mode where it ended, and each port's value there (a number where the cell is one). Read
+    from the file's end, so that a run of a million rows opens as fast as a short one; empty
+    where the file has no whole row (a String cell holding a newline reads as none)."""
+    try:
+        with open(path, "rb") as f:
+            size = f.seek(0, os.SEEK_END)
+            f.seek(max(0, size - _TAIL_BYTES))
+            tail = f.read().decode("utf-8", errors="replace")
+    except OSError:
+        return {}
+    lines = tail.split("\n")[:-1]  # the part after the last newline is torn (or empty)
+    if len(lines) < (1 if size > _TAIL_BYTES else 2):
+        return {}
+    try:
+        row = next(csv.reader([lines[-1]]))
+    except csv.Error:
+        return {}
+    if len(row) != len(columns) or row == columns:
+        return {}
+    cells = dict(zip(columns, row))
+    t = _float(cells.get("t", ""))
+    return {"t": t if t is not None and math.isfinite(t) else None, "mode": cells.get("mode", "")[:64],
+            "values": {p: (v if (v := _float(cells[p])) is not None else cells[p][:80]) for p in columns if "." in p}}
+
+
+def guard_ports(path: Path, ports: list[str]) -> list[str]:
+    """The ``ports`` the project's events' guards name (when, until, rearm), in the order they
+    first appear: what a finished run opens plotted. ``project.json`` is read as any file a
+    user may have edited: anything that is not a guard over this run's ports is passed over."""
+    try:
+        doc = json_text.loads(path.read_text())
+    except (OSError, ValueError, UnicodeDecodeError):
+        return []
+    events = doc.get("events") if type(doc) is dict else None
+    found: list[str] = []
+    for event in events if type(events) is list else []:
+        for key in ("when", "until", "rearm"):
+            text = event.get(key) if type(event) is dict else None
+            if type(text) is not str:
+                continue
+            try:
+                references = Guard(text).references
+            except GuardError:
+                continue
+            found += [name for node, port in references if (name := f"{node}.{port}") in ports]
+    return list(dict.fromkeys(found))[:MAX_GUARDED]
 
 
 class FinishedRun:
@@ -76,7 +139,10 @@ class FinishedRun:
         self.run_dir = run_dir
         self.meta = read_meta(run_dir)  # RunDirError: not a run directory
         self.switches = read_events(run_dir)
-        self._ports = self._header()
+        self._columns = self._header()
+        self._ports = [c for c in self._columns if "." in c]
+        self._end = last_row(run_dir / "values.csv", self._columns)  # t, mode, each port's value where the run ended
+        self._guarded = guard_ports(run_dir / "project.json", self._ports)
         self._series: dict[str, Any] = {}  # port → [t, y] thinned, or {"error": ...}
         self._asked: set[str] = set()
         self._lock = threading.Lock()
@@ -101,7 +167,7 @@ class FinishedRun:
                 header = next(csv.reader(f), [])
         except (OSError, csv.Error, UnicodeDecodeError) as exc:
             raise RunDirError(f"{path}: cannot be read ({exc})") from None
-        return [c for c in header if "." in c]
+        return header
 
     def _work(self) -> None:
         while True:
@@ -144,10 +210,12 @@ class FinishedRun:
         shares = (summary or {}).get("holder_share", {})
         arrivals = (summary or {}).get("mean_arrival_ms", {})
         names = list(dict.fromkeys(p.split(".", 1)[0] for p in self._ports))
+        m = self.meta
+        samples = m.samples_received
         nodes = [{"name": n, "attached": None, "host": None, "restarts": None,
+                  "status": f"source: {samples[n]} samples" if n in samples else "stepped",
                   "held_share": None if shares.get(n) is None or math.isnan(shares[n]) else shares[n],
                   "mean_arrival_ms": arrivals.get(n)} for n in names]
-        m = self.meta
         series, problems = {}, []
         for port, points in ready.items():
             if isinstance(points, dict):
@@ -156,7 +224,8 @@ class FinishedRun:
                 series[port] = {"version": 0, "from": 0, "t": points[0], "y": points[1]}
         return {"source": "run", "state": "finished", "message": f"{m.status}" + (f": {m.reason}" if m.reason else ""),
                 "project": self.run_dir.name, "run": self.run_dir.name, "step": m.steps or 0,
-                "t": None, "mode": "", "steps_per_s": m.steps_per_s, "lateness_s": None, "nodes": nodes,
+                "t": self._end.get("t"), "mode": self._end.get("mode", ""), "values": self._end.get("values", {}),
+                "guarded": self._guarded, "steps_per_s": m.steps_per_s, "lateness_s": None, "nodes": nodes,
                 "switches": self.switches, "dropped": m.dropped_frames, "coupling": m.coupling,
                 "loading": sorted(set(select) & self._asked - set(ready)), "read_problems": problems,
                 "summary_pending": summary is None and not problem, "summary_error": problem, "series": series}

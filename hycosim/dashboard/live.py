@@ -290,6 +290,16 @@ class LiveFeed:
                 scene[name] = points
         return scene
 
+    def _values(self) -> dict[str, Any]:
+        """Every port's value at the latest point (``node.port`` → value), for the page's port list."""
+        values: dict[str, Any] = {}
+        for key, names_of in (("outputs", lambda v: v.outputs), ("inputs", lambda v: v.inputs)):
+            for name, given in self.status.get(key, {}).items():
+                view = self.nodes.get(name)
+                if view is not None:
+                    values.update((f"{name}.{port}", value) for port, value in zip(names_of(view), given))
+        return values
+
     def ports(self) -> list[str]:
         with self._lock:
             return list(self.series)
@@ -308,6 +318,6 @@ class LiveFeed:
                     "mode": s.get("mode", ""), "stopTime": s.get("stopTime"), "steps_per_s": s.get("steps", 0),
                     "lateness_s": s.get("lateness_s"), "point_wall": s.get("point_wall"), "nodes": nodes,
                     "switches": list(s.get("switches", [])), "dropped": dict(s.get("dropped", {})),
-                    "scene": self._scene(), "ages": dict(s.get("ages", {})),
+                    "scene": self._scene(), "ages": dict(s.get("ages", {})), "values": self._values(),
                     "series": {p: d for p in select if p in self.series
                                and (d := self.series[p].since(*held.get(p, (-1, 0)))) is not None}}

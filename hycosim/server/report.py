@@ -90,6 +90,7 @@ class RunMeta(BaseModel):
     iteration: str = ""
     step_control: str = ""
     iterations: Iterations | None = None
+    samples_received: dict[str, int] = Field(default_factory=dict)  # asynchronous node → samples
 
 
 class ModeSwitchRecord(BaseModel):

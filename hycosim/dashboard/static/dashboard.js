@@ -2,7 +2,8 @@
 "use strict";
 const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
-const state = { selected: (params.get("ports") || "").split(",").filter(Boolean), plots: {}, data: {}, snapshot: null, ws: null };
+const state = { selected: (params.get("ports") || "").split(",").filter(Boolean), plots: {}, data: {}, snapshot: null, ws: null,
+  ports: [], chosenByUrl: params.has("ports"), guardedShown: false };
 window.hycosim = state;  // for the tests and the curious
 
 function fmt(v, digits = 3) { return v === null || v === undefined ? "–" : Number(v).toFixed(digits); }
@@ -45,6 +46,12 @@ function render(s) {
   const ages = Object.entries(s.ages || {});
   text($("ages"), ages.length ? ages.map(([p, a]) => `${p}: ${fmt(a, 3)}`).join(", ") : "–");
   nodeRows(s.nodes);
+  portValues(s.values || {});
+  // A finished run opens on the ports its events' guards name, unless the URL chose others.
+  if (!state.chosenByUrl && !state.guardedShown && (s.guarded || []).length) {
+    state.guardedShown = true;
+    select(s.guarded);
+  }
   const list = $("switches");
   const items = (s.switches || []).map((e) =>
     `<li>t=${fmt(e.t, 4)} s: <b>${esc(e.event)}</b> ${esc(e.from)} → ${esc(e.to)} <code>${esc(e.guard)}</code> ` +
@@ -54,6 +61,7 @@ function render(s) {
   scene(s.scene || {});
   state.markers = (s.switches || []).map((e) => e.t);
   for (const [port, part] of Object.entries(s.series)) {
+    if (!state.selected.includes(port)) continue;  // taken off the page while this snapshot came
     // Only what this page lacks comes: points after those it has, or all of them anew.
     const held = state.data[port] && part.from > 0 ? state.data[port] : [[], []];
     held[0].push(...part.t); held[1].push(...part.y);
@@ -73,7 +81,7 @@ function nodeRows(nodes) {
   }
   nodes.forEach((n, i) => {
     const cells = body.rows[i].cells;
-    const status = n.attached === null ? "" : n.lost ? "lost" : n.attached ? "attached" : "not attached";
+    const status = n.status ?? (n.attached === null ? "" : n.lost ? "lost" : n.attached ? "attached" : "not attached");
     const cls = status.replace(" ", "-");
     if (cells[1].className !== cls) cells[1].className = cls;
     text(cells[1], status); text(cells[2], n.host || "");
@@ -156,19 +164,66 @@ function cursorValue(port) {  // a finished run's time slider: each plot's value
   p.chart.setCursor({ left: p.chart.valToPos(t[i], "x"), top: p.chart.valToPos(y[i] ?? 0, "y") });
 }
 
-$("cursor").addEventListener("input", () => state.selected.forEach(cursorValue));
-$("pick").addEventListener("submit", (ev) => {
-  ev.preventDefault();
-  const port = $("port").value.trim();
-  if (port && !state.selected.includes(port)) state.selected.push(port);
-  $("port").value = "";
+// The selection: plotted, marked in the port list, kept in the URL (a link shows the same plots).
+function select(ports) {
+  for (const port of Object.keys(state.plots)) {
+    if (!ports.includes(port)) { state.plots[port].chart.destroy(); state.plots[port].box.remove(); delete state.plots[port]; }
+  }
+  state.selected = [...ports];
+  const query = ports.map(encodeURIComponent).join(",");
+  history.replaceState(null, "", ports.length ? `?ports=${query}` : location.pathname);
+  for (const li of $("portlist").querySelectorAll("li")) li.classList.toggle("on", ports.includes(li.dataset.port));
   if (state.ws && state.ws.readyState === 1) { state.data = {}; state.ws.send(JSON.stringify({ select: state.selected })); }
+}
+
+function toggle(port) {
+  select(state.selected.includes(port) ? state.selected.filter((p) => p !== port) : [...state.selected, port]);
+}
+
+function portList(ports) {  // every port, grouped by node in the run's order
+  const groups = new Map();
+  for (const p of ports) { const i = p.indexOf("."); const n = p.slice(0, i); (groups.get(n) || groups.set(n, []).get(n)).push(p); }
+  $("portlist").innerHTML = [...groups].map(([node, names]) => `<details open data-node="${esc(node)}"><summary>${esc(node)}</summary><ul>` +
+    names.map((p) => `<li data-port="${esc(p)}" class="${state.selected.includes(p) ? "on" : ""}"><button type="button">` +
+      `${esc(p.slice(node.length + 1))}</button><span class="v"></span></li>`).join("") + "</ul></details>").join("");
+  filterPorts();
+  if (state.snapshot) portValues(state.snapshot.values || {});
+}
+
+function filterPorts() {
+  const q = $("filter").value.trim().toLowerCase();
+  for (const group of $("portlist").querySelectorAll("details")) {
+    let shown = 0;
+    for (const li of group.querySelectorAll("li")) {
+      const hit = !q || li.dataset.port.toLowerCase().includes(q);
+      li.hidden = !hit; shown += hit;
+    }
+    group.hidden = shown === 0;
+  }
+}
+
+function shortValue(v) {
+  if (v === null || v === undefined) return "–";
+  if (typeof v === "number") return Number.isInteger(v) ? String(v) : v.toPrecision(6);
+  const s = String(v); return s.length > 24 ? s.slice(0, 23) + "…" : s;
+}
+
+function portValues(values) {
+  for (const li of $("portlist").querySelectorAll("li")) text(li.lastChild, shortValue(values[li.dataset.port]));
+}
+
+$("cursor").addEventListener("input", () => state.selected.forEach(cursorValue));
+$("filter").addEventListener("input", filterPorts);
+$("portlist").addEventListener("click", (ev) => {
+  const li = ev.target.closest("li[data-port]");
+  if (li) toggle(li.dataset.port);
 });
 
 async function loadPorts() {
   try {
     const r = await fetch("/api/ports"); const { ports } = await r.json();
-    $("portlist").innerHTML = ports.map((p) => `<option value="${esc(p)}">`).join("");
+    state.ports = ports;
+    portList(ports);
     if (!ports.length) setTimeout(loadPorts, 1000);  // a live run's ports come with the server's first answer
   } catch (e) { setTimeout(loadPorts, 1000); }
 }
