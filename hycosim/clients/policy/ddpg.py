@@ -22,7 +22,7 @@ pretrained to imitate them. The DDPG phase then fine-tunes without forgetting:
   action, Hausknecht and Stone 2016), and explored with temporally correlated noise so that
   an exploring episode keeps a choice long enough to see where it leads;
 * optionally (``n_step``), the critics also learn from n-step returns, as DDPGfD does; measured
-  on this task it did not help (docs/scenario.md), so it is off by default.
+  on this task it did not help (benchmarks/FINDINGS.md), so it is off by default.
 """
 
 from __future__ import annotations

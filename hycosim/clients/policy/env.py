@@ -36,7 +36,7 @@ KEEP_WITHIN = 0.1  # s: a re-predicted turning point is the same point when its 
 # m: the object to reach is the grasp point (D is the distance to it), so a grasp farther off
 # is paid as a near miss: paid +100 as any grasp, the DDPG phase traded precise grasps at 60°
 # for quicker ones 17–20 mm off. 3 mm is what the evaluation counts as precise; 1 mm (Table
-# 2's target for the mean error) gave no more precise policies (docs/scenario.md).
+# 2's target for the mean error) gave no more precise policies (benchmarks/FINDINGS.md).
 GRASP_TOLERANCE = 0.003
 
 

@@ -69,7 +69,7 @@ def aimed_point(action: np.ndarray, points: list["TurningPoint"]) -> "TurningPoi
     A choice of a point whose IK did not converge goes to the other point when that one's
     did (action masking): the pose of an unconverged point does not put the jaws across the
     rod, so going there cannot end in a grasp. Cloned policies kept choosing such a point
-    after a missed grasp and ran out of time (see docs/scenario.md)."""
+    after a missed grasp and ran out of time (see benchmarks/FINDINGS.md)."""
     if not points:
         return None
     chosen, other = (points[0], points[1:]) if action[0] <= 0 or len(points) < 2 else (points[1], points[:1])
