@@ -188,9 +188,9 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
                         cause = _node_failure(run_dir, name, proc.returncode, before_start=not started)
                         # Before the start nothing of the node's is lost: its new process attaches as
                         # the first did. During the run the server restores it from the last
-                        # checkpoint once the new process says HELLO. A process that fails before the
-                        # start as the one before it did (a broken model) is not tried again.
-                        # Not a node that the server stopped (FAILED_ELSEWHERE), nor one of a server gone.
+                        # checkpoint once the new process says HELLO. Not started again: a process
+                        # that fails before the start as the one before it did (a broken model), one
+                        # the server stopped (FAILED_ELSEWHERE), one whose server is gone.
                         again = (restarted.get(name, 0) < restarts and code is None and not server_stopped
                                  and proc.returncode != FAILED_ELSEWHERE and server.poll() is None
                                  and (restartable if started else last_cause.get(name) != cause))

@@ -468,6 +468,8 @@ def test_the_live_feed_takes_any_status_answer_without_failing(answers):
         feed.take(checked)
     snap = finite(feed.snapshot(feed.ports()))
     json.dumps(snap, allow_nan=False)
+    # The port list's values: only ports of nodes the answers declared.
+    assert all(k.split(".", 1)[0] in feed.nodes and k in feed.series for k in snap["values"])
     for part in snap["series"].values():
         assert part["from"] == 0 and len(part["t"]) == len(part["y"]) and part["t"] == sorted(part["t"])
 

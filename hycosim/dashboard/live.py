@@ -293,11 +293,11 @@ class LiveFeed:
     def _values(self) -> dict[str, Any]:
         """Every port's value at the latest point (``node.port`` → value), for the page's port list."""
         values: dict[str, Any] = {}
-        for key, names_of in (("outputs", lambda v: v.outputs), ("inputs", lambda v: v.inputs)):
+        for key in ("outputs", "inputs"):
             for name, given in self.status.get(key, {}).items():
                 view = self.nodes.get(name)
                 if view is not None:
-                    values.update((f"{name}.{port}", value) for port, value in zip(names_of(view), given))
+                    values.update((f"{name}.{port}", value) for port, value in zip(getattr(view, key), given))
         return values
 
     def ports(self) -> list[str]:
