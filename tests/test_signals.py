@@ -172,6 +172,33 @@ def test_a_node_stopped_by_sigterm_holds_its_token_until_the_server_has_read_its
             up.undeclare()
 
 
+_HELD = """
+import os, signal, sys
+from hycosim.core import signals
+signals.raise_on_stop()
+counted = 0
+try:
+    mask = signals.hold_stops()
+    try:
+        os.kill(os.getpid(), signal.SIGTERM)
+        for _ in range(100000):  # many bytecodes at which an unheld signal would have been raised
+            pass
+        counted = 1
+    finally:
+        signals.release_stops(mask)
+    print("not stopped")
+except signals.Stopped as exc:
+    print(f"stopped by {signals.name_of(exc)} with counted={counted}")
+"""
+
+
+def test_a_stop_that_comes_between_sending_outputs_and_counting_them_waits_for_the_count():
+    """A node sends its outputs and counts the step with stop signals held: its END names the
+    step the server has, wherever the SIGTERM falls."""
+    done = subprocess.run([sys.executable, "-c", _HELD], capture_output=True, text=True, env=env(), timeout=60)
+    assert done.stdout.strip() == "stopped by SIGTERM with counted=1", done.stdout + done.stderr
+
+
 def test_the_launcher_sent_sigterm_stops_the_run_and_keeps_its_records(tmp_path):
     cfg = _pair(tmp_path)
     runs = tmp_path / "runs"

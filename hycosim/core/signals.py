@@ -79,6 +79,18 @@ def raise_on_stop(heard: list[int] | None = None) -> dict[int, Any]:
     return {signum: signal.signal(signum, interrupt) for signum in STOP_SIGNALS}
 
 
+def hold_stops() -> set[int]:
+    """Keep stop signals pending (this thread) until :func:`release_stops`: what is sent and
+    what the process says it sent must not be parted by a stop arriving between them.
+    Returns the mask to restore."""
+    return signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+
+
+def release_stops(mask: set[int]) -> None:
+    """Restore the mask :func:`hold_stops` returned; a stop that came meanwhile is raised now."""
+    signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+
+
 def ignore_stops() -> None:
     """Ignore every stop signal from here on: the process is on its way out, and an
     interruption during its shutdown would leave its records unwritten."""
