@@ -63,17 +63,17 @@ test-long: $(STAMP) bytecode
 
 bench: $(STAMP) bytecode chromium tbb
 	$(PY) -m pip install --quiet -e ".[scenario,dashboard,models,test,docs,bench]"
-	$(PY) benchmarks/barrier.py
-	$(PY) benchmarks/inprocess.py
-	$(PY) benchmarks/crosscheck.py
-	$(PY) benchmarks/fmu_overhead.py
-	$(PY) benchmarks/scene_fmus.py
-	$(PY) benchmarks/memory.py
-	$(PY) benchmarks/fuzz.py
-	$(PY) benchmarks/status_flood.py
-	$(PY) benchmarks/recovery.py
-	$(PY) benchmarks/accuracy.py
-	$(PY) benchmarks/dashboard_cost.py
+	$(PY) benchmarks/barrier.py --table benchmarks/results/barrier.md
+	$(PY) benchmarks/inprocess.py --table benchmarks/results/inprocess.md
+	$(PY) benchmarks/crosscheck.py --table benchmarks/results/crosscheck.md
+	$(PY) benchmarks/fmu_overhead.py --table benchmarks/results/fmu_overhead.md
+	$(PY) benchmarks/scene_fmus.py --table benchmarks/results/scene_fmus.md
+	$(PY) benchmarks/memory.py --table benchmarks/results/memory.md
+	$(PY) benchmarks/fuzz.py --table benchmarks/results/fuzz.md
+	$(PY) benchmarks/status_flood.py --table benchmarks/results/status_flood.md
+	$(PY) benchmarks/recovery.py --table benchmarks/results/recovery.md
+	$(PY) benchmarks/accuracy.py --table benchmarks/results/accuracy.md --plot docs/images/accuracy.png
+	$(PY) benchmarks/dashboard_cost.py --least-page --page-elsewhere --table benchmarks/results/dashboard_cost.md
 
 # The manual as a site in site/ (make test builds it too, strictly, and runs its examples).
 docs: $(STAMP)

@@ -47,6 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
+import _table
 from _procs import free_port, run
 
 HERE = Path(__file__).resolve().parent
@@ -372,6 +373,7 @@ def main() -> None:
     ap.add_argument("--fixed-h", type=float, default=0.001, help="the fixed step the controlled one is set against")
     ap.add_argument("--plot", type=Path, help="write the error-against-cost figure here (PNG)")
     ap.add_argument("--json", action="store_true")
+    _table.add_argument(ap)
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         dir_ = Path(tmp)
@@ -388,6 +390,7 @@ def main() -> None:
               "multirate": rates, "transient": sharp}
     if args.plot:
         result["plot"] = str(plot(rows, sharp, args.plot, monolithic))
+    _table.write(args.table, *_manual_tables(args, rows, monolithic, orders, rates, sharp))
     if args.json:
         print(json.dumps(result, indent=1))
         return
@@ -418,6 +421,43 @@ def main() -> None:
                   f"{r['error_x1']:>13.3e}{r['error_x2']:>13.3e}")
     if args.plot:
         print(f"figure: {args.plot}")
+
+
+def _manual_tables(args: argparse.Namespace, rows: list[dict], monolithic: list[dict], orders: dict,
+                   rates: dict, sharp: list[dict]) -> list[_table.Table]:
+    by = {(r["problem"], r["coupling"], r["H"]): r for r in rows}
+    rk4 = {(r["problem"], r["H"]): r for r in monolithic}
+
+    def err(problem: str, scheme: str, h: float, takes: bool = False) -> str:
+        r = by[(problem, scheme, h)]
+        return f"{r['error_x1']:.2e} m" + (f" ({r['takes']:,})" if takes else "")
+
+    order = "; ".join(f"{problem} masses: " + ", ".join(f"{scheme} {min(got):.2f}–{max(got):.2f}"
+                                                         for scheme, got in by_scheme.items() if got)
+                      for problem, by_scheme in orders.items())
+    tables = [
+        _table.Table(f"Largest error in x1 against the exact solution, {args.stop:g} s simulated; in brackets the "
+                     "takes of every step:",
+                     ["masses", "H", "Jacobi", "Gauss-Seidel", "iterative, inputs held", "degree 1", "degree 2",
+                      "degree 3", "RK4 on the whole system"],
+                     [[problem, f"{h * 1000:g} ms", err(problem, "jacobi", h), err(problem, "gauss-seidel", h),
+                       err(problem, "iterative", h, True), err(problem, "interpolated-1", h),
+                       err(problem, "interpolated-2", h), err(problem, "interpolated-3", h, True),
+                       f"{rk4[(problem, h)]['error_x1']:.2e} m"] for problem in args.problems for h in args.h],
+                     after=f"Observed order in H: {order}." if order else ""),
+        _table.Table(f"Multi-rate, a 1 kHz source → 100 Hz → 1 Hz chain over {args.mr_stop:g} s:",
+                     ["frames multi-rate", "frames all at 1 kHz", "ratio", "the fast node's values identical",
+                      "`values.csv` the same unbatched"],
+                     [[f"{rates['multi_rate']['messages']:,}", f"{rates['single_rate']['messages']:,}",
+                       f"{rates['message_ratio']:.3f}", rates["fast_node_identical"], rates["batching_changes_nothing"]]])]
+    if sharp:
+        tables.append(_table.Table(
+            f"Step control: the damped oscillator struck at {PULSE['pulse_at']:g} s by a {PULSE['pulse']:g} N "
+            f"half-sine pulse of {PULSE['pulse_width'] * 1000:g} ms, {args.transient_stop:g} s, Jacobi:",
+            ["step", "macro steps", "takes", "rejected", "max error x1", "max error x2"],
+            [[r["step"], f"{r['macro_steps']:,}", f"{r['takes']:,}", r["rejected"], f"{r['error_x1']:.2e} m",
+              f"{r['error_x2']:.2e} m"] for r in sharp]))
+    return tables
 
 
 if __name__ == "__main__":

@@ -27,6 +27,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import _table
 from _procs import free_port, run, start, wait_all
 
 HERE = Path(__file__).resolve().parent
@@ -128,6 +129,7 @@ def main() -> None:
     ap.add_argument("--timeout", type=float, default=120.0,
                     help="seconds one run of one system may take; a run past it is reported as failed "
                          "and left out of the median (a HELICS zmq run once hung here for good)")
+    _table.add_argument(ap)
     args = ap.parse_args()
     runs: dict[tuple[str, int], list[float]] = {(system, n): [] for n in args.n for system in args.systems}
     skipped: set[str] = set()
@@ -150,11 +152,23 @@ def main() -> None:
                 print(json.dumps({"system": system, "n": n, "steps_per_s": _median(rates) if rates else None,
                                   "runs": [round(r, 1) for r in rates]}), flush=True)
     empty = sorted(f"{system} N={n}" for (system, n), rates in runs.items() if not rates and system not in skipped)
+    _table.write(args.table, _manual_table(args, runs, skipped))
     if not args.json:
         _print_table(args, runs, skipped)
     if empty:
         print(f"# no run completed for {', '.join(empty)}", file=sys.stderr)
         sys.exit(1)
+
+
+def _manual_table(args: argparse.Namespace, runs: dict[tuple[str, int], list[float]], skipped: set[str]) -> _table.Table:
+    systems = [s for s in args.systems if s not in skipped]
+    medians = {key: (_median(rates) if rates else None) for key, rates in runs.items()}
+    others = [s for s in systems if s != "hycosim"] if "hycosim" in systems else []
+    header = ["N", *systems, *(f"hycosim / {s}" for s in others)]
+    rows = [[n, *(_table.rate(medians[(s, n)]) for s in systems),
+             *(_table.ratio(medians[("hycosim", n)], medians[(s, n)]) for s in others)] for n in args.n]
+    return _table.Table(f"Macro steps/s, medians of {args.repeat} interleaved rounds of {args.steps:,} steps:",
+                        header, rows)
 
 
 def _print_table(args: argparse.Namespace, runs: dict[tuple[str, int], list[float]], skipped: set[str]) -> None:

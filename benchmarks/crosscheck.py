@@ -47,6 +47,7 @@ import tempfile
 import zipfile
 from pathlib import Path
 
+import _table
 from _procs import run
 
 HERE = Path(__file__).resolve().parent
@@ -233,6 +234,7 @@ def main() -> None:
     ap.add_argument("--h", type=float, default=0.01)
     ap.add_argument("--timeout", type=float, default=300.0)
     ap.add_argument("--json", action="store_true")
+    _table.add_argument(ap)
     args = ap.parse_args()
 
     from hycosim.core.config import load_project
@@ -260,6 +262,7 @@ def main() -> None:
             result[name] = {engine: compare(ours, {n: v for n, v in values.items() if n in roles},
                                             SHIFTS.get(engine, {}), roles)
                             for engine, values in engines.items()}
+    _table.write(args.table, _manual_table(args, result))
     if args.json:
         print(json.dumps(result, indent=1))
         return
@@ -271,6 +274,21 @@ def main() -> None:
                 t0 = "-" if r["t0_diff"] is None else f"{r['t0_diff']:.3g}"
                 print(f"{system:7} {engine:19} {var:13} {t0:>6} {r['max_abs_diff']:11.3g} {r['at_t']:7.3f} "
                       f"{r['max_rel_diff']:9.2g}  {r['compared']}")
+
+
+def _manual_table(args: argparse.Namespace, result: dict) -> _table.Table:
+    rows = []
+    for system, engines in result.items():
+        for engine, variables in engines.items():
+            t0 = [r["t0_diff"] for r in variables.values() if r["t0_diff"] is not None]
+            var, worst = max(variables.items(), key=lambda item: item[1]["max_abs_diff"])
+            largest = (f"{worst['max_abs_diff']:.2g} ({var} at t = {worst['at_t']:.2f} s)"
+                       if worst["max_abs_diff"] else "0")
+            rows.append([system, engine, f"{max(t0):.2g}" if t0 else None, largest,
+                         f"{max(r['max_rel_diff'] for r in variables.values()):.2g}"])
+    return _table.Table(f"{args.steps:,} steps of {args.h * 1000:g} ms; per system and engine the largest difference "
+                        "at t0, over every point, and over every point relative to max(1, |value|):",
+                        ["system", "engine", "at t0", "largest difference", "relative"], rows)
 
 
 if __name__ == "__main__":

@@ -46,6 +46,7 @@ import urllib.parse
 import urllib.request
 from pathlib import Path
 
+import _table
 from _procs import descendants, free_port, kill_group, start
 
 from barrier import ring_config
@@ -302,6 +303,7 @@ def main() -> None:
     ap.add_argument("--paced-s", type=float, default=20.0)
     ap.add_argument("--big", type=int, default=1_000_000, help="steps of the finished run opened (0: none)")
     ap.add_argument("--json", action="store_true")
+    _table.add_argument(ap)
     args = ap.parse_args()
     rates: dict[str, list[float]] = {"plain": [], "dashboard": []}
     if args.least_page:
@@ -354,6 +356,7 @@ def main() -> None:
                              "p95": 1000 * lat[int(0.95 * (len(lat) - 1))] if lat else None},
               "watching": {**taken, "browser_floor": floor, "cores": CORES} if taken else None,
               "big_run": big}
+    _table.write(args.table, _manual_table(args, result))
     if args.json:
         print(json.dumps(result, indent=1))
         return
@@ -385,6 +388,29 @@ def main() -> None:
     if big:
         print(f"a finished run of {args.big:,} steps: the page usable after {big['usable_s']:.2f} s, the plot drawn "
               f"after {big['plot_s']:.2f} s ({big['points_sent']:,} points sent)")
+
+
+def _manual_table(args: argparse.Namespace, r: dict) -> _table.Table:
+    def against_plain(key: str, interval: str) -> str:
+        low, high = r[interval]
+        return f"{r[key]:.3f} ({low:.3f}–{high:.3f})"
+
+    rows = [["the dashboard and its page here", against_plain("ratio", "ratio_90")]]
+    if "least_page_ratio" in r:
+        rows.append(["any page here (one line, 5/s)", against_plain("least_page_ratio", "least_page_ratio_90")])
+    if "page_elsewhere_ratio" in r:
+        rows.append(["the dashboard, its page on another machine",
+                     against_plain("page_elsewhere_ratio", "page_elsewhere_ratio_90")])
+    lat = r["latency_ms"]
+    if lat["median"] is not None:
+        rows.append(["a step reaches the page", f"{lat['median']:.0f} ms median, {lat['p95']:.0f} ms 95th percentile"])
+    if r["big_run"]:
+        big = r["big_run"]
+        rows.append([f"a finished run of {args.big:,} steps", f"usable after {big['usable_s']:.2f} s, "
+                                                              f"plotted after {big['plot_s']:.2f} s"])
+    return _table.Table(
+        f"A ring of {args.n}, {args.steps:,} steps, `waitStrategy` {r['wait_strategy']}, medians of {args.repeat} "
+        "interleaved rounds; steps/s against the run plain (90 % bootstrap interval):", ["case", "figure"], rows)
 
 
 if __name__ == "__main__":

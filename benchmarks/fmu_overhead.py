@@ -39,6 +39,7 @@ from hycosim.fmu_bridge.bridge_fmu import build_bridge_fmu  # noqa: E402
 from hycosim.core.config import load_project, parse_project  # noqa: E402
 from hycosim.fmu_bridge.model_fmu import build_model_fmu  # noqa: E402
 
+import _table  # noqa: E402
 from _procs import free_port, run, start, stop_all  # noqa: E402
 
 KEYS = ["python_node_step_us", "fmu_node_step_us", "python_node_cosim_steps_per_s", "fmu_node_cosim_steps_per_s",
@@ -166,11 +167,13 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3, help="interleaved rounds; the figures are their medians")
     ap.add_argument("--timeout", type=float, default=300.0, help="seconds per co-simulation before it is killed")
     ap.add_argument("--json", action="store_true")
+    _table.add_argument(ap)
     args = ap.parse_args()
     try:
         figures = measure(args.steps, args.timeout, args.repeat)
     except RuntimeError as exc:
         raise SystemExit(f"fmu_overhead: {exc}") from None
+    _table.write(args.table, _manual_table(args, figures))
     if args.json:
         print(json.dumps(figures))
         return
@@ -214,6 +217,22 @@ def measure(steps: int, timeout: float, repeat: int) -> dict[str, float]:
             runs["me_node_step_us"].append(me_step * 1e6)
             runs["fmpy_me_step_us"].append(fmpy_step * 1e6)
     return {key: statistics.median(values) for key, values in runs.items()}
+
+
+def _manual_table(args: argparse.Namespace, f: dict[str, float]) -> _table.Table:
+    py_cosim, fmu_cosim = f["python_node_cosim_steps_per_s"], f["fmu_node_cosim_steps_per_s"]
+    me, ref = f["me_node_step_us"], f["fmpy_me_step_us"]
+    rows = [["one step of the gain model", f"FMU (pythonfmu via fmpy) {f['fmu_node_step_us']:.1f} µs",
+             f"Python node {f['python_node_step_us']:.1f} µs", f"{f['fmu_node_step_us'] / f['python_node_step_us']:.1f}×"],
+            ["a one-node co-simulation", f"FMU {1e6 / fmu_cosim:.1f} µs a step", f"Python node {1e6 / py_cosim:.1f} µs",
+             f"{py_cosim / fmu_cosim:.2f}×"],
+            ["a round trip", f"bridge FMU {1e6 / f['bridge_fmu_cosim_steps_per_s']:.1f} µs",
+             f"raw Zenoh {1e6 / f['zenoh_floor_steps_per_s']:.1f} µs",
+             f"{f['zenoh_floor_steps_per_s'] / f['bridge_fmu_cosim_steps_per_s']:.2f}×"],
+            ["Model Exchange (the bouncing ball, 10 ms)", f"node {me:.1f} µs a step", f"`fmpy.simulate_fmu` {ref:.1f} µs",
+             f"{me / ref:.2f}×"]]
+    return _table.Table(f"Medians of {args.repeat} interleaved rounds of {args.steps:,} macro steps:",
+                        ["what", "measured", "against", "ratio"], rows)
 
 
 def report(f: dict[str, float]) -> None:

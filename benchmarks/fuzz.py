@@ -33,6 +33,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+import _table  # noqa: E402
+
 import zenoh  # noqa: E402
 
 from benchmarks._procs import free_port  # noqa: E402
@@ -193,15 +195,23 @@ def main() -> None:
     ap.add_argument("--forged", type=int, default=10_000)
     ap.add_argument("--seconds", type=float, default=12.0, help="simulated (= wall) seconds of each run")
     ap.add_argument("--json", action="store_true")
+    _table.add_argument(ap)
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(prefix="hycosim-fuzz-") as tmp:
         results = [fuzz(Path(tmp), args.frames, args.streams, args.seconds),
                    forgery(Path(tmp), args.forged, args.seconds)]
+    f, g = results
+    _table.write(args.table, _table.Table(
+        f"A run of {args.seconds:g} s under attack against the same run left alone:",
+        ["attack", "exit", "`values.csv` identical", "what became of it"],
+        [[f"{f['frames']:,} fuzzed frames on every key, {f['gateway_connections']} garbage connections to the gateway",
+          f["exit_code"], f["identical_values"], f"{f['dropped_total']:,} dropped and counted by the server"],
+         [f"{g['frames']:,} forged frames from an authenticated node on keys it does not own", g["exit_code"],
+          g["identical_values"], f"reached the server: {g['reached_server']}; reached a node: {g['reached_nodes']}"]]))
     if args.json:
         for r in results:
             print(json.dumps(r))
         return
-    f, g = results
     print(f"fuzz: {f['frames']:,} frames ({f['frames_per_s']:,.0f}/s, {f['frames_on_up']:,} on up keys) and "
           f"{f['gateway_connections']} gateway connections during the run: {f['all_sent_during_run']}")
     print(f"  exit {f['exit_code']}; values.csv identical to the clean run: {f['identical_values']}; "

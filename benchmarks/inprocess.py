@@ -30,6 +30,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import _table
 from _procs import run
 
 HERE = Path(__file__).resolve().parent
@@ -122,6 +123,7 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3, help="rounds, interleaved")
     ap.add_argument("--timeout", type=float, default=600.0, help="seconds one run may take")
     ap.add_argument("--json", action="store_true")
+    _table.add_argument(ap)
     args = ap.parse_args()
     h = 0.01
     rates: dict[str, list[float]] = {}
@@ -157,6 +159,17 @@ def main() -> None:
     result = {"date": time.strftime("%Y-%m-%d"), "ring_steps": args.ring_steps, "fmu_steps": args.fmu_steps,
               "repeat": args.repeat, "median_steps_per_s": median, "ratios": ratios,
               "values_identical": same, "ecos": "3 FMUs ECOS" in median}
+    rows = [[f"ring N={n}", _table.rate(median[f"ring N={n} processes"]), _table.rate(median[f"ring N={n} in process"]),
+             None, None, f"{ratios[f'ring N={n} in process / processes']:.1f}× in processes", same[f"ring N={n}"]]
+            for n in args.n]
+    ecos_ratio = ratios.get("3 FMUs hycosim in process / ECOS")
+    rows.append(["3 FMUs", _table.rate(median["3 FMUs hycosim processes"]), _table.rate(median["3 FMUs hycosim in process"]),
+                 _table.rate(median["3 FMUs fmpy loop"]), _table.rate(median.get("3 FMUs ECOS")),
+                 f"{ecos_ratio:.2f}× ECOS" if ecos_ratio else None, same["3 FMUs"]])
+    _table.write(args.table, _table.Table(
+        f"Steps/s, medians of {args.repeat} interleaved rounds (the ring {args.ring_steps:,} steps, the three FMUs "
+        f"{args.fmu_steps:,}); the ratio is of the run in process:",
+        ["system", "in processes", "in process", "fmpy loop", "ECOS", "ratio", "`values.csv` identical"], rows))
     if args.json:
         print(json.dumps(result, indent=1))
         return

@@ -28,6 +28,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import _table
 from _procs import children, free_port, kill_group, start
 from barrier import ring_config
 
@@ -121,6 +122,7 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=4, help="nodes in the ring")
     ap.add_argument("--steps", type=int, default=2000, help="macro steps of the short run; the long run has 10×")
     ap.add_argument("--json", action="store_true")
+    _table.add_argument(ap)
     ap.add_argument("--timeout", type=float, default=120.0, help="seconds one run may take")
     args = ap.parse_args()
     lengths = (args.steps, 10 * args.steps)
@@ -130,6 +132,15 @@ def main() -> None:
               for system in ("hycosim", "zenoh-floor") for kind in peaks[(system, lengths[0])]}
     vs_floor = {kind: peaks[("hycosim", lengths[1])][kind] / peaks[("zenoh-floor", lengths[1])][kind]
                 for kind in ("server", "node")}
+    _table.write(args.table, _table.Table(
+        f"Peak resident set, MiB, a ring of {args.n} (the largest node), after {lengths[0]:,} and {lengths[1]:,} steps:",
+        ["process", f"hycosim, {lengths[0]:,} steps", f"hycosim, {lengths[1]:,} steps", "growth",
+         "bare Zenoh barrier", "hycosim / bare"],
+        [[kind, f"{peaks[('hycosim', lengths[0])][kind]:.1f}", f"{peaks[('hycosim', lengths[1])][kind]:.1f}",
+          f"{growth[f'hycosim {kind}']:.3f}",
+          f"{peaks[('zenoh-floor', lengths[1])][kind]:.1f}" if kind in vs_floor else None,
+          f"{vs_floor[kind]:.2f}" if kind in vs_floor else None]
+         for kind in ("server", "node", "report", "plot") if kind in peaks[("hycosim", lengths[0])]]))
     if args.json:
         for (system, steps), by_kind in peaks.items():
             for kind, rss in by_kind.items():

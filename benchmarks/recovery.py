@@ -36,6 +36,7 @@ import threading
 import time
 from pathlib import Path
 
+import _table
 from _procs import free_port
 from barrier import ring_config
 
@@ -254,6 +255,7 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--json", action="store_true")
+    _table.add_argument(ap)
     args = ap.parse_args()
     results: dict = {}
     with tempfile.TemporaryDirectory() as tmp_:
@@ -292,6 +294,7 @@ def main() -> int:
             rates["with"].append(ring_rate(2, args.ring_steps, 1.0, tmp))
         med = {k: statistics.median(v) for k, v in rates.items()}
         results["checkpoint_cost"] = {"steps_per_s": med, "ratio": med["with"] / med["without"], "rounds": rates}
+    _table.write(args.table, _manual_table(args, results))
     if args.json:
         print(json.dumps(results, indent=1))
     else:
@@ -314,6 +317,30 @@ def main() -> int:
               f"{c['steps_per_s']['with']:.0f} with one every 1 s: ratio {c['ratio']:.3f}")
     ok = all(results.get(k, {}).get("identical", True) for k in ("node_kills", "server_kills", "replay"))
     return 0 if ok else 1
+
+
+def _manual_table(args: argparse.Namespace, r: dict) -> _table.Table:
+    rows = []
+    if "node_kills" in r:
+        n = r["node_kills"]
+        loss = n["recovery_s"]
+        rows.append([f"{n['kills']} SIGKILLs of random node processes",
+                     f"{n['restores']} restores, `values.csv` identical: {n['identical']}; loss to restored run "
+                     + (f"{loss['median']:.2f} s median, {loss['max']:.2f} s at most" if loss["median"] is not None
+                        else "–")])
+    if "server_kills" in r:
+        s = r["server_kills"]
+        rows.append([f"{args.server_kills} SIGKILLs of the server, each resumed",
+                     f"{s['resumes']} resumes, `values.csv` identical: {s['identical']}"])
+    if "replay" in r:
+        p = r["replay"]
+        rows.append([f"a grasp trial ({p['rows']} steps, {p['samples']} camera samples) replayed with its camera",
+                     f"`values.csv` identical: {p['identical']}"])
+    c = r["checkpoint_cost"]
+    rows.append([f"checkpoints every 1 s on the ring (N = 2, H = 1 ms, {args.ring_steps:,} steps)",
+                 f"{c['ratio']:.2f}× the steps/s without"])
+    return _table.Table(f"{args.stop:g} s simulated at H = 10 ms ({r['reference']['rows']:,} steps), checkpoints every "
+                        f"{args.every:g} s:", ["case", "result"], rows)
 
 
 if __name__ == "__main__":

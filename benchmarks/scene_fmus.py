@@ -22,6 +22,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+import _table  # noqa: E402
+
 from fmpy import extract, read_model_description  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
@@ -92,11 +94,17 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=20.0, help="simulated seconds per measurement")
     ap.add_argument("--json", action="store_true")
+    _table.add_argument(ap)
     args = ap.parse_args()
     steps = int(args.seconds / H)
     with tempfile.TemporaryDirectory() as tmp:
         fmus = build_scene_fmus(Path(tmp))
         figures = {"rod": rod(steps, fmus["rod"]), "robot": robot(steps, fmus["robot"])}
+    _table.write(args.table, _table.Table(
+        f"Macro steps of 10 ms per second over {args.seconds:g} s simulated:", ["model", "bare MuJoCo", "FMU",
+                                                                               "FMU cost (goal < 2×)"],
+        [[name, _table.rate(bare), _table.rate(wrapped), f"{bare / wrapped:.2f}×"]
+         for name, (bare, wrapped) in figures.items()]))
     for name, (bare, wrapped) in figures.items():
         if args.json:
             print(json.dumps({"model": name, "bare_steps_per_s": bare, "fmu_steps_per_s": wrapped,

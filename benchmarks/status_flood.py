@@ -35,6 +35,7 @@ import threading
 import time
 from pathlib import Path
 
+import _table
 from _procs import free_port, kill_group, start
 
 HERE = Path(__file__).resolve().parent
@@ -117,6 +118,7 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3, help="rounds of the four kinds, interleaved")
     ap.add_argument("--timeout", type=float, default=300.0, help="seconds a run may take")
     ap.add_argument("--json", action="store_true")
+    _table.add_argument(ap)
     args = ap.parse_args()
     kinds = ["plain", "busy core", "flood, waiting", "flood, firing"]
     runs: dict[str, list[dict]] = {k: [] for k in kinds}
@@ -131,6 +133,12 @@ def main() -> None:
               "ratio_to_plain": {k: median[k] / median["plain"] for k in kinds},
               "floods": {k: {"answered": [x["answered"] for x in runs[k]], "busy": [x["busy"] for x in runs[k]],
                              "counted_busy": [x["counted"] for x in runs[k]]} for k in kinds if k.startswith("flood")}}
+    _table.write(args.table, _table.Table(
+        f"A ring of 2, {args.steps:,} steps, medians of {args.repeat} interleaved rounds:",
+        ["beside the run", "steps/s", "against plain", "told busy"],
+        [[kind, _table.rate(median[kind]), f"{result['ratio_to_plain'][kind]:.2f}",
+          ", ".join(str(b) for b in result["floods"][kind]["busy"]) if kind in result["floods"] else None]
+         for kind in kinds]))
     if args.json:
         print(json.dumps(result, indent=1))
         return

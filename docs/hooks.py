@@ -1,9 +1,12 @@
-"""MkDocs hook: the project file reference, generated at build time from the models the loader
-checks with (through their JSON Schema), so that the page cannot drift from the code."""
+"""MkDocs hooks: the project file reference, generated at build time from the models the loader
+checks with (through their JSON Schema), so that the page cannot drift from the code; and the
+benchmarks' current figures, included from what ``make bench`` last wrote
+(``benchmarks/results/NAME.md``, one file per benchmark, in place of ``<!-- bench: NAME -->``)."""
 
 from __future__ import annotations
 
 import json
+import re
 import sys
 from pathlib import Path
 from typing import Any
@@ -13,6 +16,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from hycosim.core.schema import project_json_schema  # noqa: E402
 
 MARKER = "<!-- project-reference -->"
+RESULTS = Path(__file__).resolve().parents[1] / "benchmarks" / "results"
+BENCH = re.compile(r"<!-- bench: ([a-z_]+) -->")
 # The objects of the file, in the order a reader meets them, with the key that holds them.
 SECTIONS = [("Project", "the file itself"), ("Node", "nodeLists[]"), ("Port", "input[] and output[] of a node"),
             ("Link", "linkLists[]"), ("CoSimulation", "coSimulation"), ("Event", "events[]"),
@@ -63,5 +68,16 @@ def reference() -> str:
     return "\n".join(out)
 
 
+def figures(name: str) -> str:
+    """The table ``make bench`` last wrote for benchmark ``name``; a page that names a benchmark
+    with none fails the build, naming the file."""
+    path = RESULTS / f"{name}.md"
+    if not path.is_file():
+        raise ValueError(f"{path}: no figures of benchmarks/{name}.py (make bench writes them)")
+    return path.read_text().strip()
+
+
 def on_page_markdown(markdown: str, page: Any, config: Any, files: Any) -> str:
-    return markdown.replace(MARKER, reference()) if MARKER in markdown else markdown
+    if MARKER in markdown:
+        markdown = markdown.replace(MARKER, reference())
+    return BENCH.sub(lambda m: figures(m.group(1)), markdown)

@@ -18,9 +18,31 @@ from tests.netns import netns_available
 needs_netns = pytest.mark.skipif(not netns_available(), reason="needs root and ip netns")
 
 
-def test_barrier_benchmark_json_reports_medians_of_its_runs():
+def manual_tables(path) -> list[list[dict[str, str]]]:
+    """The Markdown tables a benchmark wrote with --table (for the manual), each as its rows
+    keyed by the header, after checking the line that says how they were measured."""
+    lines = path.read_text().splitlines()
+    assert lines[0].startswith("`") and time.strftime("%Y-%m-%d") in lines[0] and "--table" not in lines[0], lines[0]
+    tables, i = [], 0
+    while i < len(lines):
+        if lines[i].startswith("| ") and i + 1 < len(lines) and lines[i + 1].startswith("|---"):
+            header = [c.strip() for c in lines[i].strip("|").split("|")]
+            i += 2
+            rows = []
+            while i < len(lines) and lines[i].startswith("| "):
+                cells = [c.strip() for c in lines[i].strip("|").split("|")]
+                assert len(cells) == len(header), lines[i]
+                rows.append(dict(zip(header, cells)))
+                i += 1
+            tables.append(rows)
+        i += 1
+    assert tables, path.read_text()
+    return tables
+
+
+def test_barrier_benchmark_json_reports_medians_of_its_runs(tmp_path):
     res = subprocess.run([sys.executable, "benchmarks/barrier.py", "--n", "2", "--steps", "200", "--repeat", "2",
-                          "--systems", "hycosim", "zenoh-floor", "--json"],
+                          "--systems", "hycosim", "zenoh-floor", "--json", "--table", str(tmp_path / "barrier.md")],
                          capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
     assert res.returncode == 0, res.stderr
     lines = [json.loads(line) for line in res.stdout.splitlines()]
@@ -29,6 +51,11 @@ def test_barrier_benchmark_json_reports_medians_of_its_runs():
         assert set(r) == {"system", "n", "steps_per_s", "runs"}
         assert len(r["runs"]) == 2 and all(x > 0 for x in r["runs"])
         assert min(r["runs"]) <= r["steps_per_s"] <= max(r["runs"])
+    # The manual's table holds the same medians and their ratio.
+    [[row]] = manual_tables(tmp_path / "barrier.md")
+    rate = {r["system"]: r["steps_per_s"] for r in lines}
+    assert row == {"N": "2", "hycosim": f"{rate['hycosim']:,.0f}", "zenoh-floor": f"{rate['zenoh-floor']:,.0f}",
+                   "hycosim / zenoh-floor": f"{rate['hycosim'] / rate['zenoh-floor']:.2f}"}
 
 
 def test_barrier_benchmark_kills_a_run_past_its_timeout_and_says_so():
@@ -47,8 +74,9 @@ def test_barrier_benchmark_kills_a_run_past_its_timeout_and_says_so():
     assert left == []
 
 
-def test_fmu_overhead_benchmark_runs_every_measurement():
-    res = subprocess.run([sys.executable, "benchmarks/fmu_overhead.py", "--steps", "200", "--repeat", "2", "--json"],
+def test_fmu_overhead_benchmark_runs_every_measurement(tmp_path):
+    res = subprocess.run([sys.executable, "benchmarks/fmu_overhead.py", "--steps", "200", "--repeat", "2", "--json",
+                          "--table", str(tmp_path / "fmu.md")],
                          capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
     assert res.returncode == 0, res.stderr
     figures = json.loads(res.stdout.splitlines()[-1])
@@ -58,6 +86,10 @@ def test_fmu_overhead_benchmark_runs_every_measurement():
     assert all(v > 0 for v in figures.values())
     # pythonfmu through fmpy does more per step than a plain method call, whatever the machine.
     assert figures["fmu_node_step_us"] > figures["python_node_step_us"]
+    [rows] = manual_tables(tmp_path / "fmu.md")
+    assert [r["what"] for r in rows] == ["one step of the gain model", "a one-node co-simulation", "a round trip",
+                                         "Model Exchange (the bouncing ball, 10 ms)"]
+    assert rows[3]["ratio"] == f"{figures['me_node_step_us'] / figures['fmpy_me_step_us']:.2f}×"
 
 
 def test_fmu_overhead_benchmark_kills_a_cosimulation_past_its_timeout_and_says_which(tmp_path):
@@ -87,8 +119,9 @@ def test_scale_benchmark_over_namespaces_reports_and_kills_a_run_past_its_timeou
     assert left.stdout.split() == []
 
 
-def test_memory_benchmark_reports_peaks_growth_and_ratios():
-    res = subprocess.run([sys.executable, "benchmarks/memory.py", "--n", "2", "--steps", "300", "--json"],
+def test_memory_benchmark_reports_peaks_growth_and_ratios(tmp_path):
+    res = subprocess.run([sys.executable, "benchmarks/memory.py", "--n", "2", "--steps", "300", "--json",
+                          "--table", str(tmp_path / "memory.md")],
                          capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
     assert res.returncode == 0, res.stderr
     lines = [json.loads(line) for line in res.stdout.splitlines()]
@@ -102,6 +135,10 @@ def test_memory_benchmark_reports_peaks_growth_and_ratios():
         rss[("hycosim", "server", 3000)] / rss[("zenoh-floor", "server", 3000)], abs=0.01)
     assert set(summary["growth"]) == {f"{system} {kind}" for system in kinds for kind in kinds[system]}
     assert all(0.8 < g < 1.5 for g in summary["growth"].values())
+    [rows] = manual_tables(tmp_path / "memory.md")
+    assert [r["process"] for r in rows] == ["server", "node", "report", "plot"]
+    assert rows[0]["hycosim, 3,000 steps"] == f"{rss[('hycosim', 'server', 3000)]:.1f}"
+    assert rows[1]["hycosim / bare"] == f"{summary['vs_floor']['node']:.2f}" and rows[2]["hycosim / bare"] == "–"
 
 
 def test_a_python_node_process_loads_neither_fmpy_nor_numpy():
@@ -114,9 +151,9 @@ def test_a_python_node_process_loads_neither_fmpy_nor_numpy():
 
 
 
-def test_fuzz_benchmark_reports_an_unharmed_run_at_a_small_scale():
+def test_fuzz_benchmark_reports_an_unharmed_run_at_a_small_scale(tmp_path):
     res = subprocess.run([sys.executable, "benchmarks/fuzz.py", "--frames", "1000", "--streams", "10",
-                          "--forged", "300", "--seconds", "1.5", "--json"],
+                          "--forged", "300", "--seconds", "1.5", "--json", "--table", str(tmp_path / "fuzz.md")],
                          capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
     assert res.returncode == 0, res.stderr
     fuzz, forgery = (json.loads(line) for line in res.stdout.splitlines())
@@ -125,12 +162,16 @@ def test_fuzz_benchmark_reports_an_unharmed_run_at_a_small_scale():
     assert fuzz["server_log_bytes"] < 1 << 20
     assert forgery["exit_code"] == 0 and forgery["identical_values"] and forgery["all_sent_during_run"]
     assert forgery["reached_server"] == 0 and forgery["reached_nodes"] == 0 and sum(forgery["by_key"].values()) == 300
+    [rows] = manual_tables(tmp_path / "fuzz.md")
+    assert [(r["exit"], r["`values.csv` identical"]) for r in rows] == [("0", "True"), ("0", "True")]
+    assert rows[1]["what became of it"] == "reached the server: 0; reached a node: 0"
 
 
-def test_status_flood_benchmark_reports_the_floods_cost_and_that_the_server_said_busy():
+def test_status_flood_benchmark_reports_the_floods_cost_and_that_the_server_said_busy(tmp_path):
     # Steps enough that the flooder, which can connect only once the run's server listens, asks
     # while the run lasts on a loaded machine too (at 1,500 it once never did).
-    res = subprocess.run([sys.executable, "benchmarks/status_flood.py", "--steps", "6000", "--repeat", "1", "--json"],
+    res = subprocess.run([sys.executable, "benchmarks/status_flood.py", "--steps", "6000", "--repeat", "1", "--json",
+                          "--table", str(tmp_path / "flood.md")],
                          capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
     assert res.returncode == 0, res.stderr
     r = json.loads(res.stdout)
@@ -142,12 +183,15 @@ def test_status_flood_benchmark_reports_the_floods_cost_and_that_the_server_said
         # on after the server's records close; tests/test_wire_live.py compares them exactly)
         assert f["answered"][0] >= 1 and f["busy"][0] > 0 and f["counted_busy"][0] > 0, (kind, f)
     assert r["floods"]["flood, waiting"]["busy"][0] > r["floods"]["flood, waiting"]["answered"][0]
+    [rows] = manual_tables(tmp_path / "flood.md")
+    assert [(x["beside the run"], x["against plain"]) for x in rows][0] == ("plain", "1.00")
+    assert rows[2]["told busy"] == str(r["floods"]["flood, waiting"]["busy"][0]) and rows[1]["told busy"] == "–"
 
 
-def test_recovery_benchmark_reports_identical_records_at_a_small_scale():
+def test_recovery_benchmark_reports_identical_records_at_a_small_scale(tmp_path):
     res = subprocess.run([sys.executable, "benchmarks/recovery.py", "--stop", "10", "--every", "0.5", "--node-kills", "2",
                           "--server-kills", "1", "--replay-stop", "0", "--ring-steps", "2000", "--repeat", "1",
-                          "--json"],
+                          "--json", "--table", str(tmp_path / "recovery.md")],
                          capture_output=True, text=True, timeout=400, cwd=REPO, env=env())
     assert res.returncode == 0, res.stderr
     r = json.loads(res.stdout)
@@ -159,12 +203,17 @@ def test_recovery_benchmark_reports_identical_records_at_a_small_scale():
     assert r["server_kills"] == {"resumes": 1, "identical": True, "rows": 1001}
     assert r["checkpoint_cost"]["ratio"] > 0
     assert "replay" not in r  # tests/test_replay.py runs the replayed trial
+    [rows] = manual_tables(tmp_path / "recovery.md")
+    assert [x["case"].split(" ", 1)[1] for x in rows[:2]] == ["SIGKILLs of random node processes",
+                                                             "SIGKILLs of the server, each resumed"]
+    assert "`values.csv` identical: True" in rows[0]["result"] and rows[1]["result"] == "1 resumes, `values.csv` identical: True"
+    assert rows[2]["result"] == f"{r['checkpoint_cost']['ratio']:.2f}× the steps/s without"
 
 
 def test_accuracy_benchmark_compares_the_couplings_with_the_exact_solution_and_counts_messages(tmp_path):
     res = subprocess.run([sys.executable, "benchmarks/accuracy.py", "--stop", "0.5", "--h", "0.01", "--mr-stop",
                           "0.3", "--transient-stop", "1.1", "--fixed-h", "0.002", "--tolerances", "1e-4",
-                          "--plot", str(tmp_path / "accuracy.png"), "--json"],
+                          "--plot", str(tmp_path / "accuracy.png"), "--json", "--table", str(tmp_path / "acc.md")],
                          capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
     assert res.returncode == 0, res.stderr
     r = json.loads(res.stdout)
@@ -194,6 +243,15 @@ def test_accuracy_benchmark_compares_the_couplings_with_the_exact_solution_and_c
     assert m["single_rate"]["points"] == m["multi_rate"]["points"] == 301
     assert m["multi_rate"]["messages"] < m["multi_rate_unbatched"]["messages"] < m["single_rate"]["messages"]
     assert m["message_ratio"] <= 1 / 3 and m["fast_node_identical"] and m["batching_changes_nothing"]
+    schemes, rates, control = manual_tables(tmp_path / "acc.md")
+    assert [(x["masses"], x["H"]) for x in schemes] == [("two", "10 ms"), ("three", "10 ms")]
+    two = {row["coupling"]: row for row in r["oscillator"] if row["problem"] == "two"}
+    assert schemes[0]["Jacobi"] == f"{two['jacobi']['error_x1']:.2e} m"
+    assert schemes[0]["degree 3"] == f"{two['interpolated-3']['error_x1']:.2e} m ({two['interpolated-3']['takes']:,})"
+    assert rates == [{"frames multi-rate": f"{m['multi_rate']['messages']:,}",
+                      "frames all at 1 kHz": f"{m['single_rate']['messages']:,}", "ratio": f"{m['message_ratio']:.3f}",
+                      "the fast node's values identical": "True", "`values.csv` the same unbatched": "True"}]
+    assert [x["step"] for x in control] == ["H = 0.002 s", "tolerance 0.0001"]
 
 
 _odd = st.sampled_from([float("nan"), float("inf"), -1.0, 1.0000001, "1", "x", None, True, [], {}])
@@ -241,10 +299,10 @@ def test_the_baselines_saved_curves_are_read_back_whole_or_refused_by_name(paper
         assert all(math.isfinite(e["seconds"]) and e["seconds"] >= 0 and 0 <= e["mean_success"] <= 1 for e in run)
 
 
-def test_dashboard_cost_benchmark_reports_the_cost_the_latency_and_what_watching_takes():
+def test_dashboard_cost_benchmark_reports_the_cost_the_latency_and_what_watching_takes(tmp_path):
     res = subprocess.run([sys.executable, "benchmarks/dashboard_cost.py", "--steps", "500", "--repeat", "1",
                           "--least-page", "--page-elsewhere", "--wait-strategy", "block", "--paced-s", "10", "--big",
-                          "2000", "--json"],
+                          "2000", "--json", "--table", str(tmp_path / "dash.md")],
                          capture_output=True, text=True, timeout=400, cwd=REPO, env=env())
     assert res.returncode == 0, res.stderr
     got = json.loads(res.stdout)
@@ -264,11 +322,16 @@ def test_dashboard_cost_benchmark_reports_the_cost_the_latency_and_what_watching
     assert w["cores"] >= 1
     big = got["big_run"]
     assert 0 < big["usable_s"] <= big["plot_s"] and big["points_sent"] > 100
+    [rows] = manual_tables(tmp_path / "dash.md")
+    assert [x["case"] for x in rows] == ["the dashboard and its page here", "any page here (one line, 5/s)",
+                                         "the dashboard, its page on another machine", "a step reaches the page",
+                                         "a finished run of 2,000 steps"]
+    assert rows[0]["figure"].startswith(f"{got['ratio']:.3f} (")
 
 
-def test_inprocess_benchmark_reports_ratios_against_the_distributed_run_and_ecos_and_identical_values():
+def test_inprocess_benchmark_reports_ratios_against_the_distributed_run_and_ecos_and_identical_values(tmp_path):
     res = subprocess.run([sys.executable, "benchmarks/inprocess.py", "--n", "2", "--ring-steps", "1500",
-                          "--fmu-steps", "1500", "--repeat", "1", "--json"],
+                          "--fmu-steps", "1500", "--repeat", "1", "--json", "--table", str(tmp_path / "inproc.md")],
                          capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
     assert res.returncode == 0, res.stderr
     r = json.loads(res.stdout)
@@ -277,10 +340,15 @@ def test_inprocess_benchmark_reports_ratios_against_the_distributed_run_and_ecos
     assert set(r["ratios"]) == {"ring N=2 in process / processes", "3 FMUs hycosim in process / ECOS",
                                 "3 FMUs hycosim processes / ECOS", "3 FMUs fmpy loop / ECOS"}
     assert all(v > 0 for v in r["median_steps_per_s"].values())
+    [rows] = manual_tables(tmp_path / "inproc.md")
+    assert [(x["system"], x["`values.csv` identical"]) for x in rows] == [("ring N=2", "True"), ("3 FMUs", "True")]
+    assert rows[1]["ECOS"] == f"{r['median_steps_per_s']['3 FMUs ECOS']:,.0f}"
+    assert rows[1]["ratio"] == f"{r['ratios']['3 FMUs hycosim in process / ECOS']:.2f}× ECOS"
 
 
-def test_crosscheck_benchmark_finds_hycosim_ecos_and_libcosim_equal_at_t0_and_within_rounding_after():
-    res = subprocess.run([sys.executable, "benchmarks/crosscheck.py", "--steps", "80", "--json"],
+def test_crosscheck_benchmark_finds_hycosim_ecos_and_libcosim_equal_at_t0_and_within_rounding_after(tmp_path):
+    res = subprocess.run([sys.executable, "benchmarks/crosscheck.py", "--steps", "80", "--json",
+                          "--table", str(tmp_path / "cross.md")],
                          capture_output=True, text=True, timeout=600, cwd=REPO, env=env())
     assert res.returncode == 0, res.stderr
     r = json.loads(res.stdout)
@@ -303,3 +371,32 @@ def test_crosscheck_benchmark_finds_hycosim_ecos_and_libcosim_equal_at_t0_and_wi
     assert r["ball"]["libcosim"]["ball.falling"]["t0_diff"] is None  # libcosimpy: no Boolean at t0
     assert r["chain"]["ECOS"]["ft.y"]["compared"].startswith("one point earlier")
     assert r["chain"]["libcosim"]["ft.u"]["compared"].startswith("one point later")
+    rows = manual_tables(tmp_path / "cross.md")[0]
+    assert [(x["system"], x["engine"]) for x in rows] == [(name, engine) for name, system in r.items() for engine in system]
+    assert {x["largest difference"] for x in rows if x["engine"] == "hycosim in process"} == {"0"}
+    assert all(x["at t0"] == "0" for x in rows if x["engine"] == "ECOS")
+
+
+def test_scene_fmus_benchmark_writes_the_manuals_table(tmp_path):
+    res = subprocess.run([sys.executable, "benchmarks/scene_fmus.py", "--seconds", "0.5", "--json",
+                          "--table", str(tmp_path / "scene.md")],
+                         capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
+    assert res.returncode == 0, res.stderr
+    figures = {r["model"]: r for r in map(json.loads, res.stdout.splitlines())}
+    [rows] = manual_tables(tmp_path / "scene.md")
+    assert [x["model"] for x in rows] == ["rod", "robot"]
+    assert [x["FMU cost (goal < 2×)"] for x in rows] == [f"{figures[m]['cost_ratio']:.2f}×" for m in ("rod", "robot")]
+
+
+def test_every_benchmark_make_bench_runs_writes_a_table_a_manual_page_includes():
+    """make bench regenerates the manual's figures: each script it runs writes the file that one
+    page names, and each page's named file is one make bench writes (and is in the repository)."""
+    import re
+
+    written = re.findall(r"benchmarks/(\w+)\.py [^\n]*--table benchmarks/results/(\w+)\.md", (REPO / "Makefile").read_text())
+    assert [a for a, b in written] == [b for a, b in written] and len(written) >= 11
+    included = re.findall(r"<!-- bench: (\w+) -->", "".join(p.read_text() for p in (REPO / "docs").glob("*.md")))
+    assert sorted(included) == sorted(a for a, _ in written)
+    for name in included:
+        lines = (REPO / "benchmarks" / "results" / f"{name}.md").read_text().splitlines()
+        assert lines[0].startswith(f"`{name}.py") and any(line.startswith("|---") for line in lines)
