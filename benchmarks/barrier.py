@@ -78,7 +78,17 @@ def run_helics(core: str, n: int, steps: int, timeout: float) -> float:
         out = wait_all(feds[0], [*feds[1:], broker], timeout)[0]
     except subprocess.TimeoutExpired:
         raise RuntimeError(f"timed out after {timeout:g} s (--timeout): HELICS {core} with {n} federates") from None
-    return float(out.split()[0])
+    return _figure(out)
+
+
+def _figure(out: str) -> float:
+    """The steps/s a federate printed: HELICS may log lines of its own to stdout around it."""
+    for line in reversed(out.splitlines()):
+        try:
+            return float(line.split()[0])
+        except (IndexError, ValueError):
+            continue
+    raise RuntimeError(f"no figure in the federate's output: {out[-500:]!r}")
 
 
 def run_mosaik(n: int, steps: int, timeout: float) -> float:

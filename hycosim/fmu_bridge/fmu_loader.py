@@ -94,6 +94,9 @@ def interface_of(md: ModelDescription, node: Node, path: Path) -> str:
                            'which the node uses unless told: add "interface": "ModelExchange"')
         return CO_SIMULATION
     if md.modelExchange is None:
+        if getattr(md, "scheduledExecution", None) is not None:
+            raise FmuError(f"node {name!r}: {path.name} has only a scheduled-execution interface, which hycosim "
+                           "does not run (it runs co-simulation and Model Exchange)")
         raise FmuError(f"node {name!r}: {path.name} has neither a co-simulation nor a Model Exchange interface")
     return MODEL_EXCHANGE
 
@@ -116,9 +119,134 @@ def _a(word: str) -> str:
     return ("an " if word[:1] in "aeiou" else "a ") + word
 
 
-def map_ports(md: ModelDescription, node: Node, path: Path) -> tuple[list[MappedPort], list[MappedPort]]:
-    """Map the node's inputs and outputs onto FMU variables by name (``variable`` renames)."""
+# The most elements an array variable may hold, whatever its dimensions say: a structural
+# parameter set (or declared) far larger is refused before the FMU is instantiated.
+MAX_ELEMENTS = 65_536
+
+
+def shape_of(md: ModelDescription, var: ScalarVariable, parameters: dict[str, Any], path: Path) -> tuple[int, ...]:
+    """The shape of an FMU variable, ``()`` for a scalar: per ``Dimension``, its fixed ``start``,
+    or the value of the structural parameter it refers to (the node's ``parameters`` where they
+    set it, else that parameter's start). FmuError where a dimension is not a whole number,
+    is zero, or the array would hold more than MAX_ELEMENTS."""
+    dims = getattr(var, "dimensions", None) or []
+    if not dims:
+        return ()
+    by_vr = {v.valueReference: v for v in md.modelVariables if v.type.startswith(("UInt", "Int"))}
+    shape = []
+    for dim in dims:
+        if dim.start is not None:
+            size, source = dim.start, "its fixed size"
+        else:
+            param = by_vr.get(dim.valueReference)
+            if param is None:
+                raise FmuError(f"{path.name}: a dimension of variable {var.name!r} refers to value reference "
+                               f"{dim.valueReference}, which is not an integer variable of the FMU")
+            size = parameters.get(param.name, param.start)
+            source = f"structural parameter {param.name!r}"
+        try:
+            size = int(size)
+        except (TypeError, ValueError):
+            raise FmuError(f"{path.name}: a dimension of variable {var.name!r} ({source}) is {size!r}, "
+                           "not a whole number") from None
+        if size < 1:
+            raise FmuError(f"{path.name}: variable {var.name!r} would have a dimension of {size} ({source}); "
+                           "each must be at least 1")
+        shape.append(size)
+    elements = math.prod(shape)
+    if elements > MAX_ELEMENTS:
+        raise FmuError(f"{path.name}: variable {var.name!r} would hold {elements:,} elements (shape "
+                       f"{list(shape)}); hycosim takes at most {MAX_ELEMENTS:,} per variable")
+    return tuple(shape)
+
+
+# FMI 3 clocks by intervalVariability: time-based periodic ones tick on a fixed (or tunable)
+# interval; the rest tick when the FMU or the importer says.
+_PERIODIC = {"constant", "fixed", "calculated", "tunable"}
+
+
+@dataclass(frozen=True)
+class Clock:
+    """An FMI 3 clock variable as hycosim sees it: its name, causality, and what kind it is
+    (``periodic``, ``aperiodic`` or ``triggered``) with its interval where it is fixed."""
+
+    name: str
+    causality: str
+    kind: str
+    interval: float | None
+
+    def describe(self) -> str:
+        """``tick (periodic, every 0.1 s)``, ``trip (triggered)``."""
+        every = f", every {self.interval:g} s" if self.interval else ""
+        return f"{self.name} ({self.kind}{every})"
+
+
+def _clock_intervals(path: Path) -> dict[str, float]:
+    """Each clock's ``intervalDecimal`` as the FMU's model description declares it (fmpy reads
+    a clock's intervalVariability but not its interval)."""
+    import zipfile
+    from xml.etree import ElementTree
+
+    try:
+        if path.is_dir():
+            root = ElementTree.parse(path / "modelDescription.xml").getroot()
+        else:
+            with zipfile.ZipFile(path) as z:
+                root = ElementTree.fromstring(z.read("modelDescription.xml"))
+    except (OSError, KeyError, zipfile.BadZipFile, ElementTree.ParseError):
+        return {}
+    found = {}
+    for clock in root.iter("Clock"):
+        interval = _bound(clock.get("intervalDecimal"))
+        if clock.get("name") and interval is not None:
+            found[clock.get("name")] = interval
+    return found
+
+
+def clocks_of(md: ModelDescription, path: Path) -> list[Clock]:
+    """The clock variables of an FMI 3 FMU (``path``, described by ``md``), in their order."""
+    if not any(v.type == "Clock" for v in md.modelVariables):
+        return []
+    intervals = _clock_intervals(path)
+    out = []
+    for v in md.modelVariables:
+        if v.type != "Clock":
+            continue
+        variability = v.intervalVariability or "constant"
+        kind = ("periodic" if variability in _PERIODIC else "triggered" if variability == "triggered" else "aperiodic")
+        out.append(Clock(v.name, v.causality or "local", kind, intervals.get(v.name) if kind == "periodic" else None))
+    return out
+
+
+def check_shapes(md: ModelDescription, node: str, parameters: dict[str, Any], path: Path) -> None:
+    """FmuError unless every array variable of the FMU has a shape within bounds (:func:`shape_of`)
+    once ``parameters`` have set its structural parameters: a dimension set to zero, or to a size
+    past MAX_ELEMENTS, is named before the FMU is instantiated."""
+    for var in md.modelVariables:
+        if getattr(var, "dimensions", None):
+            try:
+                shape_of(md, var, parameters, path)
+            except FmuError as exc:
+                raise FmuError(f"node {node!r}: {exc}") from None
+
+
+def check_clocks(md: ModelDescription, node: str, path: Path) -> None:
+    """FmuError naming an FMU's clocks, if it has any: hycosim does not yet activate FMI 3
+    clocks, and a clocked FMU stepped without them would run its clocked partitions never."""
+    clocks = clocks_of(md, path)
+    if clocks:
+        raise FmuError(f"node {node!r}: {path.name} has clock{'s' if len(clocks) > 1 else ''} "
+                       f"{', '.join(c.describe() for c in clocks)}; hycosim does not run FMUs with clocks yet "
+                       "(it would never tick them)")
+
+
+def map_ports(md: ModelDescription, node: Node, path: Path,
+              parameters: dict[str, Any] | None = None) -> tuple[list[MappedPort], list[MappedPort]]:
+    """Map the node's inputs and outputs onto FMU variables by name (``variable`` renames),
+    each a scalar with the shape the model description and ``parameters`` (default the
+    node's; they may set structural parameters) give it."""
     variables = {v.name: v for v in md.modelVariables}
+    parameters = node.parameters if parameters is None else parameters
 
     def one(port, causalities: tuple[str, ...], kind: str) -> MappedPort:
         name = port.variable or port.name
@@ -132,6 +260,16 @@ def map_ports(md: ModelDescription, node: Node, path: Path) -> tuple[list[Mapped
         if var.type not in _COMPATIBLE[port.type]:
             raise FmuError(f"node {node.nodeName!r}: {kind} {port.name!r} is {port.type.value} but variable "
                            f"{name!r} of {path.name} is {var.type}")
+        try:
+            shape = shape_of(md, var, parameters, path)
+        except FmuError as exc:
+            raise FmuError(f"node {node.nodeName!r}: {kind} {port.name!r}: {exc}") from None
+        if shape:
+            # The model description says so already: refused here, not at the first point
+            # where reading one value of several fails.
+            raise FmuError(f"node {node.nodeName!r}: {kind} {port.name!r} maps to variable {name!r} of "
+                           f"{path.name}, an array of shape {list(shape)}; hycosim maps only scalar variables "
+                           "to ports so far")
         return MappedPort(port.name, name, var.valueReference, var.type)
 
     missing = [f"{kind} {p.name!r}" + (f" (variable {p.variable!r})" if p.variable else "")
@@ -175,7 +313,7 @@ def _fits(var_type: str, value: Any) -> bool:
     if var_type == "String":
         return type(value) is str
     if var_type in _COMPATIBLE[PortType.INTEGER]:
-        return type(value) is int
+        return type(value) is int and (value >= 0 or not var_type.startswith("UInt"))
     return True  # Binary and the like: the FMU says
 
 
@@ -305,9 +443,12 @@ def check_fmu(path: Path, node: Node, parameters: dict[str, Any] | None = None) 
     md = describe(path)
     check_platform(path, md, node.nodeName)
     interface = interface_of(md, node, path)
-    inputs, outputs = map_ports(md, node, path)
+    check_clocks(md, node.nodeName, path)
+    parameters = node.parameters if parameters is None else parameters
+    inputs, outputs = map_ports(md, node, path, parameters)
     driven = map_driven(md, node, path)
-    check_parameters(md, node.nodeName, node.parameters if parameters is None else parameters, path)
+    check_parameters(md, node.nodeName, parameters, path)
+    check_shapes(md, node.nodeName, parameters, path)
     return FmuMapping(md, inputs, outputs, driven, interface)
 
 

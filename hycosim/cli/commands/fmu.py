@@ -56,7 +56,8 @@ def fmu_inspect(
     """List an FMU's co-simulation capabilities and variables; with --config, the port mapping."""
     import fmpy
 
-    from hycosim.fmu_bridge.fmu_loader import FmuError, check_platform, describe, map_driven, map_ports
+    from hycosim.fmu_bridge.fmu_loader import (FmuError, check_platform, clocks_of, describe, map_driven, map_ports,
+                                               shape_of)
 
     try:
         md = describe(fmu)
@@ -66,8 +67,9 @@ def fmu_inspect(
     caps = Table(title=f"{fmu.name}: FMI {md.fmiVersion}, {md.modelName}")
     caps.add_column("capability")
     caps.add_column("value")
-    caps.add_row("interfaces", ", ".join(["co-simulation"] * bool(cs) + ["Model Exchange (the node integrates it)"] * bool(me))
-                 or "none")
+    se = getattr(md, "scheduledExecution", None)
+    caps.add_row("interfaces", ", ".join(["co-simulation"] * bool(cs) + ["Model Exchange (the node integrates it)"] * bool(me)
+                                         + ["scheduled execution (hycosim does not run it)"] * bool(se)) or "none")
     caps.add_row("platforms", ", ".join(fmpy.supported_platforms(str(fmu))) or "-")
     for label, element, attrs in (
             ("co-simulation", cs, ("canGetAndSetFMUstate", "canSerializeFMUstate", "canHandleVariableCommunicationStepSize",
@@ -84,12 +86,25 @@ def fmu_inspect(
                      f"{md.numberOfContinuousStates or 0}, {md.numberOfEventIndicators or 0}")
     print_table(caps)
     variables = Table(title="variables")
-    for col in ("name", "causality", "variability", "type", "start", "unit"):
+    for col in ("name", "causality", "variability", "type", "shape", "start", "unit"):
         variables.add_column(col)
     for v in md.modelVariables:
-        variables.add_row(v.name, v.causality or "", v.variability or "", v.type, "" if v.start is None else str(v.start),
-                          getattr(v, "unit", None) or "")
+        try:
+            shape = shape_of(md, v, {}, fmu)
+        except FmuError as exc:
+            shape = f"invalid: {exc}"
+        variables.add_row(v.name, v.causality or "", v.variability or "", v.type, str(list(shape)) if shape else "",
+                          "" if v.start is None else str(v.start), getattr(v, "unit", None) or "")
     print_table(variables)
+    clocks = clocks_of(md, fmu)
+    if clocks:
+        table = Table(title="clocks")
+        for col in ("name", "causality", "kind", "interval (s)", "run by hycosim"):
+            table.add_column(col)
+        for c in clocks:
+            table.add_row(c.name, c.causality, c.kind, "" if c.interval is None else f"{c.interval:g}",
+                          "not yet: an FMU with clocks is refused")
+        print_table(table)
     if config is None:
         return
     loaded = load(config)
@@ -110,7 +125,7 @@ def fmu_inspect(
     except FmuError as exc:
         fail(str(exc))
     mapping = Table(title=f"node {spec.nodeName!r} → {fmu.name}")
-    for col in ("port", "direction", "FMU variable", "value reference", "type"):
+    for col in ("port", "direction", "FMU variable", "value reference", "type"):  # every port is a scalar
         mapping.add_column(col)
     for direction, ports in (("input", inputs), ("output", outputs)):
         for m in ports:
