@@ -69,12 +69,21 @@ def model_description(clocks: str = "", interface: str | None = None) -> str:
     <Float64 name="s" valueReference="13" causality="output" variability="continuous"/>
     <Float64 name="pair" valueReference="14" causality="output" variability="continuous">
       <Dimension start="2"/></Float64>
+    <String name="label" valueReference="15" causality="input" variability="discrete"><Start value=""/></String>
+    <String name="greeting" valueReference="16" causality="output" variability="discrete"/>
+    <Binary name="blob" valueReference="17" causality="input" variability="discrete"><Start value=""/></Binary>
+    <Binary name="blob_out" valueReference="18" causality="output" variability="discrete"/>
+    <Float32 name="k32" valueReference="22" causality="input" variability="continuous" start="0"/>
+    <Float32 name="s32" valueReference="19" causality="output" variability="continuous"/>
     {CLOCKS.get(clocks, "")}
   </ModelVariables>
   <ModelStructure>
     <Output valueReference="10" dependencies="9"/>
     <Output valueReference="13" dependencies="9"/>
     <Output valueReference="14"/>
+    <Output valueReference="16" dependencies="15"/>
+    <Output valueReference="18" dependencies="17"/>
+    <Output valueReference="19" dependencies="9 22"/>
   </ModelStructure>
 </fmiModelDescription>
 """

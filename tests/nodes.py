@@ -110,3 +110,19 @@ class SlowStart(Clock):
 
         time.sleep(float(ctx.parameter("setup_s", 5.0)))
         super().setup(ctx)
+
+
+class Bytes(Node):
+    """At step k: ``label`` the String "n<k>", ``blob`` the Binary bytes k, k+1, k+2 (mod 256),
+    ``w`` the Real k / 8."""
+
+    OUTPUTS = frozenset({"label", "blob", "w"})
+
+    def setup(self, ctx: NodeContext) -> None:
+        self.k = 0
+
+    def outputs(self) -> dict[str, Any]:
+        return {"label": f"n{self.k}", "blob": bytes((self.k + i) % 256 for i in range(3)), "w": self.k / 8}
+
+    def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
+        self.k += 1

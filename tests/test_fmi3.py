@@ -119,3 +119,26 @@ def test_any_structural_parameters_are_taken_or_refused_naming_the_node(tmp_path
         assert not fits and str(exc).startswith("node 'ss': "), exc
         return
     assert fits
+
+
+def test_fmi3_string_binary_and_float32_ports_carry_their_values(tmp_path, fmus):
+    """The FMI 3 types beside Float64: a String and a Binary input each read back through an
+    output that depends on it, and a Float32 computed in single precision."""
+    import numpy as np
+
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "src", "UID": 1, "model": "tests.nodes:Bytes",
+         "output": [{"name": "label", "type": "String"}, {"name": "blob", "type": "Binary"}, "w"]},
+        {"nodeName": "ss", "UID": 2, "fmu": str(fmus["statespace"]),
+         "input": [{"name": "label", "type": "String"}, {"name": "blob", "type": "Binary"}, "k32"],
+         "output": [{"name": "greeting", "type": "String"}, {"name": "blob_out", "type": "Binary"}, "s32", "s"]},
+    ], [{"from": "src.label", "to": "ss.label"}, {"from": "src.blob", "to": "ss.blob"}, {"from": "src.w", "to": "ss.k32"}],
+        cosim={"stepSize": 0.01, "stopTime": 0.2})
+    rows = read_rows(run_project(cfg, tmp_path / "runs"))
+    assert len(rows) == 21
+    for k in range(1, len(rows)):
+        before, now = rows[k - 1], rows[k]
+        assert now["ss.greeting"] == f"hello {before['src.label']}"
+        assert bytes.fromhex(now["ss.blob_out"]) == bytes.fromhex(before["src.blob"])[::-1]
+        assert float(now["ss.s32"]) == float(np.float32(float(now["ss.s"])) + np.float32(float(before["src.w"])))
+    assert {r["src.label"] for r in rows} == {f"n{k}" for k in range(21)}

@@ -505,12 +505,16 @@ class FmuInstance:
         vr = [var.valueReference]
         t = var.type
         try:
-            if t in ("Real", "Float64", "Float32"):
+            if t in ("Real", "Float64"):
                 (self.fmu.setFloat64 if self.fmi3 else self.fmu.setReal)(vr, [float(value)])
+            elif t == "Float32":
+                self.fmu.setFloat32(vr, [float(value)])
             elif t == "Boolean":
                 self.fmu.setBoolean(vr, [bool(value)])
             elif t == "String":
                 self.fmu.setString(vr, [str(value)])
+            elif t == "Binary":
+                self.fmu.setBinary(vr, [bytes(value)])
             elif self.fmi3:
                 getattr(self.fmu, f"set{t if t != 'Enumeration' else 'Int64'}")(vr, [int(value)])
             else:
@@ -519,12 +523,16 @@ class FmuInstance:
             raise FmuError(f"node {self.node!r}: setting {var.name!r} = {value!r} failed ({exc})") from None
 
     def _get(self, vr: int, t: str) -> Any:
-        if t in ("Real", "Float64", "Float32"):
+        if t in ("Real", "Float64"):
             return (self.fmu.getFloat64 if self.fmi3 else self.fmu.getReal)([vr])[0]
+        if t == "Float32":
+            return self.fmu.getFloat32([vr])[0]
         if t == "Boolean":
             return bool(self.fmu.getBoolean([vr])[0])
         if t == "String":
             return self.fmu.getString([vr])[0]
+        if t == "Binary":
+            return self.fmu.getBinary([vr])[0] or b""  # a null pointer: no bytes
         if self.fmi3:
             return int(getattr(self.fmu, f"get{t if t != 'Enumeration' else 'Int64'}")([vr])[0])
         return int(self.fmu.getInteger([vr])[0])

@@ -4,7 +4,10 @@
  * (UInt64, vr 1-3; 1 to MAXD each) before initialisation. A (vr 4, n x n), B (5, n x m),
  * C (6, r x n), D (7, r x m), x0 (8, n), u (9, m), y (10, r), x (11, n); a scalar input g
  * (12) added to every element of dx/dt, a scalar output s (13), the sum of y, and an output
- * pair (14) of a fixed size 2: x[0] and the time.
+ * pair (14) of a fixed size 2: x[0] and the time. Beside them, the FMI 3 types FMI 2 lacks or
+ * names otherwise: a String input label (15) and output greeting (16, "hello " + label), a
+ * Binary input blob (17) and output blob_out (18, blob reversed), a Float32 input k32 (22) and
+ * output s32 (19, s + k32 in single precision).
  * Arrays are row-major, as FMI 3 serialises them. A step of h is taken as 10 explicit Euler
  * steps, so that fmpy and hycosim, calling it on the same grid, get the same values.
  * The FMI 3 types are written out, as in ball_me3.c; functions never called are stubs.
@@ -19,6 +22,8 @@
 #define OK 0
 #define ERROR 3
 #define MAXD 16
+#define MAXTEXT 256
+#define MAXBLOB 1024
 
 typedef struct {
     uint64_t m, n, r;
@@ -26,6 +31,10 @@ typedef struct {
     double x0[MAXD], u[MAXD], x[MAXD], g;
     double time;
     int initialised;
+    char label[MAXTEXT], greeting[MAXTEXT + 6];
+    uint8_t blob[MAXBLOB], blob_out[MAXBLOB];
+    size_t blob_size;
+    float k32;
 } Model;
 
 /* The defaults of every array for the sizes set: the model description's start values are
@@ -169,6 +178,78 @@ EXPORT int fmi3SetFloat64(void *c, const uint32_t vr[], size_t n, const double v
     return at == nv ? OK : ERROR;
 }
 
+static double sum_of_y(Model *s) {
+    double y[MAXD], sum = 0.0;
+    outputs(s, y);
+    for (uint64_t l = 0; l < s->r; l++) sum += y[l];
+    return sum;
+}
+
+EXPORT int fmi3GetFloat32(void *c, const uint32_t vr[], size_t n, float v[], size_t nv) {
+    Model *s = c;
+    if (nv != n) return ERROR;
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] == 19) v[i] = (float)sum_of_y(s) + s->k32;
+        else if (vr[i] == 22) v[i] = s->k32;
+        else return ERROR;
+    }
+    return OK;
+}
+EXPORT int fmi3SetFloat32(void *c, const uint32_t vr[], size_t n, const float v[], size_t nv) {
+    if (nv != n) return ERROR;
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] != 22) return ERROR;
+        ((Model *)c)->k32 = v[i];
+    }
+    return OK;
+}
+EXPORT int fmi3GetString(void *c, const uint32_t vr[], size_t n, const char *v[], size_t nv) {
+    Model *s = c;
+    if (nv != n) return ERROR;
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] == 15) v[i] = s->label;
+        else if (vr[i] == 16) {
+            strcpy(s->greeting, "hello ");
+            strcat(s->greeting, s->label);
+            v[i] = s->greeting;
+        } else return ERROR;
+    }
+    return OK;
+}
+EXPORT int fmi3SetString(void *c, const uint32_t vr[], size_t n, const char *const v[], size_t nv) {
+    Model *s = c;
+    if (nv != n) return ERROR;
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] != 15 || !v[i] || strlen(v[i]) >= MAXTEXT) return ERROR;
+        strcpy(s->label, v[i]);
+    }
+    return OK;
+}
+EXPORT int fmi3GetBinary(void *c, const uint32_t vr[], size_t n, size_t sizes[], const uint8_t *v[], size_t nv) {
+    Model *s = c;
+    if (nv != n) return ERROR;
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] == 17) v[i] = s->blob;
+        else if (vr[i] == 18) {
+            for (size_t k = 0; k < s->blob_size; k++) s->blob_out[k] = s->blob[s->blob_size - 1 - k];
+            v[i] = s->blob_out;
+        } else return ERROR;
+        sizes[i] = s->blob_size;
+    }
+    return OK;
+}
+EXPORT int fmi3SetBinary(void *c, const uint32_t vr[], size_t n, const size_t sizes[], const uint8_t *const v[],
+                         size_t nv) {
+    Model *s = c;
+    if (nv != n) return ERROR;
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] != 17 || sizes[i] > MAXBLOB) return ERROR;
+        if (sizes[i]) memcpy(s->blob, v[i], sizes[i]);
+        s->blob_size = sizes[i];
+    }
+    return OK;
+}
+
 EXPORT int fmi3DoStep(void *c, double t, double h, bool noSetPrior, bool *eventNeeded, bool *terminate,
                       bool *earlyReturn, double *lastT) {
     Model *s = c;
@@ -220,12 +301,12 @@ STUB(fmi3GetContinuousStateDerivatives) STUB(fmi3GetEventIndicators) STUB(fmi3Ge
 STUB(fmi3GetNominalsOfContinuousStates) STUB(fmi3GetNumberOfEventIndicators) STUB(fmi3GetNumberOfContinuousStates)
 STUB(fmi3UpdateDiscreteStates) STUB(fmi3InstantiateModelExchange)
 STUB(fmi3EvaluateDiscreteStates) STUB(fmi3GetAdjointDerivative)
-STUB(fmi3GetBinary) STUB(fmi3GetBoolean) STUB(fmi3GetClock) STUB(fmi3GetDirectionalDerivative)
-STUB(fmi3GetFloat32) STUB(fmi3GetInt16) STUB(fmi3GetInt32) STUB(fmi3GetInt64) STUB(fmi3GetInt8)
+STUB(fmi3GetBoolean) STUB(fmi3GetClock) STUB(fmi3GetDirectionalDerivative)
+STUB(fmi3GetInt16) STUB(fmi3GetInt32) STUB(fmi3GetInt64) STUB(fmi3GetInt8)
 STUB(fmi3GetIntervalDecimal) STUB(fmi3GetIntervalFraction) STUB(fmi3GetNumberOfVariableDependencies)
-STUB(fmi3GetOutputDerivatives) STUB(fmi3GetShiftDecimal) STUB(fmi3GetShiftFraction) STUB(fmi3GetString)
+STUB(fmi3GetOutputDerivatives) STUB(fmi3GetShiftDecimal) STUB(fmi3GetShiftFraction) 
 STUB(fmi3GetUInt16) STUB(fmi3GetUInt32) STUB(fmi3GetUInt8) STUB(fmi3GetVariableDependencies)
-STUB(fmi3InstantiateScheduledExecution) STUB(fmi3SetBinary) STUB(fmi3SetBoolean) STUB(fmi3SetClock)
-STUB(fmi3SetFloat32) STUB(fmi3SetInt16) STUB(fmi3SetInt32) STUB(fmi3SetInt64) STUB(fmi3SetInt8)
+STUB(fmi3InstantiateScheduledExecution) STUB(fmi3SetBoolean) STUB(fmi3SetClock)
+STUB(fmi3SetInt16) STUB(fmi3SetInt32) STUB(fmi3SetInt64) STUB(fmi3SetInt8)
 STUB(fmi3SetIntervalDecimal) STUB(fmi3SetIntervalFraction) STUB(fmi3SetShiftDecimal) STUB(fmi3SetShiftFraction)
-STUB(fmi3SetString) STUB(fmi3SetUInt16) STUB(fmi3SetUInt32) STUB(fmi3SetUInt8)
+STUB(fmi3SetUInt16) STUB(fmi3SetUInt32) STUB(fmi3SetUInt8)
