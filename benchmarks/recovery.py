@@ -330,8 +330,8 @@ def _manual_table(args: argparse.Namespace, r: dict) -> _table.Table:
                         else "–")])
     if "server_kills" in r:
         s = r["server_kills"]
-        rows.append([f"{args.server_kills} SIGKILLs of the server, each resumed",
-                     f"{s['resumes']} resumes, `values.csv` identical: {s['identical']}"])
+        rows.append([f"{args.server_kills} SIGKILL{'s' if args.server_kills != 1 else ''} of the server, each resumed",
+                     f"resumed {s['resumes']} times, `values.csv` identical: {s['identical']}"])
     if "replay" in r:
         p = r["replay"]
         rows.append([f"a grasp trial ({p['rows']} steps, {p['samples']} camera samples) replayed with its camera",

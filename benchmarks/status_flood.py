@@ -137,7 +137,7 @@ def main() -> None:
         f"A ring of 2, {args.steps:,} steps, medians of {args.repeat} interleaved rounds:",
         ["beside the run", "steps/s", "against plain", "told busy"],
         [[kind, _table.rate(median[kind]), f"{result['ratio_to_plain'][kind]:.2f}",
-          ", ".join(str(b) for b in result["floods"][kind]["busy"]) if kind in result["floods"] else None]
+          ", ".join(f"{b:,}" for b in result["floods"][kind]["busy"]) if kind in result["floods"] else None]
          for kind in kinds]))
     if args.json:
         print(json.dumps(result, indent=1))

@@ -185,7 +185,7 @@ def test_status_flood_benchmark_reports_the_floods_cost_and_that_the_server_said
     assert r["floods"]["flood, waiting"]["busy"][0] > r["floods"]["flood, waiting"]["answered"][0]
     [rows] = manual_tables(tmp_path / "flood.md")
     assert [(x["beside the run"], x["against plain"]) for x in rows][0] == ("plain", "1.00")
-    assert rows[2]["told busy"] == str(r["floods"]["flood, waiting"]["busy"][0]) and rows[1]["told busy"] == "–"
+    assert rows[2]["told busy"] == f"{r['floods']['flood, waiting']['busy'][0]:,}" and rows[1]["told busy"] == "–"
 
 
 def test_recovery_benchmark_reports_identical_records_at_a_small_scale(tmp_path):
@@ -204,9 +204,10 @@ def test_recovery_benchmark_reports_identical_records_at_a_small_scale(tmp_path)
     assert r["checkpoint_cost"]["ratio"] > 0
     assert "replay" not in r  # tests/test_replay.py runs the replayed trial
     [rows] = manual_tables(tmp_path / "recovery.md")
-    assert [x["case"].split(" ", 1)[1] for x in rows[:2]] == ["SIGKILLs of random node processes",
-                                                             "SIGKILLs of the server, each resumed"]
-    assert "`values.csv` identical: True" in rows[0]["result"] and rows[1]["result"] == "1 resumes, `values.csv` identical: True"
+    assert [x["case"] for x in rows[:2]] == ["2 SIGKILLs of random node processes",
+                                             "1 SIGKILL of the server, each resumed"]
+    assert "`values.csv` identical: True" in rows[0]["result"]
+    assert rows[1]["result"] == "resumed 1 times, `values.csv` identical: True"
     assert rows[2]["result"] == f"{r['checkpoint_cost']['ratio']:.2f}× the steps/s without"
 
 
