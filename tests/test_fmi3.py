@@ -96,15 +96,17 @@ _sizes = st.one_of(st.integers(-5, 70_000), st.floats(allow_nan=True), st.text(m
                    st.lists(st.integers(), max_size=2))
 
 
-@given(parameters=st.dictionaries(st.sampled_from(["m", "n", "r"]), _sizes, max_size=3))
-def test_any_structural_parameters_are_taken_or_refused_naming_the_node(tmp_path_factory, fmus, parameters):
-    """Whatever a project file sets them to: a size that fits is taken, anything else is an
+@given(parameters=st.dictionaries(st.sampled_from(["m", "n", "r"]), _sizes, max_size=3),
+       output=st.sampled_from(["s", "y"]))
+def test_any_structural_parameters_are_taken_or_refused_naming_the_node(tmp_path_factory, fmus, parameters, output):
+    """Whatever a project file sets them to, with a port on a scalar or on an array they size: a
+    size that fits is taken (an array port is then refused for being one), anything else is an
     FmuError naming the node (never another exception, never an array past the bound)."""
     tmp = tmp_path_factory.mktemp("p")
     cfg = tmp / "p.json"
     cfg.write_text(json.dumps({"serverIP": "tcp/127.0.0.1:7447", "nodeNum": 1, "linkNum": 0, "linkLists": [],
                                "nodeLists": [{"nodeName": "ss", "UID": 1, "fmu": str(fmus["statespace"]),
-                                              "input": ["g"], "output": ["s"], "parameters": parameters}]}))
+                                              "input": ["g"], "output": [output], "parameters": parameters}]}))
     try:
         spec = load_project(cfg).project.node("ss")
     except Exception as exc:  # noqa: BLE001 - the loader refuses a value JSON cannot give a parameter
@@ -116,9 +118,12 @@ def test_any_structural_parameters_are_taken_or_refused_naming_the_node(tmp_path
     try:
         check_fmu(fmus["statespace"], spec)
     except FmuError as exc:
-        assert not fits and str(exc).startswith("node 'ss': "), exc
+        assert not fits or output == "y", exc
+        assert str(exc).startswith("node 'ss': "), exc
+        if fits:
+            assert f"an array of shape [{sizes['r']}]" in str(exc)
         return
-    assert fits
+    assert fits and output == "s"
 
 
 def test_fmi3_string_binary_and_float32_ports_carry_their_values(tmp_path, fmus):

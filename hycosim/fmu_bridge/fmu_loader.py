@@ -144,11 +144,11 @@ def shape_of(md: ModelDescription, var: ScalarVariable, parameters: dict[str, An
                                f"{dim.valueReference}, which is not an integer variable of the FMU")
             size = parameters.get(param.name, param.start)
             source = f"structural parameter {param.name!r}"
-        try:
-            size = int(size)
-        except (TypeError, ValueError):
+        whole = _whole(size)
+        if whole is None:
             raise FmuError(f"{path.name}: a dimension of variable {var.name!r} ({source}) is {size!r}, "
-                           "not a whole number") from None
+                           "not a whole number")
+        size = whole
         if size < 1:
             raise FmuError(f"{path.name}: variable {var.name!r} would have a dimension of {size} ({source}); "
                            "each must be at least 1")
@@ -158,6 +158,16 @@ def shape_of(md: ModelDescription, var: ScalarVariable, parameters: dict[str, An
         raise FmuError(f"{path.name}: variable {var.name!r} would hold {elements:,} elements (shape "
                        f"{list(shape)}); hycosim takes at most {MAX_ELEMENTS:,} per variable")
     return tuple(shape)
+
+
+def _whole(value: Any) -> int | None:
+    """A size as a project file (an int) or a model description (its text) gives it; None for
+    anything else (a float, true, an infinity): never truncated."""
+    if type(value) is int:
+        return value
+    if type(value) is str and value.strip().lstrip("+-").isdigit():
+        return int(value)
+    return None
 
 
 # FMI 3 clocks by intervalVariability: time-based periodic ones tick on a fixed (or tunable)
