@@ -198,7 +198,7 @@ def _keys() -> dict[str, str]:
 
 def _probe(router: zenoh.Session, client: zenoh.Session, keys: dict[str, str]) -> set[tuple[str, str]]:
     """Which (message kind, key) the client could use, each tried for real through the router.
-    Each kind is tried in rounds (see ``_twice``): a refused use never gets through, so a
+    Each kind is tried in rounds (see ``_in_rounds``): a refused use never gets through, so a
     second try of what did not only spares a permitted one that was slow on a loaded machine."""
     by_key = {v: n for n, v in keys.items()}
     root = "hycosim/wire/**"
@@ -214,7 +214,7 @@ def _probe(router: zenoh.Session, client: zenoh.Session, keys: dict[str, str]) -
         sub.undeclare()
         return {("put" if s.kind == zenoh.SampleKind.PUT else "delete", by_key[str(s.key_expr)]) for s in got}
 
-    passed = _twice(written, {(kind, name) for name in keys for kind in ("put", "delete")})
+    passed = _in_rounds(written, {(kind, name) for name in keys for kind in ("put", "delete")})
 
     subs = {name: client.declare_subscriber(key, zenoh.handlers.FifoChannel(16)) for name, key in keys.items()}
     time.sleep(0.4)
@@ -225,7 +225,7 @@ def _probe(router: zenoh.Session, client: zenoh.Session, keys: dict[str, str]) -
         time.sleep(0.5)
         return {name for name in pending if subs[name].try_recv() is not None}
 
-    passed |= {("declare_subscriber", n) for n in _twice(heard, set(keys))}
+    passed |= {("declare_subscriber", n) for n in _in_rounds(heard, set(keys))}
     for s in subs.values():
         s.undeclare()
 
@@ -236,13 +236,16 @@ def _probe(router: zenoh.Session, client: zenoh.Session, keys: dict[str, str]) -
         return {by_key[k] for r in router.liveliness().get(root, timeout=1.0) if r.ok is not None
                 and (k := str(r.ok.key_expr)) in by_key}
 
-    passed |= {("liveliness_token", n) for n in _twice(seen, set(keys))}
+    passed |= {("liveliness_token", n) for n in _in_rounds(seen, set(keys))}
     for t in tokens:
         t.undeclare()
     time.sleep(0.3)
 
     server_tokens = [router.liveliness().declare_token(key) for key in keys.values()]
     time.sleep(0.3)
+    # Queried before the watchers below are declared and undeclared: in one CI run every
+    # query the monitor was allowed went unanswered in both rounds right after those undeclares.
+    passed |= {("liveliness_query", n) for n in _replied(lambda k: client.liveliness().get(k, timeout=2.0), keys)}
     watchers = {name: client.liveliness().declare_subscriber(key, zenoh.handlers.FifoChannel(16), history=True)
                 for name, key in keys.items()}
 
@@ -250,10 +253,9 @@ def _probe(router: zenoh.Session, client: zenoh.Session, keys: dict[str, str]) -
         time.sleep(0.5)
         return {name for name in pending if watchers[name].try_recv() is not None}
 
-    passed |= {("declare_liveliness_subscriber", n) for n in _twice(told, set(keys))}
+    passed |= {("declare_liveliness_subscriber", n) for n in _in_rounds(told, set(keys))}
     for w in watchers.values():
         w.undeclare()
-    passed |= {("liveliness_query", n) for n in _replied(lambda k: client.liveliness().get(k, timeout=2.0), keys)}
     for t in server_tokens:
         t.undeclare()
 
@@ -262,25 +264,27 @@ def _probe(router: zenoh.Session, client: zenoh.Session, keys: dict[str, str]) -
     return passed
 
 
-def _twice(attempt: Callable[[set], set], names: set) -> set:
-    """The names (or pairs) that got through ``attempt(pending)``, tried once more for those that did not:
+def _in_rounds(attempt: Callable[[set], set], names: set) -> set:
+    """The names (or pairs) that got through ``attempt(pending)``, tried twice more for those that did not:
     in one make test a permitted use was not through within its wait on the loaded machine,
     and a refused one never gets through however often it is tried."""
     found = attempt(set(names))
-    if names - found:
+    for _ in range(2):
+        if not names - found:
+            break
         found |= attempt(names - found)
     return found
 
 
 def _replied(ask, keys: dict[str, str]) -> set[str]:
-    """The names whose query (``ask(key)``) had an answer, in rounds as ``_twice`` tries them.
+    """The names whose query (``ask(key)``) had an answer, in rounds as ``_in_rounds`` tries them.
     A round's queries are all sent before any is waited on, so that the ones refused (which
     wait out their timeout) cost it once a round."""
     def answered(pending: set[str]) -> set[str]:
         sent = {name: ask(keys[name]) for name in pending}
         return {name for name, replies in sent.items() if any(r.ok is not None for r in replies)}
 
-    return _twice(answered, set(keys))
+    return _in_rounds(answered, set(keys))
 
 
 def _answered(answering: zenoh.Session, asking: zenoh.Session, keys: dict[str, str]) -> set[str]:
