@@ -126,3 +126,42 @@ class Bytes(Node):
 
     def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
         self.k += 1
+
+
+class Vector(Node):
+    """``v``: an array (of its port's shape) whose element i is (i + 1)·t, given as a numpy array;
+    ``total``: the sum of the elements of the array input ``a`` at the last step (0 at first)."""
+
+    INPUTS = frozenset({"a"})
+    OUTPUTS = frozenset({"v", "total"})
+
+    def setup(self, ctx: NodeContext) -> None:
+        import numpy as np
+
+        shape = next(p.shape for p in ctx.outputs if p.name == "v")
+        self.base = np.arange(1, int(np.prod(shape)) + 1, dtype=float).reshape(shape)
+        self.t, self.total = ctx.start_time, 0.0
+
+    def outputs(self) -> dict[str, Any]:
+        return {"v": self.base * self.t, "total": self.total}
+
+    def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
+        self.t = t + h
+        self.total = sum(inputs.get("a", [])) if "a" in inputs else 0.0
+
+    def get_state(self) -> bytes:
+        import struct
+
+        return struct.pack("<dd", self.t, self.total)
+
+    def set_state(self, state: bytes) -> None:
+        import struct
+
+        self.t, self.total = struct.unpack("<dd", state)
+
+
+class VectorOfThree(Vector):
+    """A Vector whose ``v`` holds three elements whatever its port's shape says."""
+
+    def outputs(self) -> dict[str, Any]:
+        return {"v": [1.0, 2.0, 3.0], "total": self.total}

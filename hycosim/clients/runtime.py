@@ -15,13 +15,13 @@ import signal
 import socket
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
 import structlog
 import zenoh
 
 from hycosim.core import frames, signals
-from hycosim.core.schema import WIRE_TYPES, PortType
+from hycosim.core.schema import WIRE_TYPES, Port, PortType, wire_types
 from hycosim.core.config import LoadedProject
 from hycosim.core.drops import DropLog
 from hycosim.core.inbox import LOCAL, Inbox
@@ -41,6 +41,26 @@ _COERCE = {
     PortType.STRING: str,
     PortType.BINARY: bytes,
 }
+
+
+def _coerce(port: Port) -> Callable[[Any], Any]:
+    """How a model's value for ``port`` becomes its wire value: an array's, element by element,
+    into a list of its shape's size (ValueError otherwise)."""
+    one = _COERCE[port.type]
+    if port.shape is None:
+        return one
+    size = port.size
+
+    def array(value: Any) -> list[Any]:
+        if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
+            raise ValueError(f"{type(value).__name__} {str(value)[:40]!r} for array port {port.name!r} "
+                             f"of shape {list(port.shape)}")
+        flat = value.ravel().tolist() if hasattr(value, "ravel") else list(value)
+        if len(flat) != size:
+            raise ValueError(f"{len(flat)} values for array port {port.name!r} of shape {list(port.shape)} "
+                             f"({size} elements)")
+        return [one(x) for x in flat]
+    return array
 
 
 # How long a node a supervisor stops (SIGTERM, SIGHUP) waits for the server to read its END:
@@ -67,9 +87,11 @@ class NodeRuntime:
         self.password = password
         self.cosim = loaded.project.coSimulation
         self.keys = ProjectKeys(loaded.project.projectName)
-        self._out_ports = [(p.name, _COERCE[p.type]) for p in self.spec.output]
+        self._out_ports = [(p.name, _coerce(p)) for p in self.spec.output]
         self._in_names = self.spec.input_names()
-        self._in_types = tuple(WIRE_TYPES[p.type] for p in self.spec.input)
+        self._in_types = tuple(wire_types(p) for p in self.spec.input)
+        self._in_arrays = tuple((i, p.size, WIRE_TYPES[p.type]) for i, p in enumerate(self.spec.input)
+                                if p.shape is not None)
         # Releases carry inputs for the stepping nodes; an asynchronous source only reads their time.
         self._release_for = None if self.spec.asynchronous else node_name
         # Multi-rate: this node steps over this many base steps, at every such base point.
@@ -102,7 +124,10 @@ class NodeRuntime:
         for port, coerce in self._out_ports:
             if port not in values:
                 raise NodeRunError(f"node {self.name!r}: its model returned no value for output {port!r}")
-            packed.append(coerce(values[port]))
+            try:
+                packed.append(coerce(values[port]))
+            except (TypeError, ValueError, OverflowError) as exc:
+                raise NodeRunError(f"node {self.name!r}: output {port!r}: {exc}") from None
         return packed
 
     def _on_server_liveliness(self, sample: zenoh.Sample) -> None:
@@ -294,11 +319,12 @@ class NodeRuntime:
                 self._release_for not in frame.inputs:
             return None  # a release of other nodes (this one is not due, or not yet in Gauss-Seidel order)
         if kind in (frames.START, frames.STEP, frames.STEPS):
-            return frames.check_release(frame, self._release_for, self._in_types, self._interpolates())
+            return frames.check_release(frame, self._release_for, self._in_types, self._interpolates(),
+                                        self._in_arrays)
         if kind == frames.INIT:
             if self.name not in frame.inputs:
                 return None  # the initialisation of other nodes
-            return frames.check_release(frame, self.name, self._in_types)
+            return frames.check_release(frame, self.name, self._in_types, input_arrays=self._in_arrays)
         if kind == frames.REPLAY:
             if frame.node != self.name:
                 return None
@@ -306,7 +332,7 @@ class NodeRuntime:
             if inner.kind not in (frames.START, frames.STEP, frames.STEPS):
                 raise frames.FrameError(f"a replay of a {frames.KIND_NAMES[inner.kind]} frame")
             return frames.Replay(self.name, frames.check_release(inner, self._release_for, self._in_types,
-                                                              self._interpolates()))
+                                                              self._interpolates(), self._in_arrays))
         if kind == frames.ROLLBACK:
             k, t = frame.step, frame.t
             if not (0 <= k < frames.MAX_STEP and math.isfinite(t)):

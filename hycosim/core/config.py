@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -97,6 +98,19 @@ def _split_port_ref(ref: str) -> tuple[str, str] | None:
     return (node, port) if node and port else None
 
 
+_ELEMENT = re.compile(r"^(?P<port>[^\[\]]+)\[(?P<index>\d{1,9})\]$")
+
+
+def _split_element(port: str) -> tuple[str, int | None]:
+    """``"y[2]"`` → ``("y", 2)``: one element of an array port; ``"y"`` → ``("y", None)``."""
+    m = _ELEMENT.match(port)
+    return (m["port"], int(m["index"])) if m else (port, None)
+
+
+def _shape_text(shape: tuple[int, ...] | None) -> str:
+    return "a scalar" if shape is None else f"an array of shape {list(shape)}"
+
+
 def _resolve_routes(project: Project, issues: list[Issue]) -> list[Route]:
     nodes = {n.nodeName: n for n in project.nodeLists}
     modes = set(project.modes())
@@ -122,7 +136,12 @@ def _resolve_routes(project: Project, issues: list[Issue]) -> list[Route]:
             pairs = [(link.source, o, link.target, n) for o, n in link.pairs]
         for j, (sn, sp, dn, dp) in enumerate(pairs):
             pw = where if link.pairs is None else f"{where}.pairs[{j}]"
+            sp, element = _split_element(sp)
             ok = True
+            if _split_element(dp)[1] is not None:
+                issues.append(Issue(f"{pw}.to", f"{dn}.{dp} names one element of an input",
+                                    "a link feeds a whole input: make the input a scalar port, or link a whole array"))
+                continue
             if sn not in nodes:
                 issues.append(Issue(f"{where}.from", f"unknown node {sn!r}", f"nodes are {sorted(nodes)}"))
                 ok = False
@@ -139,7 +158,26 @@ def _resolve_routes(project: Project, issues: list[Issue]) -> list[Route]:
                 ok = False
             if not ok:
                 continue
-            st, dt = nodes[sn].port(sp).type, nodes[dn].port(dp).type
+            src_port, dst_port = nodes[sn].port(sp), nodes[dn].port(dp)
+            src_shape = src_port.shape
+            if element is not None:
+                if src_port.shape is None:
+                    issues.append(Issue(f"{pw}.from", f"{sn}.{sp}[{element}] indexes a scalar port",
+                                        f"{sn}.{sp} is no array; link it as {sn}.{sp}"))
+                    continue
+                if element >= src_port.size:
+                    issues.append(Issue(f"{pw}.from", f"{sn}.{sp}[{element}] is out of range",
+                                        f"{sn}.{sp} has shape {list(src_port.shape)}: elements 0 to "
+                                        f"{src_port.size - 1}, row-major"))
+                    continue
+                src_shape = None
+            if src_shape != dst_port.shape:
+                shown = f"{sn}.{sp}" + ("" if element is None else f"[{element}]")
+                issues.append(Issue(pw, f"shape mismatch: {shown} is {_shape_text(src_shape)}, {dn}.{dp} is "
+                                    f"{_shape_text(dst_port.shape)}",
+                                    "link arrays of the same shape, or one element (node.port[i]) to a scalar"))
+                continue
+            st, dt = src_port.type, dst_port.type
             if st not in ASSIGNABLE[dt]:
                 issues.append(Issue(pw, f"type mismatch: {sn}.{sp} is {st.value}, {dn}.{dp} is {dt.value}",
                                     "a link may widen (Integer→Real) but not narrow"))
@@ -154,7 +192,7 @@ def _resolve_routes(project: Project, issues: list[Issue]) -> list[Route]:
                     issues.append(Issue(f"{where}.factor" if link.factor is not None else f"{where}.offset",
                                         f"a linear transformation into {dt.value} input {dn}.{dp}",
                                         "factor and offset apply to links into Real inputs"))
-            routes.append(Route(i, sn, sp, dn, dp, active, link.extrapolation, transform))
+            routes.append(Route(i, sn, sp, dn, dp, active, link.extrapolation, transform, element))
     # One writer per input per mode: two active feeders would make the value depend on order.
     for mode in sorted(modes):
         feeders: dict[tuple[str, str], int] = {}
@@ -250,6 +288,14 @@ def check_semantics(project: Project) -> tuple[list[Route], dict[str, EventGuard
             issues.append(Issue(f"nodeLists[{i}].drivenVariable", f"node {n.nodeName!r} is not an FMU node",
                                 "a Python node is told it is driven through set_mode; a bridge FMU through "
                                 "its hycosim_driven output"))
+        arrays = [p.name for p in (*n.input, *n.output) if p.shape is not None]
+        if arrays and not (n.fmu or n.model or n.replay or n.asynchronous):
+            issues.append(Issue(f"nodeLists[{i}]", f"node {n.nodeName!r} has array port {arrays[0]!r}, and its "
+                                "bridge FMU (a node with no fmu, model or replay) carries scalars only",
+                                "give the bridge node scalar ports"))
+        if n.asynchronous and arrays:
+            issues.append(Issue(f"nodeLists[{i}].output", f"asynchronous node {n.nodeName!r} has array port "
+                                f"{arrays[0]!r}", "an asynchronous source publishes scalar samples"))
         if n.asynchronous and n.input:
             issues.append(Issue(f"nodeLists[{i}].input", f"asynchronous node {n.nodeName!r} has inputs",
                                 "an asynchronous source only publishes samples"))
@@ -280,6 +326,7 @@ def check_semantics(project: Project) -> tuple[list[Route], dict[str, EventGuard
     event_names: set[str] = set()
     guards: dict[str, EventGuards] = {}
     outputs = {(n.nodeName, p.name) for n in project.nodeLists for p in n.output}
+    arrays_out = {(n.nodeName, p.name) for n in project.nodeLists for p in n.output if p.shape is not None}
     for i, e in enumerate(project.events):
         if e.name == FREE_MODE or e.name in event_names:
             issues.append(Issue(f"events[{i}].name", f"event name {e.name!r} is reserved or repeated"))
@@ -302,6 +349,9 @@ def check_semantics(project: Project) -> tuple[list[Route], dict[str, EventGuard
                 if ref not in outputs:
                     issues.append(Issue(f"events[{i}].{key}", f"guard names {ref[0]}.{ref[1]}, which is not a node output",
                                         "guards read node outputs as node.port"))
+                elif ref in arrays_out:
+                    issues.append(Issue(f"events[{i}].{key}", f"guard names {ref[0]}.{ref[1]}, an array port",
+                                        "guards read scalar outputs; give the node a scalar output for the guard"))
             compiled[key] = g
         if len(compiled) == len(given):
             guards[e.name] = EventGuards(**compiled)

@@ -339,7 +339,8 @@ def decode(payload: bytes) -> Frame:
 
 
 def check_release(frame: Frame, node: str | None = None, input_types: tuple[tuple[type, ...], ...] | None = None,
-                  interpolates: bool = False) -> Frame:
+                  interpolates: bool = False,
+                  input_arrays: tuple[tuple[int, int, tuple[type, ...]], ...] = ()) -> Frame:
     """Return a START, STEP, STEPS or INIT frame a node can act on; raise FrameError otherwise.
 
     :func:`decode` has checked the field types. Here: times finite, a step size above zero
@@ -348,8 +349,10 @@ def check_release(frame: Frame, node: str | None = None, input_types: tuple[tupl
     ``len(input_types)`` of them, each of one of its port's types (``input_types``: per input,
     the Python types msgpack yields for it). A STEP's slopes for that node only if it
     ``interpolates``: one entry per input, None or 1 to MAX_SLOPE_ORDER finite numbers, and
-    numbers only for an input that takes floats. A release anyone on an unsecured network may
-    have written is checked before a node acts on it.
+    numbers only for an input that takes floats. ``input_arrays``: (index, size, element types)
+    of each array input (whose ``input_types`` is a list): that many elements, each of those
+    types. A release anyone on an unsecured network may have written is checked before a node
+    acts on it.
     """
     isfinite = math.isfinite
     if frame.kind == START:
@@ -388,6 +391,11 @@ def check_release(frame: Frame, node: str | None = None, input_types: tuple[tupl
             if i is not None:
                 raise FrameError(f"{KIND_NAMES[frame.kind]} {k} gives node {node!r} a {type(mine[i]).__name__} "
                                  f"for input {i}")
+            for i, size, element in input_arrays:
+                value = mine[i]
+                if len(value) != size or first_misfit(value, [element] * size) is not None:
+                    raise FrameError(f"{KIND_NAMES[frame.kind]} {k} gives node {node!r} {short(value)} for "
+                                     f"input {i}, an array of {size} elements")
     return frame
 
 

@@ -33,6 +33,10 @@ PROJECT_FILE = "project.json"
 _INTEGER = re.compile(r"[+-]?\d+")
 
 
+def _shown(shape: tuple[int, ...] | None) -> str:
+    return "none (a scalar)" if shape is None else str(list(shape))
+
+
 class RecordingError(RuntimeError):
     """A recording that cannot be played for a node; the message says why."""
 
@@ -115,14 +119,17 @@ class Recording:
         found = []
         if recorded.asynchronous != spec.asynchronous:
             found.append(f"{spec.nodeName!r} was {'' if recorded.asynchronous else 'not '}asynchronous there")
-        theirs = {p.name: p.type for p in recorded.output}
+        theirs = {p.name: p for p in recorded.output}
         for p in spec.output:
             if p.name not in theirs:
                 found.append(f"it recorded no output {p.name!r} of {spec.nodeName!r} "
                              f"(its outputs: {', '.join(theirs) or 'none'})")
-            elif theirs[p.name] != p.type:
-                found.append(f"output {spec.nodeName}.{p.name} was {theirs[p.name].value} there, "
+            elif theirs[p.name].type != p.type:
+                found.append(f"output {spec.nodeName}.{p.name} was {theirs[p.name].type.value} there, "
                              f"{p.type.value} here")
+            elif theirs[p.name].shape != p.shape:
+                found.append(f"output {spec.nodeName}.{p.name} had shape {_shown(theirs[p.name].shape)} there, "
+                             f"{_shown(p.shape)} here")
         if ours.stepSize != cosim.stepSize:
             found.append(f"it stepped {ours.stepSize:g} s, this project {cosim.stepSize:g} s")
         if ours.startTime != cosim.startTime:
@@ -139,14 +146,15 @@ class Recording:
     def outputs(self, spec: Node) -> list[tuple[float, list[Any]]]:
         """The stepping node's recorded outputs, (t, values in ``spec``'s output order) per point."""
         path = self.run_dir / VALUES_FILE
-        columns = ["t", *(f"{spec.nodeName}.{p.name}" for p in spec.output)]
-        converters = [_CELL[p.type] for p in spec.output]
+        ports = [(p.columns(spec.nodeName), _CELL[p.type], p.shape is not None) for p in spec.output]
+        columns = ["t", *(c for cols, _, _ in ports for c in cols)]
         rows: list[tuple[float, list[Any]]] = []
         try:
             for number, row in enumerate(iter_csv_rows(path, required=columns), start=2):
                 try:
                     t = float(row["t"])
-                    values = [convert(row[c]) for convert, c in zip(converters, columns[1:])]
+                    values = [[convert(row[c]) for c in cols] if array else convert(row[cols[0]])
+                              for cols, convert, array in ports]
                 except ValueError as exc:
                     raise RecordingError(f"replay: {path}: line {number}: {exc}") from None
                 if not math.isfinite(t) or (rows and t <= rows[-1][0]):

@@ -11,11 +11,12 @@ entries (links against ports, modes, guards, the coupling) is checked by
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from enum import Enum
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictInt, field_validator, model_validator
 
 
 FREE_MODE = "free"
@@ -48,6 +49,27 @@ WIRE_TYPES: dict[PortType, tuple[type, ...]] = {
     PortType.BINARY: (bytes, list),
 }
 
+# The start values an array port's elements may have, as JSON gives them.
+_ELEMENT_TYPES = {PortType.REAL: (float, int), PortType.INTEGER: (int,), PortType.BOOLEAN: (bool,)}
+
+def wire_types(port: "Port") -> tuple[type, ...]:
+    """The Python types a port's value has on the wire: an array port's is a list (whose
+    elements :func:`array_misfit` checks)."""
+    return (list,) if port.shape is not None else WIRE_TYPES[port.type]
+
+
+def array_misfit(port: "Port", value: list) -> str | None:
+    """What is wrong with a list as the value of array ``port`` (its length, an element's
+    type, as msgpack yields them), in words; None when it fits."""
+    if len(value) != port.size:
+        return f"{len(value)} elements where shape {list(port.shape)} holds {port.size}"
+    allowed = WIRE_TYPES[port.type]
+    for i, x in enumerate(value):
+        if type(x) not in allowed:
+            return f"element {i} is a {type(x).__name__}, not a {port.type.value}"
+    return None
+
+
 _DEFAULT_START = {
     PortType.REAL: 0.0,
     PortType.INTEGER: 0,
@@ -61,6 +83,12 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", populate_by_name=True, frozen=True)
 
 
+# The most elements an array port may hold (the bound FMU array variables have too).
+MAX_ARRAY_ELEMENTS = 65_536
+# The element types an array port may have.
+ARRAY_TYPES = (PortType.REAL, PortType.INTEGER, PortType.BOOLEAN)
+
+
 class Port(_Strict):
     name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")
     type: PortType = PortType.REAL
@@ -68,9 +96,58 @@ class Port(_Strict):
     start: Any = None
     # For FMU nodes: the FMU variable this port maps to, when its name differs.
     variable: str | None = None
+    # An array port: its dimensions; values travel flattened, row-major, as one list.
+    shape: tuple[StrictInt, ...] | None = None
+
+    @field_validator("shape")
+    @classmethod
+    def _shape(cls, value: tuple[int, ...] | None) -> tuple[int, ...] | None:
+        if value is None:
+            return None
+        if not value or any(type(d) is not int or d < 1 for d in value):
+            raise ValueError("shape is one or more dimensions, each a whole number of at least 1")
+        if math.prod(value) > MAX_ARRAY_ELEMENTS:
+            raise ValueError(f"shape {list(value)} holds {math.prod(value):,} elements; "
+                             f"a port holds at most {MAX_ARRAY_ELEMENTS:,}")
+        return value
+
+    @model_validator(mode="after")
+    def _array(self) -> "Port":
+        if self.shape is None:
+            return self
+        if self.type not in ARRAY_TYPES:
+            raise ValueError(f"an array port holds Real, Integer or Boolean values, not {self.type.value}")
+        starts = self.start if isinstance(self.start, list) else [self.start]
+        if isinstance(self.start, list) and len(self.start) != self.size:
+            raise ValueError(f"start has {len(self.start)} values for shape {list(self.shape)} "
+                             f"({self.size} elements)")
+        fits = _ELEMENT_TYPES[self.type]
+        wrong = next((v for v in starts if v is not None and type(v) not in fits), None)
+        if wrong is not None or (isinstance(self.start, list) and None in starts):
+            raise ValueError(f"start {wrong!r} is no {self.type.value} value")
+        return self
+
+    @property
+    def size(self) -> int | None:
+        """How many elements an array port holds; None for a scalar port."""
+        return None if self.shape is None else math.prod(self.shape)
 
     def start_value(self) -> Any:
-        return _DEFAULT_START[self.type] if self.start is None else self.start
+        one = _DEFAULT_START[self.type] if self.start is None else self.start
+        if self.shape is None or isinstance(one, list):
+            return list(one) if isinstance(one, list) else one
+        return [one] * self.size
+
+    def columns(self, node: str) -> list[str]:
+        """The port's columns in ``values.csv``: ``node.port``, or one per element of an array,
+        ``node.port[0]``, ``node.port[1]``, … (flat, row-major)."""
+        label = f"{node}.{self.name}"
+        return [label] if self.shape is None else [f"{label}[{i}]" for i in range(self.size)]
+
+    def wire(self) -> str:
+        """``name:Type``, ``name:Type[2,3]`` for an array: what server and node agree on."""
+        dims = "" if self.shape is None else "[" + ",".join(map(str, self.shape)) + "]"
+        return f"{self.name}:{self.type.value}{dims}"
 
 
 def _as_port(value: Any) -> Any:
@@ -128,8 +205,7 @@ class Node(_Strict):
     def wire_ports(self) -> dict[str, list[str]]:
         """The node's ports as frames carry them, ``name:Type`` in order: what the server and a
         node must agree on, however else their copies of the project file differ."""
-        return {"input": [f"{p.name}:{p.type.value}" for p in self.input],
-                "output": [f"{p.name}:{p.type.value}" for p in self.output]}
+        return {"input": [p.wire() for p in self.input], "output": [p.wire() for p in self.output]}
 
 
 class Link(_Strict):
@@ -379,6 +455,8 @@ class Route:
     extrapolation: str
     # (factor, offset) of a linear transformation; None: the value as it is.
     transform: tuple[float, float] | None = None
+    # One element of an array output (flat, row-major) into a scalar input; None: the whole port.
+    src_element: int | None = None
 
     def active(self, mode: str) -> bool:
         return self.active_in is None or mode in self.active_in

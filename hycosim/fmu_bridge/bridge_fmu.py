@@ -64,6 +64,9 @@ def _check_node(node: Node) -> None:
     if node.asynchronous:
         raise BridgeBuildError(f"node {node.nodeName!r} is asynchronous; bridge FMUs step with the barrier")
     for port in (*node.input, *node.output):
+        if port.shape is not None:
+            raise BridgeBuildError(f"node {node.nodeName!r}, port {port.name!r}: bridge FMUs carry scalar ports, "
+                                   f"not arrays (shape {list(port.shape)})")
         if port.type not in _TYPE_CODE:
             raise BridgeBuildError(f"node {node.nodeName!r}, port {port.name!r}: bridge FMUs carry Real, Integer "
                                    f"and Boolean ports, not {port.type.value}")

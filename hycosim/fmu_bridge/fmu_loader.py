@@ -59,6 +59,8 @@ class MappedPort:
     variable: str
     vr: int
     type: str
+    # An array variable: how many elements it holds (flat, row-major); None for a scalar.
+    size: int | None = None
 
 
 def describe(path: Path) -> ModelDescription:
@@ -274,13 +276,17 @@ def map_ports(md: ModelDescription, node: Node, path: Path,
             shape = shape_of(md, var, parameters, path)
         except FmuError as exc:
             raise FmuError(f"node {node.nodeName!r}: {kind} {port.name!r}: {exc}") from None
-        if shape:
+        ours = tuple(port.shape or ())
+        if shape != ours:
             # The model description says so already: refused here, not at the first point
             # where reading one value of several fails.
-            raise FmuError(f"node {node.nodeName!r}: {kind} {port.name!r} maps to variable {name!r} of "
-                           f"{path.name}, an array of shape {list(shape)}; hycosim maps only scalar variables "
-                           "to ports so far")
-        return MappedPort(port.name, name, var.valueReference, var.type)
+            theirs = f"an array of shape {list(shape)}" if shape else "a scalar"
+            hint = (f'give the port "shape": {list(shape)}' if shape and not ours
+                    else "give the port the variable's shape" if shape else 'leave "shape" out')
+            raise FmuError(f"node {node.nodeName!r}: {kind} {port.name!r}"
+                           + (f" (shape {list(ours)})" if ours else "")
+                           + f" maps to variable {name!r} of {path.name}, {theirs} ({hint})")
+        return MappedPort(port.name, name, var.valueReference, var.type, math.prod(shape) if shape else None)
 
     missing = [f"{kind} {p.name!r}" + (f" (variable {p.variable!r})" if p.variable else "")
                for kind, ports in (("input", node.input), ("output", node.output))
@@ -482,7 +488,7 @@ class FmuInstance:
         # FMI 2 only: FMI 3 co-simulation has no input derivatives.
         self.can_interpolate = not self.fmi3 and bool(getattr(cs, "canInterpolateInputs", False))
         self._variables = {v.name: v for v in self.md.modelVariables}
-        self._starts = {p.variable or p.name: p.start for p in node.input if p.start is not None}
+        self._starts = {p.variable or p.name: p.start_value() for p in node.input if p.start is not None}
         self._parameters = parameters
         self._unzipdir = tempfile.mkdtemp(prefix=f"hycosim-{self.node}-")
         fmpy.extract(str(path), self._unzipdir)
@@ -511,28 +517,33 @@ class FmuInstance:
 
     # --- values ---------------------------------------------------------------------
 
-    def _set(self, var: ScalarVariable, value: Any) -> None:
+    def _set(self, var: ScalarVariable, value: Any, size: int | None = None) -> None:
+        """Set one variable: a scalar, or (``size``) every element of an array variable from a list."""
         vr = [var.valueReference]
         t = var.type
+        values = [value] if size is None else value
         try:
             if t in ("Real", "Float64"):
-                (self.fmu.setFloat64 if self.fmi3 else self.fmu.setReal)(vr, [float(value)])
+                (self.fmu.setFloat64 if self.fmi3 else self.fmu.setReal)(vr, [float(v) for v in values])
             elif t == "Float32":
-                self.fmu.setFloat32(vr, [float(value)])
+                self.fmu.setFloat32(vr, [float(v) for v in values])
             elif t == "Boolean":
-                self.fmu.setBoolean(vr, [bool(value)])
+                self.fmu.setBoolean(vr, [bool(v) for v in values])
             elif t == "String":
-                self.fmu.setString(vr, [str(value)])
+                self.fmu.setString(vr, [str(v) for v in values])
             elif t == "Binary":
-                self.fmu.setBinary(vr, [bytes(value)])
+                self.fmu.setBinary(vr, [bytes(v) for v in values])
             elif self.fmi3:
-                getattr(self.fmu, f"set{t if t != 'Enumeration' else 'Int64'}")(vr, [int(value)])
+                getattr(self.fmu, f"set{t if t != 'Enumeration' else 'Int64'}")(vr, [int(v) for v in values])
             else:
-                self.fmu.setInteger(vr, [int(value)])
+                self.fmu.setInteger(vr, [int(v) for v in values])
         except FMICallException as exc:
             raise FmuError(f"node {self.node!r}: setting {var.name!r} = {value!r} failed ({exc})") from None
 
-    def _get(self, vr: int, t: str) -> Any:
+    def _get(self, vr: int, t: str, size: int | None = None) -> Any:
+        """Read one variable: a scalar, or (``size``) an array variable's elements as a list."""
+        if size is not None:
+            return self._get_array(vr, t, size)
         if t in ("Real", "Float64"):
             return (self.fmu.getFloat64 if self.fmi3 else self.fmu.getReal)([vr])[0]
         if t == "Float32":
@@ -547,12 +558,20 @@ class FmuInstance:
             return int(getattr(self.fmu, f"get{t if t != 'Enumeration' else 'Int64'}")([vr])[0])
         return int(self.fmu.getInteger([vr])[0])
 
+    def _get_array(self, vr: int, t: str, size: int) -> list[Any]:
+        # Only FMI 3 has arrays, and only of the types an array port takes (Real, Integer, Boolean).
+        if t == "Boolean":
+            return [bool(v) for v in self.fmu.getBoolean([vr], size)]
+        if t in ("Float64", "Float32"):
+            return list(getattr(self.fmu, f"get{t}")([vr], size))
+        return [int(v) for v in getattr(self.fmu, f"get{t if t != 'Enumeration' else 'Int64'}")([vr], size)]
+
     def set_variable(self, name: str, value: Any) -> None:
         """Set a parameter or start value by FMU variable name."""
         var = self._variables.get(name)
         if var is None:
             raise FmuError(f"node {self.node!r}: parameter {name!r} is not a variable of {self.path.name}")
-        self._set(var, value)
+        self._set(var, value, len(value) if isinstance(value, list) else None)
 
     def set_driven(self, driven: bool) -> None:
         """Tell the FMU, through its ``drivenVariable`` (if any), whether an event drives it."""
@@ -562,7 +581,7 @@ class FmuInstance:
     def set_inputs(self, values: dict[str, Any]) -> None:
         for m in self.inputs:
             if m.port in values:
-                self._set(self._variables[m.variable], values[m.port])
+                self._set(self._variables[m.variable], values[m.port], m.size)
 
     def set_input_derivatives(self, derivatives: dict[str, list[float]]) -> None:
         """Give Real inputs (by port) their time derivatives at the next step's start, orders 1,
@@ -583,7 +602,7 @@ class FmuInstance:
 
     def get_outputs(self) -> dict[str, Any]:
         try:
-            return {m.port: self._get(m.vr, m.type) for m in self.outputs}
+            return {m.port: self._get(m.vr, m.type, m.size) for m in self.outputs}
         except FMICallException as exc:
             raise FmuError(f"node {self.node!r}: reading outputs failed ({exc})") from None
 

@@ -442,6 +442,9 @@ def export_problems(project: Any) -> list[str]:
             found.append(f"{where}: replay")
         if n.drivenVariable or n.interface or n.solver or n.relativeTolerance or n.maxStep:
             found.append(f"{where}: drivenVariable, interface or solver settings")
+        arrays = [p.name for p in (*n.input, *n.output) if p.shape is not None]
+        if arrays:  # SSP 1.0 connectors are scalars
+            found.append(f"{where}: array port{'s' if len(arrays) > 1 else ''} {', '.join(arrays)}")
     for i, link in enumerate(project.linkLists):
         if link.activeIn is not None:
             found.append(f"linkLists[{i}]: activeIn (modes)")

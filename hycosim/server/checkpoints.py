@@ -28,7 +28,7 @@ import msgpack
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from hycosim.core import frames, json_text
-from hycosim.core.schema import WIRE_TYPES, Port, Project
+from hycosim.core.schema import Port, Project, array_misfit, wire_types
 from hycosim.server.interpolation import MAX_DEGREE, InputTrack
 
 KEEP = 2
@@ -240,10 +240,14 @@ def _wrong_values(values: list[Any], ports: list[Port]) -> str | None:
     """What is wrong with ``values`` as one value for each of ``ports`` (their wire types), or None."""
     if len(values) != len(ports):
         return f"{len(values)} values for {len(ports)} ports"
-    i = frames.first_misfit(values, (WIRE_TYPES[p.type] for p in ports))
-    if i is None:
-        return None
-    return f"{ports[i].name} holds {type(values[i]).__name__} {frames.short(values[i])}, not a {ports[i].type.value}"
+    i = frames.first_misfit(values, (wire_types(p) for p in ports))
+    if i is not None:
+        return f"{ports[i].name} holds {type(values[i]).__name__} {frames.short(values[i])}, not a {ports[i].type.value}"
+    for value, port in zip(values, ports):
+        wrong = array_misfit(port, value) if port.shape is not None else None
+        if wrong is not None:
+            return f"{port.name} holds {wrong}"
+    return None
 
 
 def _first_problem(exc: ValidationError) -> str:

@@ -108,13 +108,18 @@ def residuals(before: dict[str, list[Any]], now: dict[str, list[Any]], names: di
     out: dict[str, float] = {}
     for node, old in before.items():
         for port, a, b in zip(names[node], old, now[node]):
-            if type(a) in (int, float) and type(b) in (int, float):
-                change = abs(b - a) / max(1.0, abs(a)) if math.isfinite(a) and math.isfinite(b) else (
-                    0.0 if a == b else math.inf)
+            if type(a) is list and type(b) is list and len(a) == len(b):  # an array port: its worst element
+                out[f"{node}.{port}"] = max(map(_change, a, b), default=0.0)
             else:
-                change = 0.0 if a == b else math.inf
-            out[f"{node}.{port}"] = change
+                out[f"{node}.{port}"] = _change(a, b)
     return out
+
+
+def _change(a: Any, b: Any) -> float:
+    if type(a) in (int, float) and type(b) in (int, float):
+        return abs(b - a) / max(1.0, abs(a)) if math.isfinite(a) and math.isfinite(b) else (
+            0.0 if a == b else math.inf)
+    return 0.0 if a == b else math.inf
 
 
 def describe_loop(group: Group, routes: list[Route], feedthrough: dict[str, dict[str, set[str]]]) -> str:

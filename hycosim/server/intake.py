@@ -19,7 +19,7 @@ from typing import Any
 import structlog
 
 from hycosim.core import frames
-from hycosim.core.schema import WIRE_TYPES, Node
+from hycosim.core.schema import Node, array_misfit, wire_types
 from hycosim.core.drops import DropLog
 
 
@@ -54,7 +54,9 @@ class Intake:
     def __init__(self, nodes: list[Node]):
         self._nodes = {n.nodeName: n for n in nodes}
         self._ports = {n.nodeName: [p.name for p in n.output] for n in nodes}
-        self._types = {n.nodeName: [WIRE_TYPES[p.type] for p in n.output] for n in nodes}
+        self._types = {n.nodeName: [wire_types(p) for p in n.output] for n in nodes}
+        # Array outputs, (index, port): checked element by element after the plain pass.
+        self._arrays = {n.nodeName: [(i, p) for i, p in enumerate(n.output) if p.shape is not None] for n in nodes}
         self.non_finite: dict[str, dict[str, float]] = {}  # "node.port" → first {"step", "t"} (or "t")
         self._log = structlog.get_logger("server.intake")
         self.drops = DropLog(self._log)
@@ -128,7 +130,7 @@ class Intake:
             self._check_values(node, frame, t, last)
 
     def _check_values(self, node: str, frame: frames.Frame, t: float, values: object) -> None:
-        """Dropped unless ``values`` are one value of its port's type for each of ``node``'s outputs."""
+        """Dropped unless ``values`` are one value of its port's type (and shape) for each of ``node``'s outputs."""
         ports = self._ports[node]
         if type(values) is not list:
             raise Dropped("wrong type", f"from {node}: {frames.short(values)} where its outputs' values go")
@@ -142,6 +144,15 @@ class Intake:
                 raise Dropped("wrong type", f"{node}.{port} got {type(value).__name__} {frames.short(value)}")
             if type(value) is float and not math.isfinite(value):
                 self._note_non_finite(f"{node}.{port}", frame, t, value)
+        for i, spec in self._arrays[node]:
+            value = values[i]
+            wrong = array_misfit(spec, value)
+            if wrong is not None:
+                raise Dropped("wrong type", f"{node}.{spec.name}: {wrong}")
+            for j, x in enumerate(value):
+                if type(x) is float and not math.isfinite(x):
+                    self._note_non_finite(f"{node}.{spec.name}[{j}]", frame, t, x)
+                    break
 
     def _note_non_finite(self, label: str, frame: frames.Frame, t: float, value: float) -> None:
         if label in self.non_finite:

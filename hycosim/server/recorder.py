@@ -21,7 +21,7 @@ import json
 import os
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 from hycosim.core.schema import PortType
 
@@ -51,6 +51,15 @@ def _cell(value: Any) -> Any:
     if isinstance(value, (bytes, bytearray)):
         return value.hex() if len(value) <= 32 else f"<{len(value)} bytes>"
     return value
+
+
+def _cells(values: list[Any], arrays: list[bool]) -> Iterator[Any]:
+    """A node's values as cells: an array's elements one to a cell."""
+    for value, array in zip(values, arrays):
+        if array:
+            yield from map(_cell, value)
+        else:
+            yield _cell(value)
 
 
 class _RecordFile:
@@ -129,8 +138,13 @@ class Recorder:
         self._nodes = [n.nodeName for n in project.nodeLists]
         # Numbers go to the CSV as they are; only nodes with boolean or byte ports need _cell.
         plain = (PortType.REAL, PortType.INTEGER, PortType.STRING)
-        self._plain_out = {n.nodeName: all(p.type in plain for p in n.output) for n in project.nodeLists}
-        self._plain_in = {n.nodeName: all(p.type in plain for p in n.input) for n in project.nodeLists}
+        self._plain_out = {n.nodeName: all(p.type in plain and p.shape is None for p in n.output)
+                           for n in project.nodeLists}
+        self._plain_in = {n.nodeName: all(p.type in plain and p.shape is None for p in n.input)
+                          for n in project.nodeLists}
+        # Per node, which ports are arrays (one column per element): for the nodes not plain.
+        self._arrays_out = {n.nodeName: [p.shape is not None for p in n.output] for n in project.nodeLists}
+        self._arrays_in = {n.nodeName: [p.shape is not None for p in n.input] for n in project.nodeLists}
         self._stepping = [n.nodeName for n in project.stepping_nodes()]
         # A multi-rate run says at each point which nodes started a step there.
         self._marks_steps = loaded.coupling.multirate
@@ -149,8 +163,8 @@ class Recorder:
         self._values = csv.writer(self._values_file.buffer)
         self._timing = csv.writer(self._timing_file.buffer)
         if resume_at is None:
-            out_cols = [f"{n.nodeName}.{p.name}" for n in project.nodeLists for p in n.output]
-            in_cols = [f"{n.nodeName}.{p.name}" for n in project.nodeLists for p in n.input]
+            out_cols = [c for n in project.nodeLists for p in n.output for c in p.columns(n.nodeName)]
+            in_cols = [c for n in project.nodeLists for p in n.input for c in p.columns(n.nodeName)]
             self._values.writerow(["step", "t", "mode", *(["stepped"] if self._marks_steps else []),
                                    *out_cols, *in_cols])
             self._timing.writerow(["step", "t", "wait_s", "holder", "lateness_s",
@@ -173,9 +187,9 @@ class Recorder:
         if self._marks_steps:
             cells.append(" ".join(stepped or ()))
         for n in self._nodes:
-            cells.extend(outputs[n] if self._plain_out[n] else map(_cell, outputs[n]))
+            cells.extend(outputs[n] if self._plain_out[n] else _cells(outputs[n], self._arrays_out[n]))
         for n in self._nodes:
-            cells.extend(inputs[n] if self._plain_in[n] else map(_cell, inputs[n]))
+            cells.extend(inputs[n] if self._plain_in[n] else _cells(inputs[n], self._arrays_in[n]))
         self._values.writerow(cells)
         self.meta["steps"] = step + 1
 

@@ -45,14 +45,21 @@ def input_change(candidate: Mapping[str, list[Any]], used: Mapping[str, list[Any
     for node, new in candidate.items():
         old = used[node]
         for i, (a, b) in enumerate(zip(old, new)):
-            if a == b or not (_is_number(a) and _is_number(b)):
+            if a == b:
                 continue
-            d = abs(b - a)
-            scaled = d / (tolerance * max(1.0, abs(a), abs(b)))
-            if not math.isfinite(scaled):
-                scaled = math.inf  # a non-finite input never converges; the step's node said so
-            if scaled > worst:
-                worst, where, absolute = scaled, labels[node][i], d
+            if type(a) is list and type(b) is list:  # an array input: element by element
+                pairs = [(f"{labels[node][i]}[{j}]", x, y) for j, (x, y) in enumerate(zip(a, b))]
+            else:
+                pairs = [(labels[node][i], a, b)]
+            for label, x, y in pairs:
+                if x == y or not (_is_number(x) and _is_number(y)):
+                    continue
+                d = abs(y - x)
+                scaled = d / (tolerance * max(1.0, abs(x), abs(y)))
+                if not math.isfinite(scaled):
+                    scaled = math.inf  # a non-finite input never converges; the step's node said so
+                if scaled > worst:
+                    worst, where, absolute = scaled, label, d
     return worst, where, absolute
 
 
@@ -63,8 +70,14 @@ def relaxed(candidate: Mapping[str, list[Any]], used: Mapping[str, list[Any]], f
     out: dict[str, list[Any]] = {}
     for node, new in candidate.items():
         old = used[node]
-        out[node] = [a + factor * (b - a) if type(a) is float and _is_number(b) else b for a, b in zip(old, new)]
+        out[node] = [_relax(a, b, factor) for a, b in zip(old, new)]
     return out
+
+
+def _relax(a: Any, b: Any, factor: float) -> Any:
+    if type(a) is list and type(b) is list:
+        return [_relax(x, y, factor) for x, y in zip(a, b)]
+    return a + factor * (b - a) if type(a) is float and _is_number(b) else b
 
 
 @dataclass

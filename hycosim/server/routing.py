@@ -32,6 +32,17 @@ def _linear(factor: float, offset: float) -> Callable[[Any], float]:
     return lambda value: factor * value + offset
 
 
+def _for_shape(convert: Callable[[Any], Any] | None, array: bool,
+               element: int | None) -> Callable[[Any], Any] | None:
+    """A hop's conversion of a scalar value made to fit what the hop carries: one element of an
+    array (``element``), or every element of one (``array``)."""
+    if element is not None:
+        return (lambda value: value[element]) if convert is None else (lambda value: convert(value[element]))
+    if array and convert is not None:
+        return lambda value: [convert(x) for x in value]
+    return convert
+
+
 class OutputView(Mapping[tuple[str, str], Any]):
     """Read-only view of the outputs at a macro-step point, keyed (node, port), for guards."""
 
@@ -75,6 +86,7 @@ class Router:
                     widen = float
                 elif dst_port.type is PortType.INTEGER and src_port.type is PortType.BOOLEAN:
                     widen = int
+                widen = _for_shape(widen, src_port.shape is not None, r.src_element)
                 hops.append(_Hop(r.dst_node, dst.input_names().index(r.dst_port), r.src_node,
                                  src.output_names().index(r.src_port), r.extrapolation, widen,
                                  f"{r.dst_node}.{r.dst_port}"))

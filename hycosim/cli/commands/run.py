@@ -84,6 +84,7 @@ def run(
 
     file = project_file(file, step, stop)
     loaded = load(file)
+    _refuse_unfit_fmus(loaded)
     if in_process is None:
         in_process = loaded.project.coSimulation.transport == "inprocess"
     if in_process:
@@ -111,6 +112,24 @@ def run(
         raise typer.Exit(result.code)
     summary = summarise(result.run_dir)
     print_summary(summary)
+
+
+def _refuse_unfit_fmus(loaded) -> None:
+    """End the command (exit 2, as validate) on an FMU node whose model description already shows
+    that it cannot run (a port on an array of another shape, clocks, a parameter it lacks): named
+    before a run directory is made, not by the node's process after the launch. Reads model
+    descriptions only; a missing file is left to the node, which says how to build it."""
+    from hycosim.fmu_bridge.fmu_loader import FmuError, check_fmu
+
+    for spec in loaded.project.nodeLists:
+        if not spec.fmu or spec.replay or spec.asynchronous:
+            continue
+        path = loaded.resolve(spec.fmu)
+        if path.is_file():
+            try:
+                check_fmu(path, spec)
+            except FmuError as exc:
+                fail(str(exc))
 
 
 def _run_in_process(loaded, runs_dir: Path, progress: bool, *, listen: Optional[str], resume: Optional[Path],
