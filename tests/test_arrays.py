@@ -28,9 +28,17 @@ def fmus(tmp_path_factory):
     return build(tmp_path_factory.mktemp("fmi3"))
 
 
-def _project(tmp_path, fmu, sizes=None, stop=0.5, cosim=None, name="arr", vec=None, **changes):
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    from benchmarks._small_fmus import build as build_small
+
+    return build_small(tmp_path_factory.mktemp("small"))
+
+
+def _project(tmp_path, fmu, sizes=None, stop=0.5, cosim=None, name="arr", vec=None, feedthrough=None, **changes):
     """ss (the state-space FMU: u of m elements in, y of r out) fed by vec (a Python node's array
-    v, doubled on the way), ss.y back into vec.a whole, and its element 1 into a gain."""
+    v, doubled on the way), ss.y back into vec.a whole, and its element 1 into a gain (and,
+    with ``feedthrough``, its last element into that FMI 2 FMU's scalar input)."""
     m, r = (sizes or {}).get("m", 2), (sizes or {}).get("r", 3)
     ss = {"nodeName": "ss", "UID": 1, "fmu": str(fmu), "input": [{"name": "u", "shape": [m]}],
           "output": [{"name": "y", "shape": [r]}, "s"]}
@@ -42,6 +50,9 @@ def _project(tmp_path, fmu, sizes=None, stop=0.5, cosim=None, name="arr", vec=No
     links = [{"from": "vec.v", "to": "ss.u", "factor": 2.0}, {"from": "ss.y", "to": "vec.a"},
              {"from": "ss.y[1]", "to": "g.u"}]
     nodes = [ss, vec, g]
+    if feedthrough is not None:
+        nodes.append({"nodeName": "ft", "UID": 4, "fmu": str(feedthrough), "input": ["u"], "output": ["y"]})
+        links.append({"from": f"ss.y[{r - 1}]", "to": "ft.u"})
     for key, value in changes.items():
         node, _, field = key.partition("__")
         next(n for n in nodes if n["nodeName"] == node)[field] = value
@@ -78,8 +89,9 @@ def _fmpy_outputs(fmu, sizes, inputs, times):
 
 
 @pytest.mark.parametrize("sizes", [{}, {"m": 1, "n": 4, "r": 2}], ids=["default sizes", "sizes set by parameters"])
-def test_an_array_fmu_coupled_through_arrays_and_one_element_runs_to_fmpys_values(tmp_path, fmus, sizes):
-    run_dir = run_project(_project(tmp_path, fmus["statespace"], sizes), tmp_path / "runs")
+def test_an_array_fmu_coupled_through_arrays_and_one_element_runs_to_fmpys_values(tmp_path, fmus, small, sizes):
+    run_dir = run_project(_project(tmp_path, fmus["statespace"], sizes, feedthrough=small["Feedthrough"]),
+                          tmp_path / "runs")
     rows = read_rows(run_dir)
     m, r = sizes.get("m", 2), sizes.get("r", 3)
     header = list(rows[0])
@@ -95,6 +107,8 @@ def test_an_array_fmu_coupled_through_arrays_and_one_element_runs_to_fmpys_value
     assert u == [[2.0 * x + 0.0 for x in row] for row in v]
     assert all(row_v == [(i + 1) * t for i in range(m)] for row_v, t in zip(v, times))
     assert a == y and column(rows, "g.u") == [row[1] for row in y]
+    # One element into a scalar FMU (FMI 2, y = u after each step).
+    assert column(rows, "ft.u") == [row[-1] for row in y] and column(rows, "ft.y")[1:] == column(rows, "ft.u")[:-1]
     assert column(rows, "vec.total")[1:] == [sum(row) for row in y[:-1]]
     assert len(set(map(tuple, y))) > 40  # the inputs move the state: not a constant
 
