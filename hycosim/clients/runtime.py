@@ -49,13 +49,16 @@ def _coerce(port: Port) -> Callable[[Any], Any]:
     one = _COERCE[port.type]
     if port.shape is None:
         return one
+    import numpy  # only for array ports: a scalar Python node starts without it (a tenth of a second)
+
     size = port.size
 
     def array(value: Any) -> list[Any]:
         if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
             raise ValueError(f"{type(value).__name__} {str(value)[:40]!r} for array port {port.name!r} "
                              f"of shape {list(port.shape)}")
-        flat = value.ravel().tolist() if hasattr(value, "ravel") else list(value)
+        # numpy flattens row-major whatever the model gives: a numpy array, a list, nested lists.
+        flat = numpy.asarray(value).ravel().tolist()
         if len(flat) != size:
             raise ValueError(f"{len(flat)} values for array port {port.name!r} of shape {list(port.shape)} "
                              f"({size} elements)")

@@ -49,8 +49,6 @@ WIRE_TYPES: dict[PortType, tuple[type, ...]] = {
     PortType.BINARY: (bytes, list),
 }
 
-# The start values an array port's elements may have, as JSON gives them.
-_ELEMENT_TYPES = {PortType.REAL: (float, int), PortType.INTEGER: (int,), PortType.BOOLEAN: (bool,)}
 
 def wire_types(port: "Port") -> tuple[type, ...]:
     """The Python types a port's value has on the wire: an array port's is a list (whose
@@ -117,13 +115,15 @@ class Port(_Strict):
             return self
         if self.type not in ARRAY_TYPES:
             raise ValueError(f"an array port holds Real, Integer or Boolean values, not {self.type.value}")
+        if self.start is None:
+            return self
         starts = self.start if isinstance(self.start, list) else [self.start]
-        if isinstance(self.start, list) and len(self.start) != self.size:
-            raise ValueError(f"start has {len(self.start)} values for shape {list(self.shape)} "
+        if isinstance(self.start, list) and len(starts) != self.size:
+            raise ValueError(f"start has {len(starts)} values for shape {list(self.shape)} "
                              f"({self.size} elements)")
-        fits = _ELEMENT_TYPES[self.type]
-        wrong = next((v for v in starts if v is not None and type(v) not in fits), None)
-        if wrong is not None or (isinstance(self.start, list) and None in starts):
+        # JSON gives the types msgpack gives: an element's start fits as its wire value does.
+        wrong = next((v for v in starts if type(v) not in WIRE_TYPES[self.type]), None)
+        if wrong is not None or None in starts:
             raise ValueError(f"start {wrong!r} is no {self.type.value} value")
         return self
 
@@ -133,10 +133,11 @@ class Port(_Strict):
         return None if self.shape is None else math.prod(self.shape)
 
     def start_value(self) -> Any:
+        """The value the port holds before anything is routed to it (an array's: a new list)."""
+        if self.shape is not None and isinstance(self.start, list):
+            return list(self.start)
         one = _DEFAULT_START[self.type] if self.start is None else self.start
-        if self.shape is None or isinstance(one, list):
-            return list(one) if isinstance(one, list) else one
-        return [one] * self.size
+        return one if self.shape is None else [one] * self.size
 
     def columns(self, node: str) -> list[str]:
         """The port's columns in ``values.csv``: ``node.port``, or one per element of an array,

@@ -119,16 +119,13 @@ def _refuse_unfit_fmus(loaded) -> None:
     that it cannot run (a port on an array of another shape, clocks, a parameter it lacks): named
     before a run directory is made, not by the node's process after the launch. Reads model
     descriptions only; a missing file is left to the node, which says how to build it."""
-    from hycosim.fmu_bridge.fmu_loader import FmuError, check_fmu
+    from hycosim.clients.loader import NodeLoadError, check_node
 
     for spec in loaded.project.nodeLists:
-        if not spec.fmu or spec.replay or spec.asynchronous:
-            continue
-        path = loaded.resolve(spec.fmu)
-        if path.is_file():
+        if spec.fmu and not (spec.replay or spec.asynchronous) and loaded.resolve(spec.fmu).is_file():
             try:
-                check_fmu(path, spec)
-            except FmuError as exc:
+                check_node(spec, loaded.resolve("."), loaded.project.coSimulation)
+            except NodeLoadError as exc:
                 fail(str(exc))
 
 
