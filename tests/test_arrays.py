@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import math
 
+import numpy
 import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi3 import FMU3Slave
@@ -64,9 +65,10 @@ def _elements(rows, label, size):
     return [[float(row[f"{label}[{i}]"]) for i in range(size)] for row in rows]
 
 
-def _fmpy_outputs(fmu, sizes, inputs, times):
+def _fmpy_outputs(fmu, sizes, inputs, times, arrays=None):
     """y after initialisation and after each step of the FMU stepped alone by fmpy's FMU3Slave,
-    its u set before each step to the given values (hycosim's, from its records)."""
+    its u set before each step to the given values (hycosim's, from its records); ``arrays``:
+    array parameters set (flat) after the sizes."""
     md = read_model_description(str(fmu))
     unzipped = extract(str(fmu))
     slave = FMU3Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
@@ -75,6 +77,8 @@ def _fmpy_outputs(fmu, sizes, inputs, times):
     vr = {v.name: v.valueReference for v in md.modelVariables}
     for name, value in sizes.items():
         slave.setUInt64([vr[name]], [value])
+    for name, value in (arrays or {}).items():
+        slave.setFloat64([vr[name]], value)
     slave.enterInitializationMode(startTime=0.0)
     slave.exitInitializationMode()
     r = sizes.get("r", 3)
@@ -111,6 +115,23 @@ def test_an_array_fmu_coupled_through_arrays_and_one_element_runs_to_fmpys_value
     assert column(rows, "ft.u") == [row[-1] for row in y] and column(rows, "ft.y")[1:] == column(rows, "ft.u")[:-1]
     assert column(rows, "vec.total")[1:] == [sum(row) for row in y[:-1]]
     assert len(set(map(tuple, y))) > 40  # the inputs move the state: not a constant
+
+
+def test_array_parameters_flat_or_nested_are_set_at_the_sizes_structural_parameters_give(tmp_path, fmus):
+    """A at n = 4 nested as its shape, C (r x n) and x0 flat: the run gives what fmpy gives the FMU
+    with the same values set, and its first row is C x0 + D u0 of them, not of the defaults."""
+    A = [[-1.0 - i if i == j else 0.1 * (j - i) for j in range(4)] for i in range(4)]
+    C = [0.5, -0.25, 1.0, 2.0, 0.0, 1.5, -1.0, 0.75]
+    x0 = [2.0, -1.0, 0.5, 3.0]
+    sizes = {"m": 1, "n": 4, "r": 2}
+    run_dir = run_project(_project(tmp_path, fmus["statespace"], {**sizes, "A": A, "C": C, "x0": x0}),
+                          tmp_path / "runs")
+    rows = read_rows(run_dir)
+    y, u = _elements(rows, "ss.y", 2), _elements(rows, "ss.u", 1)
+    flat = {"A": [a for row in A for a in row], "C": C, "x0": x0}
+    assert y == _fmpy_outputs(fmus["statespace"], sizes, u, column(rows, "t"), flat)
+    D0 = 0.1  # statespace3.c's default D[0][0]; u is 0 at t0
+    assert y[0] == [sum(C[l * 4 + i] * x0[i] for i in range(4)) + D0 * u[0][0] * (l == 0) for l in range(2)]
 
 
 def test_arrays_run_in_process_replayed_and_recovered_to_the_same_records(tmp_path, fmus):
@@ -150,6 +171,13 @@ def test_arrays_run_in_process_replayed_and_recovered_to_the_same_records(tmp_pa
     ({"vec__output": [{"name": "v", "shape": [2], "type": "String"}, "total"]},
      "an array port holds Real, Integer or Boolean values, not String"),
     ({"event": {"name": "e", "when": "ss.y > 1", "drives": "g", "until": "ss.s > 5"}}, "guard names ss.y, an array port"),
+    ({"ss__parameters": {"A": [1.0, 2.0]}}, "parameter 'A' is an array variable of StateSpace.fmu of shape [3, 3]: "
+     "give a list of its 9 elements (row-major), or lists nested as its shape; [1.0, 2.0] is neither"),
+    ({"ss__parameters": {"n": 2, "A": [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]}},
+     "parameter 'A' is an array variable of StateSpace.fmu of shape [2, 2]"),
+    ({"ss__parameters": {"x0": [1.0, True, 0.5]}}, "parameter 'x0[1]' is a Float64 variable of StateSpace.fmu, "
+     "which true is not"),
+    ({"ss__parameters": {"s": [1.0]}}, "parameter 's' is a Float64 variable of StateSpace.fmu, which [1.0] is not"),
 ])
 def test_arrays_that_do_not_fit_are_named_before_a_run(tmp_path, fmus, case, said):
     case = dict(case)
@@ -218,11 +246,33 @@ def test_an_iterated_step_measures_an_array_input_element_by_element():
     assert input_change({"n": [[1.0, 2.0]]}, {"n": [[1.0, 2.0]]}, {"n": ["n.a"]}, 1e-3) == (0.0, "", 0.0)
 
 
-def test_ssp_export_names_array_ports(tmp_path, fmus):
-    cfg = _project(tmp_path, fmus["statespace"])
+@given(shape=st.lists(st.integers(1, 3), min_size=1, max_size=3), data=st.data())
+def test_an_array_parameter_is_taken_flat_or_nested_exactly_as_its_shape(shape, data):
+    from hycosim.fmu_bridge.fmu_loader import array_elements
+
+    size = math.prod(shape)
+    flat = list(range(size))
+    nested = numpy.arange(size).reshape(shape).tolist()
+    assert array_elements(flat, tuple(shape)) == flat
+    assert array_elements(nested, tuple(shape)) == flat
+    other = data.draw(st.lists(st.integers(1, 3), min_size=1, max_size=3).filter(lambda s: math.prod(s) != size))
+    assert array_elements(numpy.arange(math.prod(other)).reshape(other).tolist(), tuple(shape)) is None
+    drawn = data.draw(st.recursive(st.integers(), lambda inner: st.lists(inner, max_size=4)))
+    got = array_elements(drawn, tuple(shape))
+    assert got is None or (len(got) == size and got == _leaves(drawn))
+    if got is not None and any(type(v) is list for v in drawn):  # nested: exactly as the shape
+        assert numpy.asarray(drawn).shape == tuple(shape)
+
+
+def _leaves(value):
+    return [leaf for v in value for leaf in _leaves(v)] if type(value) is list else [value]
+
+
+def test_ssp_export_names_array_ports_and_parameters(tmp_path, fmus):
+    cfg = _project(tmp_path, fmus["statespace"], {"x0": [1.0, 2.0, 3.0]})
     res = hycosim("export", str(cfg), "-o", str(tmp_path / "out.ssp"))
     assert res.returncode == 2, res.stderr
-    assert "nodeLists[0] (ss): array ports u, y" in res.stderr.replace("\n", " ")
+    assert "nodeLists[0] (ss): array ports u, y; nodeLists[0] (ss): array parameter x0" in res.stderr.replace("\n", " ")
     assert load_project(cfg).project.node("ss").port("y").shape == (3,)
 
 

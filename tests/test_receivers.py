@@ -302,7 +302,7 @@ def relay(loaded, tmp_path_factory):
 def test_the_relay_drops_what_it_cannot_use_and_never_stops_on_a_payload(relay, sent):
     node, payload = sent[:2]
     before = sum(relay.intake.dropped.values())
-    got = relay._handle_side_message(f"hycosim/recv/up/{node}", payload, step=5, collecting=True)
+    got = relay.take_in(f"hycosim/recv/up/{node}", payload, step=5, collecting=True)
     if got is None:
         return  # dropped (counted) or a sample taken into its history
     name, frame = got
@@ -580,28 +580,24 @@ def test_a_batched_release_is_gathered_whole_from_each_nodes_answer_whatever_els
     a source's among them (its samples are taken on the way)."""
     from hycosim.server.relay import RunError, _ModelEnded
 
-    relay._early.clear()
-    relay._earlier.clear()
-    for node in _UIDS:
-        relay._label[node], relay._due_at[node], relay._batch_steps[node] = 21, 30, 9
+    relay.ledger.expect_all(20, 0.0)
+    relay.ledger.released(sorted(_UIDS), 20, 0.0, count=10, batched=True, span=10)
     genuine = [(f"hycosim/recv/up/{node}", frames.encode(frames.BATCH, uid, 21, 0.3, *(
         [[0.0, 1.0], [[0.0, 1.0]] * 9] if node == "clock" else
         [[1.0, 2, True, "x", b"y"], [[1.0, 2, True, "x", b"y"]] * 9] if node == "g" else
         [[1.0], [[1.0]] * 9]))) for node, uid in _UIDS.items()]
     relay.inbox = _Queued([*before, *genuine])
     try:
-        arrivals = relay._collect(30, 0.0)
+        arrivals = relay.gather(30, 0.0)
     except (RunError, _ModelEnded):
         return
-    finally:
-        relay._batch_steps.clear()
     assert set(arrivals) == set(_UIDS)
     spec = relay.project
     for node in _UIDS:
         outputs = spec.node(node).output
-        for values in [*relay._earlier[node], relay.outputs[node]]:
+        for values in [*relay.ledger.earlier[node], relay.outputs[node]]:
             assert len(values) == len(outputs) and all(type(v) in WIRE_TYPES[p.type] for v, p in zip(values, outputs))
-        assert len(relay._earlier[node]) == 9
+        assert len(relay.ledger.earlier[node]) == 9
 
 
 @given(clean=st.booleans(), earlier=st.just([]) | st.lists(st.lists(st.floats(), max_size=2), max_size=2),
@@ -614,10 +610,7 @@ def test_a_source_stops_a_gathering_only_with_an_unclean_unbatched_end(relay, cl
     and the point is gathered."""
     from hycosim.server.relay import RunError
 
-    relay._early.clear()
-    relay._batch_steps.clear()
-    for node in _UIDS:
-        relay._label[node] = relay._due_at[node] = 30
+    relay.ledger.expect_all(30, 0.0)
     genuine = [(f"hycosim/recv/up/{node}", frames.encode(frames.OUTPUTS, uid, 30, 0.3, values))
                for (node, uid), values in zip(_UIDS.items(), ([0.0, 1.0], [1.0, 2, True, "x", b"y"], [1.0]))]
     relay.inbox = _Queued([("hycosim/recv/up/src", frames.encode(frames.END, 4, step, t, clean, message, earlier,
@@ -626,7 +619,7 @@ def test_a_source_stops_a_gathering_only_with_an_unclean_unbatched_end(relay, cl
     dropped = sum(relay.intake.dropped.values())
     valid = not clean and earlier == [] and last is None and 0 <= step < frames.MAX_STEP and math.isfinite(t)
     try:
-        arrivals = relay._collect(30, 0.0)
+        arrivals = relay.gather(30, 0.0)
     except RunError as exc:
         assert valid and str(exc).startswith("node 'src'")
         assert f"step {relay._point}" in str(exc) and sum(relay.intake.dropped.values()) == dropped

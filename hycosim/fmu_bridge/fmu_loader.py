@@ -336,7 +336,9 @@ def _fits(var_type: str, value: Any) -> bool:
 def check_parameters(md: ModelDescription, node: str, parameters: dict[str, Any], path: Path) -> None:
     """Raise FmuError unless every key of ``parameters`` names a variable of the FMU and its
     value fits the variable's type (a number for a Real, a whole number for an Integer, …),
-    is finite, and lies within the ``min`` and ``max`` the variable declares."""
+    is finite, and lies within the ``min`` and ``max`` the variable declares. An FMI 3 array
+    variable takes a list of its elements (flat, row-major, or nested as its shape), its shape
+    as the structural parameters among ``parameters`` set it; each element is checked so."""
     variables = {v.name: v for v in md.modelVariables}
     unknown = sorted(set(parameters) - set(variables))
     if unknown:
@@ -344,16 +346,58 @@ def check_parameters(md: ModelDescription, node: str, parameters: dict[str, Any]
                        f"{'is not a variable' if len(unknown) == 1 else 'are not variables'} of {path.name}"
                        + did_you_mean(unknown, variables))
     for name, value in parameters.items():
-        var_type = variables[name].type
-        if not _fits(var_type, value):
-            raise FmuError(f"node {node!r}: parameter {name!r} is {_a(var_type)} variable of {path.name}, "
-                           f"which {json.dumps(value)} is not")
-        if type(value) is float and not math.isfinite(value):
-            raise FmuError(f"node {node!r}: parameter {name!r} is {json.dumps(value)}, not a finite number")
-        outside = _outside_range(variables[name], value)
-        if outside:
-            raise FmuError(f"node {node!r}: parameter {name!r} is {json.dumps(value)}, {outside} that {path.name} "
-                           "declares for it")
+        var = variables[name]
+        if not getattr(var, "dimensions", None):
+            _check_parameter(var, name, value, node, path)
+            continue
+        try:
+            shape = shape_of(md, var, parameters, path)
+        except FmuError as exc:
+            raise FmuError(f"node {node!r}: {exc}") from None
+        elements = array_elements(value, shape)
+        if elements is None:
+            raise FmuError(f"node {node!r}: parameter {name!r} is an array variable of {path.name} of shape "
+                           f"{list(shape)}: give a list of its {math.prod(shape)} elements (row-major), or lists "
+                           f"nested as its shape; {_json_text(value)} is neither")
+        for i, element in enumerate(elements):
+            _check_parameter(var, f"{name}[{i}]", element, node, path)
+
+
+def array_elements(value: Any, shape: tuple[int, ...]) -> list[Any] | None:
+    """The elements of an array value as a project file gives them, row-major: a flat list of
+    every element, or lists nested as ``shape``; None if it is neither."""
+    if type(value) is not list:
+        return None
+    if len(value) == math.prod(shape) and not any(type(v) is list for v in value):
+        return value
+    if len(shape) < 2 or len(value) != shape[0]:
+        return None
+    out: list[Any] = []
+    for row in value:
+        inner = array_elements(row, shape[1:])
+        if inner is None or len(inner) != math.prod(shape[1:]):
+            return None
+        out.extend(inner)
+    return out
+
+
+def _json_text(value: Any, limit: int = 60) -> str:
+    text = json.dumps(value)
+    return text if len(text) <= limit else text[:limit - 1] + "…"
+
+
+def _check_parameter(var: ScalarVariable, name: str, value: Any, node: str, path: Path) -> None:
+    """FmuError unless one value fits ``var`` (an array parameter: one of its elements, ``name``
+    then ``A[3]``): its type, finite, within the declared range."""
+    if not _fits(var.type, value):
+        raise FmuError(f"node {node!r}: parameter {name!r} is {_a(var.type)} variable of {path.name}, "
+                       f"which {_json_text(value)} is not")
+    if type(value) is float and not math.isfinite(value):
+        raise FmuError(f"node {node!r}: parameter {name!r} is {json.dumps(value)}, not a finite number")
+    outside = _outside_range(var, value)
+    if outside:
+        raise FmuError(f"node {node!r}: parameter {name!r} is {json.dumps(value)}, {outside} that {path.name} "
+                       "declares for it")
 
 
 def _bound(text: Any) -> float | None:
@@ -567,11 +611,19 @@ class FmuInstance:
         return [int(v) for v in getattr(self.fmu, f"get{t if t != 'Enumeration' else 'Int64'}")([vr], size)]
 
     def set_variable(self, name: str, value: Any) -> None:
-        """Set a parameter or start value by FMU variable name."""
+        """Set a parameter or start value by FMU variable name (an array variable from a list,
+        flat or nested as its shape: :func:`array_elements`)."""
         var = self._variables.get(name)
         if var is None:
             raise FmuError(f"node {self.node!r}: parameter {name!r} is not a variable of {self.path.name}")
-        self._set(var, value, len(value) if isinstance(value, list) else None)
+        if not getattr(var, "dimensions", None):
+            self._set(var, value)
+            return
+        elements = array_elements(value, shape_of(self.md, var, self._parameters, self.path))
+        if elements is None:
+            raise FmuError(f"node {self.node!r}: {name!r} is an array variable of {self.path.name}, and "
+                           f"{_json_text(value)} does not have its shape")
+        self._set(var, elements, len(elements))
 
     def set_driven(self, driven: bool) -> None:
         """Tell the FMU, through its ``drivenVariable`` (if any), whether an event drives it."""
@@ -613,8 +665,10 @@ class FmuInstance:
         self.time = start_time
         if not self.fmi3:
             self.fmu.setupExperiment(startTime=start_time)
-        for name, value in {**self._starts, **self._parameters}.items():
-            self.set_variable(name, value)
+        values = {**self._starts, **self._parameters}
+        # Structural parameters first: they size the arrays set after them (and may reset them).
+        for name in sorted(values, key=lambda n: getattr(self._variables.get(n), "causality", "") != "structuralParameter"):
+            self.set_variable(name, values[name])
         if self.fmi3:
             self.fmu.enterInitializationMode(startTime=start_time)
         else:

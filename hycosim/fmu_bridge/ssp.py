@@ -445,6 +445,9 @@ def export_problems(project: Any) -> list[str]:
         arrays = [p.name for p in (*n.input, *n.output) if p.shape is not None]
         if arrays:  # SSP 1.0 connectors are scalars
             found.append(f"{where}: array port{'s' if len(arrays) > 1 else ''} {', '.join(arrays)}")
+        listed = [k for k, v in n.parameters.items() if type(v) is list]
+        if listed:  # SSP 1.0 parameters are scalars too
+            found.append(f"{where}: array parameter{'s' if len(listed) > 1 else ''} {', '.join(listed)}")
     for i, link in enumerate(project.linkLists):
         if link.activeIn is not None:
             found.append(f"linkLists[{i}]: activeIn (modes)")

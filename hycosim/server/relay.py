@@ -37,6 +37,7 @@ from hycosim.server.async_sources import SampleHistory
 from hycosim.server.coordinator import Coordinator, GuardEvaluationError
 from hycosim.server.gateway import Gateway, GatewayError
 from hycosim.server.intake import Dropped, Intake, port_mismatch
+from hycosim.server.ledger import ENDED, LATER, TAKE, Ledger
 from hycosim.server.interpolation import STARTUP_SPLIT, InputTrack
 from hycosim.server.recorder import Recorder, RecordError
 from hycosim.server.retakes import IterationLog, StepSizer, input_change, relaxed
@@ -72,6 +73,34 @@ class _PendingCheckpoint:
 class _ModelEnded(Exception):
     """A node's model ended the simulation (an FMU that asked to terminate): the run's records
     end at the last macro-step point every node reached, then the point where it ended."""
+
+
+@dataclass
+class _Point:
+    """Where the loop is: point k at time t, the j-th of the grid origin + j·H (a located event
+    starts a new grid at its time), and how the step to it went."""
+
+    k: int
+    t: float
+    origin: float
+    j: int
+    localised: dict[str, Any]  # the located event that ended the step to it
+    arrivals: dict[str, float]  # each node's answer, seconds after its release
+    wait: float  # from the release to the last answer
+    takes: int = 1  # of the step to it (iterated or size-controlled)
+
+
+@dataclass
+class _Seen:
+    """Point k as the loop saw it before stepping from it: what its record holds."""
+
+    mode: str
+    outputs: dict[str, list[Any]]
+    view: OutputView
+    ages: dict[str, float | None]
+    lateness: float | None
+    holder: str  # the node whose answer came last
+    stepped: list[str] | None  # a multi-rate run's nodes stepped from it
 
 
 # A node's own words about why it ended or failed are shown and recorded up to this length.
@@ -113,19 +142,10 @@ class Relay:
         self.intake = Intake(self.project.nodeLists)
         self.stepping = [n.nodeName for n in self.project.stepping_nodes()]
         self.coupling = loaded.coupling
-        # Each stepping node's outstanding step: the label its outputs carry (the step's release
-        # point + 1), the point they are gathered at (later for a multi-rate node), and when it
-        # was released. Outputs that come before their point wait in _early.
-        self._label: dict[str, int] = {n: 0 for n in self.stepping}
-        self._due_at: dict[str, int] = {n: 0 for n in self.stepping}
-        self._released_at: dict[str, float] = {}
-        self._early: dict[str, frames.Frame] = {}
-        # Batched releases (STEPS, multi-rate): base steps one may span once the nodes said they
-        # can take them; per node, how many of its own steps' outputs a BATCH carries before its
-        # last, and those it brought for the batch being gathered.
+        # Each stepping node's outstanding step and the answers kept for later points; batched
+        # releases (STEPS, multi-rate) span this many base steps once the nodes said they can.
+        self.ledger = Ledger(self.stepping, [n.nodeName for n in self.project.paced_nodes()], self.coupling.rates)
         self._span = 1
-        self._batch_steps: dict[str, int] = {}
-        self._earlier: dict[str, list[list[Any]]] = {}
         self.messages = {"releases": 0, "received": 0}  # release frames sent, node frames taken in
         self._point = 0  # the point the loop is at: the last recorded should a node end the run now
         self._last_release_of: dict[str, bytes] = {}  # node → the last release that named it
@@ -177,6 +197,10 @@ class Relay:
         # Go on from the run directory's last checkpoint (its server died after recording this many steps).
         self._resume = resume
         self.progress = Progress()
+        self._clock: RealTimeClock | None = None  # a real-time run's (coSimulation.realTimeFactor)
+        self._checkpoint_at = self.cosim.startTime  # the next checkpoint's time
+        self._localising = False  # whether guard crossings are located (event localisation)
+        self._perf0, self._k0, self._progressed = 0.0, 0, 0.0  # for the progress bar's steps/s
         self._progress_every = progress_every_s
         self._on_progress = on_progress
         self._log = structlog.get_logger("server").bind(project=self.project.projectName)
@@ -310,11 +334,14 @@ class Relay:
                 missing = sorted(expected - self.alive)
                 raise RunError(f"timed out after {self.cosim.attachTimeout:g} s waiting for node(s) "
                                f"{', '.join(missing)} to attach to {self.project.serverIP}")
-            self._handle_side_message(*msg, step=-1, collecting=False)
+            self.take_in(*msg, step=-1, collecting=False)
         self._log.info("all nodes attached", nodes=sorted(self.alive))
 
-    def _handle_side_message(self, key: str, payload: bytes, step: int, collecting: bool) -> tuple[str, frames.Frame] | None:
-        """Liveliness and samples are handled here; stepping outputs are returned to the caller."""
+    def take_in(self, key: str, payload: bytes, step: int, collecting: bool) -> tuple[str, frames.Frame] | None:
+        """Take in one message of the inbox (``key``: the node's ``up`` key, or LOCAL for a
+        liveliness change) while point ``step`` is gathered (-1: while the nodes attach).
+        Liveliness, samples, states and HELLOs are handled here; a node's OUTPUTS, BATCH or END
+        is returned as (node, frame); anything the intake refuses is dropped and counted."""
         if key == LOCAL:
             live = frames.decode(payload)
             if live.node in self._names:  # not the server's own token, nor one no node of this project holds
@@ -502,8 +529,8 @@ class Relay:
                     self._start_frame = frames.encode(frames.START, *start)
                     self.release.put(self._start_frame)
                 released = time.perf_counter()
-                self._expect_all(cp.step, released)
-                arrivals = self._collect(cp.step, released)
+                self.ledger.expect_all(cp.step, released)
+                arrivals = self.gather(cp.step, released)
                 wait = time.perf_counter() - released
             except _Recover as again:  # another process restarted meanwhile: once more
                 cause = again
@@ -591,15 +618,8 @@ class Relay:
     def _time(self, step: int) -> float:
         return self.cosim.startTime + max(step, 0) * self.cosim.stepSize
 
-    def _expect_all(self, step: int, released_at: float) -> None:
-        """Every stepping node owes its outputs at ``step`` (the START, a restore)."""
-        for node in self.stepping:
-            self._label[node] = self._due_at[node] = step
-            self._released_at[node] = released_at
-        self._early.clear()
-
-    def _collect(self, step: int, released_at: float, nodes: set[str] | None = None,
-                 paced: bool = True) -> dict[str, float]:
+    def gather(self, step: int, released_at: float, nodes: set[str] | None = None,
+               paced: bool = True) -> dict[str, float]:
         """Gather the outputs due at point ``step`` (every stepping node's whose step ends there,
         or just ``nodes``'), and a played source's word that its samples for ``step`` are sent
         (unless not ``paced``: the initialisation's answers); return arrival offsets (s), each
@@ -607,85 +627,74 @@ class Relay:
         if nodes is not None:
             pending = set(nodes) | (set(self.paced) if paced else set())
         elif self.coupling.multirate:
-            pending = {n for n, at in self._due_at.items() if at == step} | set(self.paced)
+            pending = self.ledger.due(step) | set(self.paced)
         else:
             pending = set(self._everyone)
         arrivals: dict[str, float] = {}
-
-        def take(node: str, frame: frames.Frame) -> None:
-            pending.discard(node)
-            if node not in self.histories:  # a played source's values are its samples'
-                self.outputs[node] = frame.values
-            if frame.kind == frames.BATCH:
-                self._earlier[node] = frame.earlier
-            arrivals[node] = time.perf_counter() - self._released_at.get(node, released_at)
-
-        if self._early:
-            for node in sorted(pending & set(self._early)):
-                take(node, self._early.pop(node))
+        for node, frame in self.ledger.kept_for(pending):
+            self._take(node, frame, released_at, pending, arrivals)
         deadline = time.monotonic() + self.cosim.stepTimeout
-        grace = self._grace()
         while pending:
-            wait = deadline - time.monotonic()
-            if self.lost:
-                node, since = min(self.lost.items(), key=lambda item: item[1])
-                # While a node is away the step's own timeout does not run: its return (or a
-                # restore) gives the others a fresh one.
-                deadline = max(deadline, time.monotonic() + self.cosim.stepTimeout)
-                if time.monotonic() - since > grace:
-                    raise RunError(f"node {node!r} was lost at step {step} (t={self._time(step):g} s) and did not "
-                                   f"come back within the link grace of {grace:g} s")
-                wait = min(wait, since + grace - time.monotonic() + 0.01)
-            msg = self.inbox.recv(wait if wait > 0.0 else 0.0)
+            deadline, wait = self._patience(deadline, step)
+            msg = self.inbox.recv(wait)
             if msg is None:
                 if self.lost:
-                    continue  # the grace check above reports it
+                    continue  # _patience reports a node lost too long
                 raise RunError(f"timed out after {self.cosim.stepTimeout:g} s at step {step} "
                                f"(t={self._time(step):g} s) waiting for outputs of {', '.join(sorted(pending))}")
-            got = self._handle_side_message(msg[0], msg[1], step, True)
+            got = self.take_in(msg[0], msg[1], step, True)
             if got is None:
                 continue
             node, frame = got
-            if frame.kind == frames.END and self.project.node(node).asynchronous:
-                self._on_end(node, step, frame)  # a source stopped or failed (never clean: the intake)
-            frame_step = frame.step
-            label = step if node in self.paced else self._label.get(node, step)
-            if frame.kind == frames.END and frame_step == label + 1 and not frame.clean:
-                # A node stopped (SIGTERM) while waiting for a release: it names the next step.
+            if frame.kind == frames.END and (self.project.node(node).asynchronous or (
+                    frame.step == self.ledger.label(node, step) + 1 and not frame.clean)):
+                # A source stopped or failed (never clean: the intake), or a node stopped
+                # (SIGTERM) while waiting for a release: it names the next step.
                 self._on_end(node, step, frame)
-            if frame_step != label:
-                reason = "step already past" if frame_step < label else "wrong step"
-                self.intake.drop(reason, f"{node} sent step {frame_step} while collecting {step}", step, node)
-                continue
-            batched = self._batch_steps.get(node)
-            if frame.kind == frames.END:
+            verdict = self.ledger.sort(node, frame, step, pending)
+            if verdict is TAKE:
+                self._take(node, frame, released_at, pending, arrivals)
+            elif verdict is LATER:
+                self.ledger.keep(node, frame)
+            elif verdict is ENDED:
                 self._on_end(node, step, frame)
                 # The others' outputs at the step's end (inside a batch: their batches, which
                 # hold the points its earlier steps reached) are gathered before the run ends.
                 pending.discard(node)
-                self._earlier[node] = frame.earlier
-                arrivals[node] = time.perf_counter() - self._released_at.get(node, released_at)
+                self.ledger.earlier[node] = frame.earlier
+                arrivals[node] = self.ledger.since_release(node, released_at)
                 self._ended_inside.add(node)
                 self._ended_arrivals = arrivals
-                continue
-            if (frame.kind == frames.BATCH) != (batched is not None):
-                self.intake.drop("wrong kind", f"{node} sent a {frames.KIND_NAMES[frame.kind]} frame for step "
-                                 f"{frame_step}, which it was released for {'in' if batched is None else 'as'} "
-                                 "a batch", step, node)
-                continue
-            if batched is not None and len(frame.earlier) != batched:
-                self.intake.drop("wrong step", f"{node} sent the outputs of {len(frame.earlier) + 1} steps for "
-                                 f"a batch of {batched + 1} of its steps", step, node)
-                continue
-            if node in pending:
-                take(node, frame)
-            elif node in self.paced or node in self._early or self._due_at.get(node, step) <= step:
-                self.intake.drop("duplicate", f"{node} sent step {frame_step} twice", step, node)
-            else:  # a slower node's outputs, for a later point
-                self._early[node] = frame
+            else:
+                self.intake.drop(verdict.reason, verdict.detail, step, node)
         if self._ended_inside:
             raise _ModelEnded
         return arrivals
+
+    def _take(self, node: str, frame: frames.Frame, released_at: float, pending: set[str],
+              arrivals: dict[str, float]) -> None:
+        pending.discard(node)
+        if node not in self.histories:  # a played source's values are its samples'
+            self.outputs[node] = frame.values
+        if frame.kind == frames.BATCH:
+            self.ledger.earlier[node] = frame.earlier
+        arrivals[node] = self.ledger.since_release(node, released_at)
+
+    def _patience(self, deadline: float, step: int) -> tuple[float, float]:
+        """The deadline of point ``step`` and how long the inbox is waited on now. While a node
+        is away the step's own timeout does not run (its return, or a restore, gives the others
+        a fresh one), and the wait ends with its grace, when the run stops naming it."""
+        if self.lost:
+            node, since = min(self.lost.items(), key=lambda item: item[1])
+            grace = self._grace()
+            if time.monotonic() - since > grace:
+                raise RunError(f"node {node!r} was lost at step {step} (t={self._time(step):g} s) and did not "
+                               f"come back within the link grace of {grace:g} s")
+            deadline = max(deadline, time.monotonic() + self.cosim.stepTimeout)
+            wait = min(deadline, since + grace + 0.01) - time.monotonic()
+        else:
+            wait = deadline - time.monotonic()
+        return deadline, wait if wait > 0.0 else 0.0
 
     def _on_end(self, node: str, step: int, frame: frames.Frame) -> None:
         """A node's END instead of its outputs for ``step``: its model ended the run (the caller
@@ -729,7 +738,7 @@ class Relay:
                     self.router.route_into(node, mode, self.outputs)
                     self.release.put(frames.encode(frames.INIT, t0, {node: list(self.router.inputs[node])}))
                     self.messages["releases"] += 1
-                    self._collect(0, time.perf_counter(), {node}, paced=False)
+                    self.gather(0, time.perf_counter(), {node}, paced=False)
                 if not group.loop:
                     break
                 change = initialisation.residuals(before, self.outputs, names)
@@ -867,7 +876,7 @@ class Relay:
         finally:
             if meanwhile is not None:
                 meanwhile()  # a release that could not be sent still leaves its point recorded
-        arrivals = self._collect(k + 1 if times is None else k + len(times) - 1, released_at)
+        arrivals = self.gather(k + 1 if times is None else k + len(times) - 1, released_at)
         return arrivals, time.perf_counter() - released_at
 
     def _put_release(self, k: int, t: float, h: float, mode: str, nodes: list[str], released_at: float,
@@ -889,18 +898,9 @@ class Relay:
             raise RunError(f"the release of step {k} (t={t:g} s) is {exc}; largest inputs, by node: "
                            f"{frames.largest_values(inputs.items())}") from None
         self.messages["releases"] += 1
-        count = 1 if times is None else len(times) - 1
-        self._earlier.clear()
+        self.ledger.released(nodes, k, released_at, count=1 if times is None else len(times) - 1,
+                             batched=times is not None, span=self._span, last_point=self._last_point)
         for n in nodes:
-            self._label[n] = k + 1
-            m = self.coupling.rates[n]
-            if times is None:
-                self._batch_steps.pop(n, None)
-                self._due_at[n] = k + 1 if m == 1 else min(k + m, self._last_point)
-            else:
-                self._batch_steps[n] = len(range(0, count, m)) - 1
-                self._due_at[n] = k + count if m <= self._span else min(k + m, self._last_point)
-            self._released_at[n] = released_at
             self._last_release_of[n] = self._last_release
 
     def _release_in_order(self, k: int, t: float, h: float, mode: str, released_at: float,
@@ -914,17 +914,17 @@ class Relay:
                 if i > 0:
                     self.router.route_into(node, mode, self.outputs)
                 self._put_release(k, t, h, mode, [node], time.perf_counter())
-                arrivals.update(self._collect(k + 1, released_at, {node}))
+                arrivals.update(self.gather(k + 1, released_at, {node}))
         finally:
             if meanwhile is not None:
                 meanwhile()
         return arrivals, time.perf_counter() - released_at
 
-    def _record_point(self, k: int, t: float, mode: str, outputs: dict[str, list[Any]], stepped: list[str] | None,
-                      wait: float, holder: str, lateness: float | None, arrivals: dict[str, float],
-                      ages: dict[str, float | None], takes: int) -> None:
-        self.recorder.row(k, t, mode, outputs, self.router.inputs, stepped)
-        self.recorder.timing(k, t, wait, holder, lateness, arrivals, ages, takes)
+    def _record_point(self, p: _Point, seen: _Seen) -> None:
+        """Point p as the loop saw it, with the inputs the step from it is taken on (an iterated
+        step's last) and how the step to it went."""
+        self.recorder.row(p.k, p.t, seen.mode, seen.outputs, self.router.inputs, seen.stepped)
+        self.recorder.timing(p.k, p.t, p.wait, seen.holder, seen.lateness, p.arrivals, seen.ages, p.takes)
 
     def _record_inside(self, k: int, times: list[float], mode: str, at_k: dict[str, list[Any]],
                        arrivals: dict[str, float]) -> dict[str, list[Any]]:
@@ -958,7 +958,7 @@ class Relay:
         assert ended is not None
         reached, held = 0, at_k
         if len(times) > 2:
-            reached = min([len(self._earlier[n]) * self.coupling.rates[n] for n in self._ended_inside]
+            reached = min([len(self.ledger.earlier[n]) * self.coupling.rates[n] for n in self._ended_inside]
                           + [len(times) - 2])
             if reached > 0:
                 held = self._record_inside(k, times[:reached + 2], mode, at_k, self._ended_arrivals)
@@ -987,7 +987,7 @@ class Relay:
     def _steps_ending_at(self, i: int) -> Iterator[tuple[str, list[Any]]]:
         """Inside the batched release being gathered: each node whose own step ends at base
         point i (a node that ended the run, up to its last step before), and its outputs there."""
-        for node, earlier in self._earlier.items():
+        for node, earlier in self.ledger.earlier.items():
             m = self.coupling.rates[node]
             if i % m == 0 and i // m - 1 < len(earlier):
                 yield node, earlier[i // m - 1]
@@ -1019,184 +1019,200 @@ class Relay:
             tries += 1
         return hi, arrivals, wait, {"retries": tries, "window": [t + lo, t + hi]}
 
-    def _show(self, k: int, t: float, mode: str, lateness: float | None, holder: str, wait: float,
-              arrivals: dict[str, float], ages: dict[str, float | None]) -> float:
-        """Point k for the progress bar and the status answer; return when (perf_counter)."""
-        self.progress.step, self.progress.t, self.progress.mode = k, t, mode
-        self.progress.lateness_s = lateness
-        now = time.perf_counter()
-        self._recent.append((now, holder, wait, arrivals))
-        # Point k's values, whole (the outputs change while the nodes step).
-        self._shown = (k, t, mode, dict(self.outputs), {n: list(v) for n, v in self.router.inputs.items()},
-                       time.time())
-        self._history.append(self._shown)
-        self._ages = ages
-        return now
-
-    def _next_point(self, k: int, t: float, origin: float, j: int, short: bool) -> tuple[float, list[float] | None]:
-        """The time the step from point k (at t, the j-th of the grid from ``origin``) ends, and
-        for a batched release the base points it spans."""
+    def _begin(self) -> tuple[_Point, dict[str, Any] | None]:
+        """START, or resuming, the last checkpoint: the first point, with every stepping node's
+        outputs there (and the checkpoint's server state when resuming)."""
         cosim = self.cosim
-        H = cosim.stepSize
-        if short:  # interpolated inputs' start-up: steps of H / STARTUP_SPLIT until there are points enough
-            return min(cosim.startTime + (k + 1) * H / STARTUP_SPLIT, cosim.stopTime), None
-        if self.sizer is not None:
-            return min(t + self.sizer.h, cosim.stopTime), None
-        if self._span > 1:  # a batched release: its base points as single releases would have them
-            times = [min(origin + (j + i) * H, cosim.stopTime)
-                     for i in range(min(self._span, self._last_point - k) + 1)]
-            return times[-1], times
-        return min(origin + (j + 1) * H, cosim.stopTime), None
-
-    def _loop(self) -> None:
-        cosim = self.cosim
-        H = cosim.stepSize
-        rt = cosim.real_time_factor()
-        wall0 = time.time()
-        checkpoint = self._saves_states()
-        every = cosim.checkpointEvery
-        # Points lie on a grid origin + j·H; a located event starts a new grid at its time.
-        origin, j, k, t = cosim.startTime, 0, 0, cosim.startTime
-        localised: dict[str, Any] = {}
-        next_checkpoint = t
+        rt, wall0 = cosim.real_time_factor(), time.time()
+        start = (frames.START, self.recorder.run_dir.name, cosim.startTime, cosim.stepSize, wall0, rt,
+                 {"checkpoint": self._saves_states()})
         if self._resume is not None:
             # Every node is a new process: each gets its state at the last checkpoint (the run's
             # START follows, for asynchronous sources, with the clock from there).
-            self._start_frame = frames.encode(frames.START, self.recorder.run_dir.name, cosim.startTime, H, wall0,
-                                              rt, {"checkpoint": checkpoint})
-            self._checkpoints = every is not None
-            point, arrivals, wait = self._restore(_Recover("server", self._resume, "resumed"))
-            k, t, origin, j, localised = (point["step"], point["t"], point["origin"], point["j"],
-                                          dict(point["localised"]))
-            resumed_h = point["h"]
-            next_checkpoint = self._next_checkpoint(t)
-            clock = RealTimeClock(t, time.time(), rt) if rt is not None else None
+            self._start_frame = frames.encode(*start)
+            self._checkpoints = cosim.checkpointEvery is not None
+            p, resumed = self._restored(_Recover("server", self._resume, "resumed"))
             if self.gateway is not None:
                 self.gateway.run_started()
-        else:
-            self._last_release = self._start_frame = frames.encode(
-                frames.START, self.recorder.run_dir.name, cosim.startTime, H, wall0, rt, {"checkpoint": checkpoint})
-            self.release.put(self._last_release)
-            released_at = time.perf_counter()
-            clock = RealTimeClock(cosim.startTime, wall0, rt) if rt is not None else None
-            if self.gateway is not None:
-                self.gateway.run_started()
-            self._expect_all(0, released_at)
-            self._starting = True
-            try:
-                arrivals = self._collect(0, released_at)
-            finally:
-                self._starting = False
-            if cosim.initialize.enabled:
-                self._initialise()
-            wait = time.perf_counter() - released_at
-        localise = self._localisation_plan()
+            return p, resumed
+        self._last_release = self._start_frame = frames.encode(*start)
+        self.release.put(self._last_release)
+        released_at = time.perf_counter()
+        self._clock = RealTimeClock(cosim.startTime, wall0, rt) if rt is not None else None
+        if self.gateway is not None:
+            self.gateway.run_started()
+        self.ledger.expect_all(0, released_at)
+        self._starting = True
+        try:
+            arrivals = self.gather(0, released_at)
+        finally:
+            self._starting = False
+        if cosim.initialize.enabled:
+            self._initialise()
+        self._checkpoint_at = cosim.startTime
+        return _Point(0, cosim.startTime, cosim.startTime, 0, {}, arrivals, time.perf_counter() - released_at), None
+
+    def _restored(self, cause: _Recover) -> tuple[_Point, dict[str, Any]]:
+        """The run back at its last checkpoint (:meth:`_restore`): the point to go on from, and
+        the checkpoint's server state."""
+        s, arrivals, wait = self._restore(cause)
+        if self.sizer is not None:
+            self.sizer.h = s["h"]
+        self._checkpoint_at = self._next_checkpoint(s["t"])
+        rt = self.cosim.real_time_factor()
+        self._clock = RealTimeClock(s["t"], time.time(), rt) if rt is not None else None
+        return _Point(s["step"], s["t"], s["origin"], s["j"], dict(s["localised"]), arrivals, wait), s
+
+    def _plan(self, resumed: dict[str, Any] | None) -> None:
+        """Once the nodes said what they can: localisation, retakes, batching and checkpoints."""
+        cosim = self.cosim
+        self._localising = self._localisation_plan()
         self._retake_plan()
-        if self._resume is not None:
-            self._restore_track(point, f"the checkpoint at step {point['step']} resumed")
-        if self.sizer is not None and self._resume is not None:
-            self.sizer.h = resumed_h
+        if resumed is not None:
+            self._restore_track(resumed, f"the checkpoint at step {resumed['step']} resumed")
+            if self.sizer is not None:
+                self.sizer.h = resumed["h"]
         # A bridge FMU through the gateway takes one release at a time (its node says no HELLO).
         cannot = [n for n in self.stepping if self.capabilities.get(n, {}).get("batches") is not True]
         self._span = 1 if cannot else self.coupling.batch
         self.recorder.meta["coupling"] = self.coupling.describe(cannot if self.coupling.batch > 1 else None)
         self._checkpoints = self._checkpoint_plan()
-        end = cosim.stopTime - 1e-9 * H
-        self._last_point = math.ceil((cosim.stopTime - cosim.startTime) / H - 1e-9)
-        takes = 1  # of the step that ended at the current point
-        perf0 = time.perf_counter()
-        k0 = k
-        last_progress = 0.0
-        while True:
-            self._point = k
-            # A multi-rate run's checkpoints wait for a point where no node is inside its step.
-            if self._checkpoints and next_checkpoint - 1e-9 * H <= t < end and k % self.coupling.period == 0:
-                self._take_checkpoint(k, t, origin, j, localised, self.sizer.h if self.sizer else H)
-                next_checkpoint = self._next_checkpoint(t)
-            for node, history in self.histories.items():
-                held = history.at(t)
-                if held is not None:
-                    self.outputs[node] = held[1]
-            view = OutputView(self.router.output_index, self.outputs)
-            try:
-                switch = self.coordinator.update(k, t, view)
-            except GuardEvaluationError as exc:
-                raise RunError(f"{exc} (at step {k}, t={t:g} s)") from None
-            if switch is not None:
-                entry = switch.as_record()
-                if localised:
-                    entry["localised"] = localised
-                self.recorder.event(entry)
-                self.switches.append(entry)
-                self._log.info("mode switch", step=k, t=t, name=switch.event, to=switch.to_mode, values=switch.values)
-            mode = self.coordinator.mode
-            ages = self.router.route(mode, t, self.outputs, self.histories)
-            lateness = None
-            if clock is not None:
-                ahead = clock.seconds_until(t)  # read once: a second reading may have passed t
-                lateness = max(0.0, -ahead)
-                if ahead > 0:
-                    time.sleep(ahead)
-            holder = max(arrivals, key=arrivals.get) if arrivals else ""
-            now = self._show(k, t, mode, lateness, holder, wait, arrivals, ages)
-            if self._on_progress is not None and now - last_progress >= self._progress_every:
-                last_progress = now
-                self.progress.steps_per_s = (k - k0) / (now - perf0) if now > perf0 else 0.0
-                self._on_progress(self.progress)
+        self._last_point = math.ceil((cosim.stopTime - cosim.startTime) / cosim.stepSize - 1e-9)
 
-            at_k = dict(self.outputs)  # kept: the step replaces outputs before its point is recorded
-            stepped = self.coupling.due(k) if self.coupling.multirate and t < end else None
-            # Point k as it is now (its timing: of the step that ended here), and the inputs the
-            # step from it is taken on (an iterated step's last): written while the nodes step.
-            record = functools.partial(self._record_point, k, t, mode, at_k, stepped, wait, holder, lateness,
-                                       arrivals, ages, takes)
-            if t >= end or self._stop_requested.is_set():
-                record()
+    def _arrive(self, p: _Point, final: bool) -> _Seen:
+        """Point p before the step from it (``final``: at stopTime): a checkpoint when one is
+        due, the sources' values held, the guards (maybe a mode switch), the inputs routed, the
+        pace of a real-time run, the point shown."""
+        H = self.cosim.stepSize
+        # A multi-rate run's checkpoints wait for a point where no node is inside its step.
+        if self._checkpoints and self._checkpoint_at - 1e-9 * H <= p.t and not final and p.k % self.coupling.period == 0:
+            self._take_checkpoint(p.k, p.t, p.origin, p.j, p.localised, self.sizer.h if self.sizer else H)
+            self._checkpoint_at = self._next_checkpoint(p.t)
+        for node, history in self.histories.items():
+            held = history.at(p.t)
+            if held is not None:
+                self.outputs[node] = held[1]
+        view = OutputView(self.router.output_index, self.outputs)
+        self._switch(p, view)
+        mode = self.coordinator.mode
+        ages = self.router.route(mode, p.t, self.outputs, self.histories)
+        lateness = self._pace(p.t)
+        holder = max(p.arrivals, key=p.arrivals.get) if p.arrivals else ""
+        self._show(p, mode, lateness, holder, ages)
+        stepped = self.coupling.due(p.k) if self.coupling.multirate and not final else None
+        # The outputs kept: the step replaces them before point p is recorded.
+        return _Seen(mode, dict(self.outputs), view, ages, lateness, holder, stepped)
+
+    def _switch(self, p: _Point, view: OutputView) -> None:
+        """Evaluate the guards at point p; a switch of mode is recorded (with the located event
+        that ended the step to p) and logged."""
+        try:
+            switch = self.coordinator.update(p.k, p.t, view)
+        except GuardEvaluationError as exc:
+            raise RunError(f"{exc} (at step {p.k}, t={p.t:g} s)") from None
+        if switch is None:
+            return
+        entry = switch.as_record()
+        if p.localised:
+            entry["localised"] = p.localised
+        self.recorder.event(entry)
+        self.switches.append(entry)
+        self._log.info("mode switch", step=p.k, t=p.t, name=switch.event, to=switch.to_mode, values=switch.values)
+
+    def _pace(self, t: float) -> float | None:
+        """A real-time run waits for t on the wall clock; return how late it is there (None: unpaced)."""
+        if self._clock is None:
+            return None
+        ahead = self._clock.seconds_until(t)  # read once: a second reading may have passed t
+        if ahead > 0:
+            time.sleep(ahead)
+        return max(0.0, -ahead)
+
+    def _show(self, p: _Point, mode: str, lateness: float | None, holder: str, ages: dict[str, float | None]) -> None:
+        """Point p for the progress bar and the status answer."""
+        self.progress.step, self.progress.t, self.progress.mode = p.k, p.t, mode
+        self.progress.lateness_s = lateness
+        now = time.perf_counter()
+        self._recent.append((now, holder, p.wait, p.arrivals))
+        # Point p's values, whole (the outputs change while the nodes step).
+        self._shown = (p.k, p.t, mode, dict(self.outputs), {n: list(v) for n, v in self.router.inputs.items()},
+                       time.time())
+        self._history.append(self._shown)
+        self._ages = ages
+        if self._on_progress is not None and now - self._progressed >= self._progress_every:
+            self._progressed = now
+            self.progress.steps_per_s = (p.k - self._k0) / (now - self._perf0) if now > self._perf0 else 0.0
+            self._on_progress(self.progress)
+
+    def _next_point(self, p: _Point, short: bool) -> tuple[float, list[float] | None]:
+        """The time the step from point p ends, and for a batched release the base points it spans."""
+        cosim = self.cosim
+        H = cosim.stepSize
+        if short:  # interpolated inputs' start-up: steps of H / STARTUP_SPLIT until there are points enough
+            return min(cosim.startTime + (p.k + 1) * H / STARTUP_SPLIT, cosim.stopTime), None
+        if self.sizer is not None:
+            return min(p.t + self.sizer.h, cosim.stopTime), None
+        if self._span > 1:  # a batched release: its base points as single releases would have them
+            times = [min(p.origin + (p.j + i) * H, cosim.stopTime)
+                     for i in range(min(self._span, self._last_point - p.k) + 1)]
+            return times[-1], times
+        return min(p.origin + (p.j + 1) * H, cosim.stopTime), None
+
+    def _step_from(self, p: _Point, seen: _Seen) -> _Point:
+        """Take the step from point p by the run's strategy (iterated, size-controlled or plain,
+        then located if a guard crossed inside it) and return the point it ends at. Point p is
+        recorded while the nodes take its step."""
+        record = functools.partial(self._record_point, p, seen)
+        short = p.k < self._short_steps
+        next_t, times = self._next_point(p, short)
+        h = h_used = next_t - p.t
+        watched = self._localising and self.coordinator.pending_guard_holds(seen.view)
+        takes = 1
+        try:
+            if self.iteration is not None:
+                try:
+                    arrivals, wait, takes = self._iterated(p.k, p.t, h, seen.mode)
+                finally:
+                    record()  # also when the step failed: point p stands
+            elif self.sizer is not None:
+                h_used, arrivals, wait, takes = self._controlled(p.k, p.t, h, seen.mode, record)
+            else:
+                arrivals, wait = self._release(p.k, p.t, h, seen.mode, meanwhile=record, times=times)
+                if times is not None:
+                    self._record_inside(p.k, times, seen.mode, seen.outputs, arrivals)
+            localised: dict[str, Any] = {}
+            if self._localising:
+                h_used, arrivals, wait, localised = self._localise(p.k, p.t, h, seen.mode, watched, arrivals, wait)
+        except _ModelEnded:
+            self._record_end(p.k, seen.mode, seen.outputs, times or [p.t, next_t])
+            raise
+        origin, j = p.origin, p.j
+        if h_used != h:  # a located event, or a controlled step taken shorter: a new grid from there
+            origin, j, next_t = p.t + h_used, -1, p.t + h_used
+        elif short:  # the grid of H starts where the short steps end
+            origin, j = next_t, -1
+        count = 1 if times is None else len(times) - 1
+        return _Point(p.k + count, next_t, origin, j + count, localised, arrivals, wait, takes)
+
+    def _loop(self) -> None:
+        p, resumed = self._begin()
+        self._plan(resumed)
+        end = self.cosim.stopTime - 1e-9 * self.cosim.stepSize
+        self._perf0, self._k0 = time.perf_counter(), p.k
+        while True:
+            self._point = p.k
+            seen = self._arrive(p, p.t >= end)
+            if p.t >= end or self._stop_requested.is_set():
+                self._record_point(p, seen)
                 break
-            short = k < self._short_steps
-            next_t, times = self._next_point(k, t, origin, j, short)
-            h = h_used = next_t - t
-            watched = localise and self.coordinator.pending_guard_holds(view)
             try:
-                if self.iteration is not None:
-                    try:
-                        arrivals, wait, takes = self._iterated(k, t, h, mode)
-                    finally:
-                        record()  # also when the step failed: point k stands
-                elif self.sizer is not None:
-                    h_used, arrivals, wait, takes = self._controlled(k, t, h, mode, record)
-                else:
-                    arrivals, wait = self._release(k, t, h, mode, meanwhile=record, times=times)
-                    if times is not None:
-                        self._record_inside(k, times, mode, at_k, arrivals)
-                localised = {}
-                if localise:
-                    h_used, arrivals, wait, localised = self._localise(k, t, h, mode, watched, arrivals, wait)
+                p = self._step_from(p, seen)
             except _ModelEnded:
-                self._record_end(k, mode, at_k, times or [t, next_t])
                 break
-            except _Recover as cause:
-                # Back to the last checkpoint: its point is taken again from the top, as it was.
-                point, arrivals, wait = self._restore(cause)
-                k, t, origin, j, localised = (point["step"], point["t"], point["origin"], point["j"],
-                                              dict(point["localised"]))
-                takes = 1
-                if self.sizer is not None:
-                    self.sizer.h = point["h"]
-                next_checkpoint = self._next_checkpoint(t)
-                if clock is not None:
-                    clock = RealTimeClock(t, time.time(), rt)
-                continue
-            if h_used != h:  # a located event, or a controlled step taken shorter
-                origin, j, next_t = t + h_used, -1, t + h_used
-            elif short:  # the grid of H starts where the short steps end
-                origin, j = next_t, -1
-            t = next_t
-            step_count = 1 if times is None else len(times) - 1
-            j += step_count
-            k += step_count
-        elapsed = time.perf_counter() - perf0
-        self.recorder.meta["steps_per_s"] = (k - k0) / elapsed if elapsed > 0 else None
+            except _Recover as cause:  # back to the last checkpoint: its point is taken again, as it was
+                p, _ = self._restored(cause)
+        elapsed = time.perf_counter() - self._perf0
+        self.recorder.meta["steps_per_s"] = (p.k - self._k0) / elapsed if elapsed > 0 else None
         if self._on_progress is not None:
             self.progress.steps_per_s = self.recorder.meta["steps_per_s"] or 0.0
             self._on_progress(self.progress)

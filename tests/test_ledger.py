@@ -1,0 +1,111 @@
+"""The releases' ledger (hycosim.server.ledger) through its own interface: which step each node
+owes after a release, at which point, and what each answer is to the point being gathered."""
+
+from __future__ import annotations
+
+from hypothesis import given, strategies as st
+
+from hycosim.core.frames import Batch, End, Outputs
+from hycosim.server.ledger import ENDED, LATER, TAKE, Ledger, Refusal
+
+NODES = ["a", "b", "c", "d"]
+
+
+def _outputs(step: int) -> Outputs:
+    return Outputs(1, step, 0.0, [1.0])
+
+
+def _batch(step: int, before: int) -> Batch:
+    return Batch(1, step, 0.0, [1.0], [[0.5]] * before)
+
+
+def _end(step: int) -> End:
+    return End(1, step, 0.0, True, "done", [], None)
+
+
+rates = st.lists(st.integers(1, 5), min_size=1, max_size=len(NODES)).map(lambda r: dict(zip(NODES, r)))
+
+
+@given(rates=rates, k=st.integers(0, 50), left=st.integers(1, 8))
+def test_a_release_makes_each_node_due_at_the_end_of_its_own_step_and_sorts_its_answer_there(rates, k, left):
+    """Released from point k, a node of rate m owes its outputs labelled k + 1 at point k + m (at
+    most the last point). Gathering k + 1, a node due there is taken; a slower one's answer is
+    kept for its point, handed over there once, and a second copy of it is a duplicate."""
+    ledger = Ledger(list(rates), [], rates)
+    last_point = k + left
+    ledger.released(list(rates), k, 0.0, last_point=last_point)
+    due_at = {n: k + 1 if m == 1 else min(k + m, last_point) for n, m in rates.items()}
+    for point in range(k + 1, last_point + 1):
+        assert ledger.due(point) == {n for n, at in due_at.items() if at == point}
+    pending = ledger.due(k + 1)
+    for node in rates:
+        verdict = ledger.sort(node, _outputs(k + 1), k + 1, pending)
+        assert verdict == (TAKE if due_at[node] == k + 1 else LATER)
+        if verdict is LATER:
+            ledger.keep(node, _outputs(k + 1))
+            again = ledger.sort(node, _outputs(k + 1), k + 1, pending)
+            assert isinstance(again, Refusal) and again.reason == "duplicate"
+    for point in range(k + 2, last_point + 1):
+        kept = ledger.kept_for(ledger.due(point))
+        assert [n for n, _ in kept] == sorted(n for n, at in due_at.items() if at == point)
+        assert all(frame.step == k + 1 for _, frame in kept)
+        assert ledger.kept_for(ledger.due(point)) == []  # handed over once
+
+
+@given(rates=rates, k=st.integers(0, 50), off=st.integers(-3, 3).filter(bool),
+       kind=st.sampled_from(["outputs", "batch", "end"]))
+def test_an_answer_with_another_label_is_refused_whatever_its_kind(rates, k, off, kind):
+    ledger = Ledger(list(rates), [], rates)
+    ledger.released(list(rates), k, 0.0)
+    step = k + 1 + off
+    frame = _outputs(step) if kind == "outputs" else _batch(step, 0) if kind == "batch" else _end(step)
+    for node in rates:
+        verdict = ledger.sort(node, frame, k + 1, set(rates))
+        assert verdict == Refusal("step already past" if off < 0 else "wrong step",
+                                  f"{node} sent step {step} while collecting {k + 1}")
+    assert ledger.sort(NODES[0], _end(k + 1), k + 1, set(rates)) is ENDED
+
+
+@given(rates=rates, k=st.integers(0, 50), count=st.integers(2, 12), before=st.integers(0, 12))
+def test_a_batched_release_takes_one_batch_of_each_nodes_steps_inside_it(rates, k, count, before):
+    """Over ``count`` base steps, a node of rate m ≤ the span owes one BATCH at the release's end
+    holding its outputs after each of its steps before its last; an OUTPUTS, or a BATCH of
+    another number of steps, is refused by name."""
+    span = max(count, *rates.values())
+    ledger = Ledger(list(rates), [], rates)
+    ledger.released(list(rates), k, 0.0, count=count, batched=True, span=span)
+    assert ledger.due(k + count) == set(rates)
+    for node, m in rates.items():
+        owed = len(range(0, count, m)) - 1
+        verdict = ledger.sort(node, _batch(k + 1, before), k + count, set(rates))
+        if before == owed:
+            assert verdict is TAKE
+        else:
+            assert verdict == Refusal("wrong step", f"{node} sent the outputs of {before + 1} steps for a batch "
+                                      f"of {owed + 1} of its steps")
+        refused = ledger.sort(node, _outputs(k + 1), k + count, set(rates))
+        assert isinstance(refused, Refusal) and refused.reason == "wrong kind"
+    # The next release, unbatched, owes OUTPUTS again.
+    ledger.released(list(rates), k + count, 0.0)
+    assert ledger.sort(NODES[0], _batch(k + count + 1, 0), k + count + 1, set(rates)).reason == "wrong kind"
+
+
+@given(step=st.integers(0, 100))
+def test_a_start_or_restore_forgets_what_was_kept_and_batched(step):
+    rates = {"a": 1, "b": 3}
+    ledger = Ledger(list(rates), [], rates)
+    ledger.released(["a", "b"], 10, 0.0, count=3, batched=True, span=3)
+    ledger.keep("b", _batch(11, 0))
+    ledger.expect_all(step, 0.0)
+    assert ledger.kept_for({"a", "b"}) == []
+    assert ledger.due(step) == {"a", "b"}
+    assert all(ledger.sort(n, _outputs(step), step, {"a", "b"}) is TAKE for n in rates)
+
+
+@given(step=st.integers(0, 100))
+def test_a_played_source_answers_each_point_with_its_own_step_once(step):
+    ledger = Ledger(["a"], ["src"], {"a": 1})
+    assert ledger.label("src", step) == step
+    assert ledger.sort("src", _outputs(step), step, {"a", "src"}) is TAKE
+    assert ledger.sort("src", _outputs(step), step, {"a"}).reason == "duplicate"
+    assert ledger.sort("src", _outputs(step + 1), step, {"src"}).reason == "wrong step"
