@@ -38,6 +38,7 @@ from hycosim.server.coordinator import Coordinator, GuardEvaluationError
 from hycosim.server.gateway import Gateway, GatewayError
 from hycosim.server.intake import Dropped, Intake, port_mismatch
 from hycosim.server.ledger import ENDED, LATER, TAKE, Ledger
+from hycosim.server.localisation import bisect_crossing
 from hycosim.server.interpolation import STARTUP_SPLIT, InputTrack
 from hycosim.server.recorder import Recorder, RecordError
 from hycosim.server.retakes import IterationLog, StepSizer, input_change, relaxed
@@ -635,7 +636,10 @@ class Relay:
             self._take(node, frame, released_at, pending, arrivals)
         deadline = time.monotonic() + self.cosim.stepTimeout
         while pending:
-            deadline, wait = self._patience(deadline, step)
+            if self.lost:
+                deadline, wait = self._patience(deadline, step)
+            else:
+                wait = max(deadline - time.monotonic(), 0.0)
             msg = self.inbox.recv(wait)
             if msg is None:
                 if self.lost:
@@ -681,20 +685,16 @@ class Relay:
         arrivals[node] = self.ledger.since_release(node, released_at)
 
     def _patience(self, deadline: float, step: int) -> tuple[float, float]:
-        """The deadline of point ``step`` and how long the inbox is waited on now. While a node
-        is away the step's own timeout does not run (its return, or a restore, gives the others
-        a fresh one), and the wait ends with its grace, when the run stops naming it."""
-        if self.lost:
-            node, since = min(self.lost.items(), key=lambda item: item[1])
-            grace = self._grace()
-            if time.monotonic() - since > grace:
-                raise RunError(f"node {node!r} was lost at step {step} (t={self._time(step):g} s) and did not "
-                               f"come back within the link grace of {grace:g} s")
-            deadline = max(deadline, time.monotonic() + self.cosim.stepTimeout)
-            wait = min(deadline, since + grace + 0.01) - time.monotonic()
-        else:
-            wait = deadline - time.monotonic()
-        return deadline, wait if wait > 0.0 else 0.0
+        """While a node is away: the deadline of point ``step`` and how long the inbox is waited
+        on now. The step's own timeout does not run then (its return, or a restore, gives the
+        others a fresh one), and the wait ends with the node's grace, when the run stops naming it."""
+        node, since = min(self.lost.items(), key=lambda item: item[1])
+        grace = self._grace()
+        if time.monotonic() - since > grace:
+            raise RunError(f"node {node!r} was lost at step {step} (t={self._time(step):g} s) and did not "
+                           f"come back within the link grace of {grace:g} s")
+        deadline = max(deadline, time.monotonic() + self.cosim.stepTimeout)
+        return deadline, max(min(deadline, since + grace + 0.01) - time.monotonic(), 0.0)
 
     def _on_end(self, node: str, step: int, frame: frames.Frame) -> None:
         """A node's END instead of its outputs for ``step``: its model ended the run (the caller
@@ -994,30 +994,22 @@ class Relay:
 
     def _localise(self, k: int, t: float, h: float, mode: str, watched_at_start: bool,
                   arrivals: dict[str, float], wait: float) -> tuple[float, dict[str, float], float, dict[str, Any]]:
-        """Shrink step k until a guard crossing inside it lies within eventTolerance of its end.
-
-        The step was taken and its end satisfies a guard that did not hold at its start. Bisect on
-        the step length, rolling every node back to its state at t before each retry.
-        """
+        """Shrink step k until a guard crossing inside it lies within eventTolerance of its end
+        (server.localisation): the step was taken and its end satisfies a guard that did not
+        hold at its start. Return the step length that stands, arrivals, wait and the window."""
         view = OutputView(self.router.output_index, self.outputs)
         tol = self.cosim.eventTolerance
         if watched_at_start or not self.coordinator.pending_guard_holds(view) or h <= tol:
             return h, arrivals, wait, {}
-        lo, hi, tries, at_hi = 0.0, h, 0, True
-        while hi - lo > tol:
-            mid = 0.5 * (lo + hi)
+        came = [arrivals, wait]
+
+        def take(length: float) -> bool:
             self.release.put(frames.encode(frames.ROLLBACK, k, t))
-            arrivals, wait = self._release(k, t, mid, mode)
-            tries += 1
-            if self.coordinator.pending_guard_holds(view):
-                hi, at_hi = mid, True
-            else:
-                lo, at_hi = mid, False
-        if not at_hi:
-            self.release.put(frames.encode(frames.ROLLBACK, k, t))
-            arrivals, wait = self._release(k, t, hi, mode)
-            tries += 1
-        return hi, arrivals, wait, {"retries": tries, "window": [t + lo, t + hi]}
+            came[:] = self._release(k, t, length, mode)
+            return self.coordinator.pending_guard_holds(view)
+
+        at = bisect_crossing(h, tol, take)
+        return at.hi, came[0], came[1], {"retries": at.tries, "window": [t + at.lo, t + at.hi]}
 
     def _begin(self) -> tuple[_Point, dict[str, Any] | None]:
         """START, or resuming, the last checkpoint: the first point, with every stepping node's

@@ -1,7 +1,10 @@
-"""The releases' ledger (hycosim.server.ledger) through its own interface: which step each node
-owes after a release, at which point, and what each answer is to the point being gathered."""
+"""The master's parts through their own interfaces: the releases' ledger (hycosim.server.ledger:
+which step each node owes after a release, at which point, and what each answer is to the point
+being gathered) and event localisation's bisection (hycosim.server.localisation)."""
 
 from __future__ import annotations
+
+import math
 
 from hypothesis import given, strategies as st
 
@@ -109,3 +112,24 @@ def test_a_played_source_answers_each_point_with_its_own_step_once(step):
     assert ledger.sort("src", _outputs(step), step, {"a", "src"}) is TAKE
     assert ledger.sort("src", _outputs(step), step, {"a"}).reason == "duplicate"
     assert ledger.sort("src", _outputs(step + 1), step, {"src"}).reason == "wrong step"
+
+
+@given(h=st.floats(1e-3, 10.0), share=st.floats(1e-6, 1.0), tol=st.floats(1e-6, 1.0))
+def test_a_crossing_is_bisected_to_within_the_tolerance_and_the_last_step_taken_ends_after_it(h, share, tol):
+    """The guard starts to hold at c inside (0, h]: the window found holds c, is at most the
+    tolerance wide, was found in the fewest halvings, and the nodes stand at its end."""
+    from hycosim.server.localisation import bisect_crossing
+
+    c = h * share
+    taken: list[float] = []
+
+    def take(length: float) -> bool:
+        taken.append(length)
+        return length >= c
+
+    at = bisect_crossing(h, tol, take)
+    assert at.lo < c <= at.hi and at.hi - at.lo <= tol
+    assert at.tries == len(taken)
+    assert (taken[-1] if taken else h) == at.hi
+    halvings = max(0, math.ceil(math.log2(h / tol)))  # each halves the window, from h
+    assert halvings - 1 <= len(taken) <= halvings + 2  # (+1: the step taken again at hi; ±1: rounding)
