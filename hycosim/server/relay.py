@@ -1,13 +1,23 @@
 """The relay server's co-simulation loop: attach, then the macro-step barrier until stopTime.
 
-Read top to bottom, :meth:`Relay.run` is the whole algorithm (Jacobi coupling):
+Read top to bottom, :meth:`Relay.run` and :meth:`Relay._loop` are the whole algorithm:
 
 1. wait until every node holds a liveliness token (attachTimeout names the missing ones);
-2. START: every stepping node reports its outputs at t0;
-3. at each macro-step point T_k: evaluate the guards (maybe switch mode), route the
-   outputs along the links active in the mode, record the step, then release all nodes
-   at once to integrate T_k → T_k+H on those inputs, and gather their outputs at T_k+H;
+2. :meth:`_begin`: START, every stepping node reports its outputs at t0 (then the
+   initialisation phase), or, resuming, every node gets its state at the last checkpoint;
+   :meth:`_plan`: what the nodes said they can take part in (localisation, iteration, step
+   control, batches, checkpoints);
+3. at each macro-step point, :meth:`_arrive`: a checkpoint if one is due, the guards (maybe a
+   mode switch), the outputs routed along the links active in the mode, pacing; then
+   :meth:`_step_from`: release the nodes to integrate T_k → T_k+H (Jacobi: all at once;
+   Gauss-Seidel: in order) by the run's strategy (plain, iterated, size-controlled, located
+   around a guard crossing), record point k while they step, and gather their outputs at
+   T_k+H (:meth:`gather`, the releases' ledger in server.ledger sorting the answers);
 4. STOP at stopTime, on Ctrl-C, or on a fault, with everything recorded so far on disk.
+
+The transport (Zenoh sessions and keys, or calls in one process) is given as a
+:class:`~hycosim.server.transport.Transport`; the loop does not know which (only the
+gateway for bridge FMUs asks for the transport's Zenoh session).
 """
 
 from __future__ import annotations
