@@ -374,8 +374,8 @@ def array_elements(value: Any, shape: tuple[int, ...]) -> list[Any] | None:
         return None
     out: list[Any] = []
     for row in value:
-        inner = array_elements(row, shape[1:])
-        if inner is None or len(inner) != math.prod(shape[1:]):
+        inner = array_elements(row, shape[1:])  # None, or exactly the row's elements
+        if inner is None:
             return None
         out.extend(inner)
     return out

@@ -1011,15 +1011,15 @@ class Relay:
         tol = self.cosim.eventTolerance
         if watched_at_start or not self.coordinator.pending_guard_holds(view) or h <= tol:
             return h, arrivals, wait, {}
-        came = [arrivals, wait]
 
         def take(length: float) -> bool:
+            nonlocal arrivals, wait
             self.release.put(frames.encode(frames.ROLLBACK, k, t))
-            came[:] = self._release(k, t, length, mode)
+            arrivals, wait = self._release(k, t, length, mode)
             return self.coordinator.pending_guard_holds(view)
 
         at = bisect_crossing(h, tol, take)
-        return at.hi, came[0], came[1], {"retries": at.tries, "window": [t + at.lo, t + at.hi]}
+        return at.hi, arrivals, wait, {"retries": at.tries, "window": [t + at.lo, t + at.hi]}
 
     def _begin(self) -> tuple[_Point, dict[str, Any] | None]:
         """START, or resuming, the last checkpoint: the first point, with every stepping node's
