@@ -77,16 +77,22 @@ class FmuNode(Node):
             self.fmu.set_inputs(inputs)
 
     def outputs(self) -> dict[str, Any]:
-        with _node_errors():
+        try:  # _node_errors written out: a context manager costs a tenth of this call
             return self.fmu.get_outputs()
+        except FmuError as exc:
+            raise NodeModelError(str(exc)) from None
 
     def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
-        with _node_errors():
+        try:  # _node_errors written out, as in outputs
             self.fmu.set_inputs(inputs)
             if self._derivatives:
                 self.fmu.set_input_derivatives(self._derivatives)
                 self._derivatives = {}
             self.fmu.do_step(t, h)
+        except FmuTerminated as exc:
+            raise SimulationEnded(exc.t, str(exc)) from None
+        except FmuError as exc:
+            raise NodeModelError(str(exc)) from None
         events = getattr(self.fmu, "events", None)  # a Model Exchange FMU's, inside the step
         if events:
             log = structlog.get_logger("node").bind(node=self.spec.nodeName)

@@ -109,6 +109,7 @@ class NodeRuntime:
         self.inbox: Inbox | None = None
         self._bus: LocalBus | None = None
         self._stepping: _Stepping | None = None
+        self._interpolating = self._is_player = False  # set once the model is set up
         self._played: _Played | None = None
         self._started = False
         self.failure: str | None = None  # in process: why this node ended the run, if it failed
@@ -139,6 +140,9 @@ class NodeRuntime:
     def _setup(self) -> None:
         try:
             self.impl.setup(self.context())
+            # Asked of every release a node checks: what it is does not change once set up.
+            self._interpolating = isinstance(self.impl, Node) and self.impl.can_interpolate
+            self._is_player = isinstance(self.impl, SamplePlayer)
         except Exception as exc:
             if isinstance(exc, NodeRunError):
                 raise
@@ -547,8 +551,7 @@ class NodeRuntime:
     def _on_release(self, frame: frames.Frame) -> bool:
         """Act on one frame from the server while stepping; True once this node is done (the
         run's STOP, or its model ended the simulation)."""
-        impl, at = self.impl, self._stepping
-        assert isinstance(impl, Node) and at is not None
+        impl, at = self.impl, self._stepping  # a Node: only a stepping node has _stepping
         if frame.kind == frames.STOP:
             self._on_stop(frame)
             return True
@@ -664,7 +667,7 @@ class NodeRuntime:
             return None
 
     def _interpolates(self) -> bool:
-        return isinstance(self.impl, Node) and self.impl.can_interpolate
+        return self._interpolating
 
     def _hello(self, rollback: bool, restart: bool = False) -> bytes:
         stepping = isinstance(self.impl, Node)
@@ -816,7 +819,7 @@ class NodeRuntime:
             self._bus.leave(self.name)
 
     def _on_hosted(self, frame: frames.Frame) -> bool:
-        if isinstance(self.impl, SamplePlayer):
+        if self._is_player:
             if not self._started:
                 self._started = True
                 self._begin_played(frame, False)

@@ -25,6 +25,7 @@ from fmpy.model_description import ModelDescription, ScalarVariable
 
 from hycosim.core.schema import Node, PortType
 from hycosim.core.hints import did_you_mean
+from hycosim.fmu_bridge.value_access import Port, port_access
 
 # FMI 2 type names and their FMI 3 counterparts, per port type.
 _COMPATIBLE = {
@@ -544,6 +545,11 @@ class FmuInstance:
             raise FmuError(f"node {self.node!r}: {path.name}: its binary cannot be loaded as {mapping.interface} "
                            f"({type(exc).__name__}: {exc})") from None
         self.time = 0.0
+        # The ports a step reads and writes, one C call per type (None: through fmpy's calls one by one).
+        self._reader = port_access(self.fmu, [Port(m.vr, m.type, m.size) for m in self.outputs], self.fmi3, False)
+        self._writer = port_access(self.fmu, [Port(m.vr, m.type, m.size) for m in self.inputs], self.fmi3, True)
+        self._do_step_c = (getattr(self.fmu.dll, "fmi2DoStep") if mapping.interface == CO_SIMULATION
+                           and not self.fmi3 and getattr(self.fmu, "fmiCallLogger", None) is None else None)
 
     def _instantiate(self, kwargs: dict[str, Any]) -> Any:
         """The fmpy object of the FMU's co-simulation interface, instantiated."""
@@ -631,6 +637,14 @@ class FmuInstance:
             self._set(self.driven_variable, driven)
 
     def set_inputs(self, values: dict[str, Any]) -> None:
+        """Set the inputs given by port (all of them in one C call per type, where they can be)."""
+        if self._writer is not None and len(values) == len(self.inputs) and all(m.port in values for m in self.inputs):
+            try:
+                self._writer.write([values[m.port] for m in self.inputs])
+            except FMICallException as exc:
+                raise FmuError(f"node {self.node!r}: setting inputs {', '.join(m.variable for m in self.inputs)} "
+                               f"failed ({exc})") from None
+            return
         for m in self.inputs:
             if m.port in values:
                 self._set(self._variables[m.variable], values[m.port], m.size)
@@ -653,7 +667,10 @@ class FmuInstance:
             raise FmuError(f"node {self.node!r}: setting input derivatives failed ({exc})") from None
 
     def get_outputs(self) -> dict[str, Any]:
+        """Every output's value by port (an array's as a list of its elements)."""
         try:
+            if self._reader is not None:
+                return dict(zip([m.port for m in self.outputs], self._reader.read()))
             return {m.port: self._get(m.vr, m.type, m.size) for m in self.outputs}
         except FMICallException as exc:
             raise FmuError(f"node {self.node!r}: reading outputs failed ({exc})") from None
@@ -693,7 +710,11 @@ class FmuInstance:
     def do_step(self, t: float, h: float) -> None:
         """Advance from t to t+h; the FMU's own micro-steps stay inside it."""
         try:
-            if not self.fmi3:
+            if self._do_step_c is not None:
+                status = self._do_step_c(self.fmu.component, t, h, 1)  # noSetFMUStatePriorToCurrentPoint, as fmpy
+                if status > 1:  # fmi2Warning
+                    raise FMICallException(function="fmi2DoStep", status=status)
+            elif not self.fmi3:
                 self.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
             else:
                 end = t + h

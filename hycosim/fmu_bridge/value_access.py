@@ -1,0 +1,127 @@
+"""An FMU's ports read and written every step: one C call per variable type, buffers made once.
+
+fmpy's ``getReal(vr)`` builds two ctypes arrays, calls through a logging wrapper and makes a
+list, for each call; a node reading three outputs a step did that three times. A
+:class:`PortAccess` groups a node's ports by FMI type once, when the FMU is opened, and then
+reads (or writes) each group with one call of the FMU's own C function on arrays kept from
+step to step. The values are the ones fmpy's calls give (the same C calls, converted to
+Python as fmpy converts them), and a failed call raises fmpy's ``FMICallException`` naming
+the function and the status, as fmpy's wrappers do.
+
+Where fmpy logs every FMI call (an ``fmiCallLogger`` is set), or a port's type has no fixed
+size (String, Binary), :func:`port_access` gives None and the FMU's values go through fmpy's
+calls one by one, as before.
+"""
+
+from __future__ import annotations
+
+import ctypes
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Callable
+
+from fmpy.fmi1 import FMICallException
+
+# FMI type → (the C function's type name, C element type, Python conversion as fmpy's calls
+# give it) per interface; String and Binary have no fixed size and are left out.
+_FMI2 = {"Real": ("Real", ctypes.c_double, float), "Integer": ("Integer", ctypes.c_int, int),
+         "Enumeration": ("Integer", ctypes.c_int, int), "Boolean": ("Boolean", ctypes.c_int, bool)}
+_FMI3 = {"Float64": ("Float64", ctypes.c_double, float), "Float32": ("Float32", ctypes.c_float, float),
+         "Int8": ("Int8", ctypes.c_int8, int), "UInt8": ("UInt8", ctypes.c_uint8, int),
+         "Int16": ("Int16", ctypes.c_int16, int), "UInt16": ("UInt16", ctypes.c_uint16, int),
+         "Int32": ("Int32", ctypes.c_int32, int), "UInt32": ("UInt32", ctypes.c_uint32, int),
+         "Int64": ("Int64", ctypes.c_int64, int), "UInt64": ("UInt64", ctypes.c_uint64, int),
+         "Enumeration": ("Int64", ctypes.c_int64, int), "Boolean": ("Boolean", ctypes.c_bool, bool)}
+
+_WARNING = 1  # fmi2Warning and fmi3Warning: above it a call failed
+
+
+@dataclass(frozen=True)
+class Port:
+    """One port as the FMU holds it: its variable's value reference and FMI type, and its
+    element count for an array variable (None for a scalar)."""
+
+    vr: int
+    type: str
+    size: int | None = None
+
+
+@dataclass
+class _Group:
+    """Ports of one FMI type, read or written in one call: ``positions`` are theirs in the
+    node's port order, ``slices`` where each one's elements lie in ``values``."""
+
+    function: str
+    call: Callable[..., int]
+    vrs: Any
+    values: Any
+    convert: type
+    positions: list[int]
+    slices: list[tuple[int, int | None]]  # (first element, size or None for a scalar)
+
+
+class PortAccess:
+    """Reads or writes a fixed list of ports (in the node's port order) with one C call per type."""
+
+    def __init__(self, groups: list[_Group], count: int, component: Any, fmi3: bool):
+        self._groups = groups
+        self._count = count
+        self._component = component
+        self._fmi3 = fmi3
+
+    def read(self) -> list[Any]:
+        """Every port's value, in order: a scalar as a Python value, an array as a list."""
+        out: list[Any] = [None] * self._count
+        for g in self._groups:
+            args = (self._component, g.vrs, len(g.vrs), g.values) + ((len(g.values),) if self._fmi3 else ())
+            status = g.call(*args)
+            if status > _WARNING:
+                raise FMICallException(function=g.function, status=status)
+            values, convert = g.values, g.convert
+            for position, (first, size) in zip(g.positions, g.slices):
+                out[position] = convert(values[first]) if size is None else \
+                    [convert(v) for v in values[first:first + size]]
+        return out
+
+    def write(self, values: Sequence[Any]) -> None:
+        """Set every port from ``values`` (in order; an array port's value a list of its elements)."""
+        for g in self._groups:
+            buffer, convert = g.values, g.convert
+            for position, (first, size) in zip(g.positions, g.slices):
+                value = values[position]
+                if size is None:
+                    buffer[first] = convert(value)
+                else:
+                    buffer[first:first + size] = [convert(v) for v in value]
+            args = (self._component, g.vrs, len(g.vrs), buffer) + ((len(buffer),) if self._fmi3 else ())
+            status = g.call(*args)
+            if status > _WARNING:
+                raise FMICallException(function=g.function, status=status)
+
+
+def port_access(fmu: Any, ports: Sequence[Port], fmi3: bool, setting: bool) -> PortAccess | None:
+    """A :class:`PortAccess` for ``ports`` of the fmpy FMU object ``fmu`` (FMI 2 or 3, instantiated),
+    reading (or with ``setting``, writing) them; None where fmpy's calls must be used instead:
+    FMI calls are being logged, or a port is of a type without a fixed size (String, Binary)."""
+    if getattr(fmu, "fmiCallLogger", None) is not None:
+        return None
+    table = _FMI3 if fmi3 else _FMI2
+    if any(p.type not in table for p in ports):
+        return None
+    by_name: dict[str, list[int]] = {}
+    for i, p in enumerate(ports):
+        by_name.setdefault(table[p.type][0], []).append(i)
+    prefix = "fmi3" if fmi3 else "fmi2"
+    groups = []
+    for name, positions in by_name.items():
+        _, ctype, convert = next(table[ports[i].type] for i in positions)
+        function = f"{prefix}{'Set' if setting else 'Get'}{name}"
+        slices, first = [], 0
+        for i in positions:
+            slices.append((first, ports[i].size))
+            first += ports[i].size or 1
+        # The library's own function object, whose argument types fmpy declared when it loaded it.
+        groups.append(_Group(function, getattr(fmu.dll, function),
+                             (ctypes.c_uint32 * len(positions))(*(ports[i].vr for i in positions)),
+                             (ctype * first)(), convert, positions, slices))
+    return PortAccess(groups, len(ports), fmu.component, fmi3)
