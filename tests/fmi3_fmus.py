@@ -32,15 +32,26 @@ CLOCKS = {
     "triggered": '<Clock name="tick" valueReference="20" causality="input" intervalVariability="constant" '
                  'intervalDecimal="0.1"/>\n    <Clock name="trip" valueReference="21" causality="output" '
                  'intervalVariability="triggered"/>',
+    "shifted": '<Clock name="tick" valueReference="20" causality="input" intervalVariability="constant" '
+               'intervalCounter="1" resolution="10" shiftDecimal="0.05"/>',
+    "tunable": '<Clock name="tick" valueReference="20" causality="input" intervalVariability="tunable" '
+               'intervalDecimal="0.1"/>',
 }
 
 
-def model_description(clocks: str = "", interface: str | None = None) -> str:
+# The clocked partition of tests/c/statespace3.c: outputs on the clock tick (vr 20).
+_CLOCKED = ('<Float64 name="held" valueReference="23" causality="output" variability="discrete" clocks="20"/>\n'
+            '    <Float64 name="ticks" valueReference="24" causality="output" variability="discrete" clocks="20"/>')
+
+
+def model_description(clocks: str = "", interface: str | None = None, event_mode: bool = True) -> str:
     """The state-space FMU's description at its default sizes; ``clocks`` (a key of CLOCKS)
-    adds clock variables, ``interface`` replaces the co-simulation element."""
+    adds clock variables (with the clocked outputs held and ticks, and event mode unless not
+    ``event_mode``), ``interface`` replaces the co-simulation element."""
     d = _defaults(M, N, R)
+    events = ' hasEventMode="true"' if clocks and event_mode else ""
     caps = ('<CoSimulation modelIdentifier="statespace3" canHandleVariableCommunicationStepSize="true" '
-            'canGetAndSetFMUState="true" canSerializeFMUState="true"/>')
+            f'canGetAndSetFMUState="true" canSerializeFMUState="true"{events}/>')
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="3.0" modelName="StateSpace" instantiationToken="{{{uuid.uuid4()}}}">
   {interface or caps}
@@ -76,6 +87,7 @@ def model_description(clocks: str = "", interface: str | None = None) -> str:
     <Float32 name="k32" valueReference="22" causality="input" variability="continuous" start="0"/>
     <Float32 name="s32" valueReference="19" causality="output" variability="continuous"/>
     {CLOCKS.get(clocks, "")}
+    {_CLOCKED if clocks else ""}
   </ModelVariables>
   <ModelStructure>
     <Output valueReference="10" dependencies="9"/>
@@ -84,14 +96,17 @@ def model_description(clocks: str = "", interface: str | None = None) -> str:
     <Output valueReference="16" dependencies="15"/>
     <Output valueReference="18" dependencies="17"/>
     <Output valueReference="19" dependencies="9 22"/>
+    {'<Output valueReference="23"/><Output valueReference="24"/>' if clocks else ""}
   </ModelStructure>
 </fmiModelDescription>
 """
 
 
 def build(out: Path) -> dict[str, Path]:
-    """Compile statespace3.c and package it into ``out``: statespace (arrays), periodic and
-    triggered (the same with clocks), scheduled (scheduled execution only)."""
+    """Compile statespace3.c and package it into ``out``: statespace (arrays); periodic,
+    shifted, triggered and tunable (the same with the clocks of CLOCKS); no-event-mode (a
+    periodic clock without event mode); model-exchange (a periodic clock, Model Exchange only);
+    scheduled (scheduled execution only)."""
     out.mkdir(parents=True, exist_ok=True)
     so = out / "statespace3.so"
     _compile("statespace3.c", so, "-fvisibility=hidden")
@@ -99,4 +114,10 @@ def build(out: Path) -> dict[str, Path]:
     return {"statespace": _zip(out / "StateSpace.fmu", model_description(), so, "x86_64-linux"),
             "periodic": _zip(out / "Periodic.fmu", model_description("periodic"), so, "x86_64-linux"),
             "triggered": _zip(out / "Triggered.fmu", model_description("triggered"), so, "x86_64-linux"),
+            "shifted": _zip(out / "Shifted.fmu", model_description("shifted"), so, "x86_64-linux"),
+            "tunable": _zip(out / "Tunable.fmu", model_description("tunable"), so, "x86_64-linux"),
+            "model-exchange": _zip(out / "ModelExchange.fmu", model_description(
+                "periodic", '<ModelExchange modelIdentifier="statespace3"/>'), so, "x86_64-linux"),
+            "no-event-mode": _zip(out / "NoEventMode.fmu", model_description("periodic", event_mode=False), so,
+                                  "x86_64-linux"),
             "scheduled": _zip(out / "Scheduled.fmu", model_description("periodic", scheduled), so, "x86_64-linux")}

@@ -1,7 +1,7 @@
 """FMI 3 beyond scalars: an FMU with array variables sized by structural parameters runs
 through its scalar ports as fmpy runs it, at its default sizes and at sizes the node's
 parameters set; what hycosim does not run (a port without its array variable's shape,
-clocks, scheduled execution) is refused by name before a run, by `validate` and `run` alike,
+clocks it cannot tick, scheduled execution) is refused by name before a run, by `validate` and `run` alike,
 and `fmu inspect` shows it. Array ports themselves: tests/test_arrays.py."""
 
 from __future__ import annotations
@@ -72,13 +72,31 @@ def test_what_the_model_description_shows_cannot_run_is_refused_before_a_run(tmp
 
 
 @pytest.mark.parametrize("kind, said", [
-    ("periodic", "Periodic.fmu has clock tick (periodic, every 0.1 s); hycosim does not run FMUs with clocks yet"),
-    ("triggered", "Triggered.fmu has clocks tick (periodic, every 0.1 s), trip (triggered); hycosim does not run"),
+    ("triggered", "Triggered.fmu: hycosim cannot tick clock trip (triggered: it ticks on an event, not on a "
+                  "schedule; hycosim does not follow such ticks yet)"),
+    ("tunable", "Tunable.fmu: hycosim cannot tick clock tick (its interval is tunable; hycosim ticks clocks of a "
+                "constant interval)"),
+    ("no-event-mode", "NoEventMode.fmu has clock tick (periodic, every 0.1 s) but no event mode (hasEventMode), "
+                      "in which FMI 3 co-simulation ticks clocks"),
+    ("model-exchange", "ModelExchange.fmu has clock tick (periodic, every 0.1 s); hycosim ticks clocks of "
+                       "co-simulation FMUs only"),
     ("scheduled", "Scheduled.fmu has only a scheduled-execution interface, which hycosim does not run"),
 ])
-def test_clocks_and_scheduled_execution_are_named_and_refused(tmp_path, fmus, kind, said):
+def test_clocks_hycosim_does_not_tick_and_scheduled_execution_are_named_and_refused(tmp_path, fmus, kind, said):
+    for command in ("validate", "run"):
+        res = hycosim(command, str(_project(tmp_path, fmus[kind])), *(["--runs-dir", str(tmp_path / "runs")]
+                                                                       if command == "run" else []))
+        assert res.returncode == 2 and said in res.stderr.replace("\n", " "), (command, res.stderr)
+        assert "Traceback" not in res.stderr
+    assert not (tmp_path / "runs").exists()
+
+
+@pytest.mark.parametrize("kind, said", [("periodic", "clock tick (periodic, every 0.1 s)"),
+                                        ("shifted", "clock tick (periodic, every 0.1 s from 0.05 s)")])
+def test_validate_takes_an_fmu_whose_clocks_are_periodic_and_names_them(tmp_path, fmus, kind, said):
     res = hycosim("validate", str(_project(tmp_path, fmus[kind])))
-    assert res.returncode == 2 and said in res.stderr.replace("\n", " "), res.stderr
+    assert res.returncode == 0, res.stderr
+    assert f"node 'ss': {said}, ticked in event mode at t0 + shift + k·interval" in " ".join(res.stdout.split())
 
 
 def test_fmu_inspect_shows_shapes_and_clocks(fmus):
@@ -90,6 +108,12 @@ def test_fmu_inspect_shows_shapes_and_clocks(fmus):
     assert row["A"][3] == "[3, 3]" and row["y"][3] == "[3]" and row["pair"][3] == "[2]" and row["s"][3] == ""
     assert "clocks" in res.stdout
     assert row["tick"][:3] == ["input", "periodic", "0.1"] and row["trip"][:3] == ["output", "triggered", ""]
+    assert row["tick"][4] == "yes" and row["trip"][4].startswith("no: triggered")
+    assert "clocks: refused: Triggered.fmu: hycosim cannot tick clock trip" in " ".join(res.stdout.split())
+    shifted = hycosim("fmu", "inspect", str(fmus["shifted"]))
+    assert "│ tick │ input     │ periodic │ 0.1          │ 0.05      │ yes" in shifted.stdout
+    assert "clocks: hycosim runs this FMU, ticking each clock at t0 + shift + k·interval in event mode" in \
+        " ".join(shifted.stdout.split())
 
 
 _sizes = st.one_of(st.integers(-5, 70_000), st.floats(allow_nan=True), st.text(max_size=3), st.none(), st.booleans(),

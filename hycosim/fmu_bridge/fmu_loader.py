@@ -14,7 +14,7 @@ import math
 import shutil
 import struct
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -181,22 +181,41 @@ _PERIODIC = {"constant", "fixed", "calculated", "tunable"}
 @dataclass(frozen=True)
 class Clock:
     """An FMI 3 clock variable as hycosim sees it: its name, causality, and what kind it is
-    (``periodic``, ``aperiodic`` or ``triggered``) with its interval where it is fixed."""
+    (``periodic``, ``aperiodic`` or ``triggered``) with its interval and shift (s) where the
+    model description gives them, its intervalVariability and its value reference."""
 
     name: str
     causality: str
     kind: str
     interval: float | None
+    shift: float = 0.0
+    variability: str = "constant"
+    vr: int = 0
 
     def describe(self) -> str:
-        """``tick (periodic, every 0.1 s)``, ``trip (triggered)``."""
+        """``tick (periodic, every 0.1 s)``, ``tick (periodic, every 0.1 s from 0.05 s)``, ``trip (triggered)``."""
         every = f", every {self.interval:g} s" if self.interval else ""
-        return f"{self.name} ({self.kind}{every})"
+        shifted = f" from {self.shift:g} s" if every and self.shift else ""
+        return f"{self.name} ({self.kind}{every}{shifted})"
+
+    def refusal(self) -> str | None:
+        """Why hycosim does not tick this clock, or None where it does: an input clock of a
+        constant interval, periodic, ticks at t0 + shift + k·interval."""
+        if self.kind == "triggered":
+            return "triggered: it ticks on an event, not on a schedule; hycosim does not follow such ticks yet"
+        if self.causality != "input":
+            return f"an {self.causality} clock: the FMU ticks it, which hycosim does not follow yet"
+        if self.variability != "constant":
+            return f"its interval is {self.variability}; hycosim ticks clocks of a constant interval"
+        if self.interval is None or self.interval <= 0 or self.shift < 0:
+            return "no interval above 0 given (intervalDecimal, or intervalCounter and resolution)"
+        return None
 
 
-def _clock_intervals(path: Path) -> dict[str, float]:
-    """Each clock's ``intervalDecimal`` as the FMU's model description declares it (fmpy reads
-    a clock's intervalVariability but not its interval)."""
+def _clock_timing(path: Path) -> dict[str, tuple[float | None, float]]:
+    """Each clock's interval and shift (s) as the FMU's model description declares them, in
+    decimal or as counters of its resolution (fmpy reads a clock's intervalVariability but
+    neither of these)."""
     import zipfile
     from xml.etree import ElementTree
 
@@ -208,27 +227,84 @@ def _clock_intervals(path: Path) -> dict[str, float]:
                 root = ElementTree.fromstring(z.read("modelDescription.xml"))
     except (OSError, KeyError, zipfile.BadZipFile, ElementTree.ParseError):
         return {}
-    found = {}
-    for clock in root.iter("Clock"):
-        interval = _bound(clock.get("intervalDecimal"))
-        if clock.get("name") and interval is not None:
-            found[clock.get("name")] = interval
-    return found
+
+    def seconds(clock: Any, what: str) -> float | None:
+        decimal = _bound(clock.get(f"{what}Decimal"))
+        if decimal is not None:
+            return decimal
+        counter, resolution = _bound(clock.get(f"{what}Counter")), _bound(clock.get("resolution"))
+        return counter / resolution if counter is not None and resolution else None
+
+    return {clock.get("name"): (seconds(clock, "interval"), seconds(clock, "shift") or 0.0)
+            for clock in root.iter("Clock") if clock.get("name")}
 
 
 def clocks_of(md: ModelDescription, path: Path) -> list[Clock]:
     """The clock variables of an FMI 3 FMU (``path``, described by ``md``), in their order."""
     if not any(v.type == "Clock" for v in md.modelVariables):
         return []
-    intervals = _clock_intervals(path)
+    timing = _clock_timing(path)
     out = []
     for v in md.modelVariables:
         if v.type != "Clock":
             continue
         variability = v.intervalVariability or "constant"
         kind = ("periodic" if variability in _PERIODIC else "triggered" if variability == "triggered" else "aperiodic")
-        out.append(Clock(v.name, v.causality or "local", kind, intervals.get(v.name) if kind == "periodic" else None))
+        interval, shift = timing.get(v.name, (None, 0.0)) if kind == "periodic" else (None, 0.0)
+        out.append(Clock(v.name, v.causality or "local", kind, interval, shift, variability, v.valueReference))
     return out
+
+
+def clock_refusal(md: ModelDescription, path: Path, interface: str) -> str | None:
+    """Why hycosim cannot run an FMU's clocks (naming each it cannot tick), or None where it
+    ticks them all (or the FMU has none): co-simulation with event mode, every clock an input
+    clock of a constant interval."""
+    clocks = clocks_of(md, path)
+    if not clocks:
+        return None
+    named = f"clock{'s' if len(clocks) > 1 else ''} {', '.join(c.describe() for c in clocks)}"
+    if interface != CO_SIMULATION:
+        return f"{path.name} has {named}; hycosim ticks clocks of co-simulation FMUs only"
+    if not getattr(md.coSimulation, "hasEventMode", False):
+        return (f"{path.name} has {named} but no event mode (hasEventMode), in which FMI 3 co-simulation "
+                "ticks clocks")
+    refused = [f"{c.name} ({c.refusal()})" for c in clocks if c.refusal()]
+    if refused:
+        return f"{path.name}: hycosim cannot tick clock{'s' if len(refused) > 1 else ''} {'; '.join(refused)}"
+    return None
+
+
+def clock_ticks(clocks: list[Clock], t0: float, t: float, end: float) -> list[tuple[float, list[int]]]:
+    """The ticks of periodic ``clocks`` (a run from ``t0``) from t (included) to ``end`` (not:
+    a tick there is the next step's), in order, each as (time, the value references of the
+    clocks that tick then). A clock ticks at t0 + shift + k·interval, k = 0, 1, …, each time
+    computed from k, so that no rounding accumulates over a run; ticks within 1e-9 of a step
+    (relative) are one tick, at the step's end the next step's."""
+    tol = 1e-9 * max(1.0, abs(end))
+    found: list[tuple[float, int]] = []
+    for c in clocks:
+        if c.interval is None or c.interval <= 0:
+            raise ValueError(f"clock {c.name!r} has no interval to tick on")
+        base = t0 + c.shift
+        k = max(0, math.ceil((t - tol - base) / c.interval))
+        while (at := base + k * c.interval) < end - tol:
+            found.append((at, c.vr))
+            k += 1
+    ticks: list[tuple[float, list[int]]] = []
+    for at, vr in sorted(found):
+        if ticks and at - ticks[-1][0] <= tol:
+            ticks[-1][1].append(vr)  # clocks that tick together tick in one event mode
+        else:
+            ticks.append((at, [vr]))
+    return ticks
+
+
+def check_clocks(md: ModelDescription, node: str, path: Path, interface: str = CO_SIMULATION) -> None:
+    """FmuError naming the clocks an FMU has where hycosim cannot tick them all
+    (:func:`clock_refusal`): stepped without its ticks, a clocked partition would never run."""
+    why = clock_refusal(md, path, interface)
+    if why is not None:
+        raise FmuError(f"node {node!r}: {why}")
 
 
 def check_shapes(md: ModelDescription, node: str, parameters: dict[str, Any], path: Path) -> None:
@@ -241,16 +317,6 @@ def check_shapes(md: ModelDescription, node: str, parameters: dict[str, Any], pa
                 shape_of(md, var, parameters, path)
             except FmuError as exc:
                 raise FmuError(f"node {node!r}: {exc}") from None
-
-
-def check_clocks(md: ModelDescription, node: str, path: Path) -> None:
-    """FmuError naming an FMU's clocks, if it has any: hycosim does not yet activate FMI 3
-    clocks, and a clocked FMU stepped without them would run its clocked partitions never."""
-    clocks = clocks_of(md, path)
-    if clocks:
-        raise FmuError(f"node {node!r}: {path.name} has clock{'s' if len(clocks) > 1 else ''} "
-                       f"{', '.join(c.describe() for c in clocks)}; hycosim does not run FMUs with clocks yet "
-                       "(it would never tick them)")
 
 
 def map_ports(md: ModelDescription, node: Node, path: Path,
@@ -430,6 +496,8 @@ class FmuMapping:
     outputs: list[MappedPort]
     driven: ScalarVariable | None
     interface: str = CO_SIMULATION
+    # Its clocks, each one hycosim ticks (check_fmu refuses an FMU with any other).
+    clocks: list[Clock] = field(default_factory=list)
 
     @property
     def capabilities(self) -> Any:
@@ -504,13 +572,14 @@ def check_fmu(path: Path, node: Node, parameters: dict[str, Any] | None = None) 
     md = describe(path)
     check_platform(path, md, node.nodeName)
     interface = interface_of(md, node, path)
-    check_clocks(md, node.nodeName, path)
+    check_clocks(md, node.nodeName, path, interface)
+    clocks = clocks_of(md, path)
     parameters = node.parameters if parameters is None else parameters
     inputs, outputs = map_ports(md, node, path, parameters)
     driven = map_driven(md, node, path)
     check_parameters(md, node.nodeName, parameters, path)
     check_shapes(md, node.nodeName, parameters, path)
-    return FmuMapping(md, inputs, outputs, driven, interface)
+    return FmuMapping(md, inputs, outputs, driven, interface, clocks)
 
 
 class FmuInstance:
@@ -530,6 +599,9 @@ class FmuInstance:
         self.variable_step = mapping.variable_step
         self.event_mode = bool(self.fmi3 and getattr(cs, "hasEventMode", False))
         self.early_return = bool(self.fmi3 and getattr(cs, "canReturnEarlyAfterIntermediateUpdate", False))
+        # Its clocks, each an input clock of a constant interval (check_fmu refuses any other).
+        self.clocks = mapping.clocks
+        self._t0 = 0.0
         # FMI 2 only: FMI 3 co-simulation has no input derivatives.
         self.can_interpolate = not self.fmi3 and bool(getattr(cs, "canInterpolateInputs", False))
         self._variables = {v.name: v for v in self.md.modelVariables}
@@ -679,7 +751,7 @@ class FmuInstance:
 
     def _initialize(self, start_time: float) -> None:
         """Set parameters and input start values, then through initialisation mode (both interfaces)."""
-        self.time = start_time
+        self.time = self._t0 = start_time
         if not self.fmi3:
             self.fmu.setupExperiment(startTime=start_time)
         values = {**self._starts, **self._parameters}
@@ -701,11 +773,30 @@ class FmuInstance:
         except FMICallException as exc:
             raise FmuError(f"node {self.node!r}: initialising {self.path.name} failed ({exc})") from None
 
-    def _handle_events(self) -> None:
-        """FMI 3 event mode: iterate the discrete states until settled, then back to step mode."""
-        while self.fmu.updateDiscreteStates()[0]:  # discreteStatesNeedUpdate
-            pass
+    def _handle_events(self, t: float | None = None) -> None:
+        """FMI 3 event mode (at ``t``, None: after initialisation): iterate the discrete states
+        until settled, then back to step mode; FmuTerminated where the FMU asks to end there."""
+        while True:
+            update, terminate = self.fmu.updateDiscreteStates()[:2]
+            if terminate:
+                at = self._t0 if t is None else t
+                raise FmuTerminated(f"{self.path.name} asked to terminate the simulation at t={at:g} s "
+                                    "(terminateSimulation in event mode)", at)
+            if not update:
+                break
         self.fmu.enterStepMode()
+
+    def _tick(self, at: float, vrs: list[int]) -> None:
+        """Tick the clocks ``vrs`` at ``at``: event mode, the clocks set, the clocked partitions
+        run (updateDiscreteStates), back to step mode. The inputs are those set for the step."""
+        try:
+            self.fmu.enterEventMode()
+            self.fmu.setClock(vrs, [True] * len(vrs))
+            self._handle_events(at)
+        except FMICallException as exc:
+            names = ", ".join(c.name for c in self.clocks if c.vr in vrs)
+            raise FmuError(f"node {self.node!r}: {self.path.name}: ticking clock {names} at t={at:g} s failed "
+                           f"({exc})") from None
 
     def do_step(self, t: float, h: float) -> None:
         """Advance from t to t+h; the FMU's own micro-steps stay inside it."""
@@ -717,19 +808,14 @@ class FmuInstance:
             elif not self.fmi3:
                 self.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
             else:
-                end = t + h
-                now = t
-                while now < end - 1e-12 * max(1.0, abs(end)):
-                    event, terminate, early, last = self.fmu.doStep(
-                        currentCommunicationPoint=now, communicationStepSize=end - now)
-                    if terminate:
-                        raise FmuTerminated(f"{self.path.name} asked to terminate the simulation at t={last:g} s "
-                                            "(terminateSimulation)", last)
-                    if event and self.event_mode:
-                        self.fmu.enterEventMode()
-                        self._handle_events()
-                    # An early return ends the call before `end`; go on from where it stopped.
-                    now = last if early else end
+                end, now = t + h, t
+                # A tick at t comes before the step, on its inputs; one inside it cuts the step there.
+                for at, vrs in clock_ticks(self.clocks, self._t0, t, end) if self.clocks else ():
+                    if at - now > 1e-9 * max(1.0, abs(end)):
+                        self._step3(now, at)
+                        now = at
+                    self._tick(at, vrs)
+                self._step3(now, end)
         except FMICallException as exc:
             if exc.status != _DISCARD:
                 raise FmuError(f"node {self.node!r}: {self.path.name}: doStep from t={t:g} s by {h:g} s failed "
@@ -742,6 +828,20 @@ class FmuInstance:
             raise FmuError(f"node {self.node!r}: {self.path.name} discarded doStep from t={t:g} s by {h:g} s "
                            f"({'fmi3' if self.fmi3 else 'fmi2'}Discard) without asking to terminate") from None
         self.time = t + h
+
+    def _step3(self, now: float, end: float) -> None:
+        """FMI 3 doStep calls from ``now`` to ``end``: an early return goes on from where it
+        stopped, an event the FMU met is settled in event mode."""
+        while now < end - 1e-12 * max(1.0, abs(end)):
+            event, terminate, early, last = self.fmu.doStep(currentCommunicationPoint=now,
+                                                            communicationStepSize=end - now)
+            if terminate:
+                raise FmuTerminated(f"{self.path.name} asked to terminate the simulation at t={last:g} s "
+                                    "(terminateSimulation)", last)
+            if event and self.event_mode:
+                self.fmu.enterEventMode()
+                self._handle_events(last if early else end)
+            now = last if early else end
 
     def _fmi2_terminated(self) -> float | None:
         """After an fmi2Discard: the time the FMU ended the simulation at, or None if it did not."""

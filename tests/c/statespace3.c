@@ -8,6 +8,10 @@
  * names otherwise: a String input label (15) and output greeting (16, "hello " + label), a
  * Binary input blob (17) and output blob_out (18, blob reversed), a Float32 input k32 (22) and
  * output s32 (19, s + k32 in single precision).
+ * A clocked partition, for the descriptions that declare the input clock tick (20): at each
+ * tick, in event mode, held (23) takes s as it is then, and ticks (24) counts the ticks. The
+ * FMU is in event mode after initialisation when the importer asked for it, and between
+ * fmi3EnterEventMode and fmi3EnterStepMode; a step or a clock set in the wrong mode fails.
  * Arrays are row-major, as FMI 3 serialises them. A step of h is taken as 10 explicit Euler
  * steps, so that fmpy and hycosim, calling it on the same grid, get the same values.
  * The FMI 3 types are written out, as in ball_me3.c; functions never called are stubs.
@@ -35,6 +39,8 @@ typedef struct {
     uint8_t blob[MAXBLOB], blob_out[MAXBLOB];
     size_t blob_size;
     float k32;
+    double held, ticks;
+    bool event_mode_used, in_event, tick_active;
 } Model;
 
 /* The defaults of every array for the sizes set: the model description's start values are
@@ -73,6 +79,8 @@ static double *array(Model *s, uint32_t vr, size_t *count) {
     case 9: *count = s->m; return s->u;
     case 11: *count = s->n; return s->x;
     case 12: *count = 1; return &s->g;
+    case 23: *count = 1; return &s->held;
+    case 24: *count = 1; return &s->ticks;
     default: *count = 0; return NULL;
     }
 }
@@ -87,6 +95,7 @@ EXPORT void *fmi3InstantiateCoSimulation(const char *name, const char *token, co
     Model *s = calloc(1, sizeof(Model));
     if (!s) return NULL;
     s->m = 2; s->n = 3; s->r = 3;
+    s->event_mode_used = eventModeUsed;
     defaults(s);
     return s;
 }
@@ -101,6 +110,7 @@ EXPORT int fmi3ExitInitializationMode(void *c) {
     Model *s = c;
     memcpy(s->x, s->x0, sizeof s->x);
     s->initialised = 1;
+    s->in_event = s->event_mode_used;
     return OK;
 }
 EXPORT int fmi3Terminate(void *c) { return OK; }
@@ -171,7 +181,7 @@ EXPORT int fmi3SetFloat64(void *c, const uint32_t vr[], size_t n, const double v
     for (size_t i = 0; i < n; i++) {
         size_t count;
         double *p = array(s, vr[i], &count);
-        if (!p || vr[i] == 11 || at + count > nv) return ERROR;
+        if (!p || vr[i] == 11 || vr[i] == 23 || vr[i] == 24 || at + count > nv) return ERROR;
         memcpy(p, v + at, count * sizeof(double));
         at += count;
     }
@@ -254,6 +264,7 @@ EXPORT int fmi3DoStep(void *c, double t, double h, bool noSetPrior, bool *eventN
                       bool *earlyReturn, double *lastT) {
     Model *s = c;
     double dt = h / 10.0, dx[MAXD];
+    if (s->in_event) return ERROR;
     for (int k = 0; k < 10; k++) {
         for (uint64_t i = 0; i < s->n; i++) {
             double d = s->g;
@@ -293,20 +304,55 @@ EXPORT int fmi3DeserializeFMUState(void *c, const uint8_t b[], size_t n, void **
     return OK;
 }
 
+EXPORT int fmi3EnterEventMode(void *c) {
+    Model *s = c;
+    if (!s->event_mode_used || !s->initialised) return ERROR;
+    s->in_event = true;
+    return OK;
+}
+EXPORT int fmi3EnterStepMode(void *c) {
+    Model *s = c;
+    if (!s->in_event) return ERROR;
+    s->in_event = false;
+    return OK;
+}
+EXPORT int fmi3SetClock(void *c, const uint32_t vr[], size_t n, const bool v[]) {
+    Model *s = c;
+    if (!s->in_event) return ERROR;
+    for (size_t i = 0; i < n; i++) {
+        if (vr[i] != 20) return ERROR;
+        s->tick_active = v[i];
+    }
+    return OK;
+}
+EXPORT int fmi3UpdateDiscreteStates(void *c, bool *needUpdate, bool *terminate, bool *nominalsChanged,
+                                    bool *valuesChanged, bool *nextDefined, double *next) {
+    Model *s = c;
+    if (!s->in_event) return ERROR;
+    if (s->tick_active) { /* the clocked partition, once per tick */
+        s->held = sum_of_y(s);
+        s->ticks += 1.0;
+        s->tick_active = false;
+    }
+    *needUpdate = *terminate = *nominalsChanged = *valuesChanged = *nextDefined = false;
+    *next = 0.0;
+    return OK;
+}
+
 /* The rest of the standard, never called here. */
 #define STUB(name) EXPORT int name(void) { return ERROR; }
-STUB(fmi3ActivateModelPartition) STUB(fmi3EnterEventMode) STUB(fmi3EnterStepMode) STUB(fmi3EnterContinuousTimeMode)
+STUB(fmi3ActivateModelPartition) STUB(fmi3EnterContinuousTimeMode)
 STUB(fmi3CompletedIntegratorStep) STUB(fmi3SetTime) STUB(fmi3SetContinuousStates)
 STUB(fmi3GetContinuousStateDerivatives) STUB(fmi3GetEventIndicators) STUB(fmi3GetContinuousStates)
 STUB(fmi3GetNominalsOfContinuousStates) STUB(fmi3GetNumberOfEventIndicators) STUB(fmi3GetNumberOfContinuousStates)
-STUB(fmi3UpdateDiscreteStates) STUB(fmi3InstantiateModelExchange)
+STUB(fmi3InstantiateModelExchange)
 STUB(fmi3EvaluateDiscreteStates) STUB(fmi3GetAdjointDerivative)
 STUB(fmi3GetBoolean) STUB(fmi3GetClock) STUB(fmi3GetDirectionalDerivative)
 STUB(fmi3GetInt16) STUB(fmi3GetInt32) STUB(fmi3GetInt64) STUB(fmi3GetInt8)
 STUB(fmi3GetIntervalDecimal) STUB(fmi3GetIntervalFraction) STUB(fmi3GetNumberOfVariableDependencies)
 STUB(fmi3GetOutputDerivatives) STUB(fmi3GetShiftDecimal) STUB(fmi3GetShiftFraction) 
 STUB(fmi3GetUInt16) STUB(fmi3GetUInt32) STUB(fmi3GetUInt8) STUB(fmi3GetVariableDependencies)
-STUB(fmi3InstantiateScheduledExecution) STUB(fmi3SetBoolean) STUB(fmi3SetClock)
+STUB(fmi3InstantiateScheduledExecution) STUB(fmi3SetBoolean) 
 STUB(fmi3SetInt16) STUB(fmi3SetInt32) STUB(fmi3SetInt64) STUB(fmi3SetInt8)
 STUB(fmi3SetIntervalDecimal) STUB(fmi3SetIntervalFraction) STUB(fmi3SetShiftDecimal) STUB(fmi3SetShiftFraction)
 STUB(fmi3SetUInt16) STUB(fmi3SetUInt32) STUB(fmi3SetUInt8)

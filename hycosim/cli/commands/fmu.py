@@ -56,8 +56,8 @@ def fmu_inspect(
     """List an FMU's co-simulation capabilities and variables; with --config, the port mapping."""
     import fmpy
 
-    from hycosim.fmu_bridge.fmu_loader import (FmuError, check_platform, clocks_of, describe, map_driven, map_ports,
-                                               shape_of)
+    from hycosim.fmu_bridge.fmu_loader import (CO_SIMULATION, MODEL_EXCHANGE, FmuError, check_platform,
+                                               clock_refusal, clocks_of, describe, map_driven, map_ports, shape_of)
 
     try:
         md = describe(fmu)
@@ -99,12 +99,15 @@ def fmu_inspect(
     clocks = clocks_of(md, fmu)
     if clocks:
         table = Table(title="clocks")
-        for col in ("name", "causality", "kind", "interval (s)", "run by hycosim"):
+        for col in ("name", "causality", "kind", "interval (s)", "shift (s)", "ticked by hycosim"):
             table.add_column(col)
         for c in clocks:
             table.add_row(c.name, c.causality, c.kind, "" if c.interval is None else f"{c.interval:g}",
-                          "not yet: an FMU with clocks is refused")
+                          f"{c.shift:g}" if c.interval is not None else "", "no: " + c.refusal() if c.refusal() else "yes")
         print_table(table)
+        why = clock_refusal(md, fmu, CO_SIMULATION if cs is not None else MODEL_EXCHANGE)
+        out.print("clocks: " + (f"refused: {why}" if why else "hycosim runs this FMU, ticking each clock at "
+                            "t0 + shift + k·interval in event mode"))
     if config is None:
         return
     loaded = load(config)

@@ -47,6 +47,7 @@ def validate(
         _warn_unstated_start_dependencies(file, loaded)
     if models:
         _say_what_nodes_take_part_in(loaded)
+        _say_clocks(loaded)
         _say_in_process(loaded)
     bridged = [n.nodeName for n in p.nodeLists if not (n.model or n.fmu or n.replay or n.asynchronous)]
     if bridged:
@@ -85,6 +86,20 @@ def _say_what_nodes_take_part_in(loaded: Any) -> None:
             warn(f"coSimulation.eventTolerance: node {n.nodeName!r} cannot take a step again with another "
                  f"length: {localise}; guards are located at macro-step points only")
     print_table(table)
+
+
+def _say_clocks(loaded: Any) -> None:
+    """The clocks of each FMU node that has any, as hycosim ticks them (an FMU with a clock it
+    cannot tick was refused, naming it)."""
+    from hycosim.clients.loader import fmu_mapping
+
+    for n in loaded.project.nodeLists:
+        if n.fmu and not n.replay:
+            clocks = fmu_mapping(n, loaded.path.parent).clocks
+            if clocks:
+                out.print(f"node {n.nodeName!r}: clock{'s' if len(clocks) > 1 else ''} "
+                          f"{', '.join(c.describe() for c in clocks)}, ticked in event mode at t0 + shift + "
+                          "k·interval", highlight=False)
 
 
 def _say_in_process(loaded: Any) -> None:
