@@ -1,6 +1,8 @@
 """The master's parts through their own interfaces: the releases' ledger (hycosim.server.ledger:
 which step each node owes after a release, at which point, and what each answer is to the point
-being gathered) and event localisation's bisection (hycosim.server.localisation)."""
+being gathered), event localisation's bisection (hycosim.server.localisation), and the step
+strategies that take a step again (hycosim.server.retakes: iterative coupling, the
+error-controlled step)."""
 
 from __future__ import annotations
 
@@ -9,7 +11,9 @@ import math
 from hypothesis import given, strategies as st
 
 from hycosim.core.frames import Batch, End, Outputs
+from hycosim.core.schema import Iterate, StepControl
 from hycosim.server.ledger import ENDED, LATER, TAKE, Ledger, Refusal
+from hycosim.server.retakes import StepSizer, control_step, input_change, iterate_step, relaxed
 
 NODES = ["a", "b", "c", "d"]
 
@@ -133,3 +137,52 @@ def test_a_crossing_is_bisected_to_within_the_tolerance_and_the_last_step_taken_
     assert (taken[-1] if taken else h) == at.hi
     halvings = max(0, math.ceil(math.log2(h / tol)))  # each halves the window, from h
     assert halvings - 1 <= len(taken) <= halvings + 2  # (+1: the step taken again at hi; ±1: rounding)
+
+
+@given(a=st.floats(-1.5, 1.5), b=st.floats(-10, 10), u0=st.floats(-10, 10), tolerance=st.floats(1e-9, 1e-2),
+       relaxation=st.floats(0.1, 1.0), most=st.integers(2, 30))
+def test_an_iterated_step_is_taken_again_on_relaxed_inputs_until_they_settle_or_its_takes_run_out(
+        a, b, u0, tolerance, relaxation, most):
+    """A node whose step on input u ends with output a·u + b, fed back to u: each take after the
+    first is on the routed end value relaxed towards the input the step was last taken on; the
+    step stops at the first take whose end changed the input by at most the tolerance, or at
+    maxIterations, and says which."""
+    settings = Iterate(tolerance=tolerance, relaxation=relaxation, maxIterations=most)
+    labels = {"n": ["n.u"]}
+    taken = [{"n": [u0]}]  # the inputs of every take, the first's given
+
+    def end_of(used):
+        candidate = {"n": [a * used["n"][0] + b]}
+        return (candidate, *input_change(candidate, used, labels, tolerance))
+
+    def measure(used):
+        assert used is taken[-1]  # measured from the end of the last take
+        return end_of(used)
+
+    settled = iterate_step(taken[0], measure, taken.append, settings)
+    assert settled.takes == len(taken) <= most and settled.used is taken[-1]
+    changes = [end_of(u)[1] for u in taken]
+    assert all(c > 1.0 for c in changes[:-1])  # no take before the last had settled
+    assert settled.converged == (changes[-1] <= 1.0) and settled.change == changes[-1]
+    assert settled.converged or settled.takes == most
+    for before, after in zip(taken, taken[1:]):
+        assert after == relaxed(end_of(before)[0], before, relaxation)
+    if settled.converged and changes[-1] > 0:
+        assert settled.port == "n.u"
+
+
+@given(c=st.floats(0.0, 1e6), h=st.floats(1e-3, 1.0), min_step=st.floats(1e-4, 1e-2), tolerance=st.floats(1e-6, 1.0))
+def test_a_controlled_step_is_taken_again_shorter_until_its_error_is_within_the_tolerance_or_at_min_step(
+        c, h, min_step, tolerance):
+    """Over a step of length L the inputs change c·L (in tolerances): each retake is shorter than
+    the one before and is asked for because the error change·L/2 of the one before was above 1 at
+    a length above minStep; the length that stands is the last one taken."""
+    sizer = StepSizer.starting(StepControl(tolerance=tolerance, minStep=min_step, maxStep=1.0), h)
+    lengths = [sizer.h]
+    stood, takes = control_step(sizer.h, lambda: c * lengths[-1], lengths.append, sizer)
+    assert takes == len(lengths) and stood == lengths[-1]
+    for before, after in zip(lengths, lengths[1:]):
+        assert after < before and c * before * before / 2 > 1.0 and before > min_step
+    error = c * stood * stood / 2
+    assert error <= 1.0 or stood <= min_step * (1 + 1e-9)
+    assert sizer.rejected == takes - 1 and sizer.accepted == 1 and min_step <= sizer.h <= 1.0

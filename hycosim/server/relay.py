@@ -10,9 +10,11 @@ Read top to bottom, :meth:`Relay.run` and :meth:`Relay._loop` are the whole algo
 3. at each macro-step point, :meth:`_arrive`: a checkpoint if one is due, the guards (maybe a
    mode switch), the outputs routed along the links active in the mode, pacing; then
    :meth:`_step_from`: release the nodes to integrate T_k → T_k+H (Jacobi: all at once;
-   Gauss-Seidel: in order) by the run's strategy (plain, iterated, size-controlled, located
-   around a guard crossing), record point k while they step, and gather their outputs at
-   T_k+H (:meth:`gather`, the releases' ledger in server.ledger sorting the answers);
+   Gauss-Seidel: in order) by the run's strategy (plain; iterated or size-controlled, whose
+   loops of retakes are server.retakes' iterate_step and control_step; located around a
+   guard crossing by server.localisation's bisection), record point k while they step, and
+   gather their outputs at T_k+H (:meth:`gather`, the releases' ledger in server.ledger
+   sorting the answers);
 4. STOP at stopTime, on Ctrl-C, or on a fault, with everything recorded so far on disk.
 
 The transport (Zenoh sessions and keys, or calls in one process) is given as a
@@ -51,7 +53,7 @@ from hycosim.server.ledger import ENDED, LATER, TAKE, Ledger
 from hycosim.server.localisation import bisect_crossing
 from hycosim.server.interpolation import STARTUP_SPLIT, InputTrack
 from hycosim.server.recorder import Recorder, RecordError
-from hycosim.server.retakes import IterationLog, StepSizer, input_change, relaxed
+from hycosim.server.retakes import IterationLog, StepSizer, control_step, input_change, iterate_step
 from hycosim.server.routing import OutputView, Router
 from hycosim.server.status_view import Recent, barrier_window, points_since
 from hycosim.server.transport import Transport
@@ -812,29 +814,28 @@ class Relay:
             track.add(t, mode, self.router.inputs)
             start = track.start()
             self.router.inputs = track.first_guess(t, h)
-        takes = 1
+        arrivals, wait = {}, 0.0
+
+        def retake(inputs: dict[str, list[Any]]) -> None:
+            nonlocal arrivals, wait
+            self.release.put(frames.encode(frames.ROLLBACK, k, t))
+            self.router.inputs = inputs
+            arrivals, wait = self._release(k, t, h, mode, **self._moving(start, t, h))
+
         try:
             arrivals, wait = self._release(k, t, h, mode, **self._moving(start, t, h))
-            while True:
-                used = self.router.inputs
-                candidate, change, port, absolute = self._change(mode, used, it.tolerance)
-                if change <= 1.0 or takes >= it.maxIterations:
-                    break
-                self.release.put(frames.encode(frames.ROLLBACK, k, t))
-                self.router.inputs = relaxed(candidate, used, it.relaxation)
-                arrivals, wait = self._release(k, t, h, mode, **self._moving(start, t, h))
-                takes += 1
+            s = iterate_step(self.router.inputs, lambda used: self._change(mode, used, it.tolerance), retake, it)
         finally:
             for n in track.nodes if track is not None else ():  # point k's record: what each had at t
                 self.router.inputs[n] = start[n]
-        self.iteration.add(k, t, takes, change, port, absolute)
+        self.iteration.add(k, t, s.takes, s.change, s.port, s.absolute)
         self.recorder.meta["iterations"] = self.iteration.record()  # in the meta however the run ends
-        if change > 1.0:
-            self._log.warning("step did not converge", step=k, t=t, takes=takes, port=port, change=absolute)
+        if not s.converged:
+            self._log.warning("step did not converge", step=k, t=t, takes=s.takes, port=s.port, change=s.absolute)
             if it.onFailure == "stop":
-                raise RunError(f"step {k} (t={t:g} s) did not converge in {takes} takes: input {port} still changed "
-                               f"by {absolute:g} (tolerance {it.tolerance:g}·max(1, |value|))")
-        return arrivals, wait, takes
+                raise RunError(f"step {k} (t={t:g} s) did not converge in {s.takes} takes: input {s.port} still "
+                               f"changed by {s.absolute:g} (tolerance {it.tolerance:g}·max(1, |value|))")
+        return arrivals, wait, s.takes
 
     def _moving(self, start: dict[str, list[Any]], t: float, h: float) -> dict[str, Any]:
         """The release's inputs and slopes when inputs are interpolated: an interpolating node
@@ -851,18 +852,16 @@ class Relay:
         the step length that stood, arrivals, wait and takes."""
         tolerance = self.sizer.settings.tolerance
         used = {n: list(v) for n, v in self.router.inputs.items()}
-        takes = 1
         arrivals, wait = self._release(k, t, h, mode, meanwhile=record)
-        while True:
-            _, change, _, _ = self._change(mode, used, tolerance)
-            shorter = self.sizer.judge(h, change)
-            if shorter is None:
-                self.recorder.meta["step_sizes"] = self.sizer.record()  # in the meta however the run ends
-                return h, arrivals, wait, takes
+
+        def retake(length: float) -> None:
+            nonlocal arrivals, wait
             self.release.put(frames.encode(frames.ROLLBACK, k, t))
-            h = shorter
-            arrivals, wait = self._release(k, t, h, mode)
-            takes += 1
+            arrivals, wait = self._release(k, t, length, mode)
+
+        h, takes = control_step(h, lambda: self._change(mode, used, tolerance)[1], retake, self.sizer)
+        self.recorder.meta["step_sizes"] = self.sizer.record()  # in the meta however the run ends
+        return h, arrivals, wait, takes
 
     def _release(self, k: int, t: float, h: float, mode: str,
                  meanwhile: Callable[[], None] | None = None,

@@ -24,6 +24,7 @@ alike). The worst port's is the step's change.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
@@ -78,6 +79,58 @@ def _relax(a: Any, b: Any, factor: float) -> Any:
     if type(a) is list and type(b) is list:
         return [_relax(x, y, factor) for x, y in zip(a, b)]
     return a + factor * (b - a) if type(a) is float and _is_number(b) else b
+
+
+# What a step's end says of the inputs it was taken on (``used``): the inputs routed from its
+# end, and their change from ``used`` as input_change measures it (in tolerances, the worst
+# port, its absolute change).
+Measure = Callable[[dict[str, list[Any]]], tuple[dict[str, list[Any]], float, str, float]]
+
+
+@dataclass(frozen=True)
+class Settled:
+    """How an iterated step ended: taken ``takes`` times, the last on ``used``, whose change
+    (in tolerances; at most 1 where it converged) was worst at ``port`` by ``absolute``."""
+
+    takes: int
+    used: dict[str, list[Any]]
+    change: float
+    port: str
+    absolute: float
+
+    @property
+    def converged(self) -> bool:
+        return self.change <= 1.0
+
+
+def iterate_step(used: dict[str, list[Any]], measure: Measure, retake: Callable[[dict[str, list[Any]]], None],
+                 settings: Iterate) -> Settled:
+    """Iterative coupling of one step, already taken once on the inputs ``used``: while the
+    inputs routed from its end changed by more than the tolerance and takes are left (at most
+    ``settings.maxIterations``, the first included), ``retake`` rolls every node back and takes
+    the step again on those inputs relaxed towards the ones it was last taken on."""
+    takes = 1
+    while True:
+        candidate, change, port, absolute = measure(used)
+        if change <= 1.0 or takes >= settings.maxIterations:
+            return Settled(takes, used, change, port, absolute)
+        used = relaxed(candidate, used, settings.relaxation)
+        retake(used)
+        takes += 1
+
+
+def control_step(h: float, measure: Callable[[], float], retake: Callable[[float], None],
+                 sizer: "StepSizer") -> tuple[float, int]:
+    """The error-controlled step, already taken once with length ``h``: while ``sizer`` rejects
+    it for the change ``measure()`` finds over it (in tolerances), ``retake`` rolls every node
+    back and takes it again with the shorter length the sizer gives. Return the length that
+    stood and how often the step was taken; the sizer has set the next step to try."""
+    takes = 1
+    while (shorter := sizer.judge(h, measure())) is not None:
+        h = shorter
+        retake(h)
+        takes += 1
+    return h, takes
 
 
 @dataclass
