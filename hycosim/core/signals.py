@@ -20,6 +20,21 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 FAILED_ELSEWHERE = 5
 
 
+class _Held:
+    """Stop signals held off by :func:`hold_stops`. A thread's signal mask alone does not hold
+    them: the kernel gives a process's signal to any thread that does not block it (Zenoh's
+    own threads, in a node), and Python then runs the handler in the main thread, held or not
+    (a node's END once named the step before the one it had just sent). So the handlers look
+    here first. Signal handlers are the process's, and so is this record of them."""
+
+    def __init__(self) -> None:
+        self.depth = 0
+        self.pending: int | None = None
+
+
+_HELD = _Held()
+
+
 class Stopped(KeyboardInterrupt):
     """A stop asked for by a signal."""
 
@@ -72,6 +87,8 @@ def raise_on_stop(heard: list[int] | None = None) -> dict[int, Any]:
         return {}
 
     def interrupt(signum: int, frame: Any) -> None:
+        if _held_off(signum):
+            return
         if heard is not None:
             heard.append(signum)
         raise Stopped(signum)
@@ -79,16 +96,30 @@ def raise_on_stop(heard: list[int] | None = None) -> dict[int, Any]:
     return {signum: signal.signal(signum, interrupt) for signum in STOP_SIGNALS}
 
 
+def _held_off(signum: int) -> bool:
+    """In a handler: keep ``signum`` for :func:`release_stops` if stops are held now."""
+    if _HELD.depth:
+        _HELD.pending = _HELD.pending or signum
+        return True
+    return False
+
+
 def hold_stops() -> set[int]:
-    """Keep stop signals pending (this thread) until :func:`release_stops`: what is sent and
-    what the process says it sent must not be parted by a stop arriving between them.
-    Returns the mask to restore."""
+    """Keep stop signals pending until :func:`release_stops`: what is sent and what the process
+    says it sent must not be parted by a stop arriving between them. Returns the mask to restore."""
+    _HELD.depth += 1
     return signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
 
 
 def release_stops(mask: set[int]) -> None:
     """Restore the mask :func:`hold_stops` returned; a stop that came meanwhile is raised now."""
-    signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+    signal.pthread_sigmask(signal.SIG_SETMASK, mask)  # one still blocked here runs its handler now
+    _HELD.depth -= 1
+    if _HELD.depth == 0 and _HELD.pending is not None:
+        signum, _HELD.pending = _HELD.pending, None
+        handler = signal.getsignal(signum)
+        if callable(handler):
+            handler(signum, None)
 
 
 def ignore_stops() -> None:
@@ -106,6 +137,8 @@ def stop_once() -> None:
         return
 
     def interrupt(signum: int, frame: Any) -> None:
+        if _held_off(signum):
+            return
         ignore_stops()
         raise Stopped(signum)
 
