@@ -8,6 +8,7 @@ does not tick are refused by name (tests/test_fmi3.py)."""
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import pytest
 from fmpy import extract, read_model_description
@@ -15,7 +16,7 @@ from fmpy.fmi3 import FMU3Slave
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hycosim.fmu_bridge.fmu_loader import Clock, clock_ticks
+from hycosim.fmu_bridge.fmu_loader import MAX_TICKS, Clock, clock_ticks, clocks_of
 from tests.fmi3_fmus import build
 from tests.helpers import column, hycosim, meta, read_rows, run_killing, run_project, write_project
 
@@ -152,3 +153,39 @@ def test_every_tick_falls_in_exactly_one_step_whatever_the_steps(interval, shift
     want = [t0 + shift + k * interval for k in range(int((points[-1] - t0) / interval) + 2)
             if t0 + shift + k * interval < points[-1] - tol]
     assert handed == want
+
+
+_numbers = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-10**30, 10**30),
+                     st.text(max_size=6), st.just("1e-300"), st.just("nan"), st.just("-inf"))
+_attributes = st.fixed_dictionaries({}, optional={
+    name: _numbers.map(str) for name in ("intervalDecimal", "shiftDecimal", "intervalCounter", "shiftCounter",
+                                         "resolution")})
+
+
+@given(attributes=_attributes, t0=st.floats(-100, 100), h=st.floats(1e-3, 10.0))
+def test_a_clock_as_any_model_description_declares_it_is_refused_by_name_or_ticks_a_bounded_step(
+        tmp_path_factory, attributes, t0, h):
+    """Whatever interval, shift, counters and resolution an FMU's model description gives an
+    input clock of a constant interval (numbers, huge or tiny, text, inf, nan): hycosim either
+    refuses it with a reason, or hands each step a bounded list of ticks inside it, or says by
+    name that it ticks too often for a step; nothing else is raised and nothing hangs."""
+    folder = tmp_path_factory.mktemp("md")
+    xml = "".join(f' {k}="{v}"' for k, v in attributes.items() if '"' not in v and "<" not in v and "&" not in v)
+    (folder / "modelDescription.xml").write_text(
+        f'<fmiModelDescription><ModelVariables><Clock name="tick" valueReference="20"{xml}/>'
+        "</ModelVariables></fmiModelDescription>")
+    md = SimpleNamespace(modelVariables=[SimpleNamespace(name="tick", type="Clock", causality="input",
+                                                         intervalVariability="constant", valueReference=20)])
+    (clock,) = clocks_of(md, folder)
+    if clock.refusal() is not None:
+        assert clock.refusal()
+        with pytest.raises(ValueError, match="clock 'tick' is not ticked by hycosim"):
+            clock_ticks([clock], t0, t0, t0 + h)
+        return
+    try:
+        ticks = clock_ticks([clock], t0, t0, t0 + h)
+    except ValueError as exc:
+        assert f"would tick more than {MAX_TICKS:,} times" in str(exc)
+        return
+    assert len(ticks) <= MAX_TICKS + 1
+    assert all(math.isfinite(at) and t0 - 1e-6 <= at < t0 + h for at, _ in ticks)

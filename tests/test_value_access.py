@@ -38,24 +38,25 @@ def _slaves(path, cls, count=2):
     return md, out
 
 
+def _pair(path, cls):
+    """Two instances of one FMU, torn down after the module's tests."""
+    md, instances = _slaves(path, cls)
+    yield {v.name: v for v in md.modelVariables}, *instances
+    for s in instances:
+        s.terminate()
+        s.freeInstance()
+
+
 @pytest.fixture(scope="module")
 def types_fmu(tmp_path_factory):
     from benchmarks._small_fmus import build
 
-    md, (ours, theirs) = _slaves(build(tmp_path_factory.mktemp("small"))["Types"], FMU2Slave)
-    yield {v.name: v for v in md.modelVariables}, ours, theirs
-    for s in (ours, theirs):
-        s.terminate()
-        s.freeInstance()
+    yield from _pair(build(tmp_path_factory.mktemp("small"))["Types"], FMU2Slave)
 
 
 @pytest.fixture(scope="module")
 def statespace(tmp_path_factory):
-    md, (ours, theirs) = _slaves(build3(tmp_path_factory.mktemp("fmi3"))["statespace"], FMU3Slave)
-    yield {v.name: v for v in md.modelVariables}, ours, theirs
-    for s in (ours, theirs):
-        s.terminate()
-        s.freeInstance()
+    yield from _pair(build3(tmp_path_factory.mktemp("fmi3"))["statespace"], FMU3Slave)
 
 
 def _ports(variables, names, sizes=None):

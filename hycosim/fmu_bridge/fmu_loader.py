@@ -207,8 +207,10 @@ class Clock:
             return f"an {self.causality} clock: the FMU ticks it, which hycosim does not follow yet"
         if self.variability != "constant":
             return f"its interval is {self.variability}; hycosim ticks clocks of a constant interval"
-        if self.interval is None or self.interval <= 0 or self.shift < 0:
-            return "no interval above 0 given (intervalDecimal, or intervalCounter and resolution)"
+        if self.interval is None or not (math.isfinite(self.interval) and self.interval > 0):
+            return "no finite interval above 0 given (intervalDecimal, or intervalCounter and resolution)"
+        if not (math.isfinite(self.shift) and self.shift >= 0):
+            return f"its shift {self.shift:g} s is not a finite time from the start"
         return None
 
 
@@ -274,19 +276,32 @@ def clock_refusal(md: ModelDescription, path: Path, interface: str) -> str | Non
     return None
 
 
+# The most ticks one step may meet: a clock far faster than the step would stall the run.
+MAX_TICKS = 10_000
+
+
 def clock_ticks(clocks: list[Clock], t0: float, t: float, end: float) -> list[tuple[float, list[int]]]:
     """The ticks of periodic ``clocks`` (a run from ``t0``) from t (included) to ``end`` (not:
     a tick there is the next step's), in order, each as (time, the value references of the
     clocks that tick then). A clock ticks at t0 + shift + k·interval, k = 0, 1, …, each time
     computed from k, so that no rounding accumulates over a run; ticks within 1e-9 of a step
-    (relative) are one tick, at the step's end the next step's."""
+    (relative) are one tick, at the step's end the next step's. ValueError for a clock that
+    :meth:`Clock.refusal` refuses, or one that ticks more than MAX_TICKS times in the step."""
     tol = 1e-9 * max(1.0, abs(end))
     found: list[tuple[float, int]] = []
     for c in clocks:
-        if c.interval is None or c.interval <= 0:
-            raise ValueError(f"clock {c.name!r} has no interval to tick on")
+        if c.refusal() is not None or c.interval is None:
+            raise ValueError(f"clock {c.name!r} is not ticked by hycosim: {c.refusal()}")
         base = t0 + c.shift
-        k = max(0, math.ceil((t - tol - base) / c.interval))
+        if base >= end - tol:
+            continue  # its first tick is after this step
+        # In periods from its first tick: where the step starts and ends (checked before any
+        # rounds to a whole number: a tiny interval makes them huge, or infinite).
+        first, last = (t - tol - base) / c.interval, (end - tol - base) / c.interval
+        if not last - max(first, 0.0) <= MAX_TICKS:
+            raise ValueError(f"clock {c.name!r} (every {c.interval:g} s) would tick more than {MAX_TICKS:,} times "
+                             f"in the step from t={t:g} s to {end:g} s")
+        k = math.ceil(first) if first > 0 else 0
         while (at := base + k * c.interval) < end - tol:
             found.append((at, c.vr))
             k += 1
@@ -619,6 +634,7 @@ class FmuInstance:
         self.time = 0.0
         # The ports a step reads and writes, one C call per type (None: through fmpy's calls one by one).
         self._reader = port_access(self.fmu, [Port(m.vr, m.type, m.size) for m in self.outputs], self.fmi3, False)
+        self._output_ports = [m.port for m in self.outputs]
         self._writer = port_access(self.fmu, [Port(m.vr, m.type, m.size) for m in self.inputs], self.fmi3, True)
         self._do_step_c = (getattr(self.fmu.dll, "fmi2DoStep") if mapping.interface == CO_SIMULATION
                            and not self.fmi3 and getattr(self.fmu, "fmiCallLogger", None) is None else None)
@@ -710,7 +726,8 @@ class FmuInstance:
 
     def set_inputs(self, values: dict[str, Any]) -> None:
         """Set the inputs given by port (all of them in one C call per type, where they can be)."""
-        if self._writer is not None and len(values) == len(self.inputs) and all(m.port in values for m in self.inputs):
+        # All of them (a step's), or some (a Model Exchange FMU's changed ones: one by one below).
+        if self._writer is not None and len(values) == len(self.inputs):
             try:
                 self._writer.write([values[m.port] for m in self.inputs])
             except FMICallException as exc:
@@ -742,7 +759,7 @@ class FmuInstance:
         """Every output's value by port (an array's as a list of its elements)."""
         try:
             if self._reader is not None:
-                return dict(zip([m.port for m in self.outputs], self._reader.read()))
+                return dict(zip(self._output_ports, self._reader.read()))
             return {m.port: self._get(m.vr, m.type, m.size) for m in self.outputs}
         except FMICallException as exc:
             raise FmuError(f"node {self.node!r}: reading outputs failed ({exc})") from None
@@ -809,8 +826,12 @@ class FmuInstance:
                 self.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
             else:
                 end, now = t + h, t
+                try:
+                    ticks = clock_ticks(self.clocks, self._t0, t, end) if self.clocks else ()
+                except ValueError as exc:
+                    raise FmuError(f"node {self.node!r}: {self.path.name}: {exc}") from None
                 # A tick at t comes before the step, on its inputs; one inside it cuts the step there.
-                for at, vrs in clock_ticks(self.clocks, self._t0, t, end) if self.clocks else ():
+                for at, vrs in ticks:
                     if at - now > 1e-9 * max(1.0, abs(end)):
                         self._step3(now, at)
                         now = at

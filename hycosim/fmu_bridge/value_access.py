@@ -49,32 +49,31 @@ class Port:
 @dataclass
 class _Group:
     """Ports of one FMI type, read or written in one call: ``positions`` are theirs in the
-    node's port order, ``slices`` where each one's elements lie in ``values``."""
+    node's port order, ``slices`` where each one's elements lie in ``values``; ``args`` the
+    call's arguments (the instance, the value references and their count, ``values``, and in
+    FMI 3 the element count), made once."""
 
     function: str
     call: Callable[..., int]
-    vrs: Any
     values: Any
     convert: type
     positions: list[int]
     slices: list[tuple[int, int | None]]  # (first element, size or None for a scalar)
+    args: tuple[Any, ...]
 
 
 class PortAccess:
     """Reads or writes a fixed list of ports (in the node's port order) with one C call per type."""
 
-    def __init__(self, groups: list[_Group], count: int, component: Any, fmi3: bool):
+    def __init__(self, groups: list[_Group], count: int):
         self._groups = groups
         self._count = count
-        self._component = component
-        self._fmi3 = fmi3
 
     def read(self) -> list[Any]:
         """Every port's value, in order: a scalar as a Python value, an array as a list."""
         out: list[Any] = [None] * self._count
         for g in self._groups:
-            args = (self._component, g.vrs, len(g.vrs), g.values) + ((len(g.values),) if self._fmi3 else ())
-            status = g.call(*args)
+            status = g.call(*g.args)
             if status > _WARNING:
                 raise FMICallException(function=g.function, status=status)
             values, convert = g.values, g.convert
@@ -93,8 +92,7 @@ class PortAccess:
                     buffer[first] = convert(value)
                 else:
                     buffer[first:first + size] = [convert(v) for v in value]
-            args = (self._component, g.vrs, len(g.vrs), buffer) + ((len(buffer),) if self._fmi3 else ())
-            status = g.call(*args)
+            status = g.call(*g.args)
             if status > _WARNING:
                 raise FMICallException(function=g.function, status=status)
 
@@ -121,7 +119,8 @@ def port_access(fmu: Any, ports: Sequence[Port], fmi3: bool, setting: bool) -> P
             slices.append((first, ports[i].size))
             first += ports[i].size or 1
         # The library's own function object, whose argument types fmpy declared when it loaded it.
-        groups.append(_Group(function, getattr(fmu.dll, function),
-                             (ctypes.c_uint32 * len(positions))(*(ports[i].vr for i in positions)),
-                             (ctype * first)(), convert, positions, slices))
-    return PortAccess(groups, len(ports), fmu.component, fmi3)
+        vrs = (ctypes.c_uint32 * len(positions))(*(ports[i].vr for i in positions))
+        values = (ctype * first)()
+        args = (fmu.component, vrs, len(positions), values) + ((first,) if fmi3 else ())
+        groups.append(_Group(function, getattr(fmu.dll, function), values, convert, positions, slices, args))
+    return PortAccess(groups, len(ports))

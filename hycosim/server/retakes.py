@@ -120,7 +120,7 @@ def iterate_step(used: dict[str, list[Any]], measure: Measure, retake: Callable[
 
 
 def control_step(h: float, measure: Callable[[], float], retake: Callable[[float], None],
-                 sizer: "StepSizer") -> tuple[float, int]:
+                 sizer: StepSizer) -> tuple[float, int]:
     """The error-controlled step, already taken once with length ``h``: while ``sizer`` rejects
     it for the change ``measure()`` finds over it (in tolerances), ``retake`` rolls every node
     back and takes it again with the shorter length the sizer gives. Return the length that
