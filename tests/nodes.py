@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from hycosim.clients.node import AsyncSource, Node, NodeContext
+from hycosim.clients.node import AsyncSource, Node, NodeContext, SimulationEnded
 
 
 class Text(Node):
@@ -72,6 +72,27 @@ class FailsAt(Node):
     def step(self, t, h, inputs):
         if t + h > self.at + 1e-9:
             raise ZeroDivisionError("the model divided by zero")
+        self.t = t + h
+
+
+class EndsAt(Node):
+    """``y`` = the time reached, plus the input ``u``; ends the simulation at t = ``at`` (0.45 s)
+    inside the step that passes it, as an FMU that asks to terminate there, its outputs given there."""
+
+    OUTPUTS = frozenset({"y"})
+
+    def setup(self, ctx):
+        self.at = float(ctx.parameters.get("at", 0.45))
+        self.t, self.u = ctx.start_time, 0.0
+
+    def outputs(self):
+        return {"y": self.t + self.u}
+
+    def step(self, t, h, inputs):
+        self.u = inputs["u"]
+        if t + h > self.at + 1e-9:
+            self.t = self.at
+            raise SimulationEnded(self.at, f"the model ends at t={self.at:g} s")
         self.t = t + h
 
 

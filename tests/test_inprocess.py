@@ -60,6 +60,9 @@ def test_the_accuracy_benchmarks_couplings_record_the_same_values_in_process(mas
     distributed, inprocess = _run_both(cfg, tmp_path)
     _same_values(distributed, inprocess)
     assert len(read_rows(inprocess)) > 30  # start-up steps of interpolation add short ones
+    # Steps are calls in process, retakes too, save where inputs follow polynomials (slopes go by frame).
+    assert meta(inprocess)["releases"] == ("frames (interpolated inputs)" if "interpolated" in scheme
+                                           else "calls (in process)")
 
 
 def test_step_control_multi_rate_batches_and_a_located_event_record_the_same_values_in_process(mass_fmu, tmp_path):
@@ -142,6 +145,25 @@ def test_a_node_that_fails_in_process_ends_the_run_with_its_words_and_the_rows_b
     assert "ZeroDivisionError: the model divided by zero" in res.stderr
     assert meta(run_dir)["status"] == "failed" and "node 'bad'" in meta(run_dir)["reason"]
     assert [float(r["bad.y"]) for r in read_rows(run_dir)] == pytest.approx([k / 10 for k in range(6)])
+
+
+def test_a_model_that_ends_the_run_inside_a_step_ends_it_at_the_same_point_in_process(tmp_path):
+    # Each macro step a call in process (no frame); the END still comes as a frame, and the run
+    # ends where the distributed run ends: the points before, then the point where the model ended.
+    nodes = [{"nodeName": "src", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+             {"nodeName": "end", "UID": 2, "model": "tests.nodes:EndsAt", "input": ["u"], "output": ["y"]},
+             {"nodeName": "gain", "UID": 3, "model": "gain", "parameters": {"k": 2.0},
+              "input": ["u"], "output": ["y"]}]
+    cfg = write_project(tmp_path / "ends.json", nodes, [{"from": "src.y", "to": "end.u"},
+                                                        {"from": "end.y", "to": "gain.u"}],
+                        cosim={"stepSize": 0.1, "stopTime": 2.0})
+    distributed, inprocess = _run_both(cfg, tmp_path)
+    _same_values(distributed, inprocess)
+    assert meta(inprocess)["ended_by"] == meta(distributed)["ended_by"]
+    assert meta(inprocess)["ended_by"]["t"] == 0.45 and meta(inprocess)["status"] == "completed"
+    assert [float(r["t"]) for r in read_rows(inprocess)][-2:] == [0.4, 0.45]
+    assert meta(inprocess)["releases"] == "calls (in process)"
+    assert meta(distributed)["releases"] == "frames (nodes in processes of their own)"
 
 
 # Anything released on the bus (well-formed or not) reaches a hosted node only through its

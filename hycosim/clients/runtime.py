@@ -798,7 +798,37 @@ class NodeRuntime:
         self._setup()
         self._publisher = bus.publisher(self.name)
         self._bus = bus
-        bus.attach(self.name, self.deliver)
+        bus.attach(self.name, self.deliver, None if self._is_player else self.step_direct)
+
+    def step_direct(self, k: int, t: float, h: float, mode: str, driven: bool, inputs: list[Any]) -> list[Any] | None:
+        """The release of step k (t → t + h) to this node in process, as a call: what a STEP frame
+        does, on ``inputs`` (the master's routing of outputs it checked; no network between).
+        Return the outputs at t + h, checked as those sent are; None when the model ended the
+        run or failed instead, its END sent to the master as over the network."""
+        impl, at = self.impl, self._stepping  # a Node (host attaches no player this way), started
+        values = dict(zip(self._in_names, inputs))
+        for i, _, _ in self._in_arrays:  # the master's lists stay its own, whatever the model does with them
+            name = self._in_names[i]
+            values[name] = list(values[name])
+        try:
+            if at.checkpoint and at.saved_step != k:
+                at.saved, at.saved_step = impl.get_state(), k
+            if (mode, driven) != (at.mode, at.driven):
+                at.mode, at.driven = mode, driven
+                impl.set_mode(mode, driven)
+                self._log.info("mode", step=k, mode=mode, driven=driven)
+            impl.step(t, h, values)
+            out = self._pack_outputs(impl.outputs())
+        except Exception as exc:
+            try:
+                self._step_failed(exc, k, t, impl=impl)
+            except NodeRunError as failure:
+                self.failure = str(failure)
+            if self._bus is not None:
+                self._bus.leave(self.name)
+            return None
+        self.steps, at.done = k + 1, k
+        return out
 
     def deliver(self, frame: frames.Frame) -> None:
         """Act on one frame the in-process master released, checked as one from the network is.

@@ -11,12 +11,20 @@ The frames are the distributed run's, byte for byte: the master encodes what it 
 and a node's answer is encoded and goes through the master's intake as one from the network
 would. Only the transport is gone, so an in-process run records the values a distributed run
 of the same project records.
+
+A macro step needs no frame at all: a node hosted here also gives the bus its
+:data:`DirectStep`, which the master calls with the inputs it routed and which returns the
+node's outputs, as its model's step and its runtime's output check make them. Frames still
+carry everything else (the START, the initialisation, rollbacks, the STOP), and the rare
+answer that is no outputs: a node whose model ended the run or failed sends its END as over
+the network, and its direct step returns None.
 """
 
 from __future__ import annotations
 
 import collections
 from collections.abc import Callable
+from typing import Any
 
 from hycosim.core import frames
 from hycosim.core.inbox import LOCAL
@@ -24,6 +32,10 @@ from hycosim.core.keys import ProjectKeys
 
 # A node hosted in process: called with each frame the master releases (decoded once for all).
 Deliver = Callable[[frames.Frame], None]
+# A node's macro step without frames: (k, t, h, mode, driven, inputs) → its outputs at t + h, in
+# port order and checked by the node as it checks what it sends; None when its model ended the
+# run or failed instead (its END is in the master's inbox then).
+DirectStep = Callable[[int, float, float, str, bool, list[Any]], "list[Any] | None"]
 
 
 class LocalInbox:
@@ -81,6 +93,7 @@ class LocalBus:
         self.inbox = LocalInbox()
         self.release = LocalPublisher(self._release)
         self._nodes: dict[str, Deliver] = {}
+        self.direct: dict[str, DirectStep] = {}  # the nodes that can be stepped by a call
         self.undecodable = 0  # releases that were no frame (the master writes none: a bug, counted)
 
     @property
@@ -88,13 +101,17 @@ class LocalBus:
         """The nodes attached, in the order they attached."""
         return list(self._nodes)
 
-    def attach(self, node: str, deliver: Deliver) -> None:
-        """Host ``node``: every frame the master releases from now on is given to ``deliver``."""
+    def attach(self, node: str, deliver: Deliver, step: DirectStep | None = None) -> None:
+        """Host ``node``: every frame the master releases from now on is given to ``deliver``;
+        ``step``, if given, takes its macro steps as calls."""
         self._nodes[node] = deliver
+        if step is not None:
+            self.direct[node] = step
         self.inbox.inject(frames.encode(frames.LIVE, node, True))
 
     def leave(self, node: str) -> None:
         """``node`` takes no more frames; the master hears that it left."""
+        self.direct.pop(node, None)
         if self._nodes.pop(node, None) is not None:
             self.inbox.inject(frames.encode(frames.LIVE, node, False))
 

@@ -105,32 +105,37 @@ class Intake:
             # was stopped or failed; it steps in no batch.
             if spec.asynchronous and (frame.clean or frame.earlier or frame.last is not None):
                 raise Dropped("wrong kind", f"{node} is asynchronous: it does not end a run, only fails")
-            self._check_batch(node, frame, t, frame.earlier, last=frame.last)
+            self._check_batch(node, frame.step, t, frame.earlier, last=frame.last)
             return frame
         if frame.kind == frames.BATCH:
             if spec.asynchronous:
                 raise Dropped("wrong kind", f"{node} is asynchronous: it takes no batched steps")
-            self._check_batch(node, frame, t, frame.earlier, last=frame.values)
+            self._check_batch(node, frame.step, t, frame.earlier, last=frame.values)
             return frame
         # A played asynchronous node also sends OUTPUTS: its word that a point's samples are all sent.
         if (frame.kind == frames.SAMPLE) != spec.asynchronous and not (spec.replay and spec.asynchronous):
             raise Dropped("wrong kind", f"{node} is {'' if spec.asynchronous else 'not '}asynchronous")
-        self._check_values(node, frame, t, frame.values)
+        self._check_values(node, None if frame.kind == frames.SAMPLE else frame.step, t, frame.values)
         return frame
 
-    def _check_batch(self, node: str, frame: frames.Frame, t: float, earlier: list[Any], last: object) -> None:
+    def check_outputs(self, node: str, step: int, t: float, values: object) -> None:
+        """Raise Dropped unless ``values`` are a stepping node's outputs at ``step`` (time t) as
+        an OUTPUTS frame's are checked: what an in-process node's direct step returned."""
+        self._check_values(node, step, t, values)
+
+    def _check_batch(self, node: str, step: int, t: float, earlier: list[Any], last: object) -> None:
         """Dropped unless a batch's outputs (``earlier`` steps', then the ``last`` step's unless
         None) are each one value of its port's type for each output, fewer than MAX_BATCH."""
         if len(earlier) >= frames.MAX_BATCH:
             raise Dropped("wrong step", f"from {node}: {len(earlier) + 1} steps' outputs in one batch, "
                                            f"at most {frames.MAX_BATCH}")
         for values in earlier:
-            self._check_values(node, frame, t, values)
+            self._check_values(node, step, t, values)
         if last is not None:
-            self._check_values(node, frame, t, last)
+            self._check_values(node, step, t, last)
 
-    def _check_values(self, node: str, frame: frames.Frame, t: float, values: object) -> None:
-        """Dropped unless ``values`` are one value of its port's type (and shape) for each of ``node``'s outputs."""
+    def _check_values(self, node: str, step: int | None, t: float, values: object) -> None:
+        """(``step``: None for a sample.) Dropped unless ``values`` are one value of its port's type (and shape) for each of ``node``'s outputs."""
         ports = self._ports[node]
         if type(values) is not list:
             raise Dropped("wrong type", f"from {node}: {frames.short(values)} where its outputs' values go")
@@ -143,7 +148,7 @@ class Intake:
             if type(value) not in types:
                 raise Dropped("wrong type", f"{node}.{port} got {type(value).__name__} {frames.short(value)}")
             if type(value) is float and not math.isfinite(value):
-                self._note_non_finite(f"{node}.{port}", frame, t, value)
+                self._note_non_finite(f"{node}.{port}", step, t, value)
         for i, spec in self._arrays[node]:
             value = values[i]
             wrong = array_misfit(spec, value)
@@ -151,12 +156,12 @@ class Intake:
                 raise Dropped("wrong type", f"{node}.{spec.name}: {wrong}")
             for j, x in enumerate(value):
                 if type(x) is float and not math.isfinite(x):
-                    self._note_non_finite(f"{node}.{spec.name}[{j}]", frame, t, x)
+                    self._note_non_finite(f"{node}.{spec.name}[{j}]", step, t, x)
                     break
 
-    def _note_non_finite(self, label: str, frame: frames.Frame, t: float, value: float) -> None:
+    def _note_non_finite(self, label: str, step: int | None, t: float, value: float) -> None:
         if label in self.non_finite:
             return
-        first = {"t": t} if frame.kind == frames.SAMPLE else {"step": frame.step, "t": t}
+        first = {"t": t} if step is None else {"step": step, "t": t}
         self.non_finite[label] = first
         self._log.warning("non-finite value", port=label, value=repr(value), **first)

@@ -99,3 +99,19 @@ def step_control(sc: StepControl, step_size: float, said: Said) -> Plan:
         return Plan(False, f"none: fixed macro steps of {step_size:g} s ({why})", why=why)
     return Plan(True, f"steps of {sc.minStep:g} to {sc.maxStep:g} s, each held input's error over a "
                 f"step (its change × step / 2) at most {sc.tolerance:g}·max(1, |value|) s")
+
+
+def direct_steps(stepping: list[str], direct: Mapping[str, Any], *, multirate: bool, played: bool,
+                 checkpoints: bool, interpolated: bool) -> Plan:
+    """Macro steps as calls (a node hosted in process steps when the master calls it, and returns
+    its outputs) rather than STEP and OUTPUTS frames: for a run whose every stepping node is hosted
+    so, and whose steps need nothing a call does not carry (each node's own rate, a played
+    source's samples, a checkpoint's states, input slopes)."""
+    if not stepping:
+        return Plan(False, "frames (no stepping node)")
+    why = [w for on, w in ((any(n not in direct for n in stepping), "nodes in processes of their own"),
+                           (multirate, "multi-rate"), (played, "played sources"), (checkpoints, "checkpoints"),
+                           (interpolated, "interpolated inputs")) if on]
+    if why:
+        return Plan(False, f"frames ({', '.join(why)})", why=", ".join(why))
+    return Plan(True, "calls (in process)")

@@ -9,14 +9,14 @@ takes them down after the run.
 from __future__ import annotations
 
 import json
-from typing import Any, Callable, Protocol
+from typing import Any, Callable, Mapping, Protocol
 
 import zenoh
 
 from hycosim.core import frames
 from hycosim.core.inbox import Inbox
 from hycosim.core.keys import SERVER_TOKEN, ProjectKeys
-from hycosim.core.local_bus import LocalBus
+from hycosim.core.local_bus import DirectStep, LocalBus
 from hycosim.core.session import FramePublisher
 from hycosim.server.answer_budget import AnswerBudget
 
@@ -38,6 +38,10 @@ class Transport(Protocol):
 
     #: The Zenoh session a gateway for bridge FMUs joins, or None where there is none.
     session: zenoh.Session | None
+    #: The nodes whose macro steps are calls rather than frames (in process), by name.
+    direct: Mapping[str, DirectStep]
+    #: Whether anyone can ask the run's status (the relay keeps each point's values for it).
+    serves_status: bool
 
     def open(self, keys: ProjectKeys, polls: bool, low_latency: bool,
              status: Callable[[int | None], dict[str, Any]], answers: AnswerBudget) -> tuple[RelayInbox, Publisher]:
@@ -52,6 +56,9 @@ class Transport(Protocol):
 class ZenohTransport:
     """The relay on a Zenoh router session: nodes publish on ``up/<node>``, the relay on
     ``down``; liveliness tokens say who is attached; anyone may ask ``status``."""
+
+    direct: Mapping[str, DirectStep] = {}
+    serves_status = True
 
     def __init__(self, session: zenoh.Session) -> None:
         self.session = session
@@ -100,12 +107,15 @@ class ZenohTransport:
 
 class InProcessTransport:
     """The relay and its nodes in one process (:mod:`hycosim.core.local_bus`): no session, no
-    status queryable, no gateway; the nodes attached to the bus before the run."""
+    status queryable, no gateway; the nodes attached to the bus before the run, and their
+    macro steps calls where the run allows (the relay's plan)."""
 
     session = None
+    serves_status = False
 
     def __init__(self, bus: LocalBus) -> None:
         self.bus = bus
+        self.direct = bus.direct
 
     def open(self, keys: ProjectKeys, polls: bool, low_latency: bool,
              status: Callable[[int | None], dict[str, Any]], answers: AnswerBudget) -> tuple[Any, Any]:
