@@ -184,7 +184,7 @@ def helper():  # started before the hold: stop signals unblocked here, as in Zen
 threading.Thread(target=helper, daemon=True).start()
 counted = 0
 try:
-    mask = signals.hold_stops()
+    signals.hold_stops()
     try:
         if sys.argv[1] == "thread":
             go.set()  # the kernel gives the signal to the helper, which does not block it
@@ -195,7 +195,7 @@ try:
             pass
         counted = 1
     finally:
-        signals.release_stops(mask)
+        signals.release_stops()
     print("not stopped")
 except signals.Stopped as exc:
     print(f"stopped by {signals.name_of(exc)} with counted={counted}")

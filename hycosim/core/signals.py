@@ -21,7 +21,7 @@ FAILED_ELSEWHERE = 5
 
 
 class _Held:
-    """Stop signals held off by :func:`hold_stops`. A thread's signal mask alone does not hold
+    """Stop signals held off by :func:`hold_stops`. A thread's signal mask would not hold
     them: the kernel gives a process's signal to any thread that does not block it (Zenoh's
     own threads, in a node), and Python then runs the handler in the main thread, held or not
     (a node's END once named the step before the one it had just sent). So the handlers look
@@ -104,16 +104,16 @@ def _held_off(signum: int) -> bool:
     return False
 
 
-def hold_stops() -> set[int]:
+def hold_stops() -> None:
     """Keep stop signals pending until :func:`release_stops`: what is sent and what the process
-    says it sent must not be parted by a stop arriving between them. Returns the mask to restore."""
+    says it sent must not be parted by a stop arriving between them. The handlers keep a signal
+    that comes meanwhile (whichever thread the kernel gives it to); no signal mask is changed,
+    which would cost two system calls a step and hold nothing more."""
     _HELD.depth += 1
-    return signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
 
 
-def release_stops(mask: set[int]) -> None:
-    """Restore the mask :func:`hold_stops` returned; a stop that came meanwhile is raised now."""
-    signal.pthread_sigmask(signal.SIG_SETMASK, mask)  # one still blocked here runs its handler now
+def release_stops() -> None:
+    """End a :func:`hold_stops`; a stop that came meanwhile is raised now."""
     _HELD.depth -= 1
     if _HELD.depth == 0 and _HELD.pending is not None:
         signum, _HELD.pending = _HELD.pending, None
