@@ -586,13 +586,7 @@ class NodeRuntime:
             self.drops.drop("not a release", "a START while the run is under way", self.steps)
             return False
         k = frame.step
-        if at.checkpoint and at.saved_step != k:
-            at.saved, at.saved_step = impl.get_state(), k
-        now_driven = self.name in frame.driven
-        if (frame.mode, now_driven) != (at.mode, at.driven):
-            at.mode, at.driven = frame.mode, now_driven
-            impl.set_mode(frame.mode, now_driven)
-            self._log.info("mode", step=k, mode=frame.mode, driven=now_driven)
+        self._enter_step(impl, at, k, frame.mode, self.name in frame.driven)
         values = dict(zip(self._in_names, frame.inputs[self.name]))
         if frame.kind == frames.STEPS:
             times = frame.times
@@ -615,6 +609,16 @@ class NodeRuntime:
                 self._send(frames.encode(frames.STATE, self.spec.UID, k, i, len(chunks), chunk))
             at.pending_state = None
         return False
+
+    def _enter_step(self, impl: Node, at: _Stepping, k: int, mode: str, driven: bool) -> None:
+        """Before the step from point k (by frame or by call): the state saved for a retake, once
+        per point, and the model told of a change of mode."""
+        if at.checkpoint and at.saved_step != k:
+            at.saved, at.saved_step = impl.get_state(), k
+        if (mode, driven) != (at.mode, at.driven):
+            at.mode, at.driven = mode, driven
+            impl.set_mode(mode, driven)
+            self._log.info("mode", step=k, mode=mode, driven=driven)
 
     def _on_init(self, impl: Node, at: _Stepping, frame: frames.Frame) -> bool:
         """The initialisation phase's inputs at t0: take them and answer with the outputs at step
@@ -806,12 +810,7 @@ class NodeRuntime:
             name = self._in_names[i]
             values[name] = list(values[name])
         try:
-            if at.checkpoint and at.saved_step != k:
-                at.saved, at.saved_step = impl.get_state(), k
-            if (mode, driven) != (at.mode, at.driven):
-                at.mode, at.driven = mode, driven
-                impl.set_mode(mode, driven)
-                self._log.info("mode", step=k, mode=mode, driven=driven)
+            self._enter_step(impl, at, k, mode, driven)
             impl.step(t, h, values)
             out = self._pack_outputs(impl.outputs())
         except Exception as exc:

@@ -9,6 +9,7 @@ takes them down after the run.
 from __future__ import annotations
 
 import json
+from types import MappingProxyType
 from typing import Any, Callable, Mapping, Protocol
 
 import zenoh
@@ -57,7 +58,7 @@ class ZenohTransport:
     """The relay on a Zenoh router session: nodes publish on ``up/<node>``, the relay on
     ``down``; liveliness tokens say who is attached; anyone may ask ``status``."""
 
-    direct: Mapping[str, DirectStep] = {}
+    direct: Mapping[str, DirectStep] = MappingProxyType({})  # every node steps in a process of its own
     serves_status = True
 
     def __init__(self, session: zenoh.Session) -> None:
