@@ -120,6 +120,24 @@ def test_a_replayed_node_and_an_ssp_package_record_the_same_values_in_process(tm
     assert len(rows) == 301 and float(rows[1]["ft.u"]) == 2 * float(rows[1]["dahlquist.x"]) + 1
 
 
+def test_fmu_ports_of_three_types_record_the_same_values_in_process(tmp_path):
+    # In process an FMU steps on the master's lists, its outputs read from its buffers as they are.
+    fmus = _small_fmus.build(tmp_path / "fmus")
+    nodes = [{"nodeName": "src", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+             {"nodeName": "typed", "UID": 2, "fmu": str(fmus["Types"]), "parameters": {"offset": 3, "gain": 2.0},
+              "input": [{"name": "ru", "type": "Real"}, {"name": "iu", "type": "Integer"},
+                        {"name": "bu", "type": "Boolean", "start": True}],
+              "output": [{"name": "ry", "type": "Real"}, {"name": "iy", "type": "Integer"},
+                         {"name": "by", "type": "Boolean"}]}]
+    cfg = write_project(tmp_path / "types.json", nodes, [{"from": "src.y", "to": "typed.ru"}],
+                        cosim={"stepSize": 0.1, "stopTime": 1.0})
+    distributed, inprocess = _run_both(cfg, tmp_path)
+    assert (distributed / "values.csv").read_bytes() == (inprocess / "values.csv").read_bytes()
+    rows = read_rows(inprocess)
+    assert {(r["typed.iy"], r["typed.bu"], r["typed.by"]) for r in rows[1:]} == {("3", "1", "0")}  # by = not bu
+    assert [float(r["typed.ry"]) for r in rows[1:]] == [2 * float(r["typed.ru"]) for r in rows[:-1]]
+
+
 def test_a_node_one_process_cannot_host_is_named_and_nothing_is_run(tmp_path):
     res = hycosim("run", str(REPO / "hycosim" / "configs" / "default.json"), "--in-process", "--runs-dir",
                   str(tmp_path / "runs"))

@@ -3,13 +3,13 @@ integrated by the node (fmu_bridge.fmu_me)."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
 import structlog
 
-from hycosim.core.schema import Node as NodeSpec
+from hycosim.core.schema import Node as NodeSpec, Port
 from hycosim.fmu_bridge.fmu_loader import FmuError, FmuInstance, FmuTerminated
 from hycosim.fmu_bridge.fmu_open import open_fmu
 
@@ -99,6 +99,20 @@ class FmuNode(Node):
             for at, kind in events:
                 log.info("fmu event", t=at, kind=kind)
             events.clear()
+
+    def listed_step(self, inputs: list[str], outputs: list[Port]) -> Callable[[float, float, list[Any]], list[Any]] | None:
+        stepped = self.fmu.listed_step(inputs, outputs) if self.fmu is not None else None
+        if stepped is None:
+            return None
+
+        def step(t: float, h: float, values: list[Any]) -> list[Any]:
+            try:  # _node_errors written out, as in outputs
+                return stepped(t, h, values)
+            except FmuTerminated as exc:
+                raise SimulationEnded(exc.t, str(exc)) from None
+            except FmuError as exc:
+                raise NodeModelError(str(exc)) from None
+        return step
 
     def set_mode(self, mode: str, driven: bool) -> None:
         with _node_errors():

@@ -23,7 +23,7 @@ the samples it has taken up to a time and publishes them with their timestamps.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar
@@ -105,6 +105,14 @@ class Node(ABC):
     @abstractmethod
     def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
         """Advance from t to t+h; ``inputs`` are the routed values at t."""
+
+    def listed_step(self, inputs: list[str], outputs: list[Port]) -> Callable[[float, float, list[Any]], list[Any]] | None:
+        """Optional, for a run in process: a callable ``step(t, h, values)`` doing what step()
+        then outputs() do, on the inputs as a list (one per port named in ``inputs``, in that
+        order) and returning the outputs as a list of their wire values (one per port of
+        ``outputs``, in order, each of the type the port declares). It raises what step()
+        raises. None (the default): the node is stepped through step() and outputs()."""
+        return None
 
     def set_mode(self, mode: str, driven: bool) -> None:
         """The coordinator entered ``mode``; ``driven`` says whether this node now follows another."""

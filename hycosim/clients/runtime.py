@@ -113,6 +113,7 @@ class NodeRuntime:
         self._played: _Played | None = None
         self._started = False
         self.failure: str | None = None  # in process: why this node ended the run, if it failed
+        self._listed: Callable[[float, float, list[Any]], list[Any]] | None = None  # in process: Node.listed_step
 
     def context(self) -> NodeContext:
         params = dict(self.spec.parameters)
@@ -797,6 +798,9 @@ class NodeRuntime:
         self._setup()
         self._publisher = bus.publisher(self.name)
         self._bus = bus
+        if not self._is_player:
+            # An FMU steps on the master's lists as they are (no dicts between, no conversions).
+            self._listed = self.impl.listed_step(list(self._in_names), list(self.spec.output))
         bus.attach(self.name, self.deliver, None if self._is_player else self.step_direct)
 
     def step_direct(self, k: int, t: float, h: float, mode: str, driven: bool, inputs: list[Any]) -> list[Any] | None:
@@ -805,14 +809,17 @@ class NodeRuntime:
         Return the outputs at t + h, checked as those sent are; None when the model ended the
         run or failed instead, its END sent to the master as over the network."""
         impl, at = self.impl, self._stepping  # a Node (host attaches no player this way), started
-        values = dict(zip(self._in_names, inputs))
-        for i, _, _ in self._in_arrays:  # the master's lists stay its own, whatever the model does with them
-            name = self._in_names[i]
-            values[name] = list(values[name])
         try:
             self._enter_step(impl, at, k, mode, driven)
-            impl.step(t, h, values)
-            out = self._pack_outputs(impl.outputs())
+            if self._listed is not None:  # the values go into the FMU's own buffers
+                out = self._listed(t, h, inputs)
+            else:
+                values = dict(zip(self._in_names, inputs))
+                for i, _, _ in self._in_arrays:  # the master's lists stay its own, whatever the model does
+                    name = self._in_names[i]
+                    values[name] = list(values[name])
+                impl.step(t, h, values)
+                out = self._pack_outputs(impl.outputs())
         except Exception as exc:
             try:
                 self._step_failed(exc, k, t, impl=impl)

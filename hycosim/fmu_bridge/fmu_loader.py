@@ -16,7 +16,7 @@ import struct
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import fmpy
 from fmpy import read_model_description
@@ -24,6 +24,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.model_description import ModelDescription, ScalarVariable
 
 from hycosim.core.schema import Node, PortType
+from hycosim.core.schema import Port as NodePort
 from hycosim.core.hints import did_you_mean
 from hycosim.fmu_bridge.value_access import Port, port_access
 
@@ -52,6 +53,10 @@ class FmuTerminated(FmuError):
     def __init__(self, message: str, t: float):
         super().__init__(message)
         self.t = t
+
+
+# A node port's values as Python has them (String and Binary ports are never read in one call).
+_PYTHON_TYPES = {PortType.REAL: float, PortType.INTEGER: int, PortType.BOOLEAN: bool}
 
 
 @dataclass(frozen=True)
@@ -737,6 +742,33 @@ class FmuInstance:
         for m in self.inputs:
             if m.port in values:
                 self._set(self._variables[m.variable], values[m.port], m.size)
+
+    def listed_step(self, inputs: list[str], outputs: list[NodePort]) -> Callable[[float, float, list[Any]], list[Any]] | None:
+        """A macro step on lists: ``step(t, h, values)`` sets the inputs from ``values`` (one per
+        port of ``inputs``, in that order), steps from t to t+h and returns the outputs, one
+        per port of ``outputs`` in order, in the Python types those ports declare. That is
+        set_inputs, do_step and get_outputs without a dict between them: the node's wire order
+        is the FMU's port order, and no value needs a conversion after its read. None where
+        that does not hold (ports in another order, a value of another type, a port read one
+        by one) and the dict calls must be used."""
+        reader, writer = self._reader, self._writer
+        if reader is None or writer is None or [m.port for m in self.inputs] != inputs \
+                or self._output_ports != [p.name for p in outputs] \
+                or reader.conversions() != [_PYTHON_TYPES.get(p.type) for p in outputs]:
+            return None
+        names = ", ".join(m.variable for m in self.inputs)
+
+        def step(t: float, h: float, values: list[Any]) -> list[Any]:
+            try:
+                writer.write(values)
+            except FMICallException as exc:
+                raise FmuError(f"node {self.node!r}: setting inputs {names} failed ({exc})") from None
+            self.do_step(t, h)
+            try:
+                return reader.read()
+            except FMICallException as exc:
+                raise FmuError(f"node {self.node!r}: reading outputs failed ({exc})") from None
+        return step
 
     def set_input_derivatives(self, derivatives: dict[str, list[float]]) -> None:
         """Give Real inputs (by port) their time derivatives at the next step's start, orders 1,

@@ -118,6 +118,11 @@ class MeInstance(FmuInstance):
 
     # --- a macro step -----------------------------------------------------------------
 
+    def listed_step(self, inputs: list[str], outputs: list[Any]) -> None:
+        """None: a Model Exchange step sets only the inputs that changed (set_inputs), which
+        restarts the solver."""
+        return None
+
     def set_inputs(self, values: dict[str, Any]) -> None:
         """Set the inputs that changed (held over the step); the solver starts afresh if any did."""
         changed = {m.port: values[m.port] for m in self.inputs

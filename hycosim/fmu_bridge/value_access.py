@@ -33,6 +33,11 @@ _FMI3 = {"Float64": ("Float64", ctypes.c_double, float), "Float32": ("Float32", 
          "Int64": ("Int64", ctypes.c_int64, int), "UInt64": ("UInt64", ctypes.c_uint64, int),
          "Enumeration": ("Int64", ctypes.c_int64, int), "Boolean": ("Boolean", ctypes.c_bool, bool)}
 
+# The C element types whose array slice gives Python values of the conversion's type.
+_SLICE_GIVES = {ctypes.c_double: float, ctypes.c_float: float, ctypes.c_int: int, ctypes.c_int8: int,
+                ctypes.c_uint8: int, ctypes.c_int16: int, ctypes.c_uint16: int, ctypes.c_int32: int,
+                ctypes.c_uint32: int, ctypes.c_int64: int, ctypes.c_uint64: int, ctypes.c_bool: bool}
+
 _WARNING = 1  # fmi2Warning and fmi3Warning: above it a call failed
 
 
@@ -68,9 +73,28 @@ class PortAccess:
     def __init__(self, groups: list[_Group], count: int):
         self._groups = groups
         self._count = count
+        # One call of scalars in port order whose C values Python reads as the type they are
+        # given as (a double as a float): a read is then the buffer's slice, with no conversions.
+        one = groups[0] if len(groups) == 1 else None
+        self._whole = one if one is not None and one.positions == list(range(count)) and \
+            all(size is None for _, size in one.slices) and _SLICE_GIVES.get(one.values._type_) is one.convert else None
+
+    def conversions(self) -> list[type]:
+        """The Python type each port's value (an array's elements) is read or written as, in order."""
+        types: list[Any] = [None] * self._count
+        for g in self._groups:
+            for position in g.positions:
+                types[position] = g.convert
+        return types
 
     def read(self) -> list[Any]:
         """Every port's value, in order: a scalar as a Python value, an array as a list."""
+        whole = self._whole
+        if whole is not None:
+            status = whole.call(*whole.args)
+            if status > _WARNING:
+                raise FMICallException(function=whole.function, status=status)
+            return whole.values[:]
         out: list[Any] = [None] * self._count
         for g in self._groups:
             status = g.call(*g.args)

@@ -115,13 +115,8 @@ class Intake:
         # A played asynchronous node also sends OUTPUTS: its word that a point's samples are all sent.
         if (frame.kind == frames.SAMPLE) != spec.asynchronous and not (spec.replay and spec.asynchronous):
             raise Dropped("wrong kind", f"{node} is {'' if spec.asynchronous else 'not '}asynchronous")
-        self._check_values(node, None if frame.kind == frames.SAMPLE else frame.step, t, frame.values)
+        self.check_values(node, None if frame.kind == frames.SAMPLE else frame.step, t, frame.values)
         return frame
-
-    def check_outputs(self, node: str, step: int, t: float, values: object) -> None:
-        """Raise Dropped unless ``values`` are a stepping node's outputs at ``step`` (time t) as
-        an OUTPUTS frame's are checked: what an in-process node's direct step returned."""
-        self._check_values(node, step, t, values)
 
     def _check_batch(self, node: str, step: int, t: float, earlier: list[Any], last: object) -> None:
         """Dropped unless a batch's outputs (``earlier`` steps', then the ``last`` step's unless
@@ -130,12 +125,15 @@ class Intake:
             raise Dropped("wrong step", f"from {node}: {len(earlier) + 1} steps' outputs in one batch, "
                                            f"at most {frames.MAX_BATCH}")
         for values in earlier:
-            self._check_values(node, step, t, values)
+            self.check_values(node, step, t, values)
         if last is not None:
-            self._check_values(node, step, t, last)
+            self.check_values(node, step, t, last)
 
-    def _check_values(self, node: str, step: int | None, t: float, values: object) -> None:
-        """(``step``: None for a sample.) Dropped unless ``values`` are one value of its port's type (and shape) for each of ``node``'s outputs."""
+    def check_values(self, node: str, step: int | None, t: float, values: object) -> None:
+        """Raise Dropped unless ``values`` are one value of its port's type (and shape) for each of
+        ``node``'s outputs, at ``step`` (None for a sample), time t: an OUTPUTS frame's, a
+        sample's, or what an in-process node's direct step returned. The first non-finite value
+        on each port is noted."""
         ports = self._ports[node]
         if type(values) is not list:
             raise Dropped("wrong type", f"from {node}: {frames.short(values)} where its outputs' values go")

@@ -89,7 +89,7 @@ class _ModelEnded(Exception):
     end at the last macro-step point every node reached, then the point where it ended."""
 
 
-@dataclass
+@dataclass(slots=True)
 class _Point:
     """Where the loop is: point k at time t, the j-th of the grid origin + j·H (a located event
     starts a new grid at its time), and how the step to it went."""
@@ -104,7 +104,7 @@ class _Point:
     takes: int = 1  # of the step to it (iterated or size-controlled)
 
 
-@dataclass
+@dataclass(slots=True)
 class _Seen:
     """Point k as the loop saw it before stepping from it: what its record holds."""
 
@@ -926,7 +926,7 @@ class Relay:
         routed for it and returns its outputs at t + h, checked by the intake as an OUTPUTS
         frame's are; return arrival offsets. A node whose model ended the run or failed sent its
         END instead, which is gathered as in a release by frames."""
-        direct, inputs, outputs, check = self._direct, self.router.inputs, self.outputs, self.intake.check_outputs
+        direct, inputs, outputs, check = self._direct, self.router.inputs, self.outputs, self.intake.check_values
         driven = self.coordinator.driven_nodes()
         arrivals: dict[str, float] = {}
         ended = []

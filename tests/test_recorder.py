@@ -1,0 +1,112 @@
+"""The recorder's rows are the text Python's csv.writer makes of their cells, whichever way it
+writes them: joined where no cell can need a quote, through csv.writer where a String port
+may hold any text; and a timing row in one format is the row of formatted cells."""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from hycosim.core.config import load_project
+from hycosim.server.recorder import Recorder
+from tests.helpers import write_project
+
+_FIXTURES = settings(suppress_health_check=[HealthCheck.function_scoped_fixture])
+
+_REAL = st.floats(allow_nan=True, allow_infinity=True) | st.sampled_from([0.0, -0.0, 5e-324, 1e16, 1e-5, 0.1])
+_INTEGER = st.integers(-2**63, 2**64)
+_TEXT = st.text(alphabet=st.sampled_from('ab ,"\r\n;x\'é'), max_size=8)
+
+
+def _project(tmp: Path, strings: bool) -> Path:
+    outputs = [{"name": "r", "type": "Real"}, {"name": "i", "type": "Integer"}, {"name": "b", "type": "Boolean"},
+               {"name": "v", "type": "Real", "shape": [2]}]
+    if strings:
+        outputs.append({"name": "s", "type": "String"})
+    # Only the ports matter to the recorder: no model is run here.
+    nodes = [{"nodeName": "a", "UID": 1, "model": "tests.nodes:Vector", "output": outputs},
+             {"nodeName": "b-2", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]}]
+    return write_project(tmp / f"p{int(strings)}.json", nodes, [{"from": "a.r", "to": "b-2.u"}],
+                         cosim={"stepSize": 0.1, "stopTime": 1.0})
+
+
+@pytest.fixture(scope="module", params=[False, True], ids=["numbers", "with a String port"])
+def loaded(request, tmp_path_factory):
+    return load_project(_project(tmp_path_factory.mktemp("rec"), request.param))
+
+
+def _a_cells(values: list) -> list:
+    r, i, b, v, *s = values
+    return [r, i, int(b), *v, *s]
+
+
+def _expected(rows: list[list]) -> str:
+    out = io.StringIO()
+    writer = csv.writer(out)
+    for row in rows:
+        writer.writerow(row)
+    return out.getvalue()
+
+
+@_FIXTURES
+@given(data=st.data(), count=st.integers(1, 4))
+def test_values_rows_are_what_csv_writer_makes_of_their_cells(loaded, tmp_path_factory, data, count):
+    strings = any(p.name == "s" for p in loaded.project.node("a").output)
+    run_dir = tmp_path_factory.mktemp("run")
+    recorder = Recorder(run_dir, loaded, {})
+    want = []
+    for step in range(count):
+        a = [data.draw(_REAL), data.draw(_INTEGER), data.draw(st.booleans()), data.draw(st.lists(_REAL, min_size=2,
+                                                                                               max_size=2))]
+        if strings:
+            a.append(data.draw(_TEXT))
+        y, u, t = data.draw(_REAL), data.draw(_REAL), data.draw(_REAL)
+        mode = data.draw(st.sampled_from(["free", "grasp", "hold_2"]))
+        recorder.row(step, t, mode, {"a": a, "b-2": [y]}, {"a": [], "b-2": [u]})
+        want.append([step, repr(t), mode, *_a_cells(a), y, u])
+    recorder.close("completed")
+    text = (run_dir / "values.csv").read_bytes().decode()
+    header, _, rows = text.partition("\r\n")
+    assert rows == _expected(want)
+    assert header.split(",")[:4] == ["step", "t", "mode", "a.r"]
+
+
+_SECONDS = st.floats(0.0, 1e4, allow_nan=False)
+
+
+@_FIXTURES
+@given(data=st.data(), count=st.integers(1, 4))
+def test_timing_rows_are_their_formatted_cells_whichever_nodes_arrived(loaded, tmp_path_factory, data, count):
+    run_dir = tmp_path_factory.mktemp("run")
+    recorder = Recorder(run_dir, loaded, {})
+    want = []
+    for step in range(count):
+        arrived = data.draw(st.sets(st.sampled_from(["a", "b-2"])))
+        arrivals = {n: data.draw(_SECONDS) for n in sorted(arrived)}
+        t, wait = data.draw(_REAL), data.draw(_SECONDS)
+        lateness = data.draw(st.none() | _SECONDS)
+        holder = data.draw(st.sampled_from(["", "a", "b-2"]))
+        recorder.timing(step, t, wait, holder, lateness, arrivals, {})
+        want.append([step, repr(t), f"{wait:.9f}", holder, "" if lateness is None else f"{lateness:.6f}",
+                     *(f"{arrivals[n]:.9f}" if n in arrivals else "" for n in ("a", "b-2"))])
+    recorder.close("completed")
+    header, _, rows = (run_dir / "timing.csv").read_bytes().decode().partition("\r\n")
+    assert header == "step,t,wait_s,holder,lateness_s,arrival_s:a,arrival_s:b-2"
+    assert rows == _expected(want)
+
+
+def test_a_non_finite_time_or_value_is_written_as_python_writes_it(tmp_path):
+    loaded = load_project(_project(tmp_path, False))
+    (tmp_path / "run").mkdir()
+    recorder = Recorder(tmp_path / "run", loaded, {})
+    recorder.row(0, math.inf, "free", {"a": [math.nan, 2**64, True, [-0.0, 1e16]], "b-2": [-math.inf]},
+                 {"a": [], "b-2": [5e-324]})
+    recorder.close("completed")
+    assert (tmp_path / "run" / "values.csv").read_text().splitlines()[1] == "0,inf,free,nan,18446744073709551616,1," \
+        "-0.0,1e+16,-inf,5e-324"
