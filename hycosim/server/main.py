@@ -194,8 +194,8 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     try:
         relay.run()
         code, message = 0, f"completed {recorder.meta['steps']} macro steps"
-        if relay.ended_by is not None:
-            e = relay.ended_by
+        if relay.ending.by is not None:
+            e = relay.ending.by
             message += f"; node {e['node']!r} ended the simulation at t={e['t']:g} s: {e['message']}"
     except (RunError, RecordError, GuardEvaluationError) as exc:
         log.error("run failed", error=str(exc))

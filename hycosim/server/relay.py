@@ -24,7 +24,6 @@ gateway for bridge FMUs asks for the transport's Zenoh session).
 
 from __future__ import annotations
 
-import collections
 import functools
 import math
 import os
@@ -56,7 +55,7 @@ from hycosim.server.interpolation import STARTUP_SPLIT, InputTrack
 from hycosim.server.recorder import Recorder, RecordError
 from hycosim.server.retakes import IterationLog, StepSizer, control_step, input_change, iterate_step
 from hycosim.server.routing import OutputView, Router
-from hycosim.server.status_view import Recent, barrier_window, points_since
+from hycosim.server.status_view import LatestPoints
 from hycosim.server.transport import Transport
 
 RECENT_KEPT = 4096  # the latest points kept for the status answers
@@ -133,6 +132,47 @@ class Progress:
     lateness_s: float | None = None  # a paced run's, at the last point
 
 
+@dataclass
+class _Ending:
+    """A node's model that ended the run: ``by`` (its node, step, t and words) once one did.
+    While the release it ended in is gathered: the nodes that ended in it (``inside``) and the
+    release's arrivals (the others' outputs are gathered first; inside a batched release the
+    points the ended steps before reached are recorded), and the ended node's outputs at its
+    end (``values``, its END's)."""
+
+    by: dict[str, Any] | None = None
+    inside: set[str] = field(default_factory=set)
+    arrivals: dict[str, float] = field(default_factory=dict)
+    values: list[Any] | None = None
+
+
+class _Rate:
+    """The run's steps a second since the loop began, handed with the progress to
+    ``on_progress`` at most every ``every`` seconds and at the end."""
+
+    def __init__(self, every: float, on_progress: Callable[[Progress], None] | None):
+        self.every, self.on_progress = every, on_progress
+        self.began, self.k0, self.reported = 0.0, 0, 0.0
+
+    def begin(self, k: int) -> None:
+        self.began, self.k0 = time.perf_counter(), k
+
+    def point(self, progress: Progress, k: int, now: float) -> None:
+        if self.on_progress is not None and now - self.reported >= self.every:
+            self.reported = now
+            progress.steps_per_s = (k - self.k0) / (now - self.began) if now > self.began else 0.0
+            self.on_progress(progress)
+
+    def end(self, progress: Progress, k: int) -> float | None:
+        """The rate over the whole loop (None if no time passed), reported once more."""
+        elapsed = time.perf_counter() - self.began
+        rate = (k - self.k0) / elapsed if elapsed > 0 else None
+        if self.on_progress is not None:
+            progress.steps_per_s = rate or 0.0
+            self.on_progress(progress)
+        return rate
+
+
 class Relay:
     def __init__(self, loaded: LoadedProject, transport: Transport, recorder: Recorder,
                  progress_every_s: float = 0.0, on_progress: Any = None,
@@ -182,20 +222,8 @@ class Relay:
         self._fresh: set[str] = set()
         self.lost: dict[str, float] = {}  # node → when its token went, while within linkGrace
         self.reattached: dict[str, int] = {}
-        self.ended_by: dict[str, Any] | None = None  # the node whose model ended the run, when, and why
-        # The nodes whose models ended the run in the release being gathered, and its arrivals:
-        # the others' outputs are gathered first (inside a batched release: the points the
-        # ended steps before reached are recorded), then the values where the model ended.
-        self._ended_inside: set[str] = set()
-        self._ended_arrivals: dict[str, float] = {}
-        self._end_values: list[Any] | None = None  # the ended node's outputs at its end (its END's)
-        self.switches: collections.deque[dict[str, Any]] = collections.deque(maxlen=200)  # the latest mode switches
-        # The latest points as (time, holder, wait, arrivals): the status answer's last second.
-        self._recent: collections.deque[Recent] = collections.deque(maxlen=RECENT_KEPT)
-        self._shown: tuple[int, float, str, dict[str, list[Any]], dict[str, list[Any]], float | None] = (
-            0, self.cosim.startTime, FREE_MODE, {}, {}, None)
-        self._history: collections.deque[tuple] = collections.deque(maxlen=RECENT_KEPT)  # the latest points, for the dashboard
-        self._ages: dict[str, float | None] = {}  # each asynchronous value's age at the latest point
+        self.ending = _Ending()  # a node's model that ended the run
+        self.latest = LatestPoints(self.cosim.startTime, RECENT_KEPT, FREE_MODE)  # for the status answers
         self.answers = AnswerBudget()  # status answers a second: anyone may ask
         self._last_release: bytes | None = None
         self._start_frame: bytes | None = None
@@ -211,13 +239,11 @@ class Relay:
         # Go on from the run directory's last checkpoint (its server died after recording this many steps).
         self._resume = resume
         self.progress = Progress()
+        self._rate = _Rate(progress_every_s, on_progress)
         self._clock: RealTimeClock | None = None  # a real-time run's (coSimulation.realTimeFactor)
         self._checkpoint_at = self.cosim.startTime  # the next checkpoint's time
         self._localising = False  # whether guard crossings are located (event localisation)
         self._direct: Mapping[str, DirectStep] | None = None  # in process, where the plan allows: steps as calls
-        self._perf0, self._k0, self._progressed = 0.0, 0, 0.0  # for the progress bar's steps/s
-        self._progress_every = progress_every_s
-        self._on_progress = on_progress
         self._log = structlog.get_logger("server").bind(project=self.project.projectName)
         self._stop_requested = threading.Event()
         self._gateway_address = gateway_address
@@ -244,15 +270,11 @@ class Relay:
             nodes.append({"name": n.nodeName, "uid": n.UID, "async": n.asynchronous,
                           "input": n.input_names(), "output": n.output_names(),
                           "host": host if type(host) is str else None, "restarts": restarts.get(n.nodeName, 0)})
-        shown = self._shown
-        window = barrier_window(list(self._recent), time.perf_counter(), RECENT_KEPT)
         return {"project": self.project.projectName, "attached": sorted(self.alive), "lost": sorted(self.lost),
                 "expected": [n.nodeName for n in self.project.nodeLists], "nodes": nodes,
-                "run": self.recorder.run_dir.name, "step": shown[0], "t": shown[1],
-                "mode": shown[2], "stopTime": self.cosim.stopTime, "lateness_s": self.progress.lateness_s,
-                "dropped": self._dropped(), "switches": list(self.switches), "window": window,
-                "outputs": shown[3], "inputs": shown[4], "point_wall": shown[5], "ages": dict(self._ages),
-                **({} if since is None else {"points": points_since(list(self._history), since)})}
+                "run": self.recorder.run_dir.name, "stopTime": self.cosim.stopTime,
+                "lateness_s": self.progress.lateness_s, "dropped": self._dropped(),
+                **self.latest.answer(time.perf_counter(), since)}
 
     def request_stop(self) -> None:
         """Ask the loop to stop at the next macro-step point (thread-safe)."""
@@ -275,8 +297,8 @@ class Relay:
             except _ModelEnded:  # at the START: no macro step was taken
                 pass
             status_text = frames.STOP_COMPLETED if not self._stop_requested.is_set() else frames.STOP_STOPPED
-            if self.ended_by is not None:
-                self.recorder.meta["ended_by"] = self.ended_by
+            if self.ending.by is not None:
+                self.recorder.meta["ended_by"] = self.ending.by
         except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM or SIGHUP
             status_text, reason = "interrupted", signals.describe(exc)
             self.recorder.meta["stopped_by"] = {"signal": signals.name_of(exc),
@@ -681,11 +703,11 @@ class Relay:
                 pending.discard(node)
                 self.ledger.earlier[node] = frame.earlier
                 arrivals[node] = self.ledger.since_release(node, released_at)
-                self._ended_inside.add(node)
-                self._ended_arrivals = arrivals
+                self.ending.inside.add(node)
+                self.ending.arrivals = arrivals
             else:
                 self.intake.drop(verdict.reason, verdict.detail, step, node)
-        if self._ended_inside:
+        if self.ending.inside:
             raise _ModelEnded
         return arrivals
 
@@ -723,10 +745,10 @@ class Relay:
             at = f" (the run at step {k}, t={self._time(k):g} s)" if self.project.node(node).asynchronous else ""
             raise RunError(message + at if message.startswith(f"node {node!r}")
                            else f"node {node!r} failed at step {k} (t={self._time(k):g} s): {message}")
-        if self._ended_inside:
+        if self.ending.inside:
             return  # another node ended in this release first: the run ends by its word
-        self.ended_by = {"node": node, "step": k, "t": t, "message": message}
-        self._end_values = last
+        self.ending.by = {"node": node, "step": k, "t": t, "message": message}
+        self.ending.values = last
         self._log.info("node ended the simulation", node=node, step=k, t=t, message=message)
 
     def _initialise(self) -> None:
@@ -949,7 +971,7 @@ class Relay:
             try:
                 arrivals.update(self.gather(k + 1, released_at, set(ended), paced=False))
             except _ModelEnded:
-                self._ended_arrivals.update(arrivals)
+                self.ending.arrivals.update(arrivals)
                 raise
         return arrivals
 
@@ -1007,26 +1029,26 @@ class Relay:
         step that ends there came), else held from the last recorded point, as the links hold
         them between points. Nothing is added where the node gave no outputs or ended outside
         the step after the last recorded point (a slower node's)."""
-        ended = self.ended_by
+        ended = self.ending.by
         assert ended is not None
         reached, held = 0, at_k
         if len(times) > 2:
-            reached = min([len(self.ledger.earlier[n]) * self.coupling.rates[n] for n in self._ended_inside]
+            reached = min([len(self.ledger.earlier[n]) * self.coupling.rates[n] for n in self.ending.inside]
                           + [len(times) - 2])
             if reached > 0:
-                held = self._record_inside(k, times[:reached + 2], mode, at_k, self._ended_arrivals)
+                held = self._record_inside(k, times[:reached + 2], mode, at_k, self.ending.arrivals)
                 ended["step"] = k + reached
         tol = 1e-9 * self.cosim.stepSize
         after, t_end = reached + 1, ended["t"]
-        if self._end_values is None or not times[reached] + tol < t_end <= times[after] + tol:
+        if self.ending.values is None or not times[reached] + tol < t_end <= times[after] + tol:
             return
         on_grid = t_end >= times[after] - tol
         outputs = dict(self._outputs_inside(after, times, held) if on_grid else held)
-        outputs[ended["node"]] = self._end_values
+        outputs[ended["node"]] = self.ending.values
         at = times[after] if on_grid else t_end
         self.router.route(mode, at, outputs, self.histories)
         self.recorder.row(k + after, at, mode, outputs, self.router.inputs, None)
-        self.recorder.timing(k + after, at, 0.0, ended["node"], None, self._ended_arrivals if on_grid else {}, {})
+        self.recorder.timing(k + after, at, 0.0, ended["node"], None, self.ending.arrivals if on_grid else {}, {})
         ended["step"] = k + after
 
     def _outputs_inside(self, i: int, times: list[float], held: dict[str, list[Any]]) -> dict[str, list[Any]]:
@@ -1166,7 +1188,7 @@ class Relay:
         if p.localised:
             entry["localised"] = p.localised
         self.recorder.event(entry)
-        self.switches.append(entry)
+        self.latest.switches.append(entry)
         self._log.info("mode switch", step=p.k, t=p.t, name=switch.event, to=switch.to_mode, values=switch.values)
 
     def _pace(self, t: float) -> float | None:
@@ -1184,16 +1206,8 @@ class Relay:
         self.progress.lateness_s = lateness
         now = time.perf_counter()
         if self.transport.serves_status:  # in process nobody asks: a fifth of a step's work saved
-            self._recent.append((now, holder, p.wait, p.arrivals))
-            # Point p's values, whole (the outputs change while the nodes step).
-            self._shown = (p.k, p.t, mode, dict(self.outputs), {n: list(v) for n, v in self.router.inputs.items()},
-                           time.time())
-            self._history.append(self._shown)
-            self._ages = ages
-        if self._on_progress is not None and now - self._progressed >= self._progress_every:
-            self._progressed = now
-            self.progress.steps_per_s = (p.k - self._k0) / (now - self._perf0) if now > self._perf0 else 0.0
-            self._on_progress(self.progress)
+            self.latest.point((now, holder, p.wait, p.arrivals), p.k, p.t, mode, self.outputs, self.router.inputs, ages)
+        self._rate.point(self.progress, p.k, now)
 
     def _next_point(self, p: _Point, short: bool) -> tuple[float, list[float] | None]:
         """The time the step from point p ends, and for a batched release the base points it spans."""
@@ -1249,7 +1263,7 @@ class Relay:
         p, resumed = self._begin()
         self._plan(resumed)
         end = self.cosim.stopTime - 1e-9 * self.cosim.stepSize
-        self._perf0, self._k0 = time.perf_counter(), p.k
+        self._rate.begin(p.k)
         while True:
             self._point = p.k
             seen = self._arrive(p, p.t >= end)
@@ -1262,8 +1276,4 @@ class Relay:
                 break
             except _Recover as cause:  # back to the last checkpoint: its point is taken again, as it was
                 p, _ = self._restored(cause)
-        elapsed = time.perf_counter() - self._perf0
-        self.recorder.meta["steps_per_s"] = (p.k - self._k0) / elapsed if elapsed > 0 else None
-        if self._on_progress is not None:
-            self.progress.steps_per_s = self.recorder.meta["steps_per_s"] or 0.0
-            self._on_progress(self.progress)
+        self.recorder.meta["steps_per_s"] = self._rate.end(self.progress, p.k)

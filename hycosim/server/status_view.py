@@ -13,6 +13,8 @@ from __future__ import annotations
 import bisect
 import operator
 import random
+import time
+from collections import deque
 from collections.abc import Sequence
 from typing import Any
 
@@ -61,3 +63,34 @@ def points_since(history: Sequence[tuple], since: int) -> list[list[Any]]:
     stride = -(-len(points) // STATUS_POINTS)
     kept = points[::-1][::stride][::-1] if stride > 1 else points
     return [[k, t, outputs, inputs] for k, t, _, outputs, inputs, _ in kept]
+
+
+class LatestPoints:
+    """The run's latest points as the status answer shows them: the loop adds each point (and
+    each mode switch) as it reaches it; Zenoh's thread reads them for an answer, each a copy
+    taken at once under the GIL."""
+
+    def __init__(self, start_time: float, kept: int, free_mode: str):
+        self.kept = kept
+        self.recent: deque[Recent] = deque(maxlen=kept)  # for the barrier window
+        self.history: deque[tuple] = deque(maxlen=kept)  # (step, t, mode, outputs, inputs, wall), for the dashboard
+        self.shown: tuple[int, float, str, dict[str, list[Any]], dict[str, list[Any]], float | None] = (
+            0, start_time, free_mode, {}, {}, None)
+        self.ages: dict[str, float | None] = {}  # each asynchronous value's age at the latest point
+        self.switches: deque[dict[str, Any]] = deque(maxlen=200)  # the latest mode switches
+
+    def point(self, released: Recent, k: int, t: float, mode: str, outputs: dict[str, list[Any]],
+              inputs: dict[str, list[Any]], ages: dict[str, float | None]) -> None:
+        """Point k as the loop reached it: its values whole (copies: the loop goes on changing them)."""
+        self.recent.append(released)
+        self.shown = (k, t, mode, dict(outputs), {n: list(v) for n, v in inputs.items()}, time.time())
+        self.history.append(self.shown)
+        self.ages = ages
+
+    def answer(self, now: float, since: int | None) -> dict[str, Any]:
+        """The status answer's part on the latest points (``since``: also the points after that step)."""
+        k, t, mode, outputs, inputs, wall = self.shown
+        return {"step": k, "t": t, "mode": mode, "switches": list(self.switches),
+                "window": barrier_window(list(self.recent), now, self.kept),
+                "outputs": outputs, "inputs": inputs, "point_wall": wall, "ages": dict(self.ages),
+                **({} if since is None else {"points": points_since(list(self.history), since)})}
