@@ -16,16 +16,20 @@ from hycosim.fmu_bridge.fmu_open import open_fmu
 from hycosim.clients.node import Node, NodeContext, NodeModelError, SimulationEnded
 
 
-@contextmanager
-def _node_errors() -> Iterator[None]:
+def _model_error(exc: FmuError) -> Exception:
     # FmuError stays inside this module: the runtime of a node that plays no FMU never
     # imports fmpy (and numpy), some 13 MB and a tenth of a second per process.
+    if isinstance(exc, FmuTerminated):
+        return SimulationEnded(exc.t, str(exc))
+    return NodeModelError(str(exc))
+
+
+@contextmanager
+def _node_errors() -> Iterator[None]:
     try:
         yield
-    except FmuTerminated as exc:
-        raise SimulationEnded(exc.t, str(exc)) from None
     except FmuError as exc:
-        raise NodeModelError(str(exc)) from None
+        raise _model_error(exc) from None
 
 
 class FmuNode(Node):
@@ -80,7 +84,7 @@ class FmuNode(Node):
         try:  # _node_errors written out: a context manager costs a tenth of this call
             return self.fmu.get_outputs()
         except FmuError as exc:
-            raise NodeModelError(str(exc)) from None
+            raise _model_error(exc) from None
 
     def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
         try:  # _node_errors written out, as in outputs
@@ -89,10 +93,8 @@ class FmuNode(Node):
                 self.fmu.set_input_derivatives(self._derivatives)
                 self._derivatives = {}
             self.fmu.do_step(t, h)
-        except FmuTerminated as exc:
-            raise SimulationEnded(exc.t, str(exc)) from None
         except FmuError as exc:
-            raise NodeModelError(str(exc)) from None
+            raise _model_error(exc) from None
         events = getattr(self.fmu, "events", None)  # a Model Exchange FMU's, inside the step
         if events:
             log = structlog.get_logger("node").bind(node=self.spec.nodeName)
@@ -108,10 +110,8 @@ class FmuNode(Node):
         def step(t: float, h: float, values: list[Any]) -> list[Any]:
             try:  # _node_errors written out, as in outputs
                 return stepped(t, h, values)
-            except FmuTerminated as exc:
-                raise SimulationEnded(exc.t, str(exc)) from None
             except FmuError as exc:
-                raise NodeModelError(str(exc)) from None
+                raise _model_error(exc) from None
         return step
 
     def set_mode(self, mode: str, driven: bool) -> None:

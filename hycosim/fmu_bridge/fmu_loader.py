@@ -736,8 +736,7 @@ class FmuInstance:
             try:
                 self._writer.write([values[m.port] for m in self.inputs])
             except FMICallException as exc:
-                raise FmuError(f"node {self.node!r}: setting inputs {', '.join(m.variable for m in self.inputs)} "
-                               f"failed ({exc})") from None
+                raise self._inputs_failed(exc) from None
             return
         for m in self.inputs:
             if m.port in values:
@@ -756,18 +755,17 @@ class FmuInstance:
                 or self._output_ports != [p.name for p in outputs] \
                 or reader.conversions() != [_PYTHON_TYPES.get(p.type) for p in outputs]:
             return None
-        names = ", ".join(m.variable for m in self.inputs)
 
         def step(t: float, h: float, values: list[Any]) -> list[Any]:
             try:
                 writer.write(values)
             except FMICallException as exc:
-                raise FmuError(f"node {self.node!r}: setting inputs {names} failed ({exc})") from None
+                raise self._inputs_failed(exc) from None
             self.do_step(t, h)
             try:
                 return reader.read()
             except FMICallException as exc:
-                raise FmuError(f"node {self.node!r}: reading outputs failed ({exc})") from None
+                raise self._outputs_failed(exc) from None
         return step
 
     def set_input_derivatives(self, derivatives: dict[str, list[float]]) -> None:
@@ -794,7 +792,14 @@ class FmuInstance:
                 return dict(zip(self._output_ports, self._reader.read()))
             return {m.port: self._get(m.vr, m.type, m.size) for m in self.outputs}
         except FMICallException as exc:
-            raise FmuError(f"node {self.node!r}: reading outputs failed ({exc})") from None
+            raise self._outputs_failed(exc) from None
+
+    def _inputs_failed(self, exc: FMICallException) -> FmuError:
+        return FmuError(f"node {self.node!r}: setting inputs {', '.join(m.variable for m in self.inputs)} "
+                        f"failed ({exc})")
+
+    def _outputs_failed(self, exc: FMICallException) -> FmuError:
+        return FmuError(f"node {self.node!r}: reading outputs failed ({exc})")
 
     # --- lifecycle ------------------------------------------------------------------
 

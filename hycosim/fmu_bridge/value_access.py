@@ -73,11 +73,11 @@ class PortAccess:
     def __init__(self, groups: list[_Group], count: int):
         self._groups = groups
         self._count = count
-        # One call of scalars in port order whose C values Python reads as the type they are
-        # given as (a double as a float): a read is then the buffer's slice, with no conversions.
+        # One call (so every port in order) of scalars whose C values Python reads as the type
+        # they are given as (a double as a float): a read is then the buffer's slice, unconverted.
         one = groups[0] if len(groups) == 1 else None
-        self._whole = one if one is not None and one.positions == list(range(count)) and \
-            all(size is None for _, size in one.slices) and _SLICE_GIVES.get(one.values._type_) is one.convert else None
+        self._whole = one if one is not None and all(size is None for _, size in one.slices) \
+            and _SLICE_GIVES.get(one.values._type_) is one.convert else None
 
     def conversions(self) -> list[type]:
         """The Python type each port's value (an array's elements) is read or written as, in order."""

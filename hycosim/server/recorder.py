@@ -157,9 +157,10 @@ class Recorder:
         # work is a quarter of a row. The text is the same: csv.writer writes str(), repr for floats.
         self._joined = not any(p.type is PortType.STRING for n in project.nodeLists for p in (*n.output, *n.input))
         self._plain_nodes = [(n, self._plain_out[n], self._plain_in[n]) for n in self._nodes]
-        # A timing row of one release's arrivals, every stepping node's, in one format.
+        # A timing row of one release's arrivals, every stepping node's and no other's, in one format.
         self._timing_format = None if self._async_labels or self._counts_takes else \
             "%d,%r,%.9f,%s,%s" + ",%.9f" * len(self._stepping) + "\r\n"
+        self._stepping_set = set(self._stepping)
         at = resume_at or {}
         try:
             self._values_file = _RecordFile(run_dir / "values.csv", at.get("values.csv"))
@@ -212,7 +213,7 @@ class Recorder:
     def timing(self, step: int, t: float, wait_s: float, holder: str, lateness_s: float | None,
                arrivals: dict[str, float], ages: dict[str, float | None], takes: int = 1) -> None:
         """One point's timing: of the step that ended there (``takes``: how often it was taken)."""
-        if self._timing_format is not None and len(arrivals) == len(self._stepping):
+        if self._timing_format is not None and arrivals.keys() == self._stepping_set:
             self._timing_file.buffer.write(self._timing_format % (
                 step, t, wait_s, holder, "" if lateness_s is None else f"{lateness_s:.6f}",
                 *map(arrivals.__getitem__, self._stepping)))
