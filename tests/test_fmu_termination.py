@@ -59,10 +59,11 @@ def _project(tmp_path: Path, fmu: Path, discard: bool, fmi: str) -> Path:
     ], cosim={"stepSize": 0.1, "stopTime": 1.0, "stepTimeout": 10.0})
 
 
+@pytest.mark.parametrize("where", ["--processes", "--in-process"])
 @pytest.mark.parametrize("fmi", ["2", "3"])
-def test_an_fmu_that_asks_to_terminate_ends_the_run_cleanly_naming_node_and_time(tmp_path, fmus, fmi):
+def test_an_fmu_that_asks_to_terminate_ends_the_run_cleanly_naming_node_and_time(tmp_path, fmus, fmi, where):
     cfg = _project(tmp_path, fmus[fmi], discard=False, fmi=fmi)
-    res = hycosim("run", str(cfg), "--runs-dir", str(tmp_path / "runs"), "--no-progress")
+    res = hycosim("run", str(cfg), where, "--runs-dir", str(tmp_path / "runs"), "--no-progress")
     assert res.returncode == 0, res.stderr
     ended_at = 0.25 if fmi == "2" else 0.3  # pythonfmu3 reports the step's end as lastSuccessfulTime
     assert f"node 'e' ended the simulation at t={ended_at:g} s" in res.stdout
@@ -80,10 +81,11 @@ def test_an_fmu_that_asks_to_terminate_ends_the_run_cleanly_naming_node_and_time
     assert column(rows, "clock.y") == pytest.approx([0.0, 0.1, 0.2, 0.2 if fmi == "2" else 0.3])
 
 
+@pytest.mark.parametrize("where", ["--processes", "--in-process"])
 @pytest.mark.parametrize("fmi", ["2", "3"])
-def test_a_discard_without_termination_is_a_failure_whose_headline_names_the_discard(tmp_path, fmus, fmi):
+def test_a_discard_without_termination_is_a_failure_whose_headline_names_the_discard(tmp_path, fmus, fmi, where):
     cfg = _project(tmp_path, fmus[fmi], discard=True, fmi=fmi)
-    res = hycosim("run", str(cfg), "--runs-dir", str(tmp_path / "runs"), "--no-progress")
+    res = hycosim("run", str(cfg), where, "--runs-dir", str(tmp_path / "runs"), "--no-progress")
     assert res.returncode == 3
     headline = res.stderr.splitlines()[0]
     assert "node 'e'" in headline and f"discarded doStep from t=0.2 s by 0.1 s (fmi{fmi}Discard)" in headline

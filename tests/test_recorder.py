@@ -1,6 +1,8 @@
 """The recorder's rows are the text Python's csv.writer makes of their cells, whichever way it
 writes them: joined where no cell can need a quote, through csv.writer where a String port
-may hold any text; and a timing row in one format is the row of formatted cells."""
+may hold any text; and a timing row in one format is the row of formatted cells. The same
+text whether the recorder formats the rows itself or a process of its own does (``apart``,
+as in a run in one process)."""
 
 from __future__ import annotations
 
@@ -54,12 +56,13 @@ def _expected(rows: list[list]) -> str:
     return out.getvalue()
 
 
+@pytest.mark.parametrize("apart", [False, True], ids=["here", "apart"])
 @_FIXTURES
 @given(data=st.data(), count=st.integers(1, 4))
-def test_values_rows_are_what_csv_writer_makes_of_their_cells(loaded, tmp_path_factory, data, count):
+def test_values_rows_are_what_csv_writer_makes_of_their_cells(loaded, apart, tmp_path_factory, data, count):
     strings = any(p.name == "s" for p in loaded.project.node("a").output)
     run_dir = tmp_path_factory.mktemp("run")
-    recorder = Recorder(run_dir, loaded, {})
+    recorder = Recorder(run_dir, loaded, {}, rows_apart=apart)
     want = []
     for step in range(count):
         a = [data.draw(_REAL), data.draw(_INTEGER), data.draw(st.booleans()), data.draw(st.lists(_REAL, min_size=2,
@@ -80,11 +83,13 @@ def test_values_rows_are_what_csv_writer_makes_of_their_cells(loaded, tmp_path_f
 _SECONDS = st.floats(0.0, 1e4, allow_nan=False)
 
 
+@pytest.mark.parametrize("apart", [False, True], ids=["here", "apart"])
 @_FIXTURES
 @given(data=st.data(), count=st.integers(1, 4))
-def test_timing_rows_are_their_formatted_cells_whichever_nodes_arrived(loaded, tmp_path_factory, data, count):
+def test_timing_rows_are_their_formatted_cells_whichever_nodes_arrived(loaded, apart, tmp_path_factory, data,
+                                                                         count):
     run_dir = tmp_path_factory.mktemp("run")
-    recorder = Recorder(run_dir, loaded, {})
+    recorder = Recorder(run_dir, loaded, {}, rows_apart=apart)
     want = []
     for step in range(count):
         # "src" steps in no release of its own (a played source is gathered too): no column of its own.
@@ -102,10 +107,11 @@ def test_timing_rows_are_their_formatted_cells_whichever_nodes_arrived(loaded, t
     assert rows == _expected(want)
 
 
-def test_a_non_finite_time_or_value_is_written_as_python_writes_it(tmp_path):
+@pytest.mark.parametrize("apart", [False, True], ids=["here", "apart"])
+def test_a_non_finite_time_or_value_is_written_as_python_writes_it(tmp_path, apart):
     loaded = load_project(_project(tmp_path, False))
     (tmp_path / "run").mkdir()
-    recorder = Recorder(tmp_path / "run", loaded, {})
+    recorder = Recorder(tmp_path / "run", loaded, {}, rows_apart=apart)
     recorder.row(0, math.inf, "free", {"a": [math.nan, 2**64, True, [-0.0, 1e16]], "b-2": [-math.inf]},
                  {"a": [], "b-2": [5e-324]})
     recorder.close("completed")

@@ -756,12 +756,20 @@ class FmuInstance:
                 or reader.conversions() != [_PYTHON_TYPES.get(p.type) for p in outputs]:
             return None
 
+        do_step_c, fmu = self._do_step_c, self.fmu
+
         def step(t: float, h: float, values: list[Any]) -> list[Any]:
             try:
                 writer.write(values)
             except FMICallException as exc:
                 raise self._inputs_failed(exc) from None
-            self.do_step(t, h)
+            if do_step_c is None:
+                self.do_step(t, h)
+            else:  # do_step's FMI 2 call, made here: a step's call less for each node
+                status = do_step_c(fmu.component, t, h, 1)
+                if status > 1:  # fmi2Warning
+                    raise self._step_refused(status, t, h)
+                self.time = t + h
             try:
                 return reader.read()
             except FMICallException as exc:
@@ -875,17 +883,21 @@ class FmuInstance:
                     self._tick(at, vrs)
                 self._step3(now, end)
         except FMICallException as exc:
-            if exc.status != _DISCARD:
-                raise FmuError(f"node {self.node!r}: {self.path.name}: doStep from t={t:g} s by {h:g} s failed "
-                               f"(status {exc.status})") from None
-            if not self.fmi3:
-                ended = self._fmi2_terminated()
-                if ended is not None:
-                    raise FmuTerminated(f"{self.path.name} asked to terminate the simulation at t={ended:g} s "
-                                        "(fmi2Discard with fmi2Terminated)", ended) from None
-            raise FmuError(f"node {self.node!r}: {self.path.name} discarded doStep from t={t:g} s by {h:g} s "
-                           f"({'fmi3' if self.fmi3 else 'fmi2'}Discard) without asking to terminate") from None
+            raise self._step_refused(exc.status, t, h) from None
         self.time = t + h
+
+    def _step_refused(self, status: int, t: float, h: float) -> FmuError:
+        """The error of a doStep from t by h that returned ``status`` (above fmi2Warning)."""
+        if status != _DISCARD:
+            return FmuError(f"node {self.node!r}: {self.path.name}: doStep from t={t:g} s by {h:g} s failed "
+                            f"(status {status})")
+        if not self.fmi3:
+            ended = self._fmi2_terminated()
+            if ended is not None:
+                return FmuTerminated(f"{self.path.name} asked to terminate the simulation at t={ended:g} s "
+                                     "(fmi2Discard with fmi2Terminated)", ended)
+        return FmuError(f"node {self.node!r}: {self.path.name} discarded doStep from t={t:g} s by {h:g} s "
+                        f"({'fmi3' if self.fmi3 else 'fmi2'}Discard) without asking to terminate")
 
     def _step3(self, now: float, end: float) -> None:
         """FMI 3 doStep calls from ``now`` to ``end``: an early return goes on from where it

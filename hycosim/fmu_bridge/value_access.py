@@ -78,6 +78,9 @@ class PortAccess:
         one = groups[0] if len(groups) == 1 else None
         self._whole = one if one is not None and all(size is None for _, size in one.slices) \
             and _SLICE_GIVES.get(one.values._type_) is one.convert else None
+        # A floating-point buffer takes a list of numbers in one slice assignment, each stored as
+        # float() makes it (an integer type would take a float only with its own conversion).
+        self._whole_write = self._whole if self._whole is not None and self._whole.convert is float else None
 
     def conversions(self) -> list[type]:
         """The Python type each port's value (an array's elements) is read or written as, in order."""
@@ -108,6 +111,13 @@ class PortAccess:
 
     def write(self, values: Sequence[Any]) -> None:
         """Set every port from ``values`` (in order; an array port's value a list of its elements)."""
+        whole = self._whole_write
+        if whole is not None:
+            whole.values[:] = values
+            status = whole.call(*whole.args)
+            if status > _WARNING:
+                raise FMICallException(function=whole.function, status=status)
+            return
         for g in self._groups:
             buffer, convert = g.values, g.convert
             for position, (first, size) in zip(g.positions, g.slices):

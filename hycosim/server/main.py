@@ -163,7 +163,8 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     if resume_at is not None:
         meta = {**old_meta, "endpoint": endpoint, "versions": meta["versions"]}
     try:
-        recorder = Recorder(run_dir, loaded, meta, resume_at=resume_at)
+        # In one process the master's thread steps every node: a process of its own writes the rows.
+        recorder = Recorder(run_dir, loaded, meta, resume_at=resume_at, rows_apart=bus is not None)
         if resume_at is None and loaded.path is not None:
             # What the project was, for a resume to compare with (the hash alone cannot say where it differs).
             (run_dir / PROJECT_COPY).write_bytes(loaded.path.read_bytes())

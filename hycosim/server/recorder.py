@@ -4,7 +4,8 @@ asynchronous sample as received (``samples.jsonl``, which a replay plays back), 
 Rows are written as each macro step completes and flushed at least every 0.1 s of wall
 time (a flush per step costs the barrier about a tenth of its rate), and always on close,
 which every failure path of the server reaches: whatever happened before a failure is on
-disk and readable. ``meta.json`` is rewritten with the outcome at the end.
+disk and readable. ``meta.json`` is rewritten with the outcome at the end. The text of the
+rows is made here, or in a run in one process by a process of its own (server.row_writer).
 
 A disk that fills up stops the run (RecordError) rather than the records going on with
 gaps. So that the rows already taken and the outcome still reach the disk then, the run
@@ -18,7 +19,6 @@ import csv
 import errno
 import io
 import json
-import os
 import time
 from pathlib import Path
 from typing import Any, Iterator
@@ -27,6 +27,10 @@ from hycosim.core.schema import PortType
 
 from hycosim.core.config import LoadedProject
 from hycosim.core.recordings import SAMPLES_FILE, encode_sample
+from hycosim.server.record_files import RecordError, RecordFile
+from hycosim.server.row_writer import LocalRows, RowWriter
+
+__all__ = ["FLUSH_EVERY_S", "RESERVE_BYTES", "RESERVE_NAME", "RecordError", "Recorder"]
 
 
 FLUSH_EVERY_S = 0.1
@@ -34,15 +38,6 @@ FLUSH_EVERY_S = 0.1
 # last log lines) and small beside any run's records.
 RESERVE_BYTES = 256 * 1024
 RESERVE_NAME = ".reserve"
-
-
-class RecordError(RuntimeError):
-    """The run directory cannot be written (a full disk, a quota): the run stops."""
-
-    @classmethod
-    def writing(cls, run_dir: Path, name: str, exc: OSError, step: int | None = None) -> RecordError:
-        at = f" at step {step}" if step is not None else ""
-        return cls(f"cannot write the run's records{at}: {run_dir / name}: {exc.strerror or exc}")
 
 
 def _cell(value: Any) -> Any:
@@ -62,69 +57,16 @@ def _cells(values: list[Any], arrays: list[bool]) -> Iterator[Any]:
             yield _cell(value)
 
 
-class _RecordFile:
-    """A file the recorder writes through its own buffer: rows collect in ``buffer`` (written to
-    directly, by csv.writer in C, on the hot path) and go to the file at each flush; whatever a failed write (a full disk) left unwritten stays in memory
-    for the next flush, in order. (A Python text file drops its pending text when the write
-    under it fails: rows would go missing from the middle of the file.)"""
-
-    def __init__(self, path: Path, resume_at: int | None = None):
-        """Open ``path`` afresh, or (``resume_at``) the file a run wrote, cut back to that offset."""
-        self.name = path.name
-        self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | (0 if resume_at is not None else os.O_TRUNC), 0o644)
-        self.buffer = io.StringIO()
-        self._unwritten = b""
-        if resume_at is not None:
-            self.cut(resume_at)
-
-    def position(self) -> int:
-        """Where the file ends once what is buffered is written (flushes)."""
-        self.flush()
-        return os.lseek(self._fd, 0, os.SEEK_CUR)
-
-    def cut(self, offset: int) -> None:
-        """Drop everything after ``offset`` (the file and what is buffered): back to a checkpoint."""
-        self.buffer.seek(0)
-        self.buffer.truncate()
-        self._unwritten = b""
-        os.ftruncate(self._fd, offset)
-        os.lseek(self._fd, offset, os.SEEK_SET)
-
-    def flush(self) -> None:
-        data = self._unwritten + self.buffer.getvalue().encode()
-        self.buffer.seek(0)
-        self.buffer.truncate()
-        while data:
-            try:
-                written = os.write(self._fd, data)
-            except OSError:
-                self._unwritten = data
-                raise
-            data = data[written:]
-        self._unwritten = b""
-
-    @property
-    def closed(self) -> bool:
-        return self._fd < 0
-
-    def close(self) -> None:
-        if self._fd < 0:
-            return
-        try:
-            self.flush()
-        finally:
-            os.close(self._fd)
-            self._fd = -1
-
-
 class Recorder:
     """Writes ``values.csv``, ``timing.csv``, ``events.jsonl`` and ``meta.json`` in ``run_dir``."""
 
     def __init__(self, run_dir: Path, loaded: LoadedProject, meta: dict[str, Any],
-                 resume_at: dict[str, int] | None = None):
+                 resume_at: dict[str, int] | None = None, rows_apart: bool = False):
         """Open the run's files in ``run_dir`` (made by the caller); RecordError if they cannot be
         written (no space even for the reserve). ``resume_at``: go on with the files a run left
-        there, each cut back to its offset (a checkpoint's), under the meta it wrote."""
+        there, each cut back to its offset (a checkpoint's), under the meta it wrote.
+        ``rows_apart``: a process of its own writes the rows (:class:`RowWriter`: for a run in
+        one process, where formatting them would hold up the master's thread)."""
         self.run_dir = run_dir
         try:
             with open(run_dir / RESERVE_NAME, "wb") as reserve:
@@ -163,23 +105,24 @@ class Recorder:
         self._stepping_set = set(self._stepping)
         at = resume_at or {}
         try:
-            self._values_file = _RecordFile(run_dir / "values.csv", at.get("values.csv"))
-            self._timing_file = _RecordFile(run_dir / "timing.csv", at.get("timing.csv"))
-            self._events_file = _RecordFile(run_dir / "events.jsonl", at.get("events.jsonl"))
-            self._samples_file = _RecordFile(run_dir / SAMPLES_FILE, at.get(SAMPLES_FILE))
+            self._events_file = RecordFile(run_dir / "events.jsonl", at.get("events.jsonl"))
+            self._samples_file = RecordFile(run_dir / SAMPLES_FILE, at.get(SAMPLES_FILE))
         except OSError as exc:
             raise RecordError(f"cannot open the run's records in {run_dir}: {exc.strerror or exc}") from None
-        self._values = csv.writer(self._values_file.buffer)
-        self._timing = csv.writer(self._timing_file.buffer)
+        self._rows = (RowWriter if rows_apart else LocalRows)(run_dir, self._timing_format, at)
+        self._values_row, self._timing_cells = self._rows.values, self._rows.timing
+        self._csv_text = io.StringIO()
+        self._csv = csv.writer(self._csv_text)
         if resume_at is None:
             out_cols = [c for n in project.nodeLists for p in n.output for c in p.columns(n.nodeName)]
             in_cols = [c for n in project.nodeLists for p in n.input for c in p.columns(n.nodeName)]
-            self._values.writerow(["step", "t", "mode", *(["stepped"] if self._marks_steps else []),
-                                   *out_cols, *in_cols])
-            self._timing.writerow(["step", "t", "wait_s", "holder", "lateness_s",
-                                   *(f"arrival_s:{n}" for n in self._stepping),
-                                   *(f"age_s:{label}" for label in self._async_labels),
-                                   *(["takes"] if self._counts_takes else [])])
+            self._rows.line("values.csv", self._csv_line(["step", "t", "mode",
+                                                           *(["stepped"] if self._marks_steps else []),
+                                                           *out_cols, *in_cols]))
+            self._rows.line("timing.csv", self._csv_line(["step", "t", "wait_s", "holder", "lateness_s",
+                                                           *(f"arrival_s:{n}" for n in self._stepping),
+                                                           *(f"age_s:{label}" for label in self._async_labels),
+                                                           *(["takes"] if self._counts_takes else [])]))
         self._flushed = time.monotonic()
         self.meta = dict(meta)
         if resume_at is None:
@@ -187,8 +130,15 @@ class Recorder:
         else:
             self.meta.update(status="running")
         self.write_meta()
-        self._files = {"values.csv": self._values_file, "timing.csv": self._timing_file,
-                       "events.jsonl": self._events_file, SAMPLES_FILE: self._samples_file}
+        self._files = {"events.jsonl": self._events_file, SAMPLES_FILE: self._samples_file}
+
+    def _csv_line(self, cells: list[Any]) -> str:
+        """csv.writer's text of a row whose cells may need quotes."""
+        self._csv.writerow(cells)
+        text = self._csv_text.getvalue()
+        self._csv_text.seek(0)
+        self._csv_text.truncate()
+        return text
 
     def row(self, step: int, t: float, mode: str, outputs: dict[str, list[Any]], inputs: dict[str, list[Any]],
             stepped: list[str] | None = None) -> None:
@@ -199,11 +149,11 @@ class Recorder:
             cells.extend(outputs[n] if plain_out else _cells(outputs[n], self._arrays_out[n]))
         for n, _, plain_in in self._plain_nodes:
             cells.extend(inputs[n] if plain_in else _cells(inputs[n], self._arrays_in[n]))
+        self.meta["steps"] = step + 1  # the row is taken even where its sending tells of a refused write
         if self._joined:
-            self._values_file.buffer.write(",".join(map(str, cells)) + "\r\n")
+            self._values_row(cells)
         else:
-            self._values.writerow(cells)
-        self.meta["steps"] = step + 1
+            self._rows.line("values.csv", self._csv_line(cells))
 
     def sample(self, node: str, point: int, t: float, values: list[Any]) -> None:
         """A sample of asynchronous ``node`` received while point ``point`` was gathered (written
@@ -214,9 +164,8 @@ class Recorder:
                arrivals: dict[str, float], ages: dict[str, float | None], takes: int = 1) -> None:
         """One point's timing: of the step that ended there (``takes``: how often it was taken)."""
         if self._timing_format is not None and arrivals.keys() == self._stepping_set:
-            self._timing_file.buffer.write(self._timing_format % (
-                step, t, wait_s, holder, "" if lateness_s is None else f"{lateness_s:.6f}",
-                *map(arrivals.__getitem__, self._stepping)))
+            self._timing_cells((step, t, wait_s, holder, "" if lateness_s is None else f"{lateness_s:.6f}",
+                                *map(arrivals.__getitem__, self._stepping)))
         else:
             self._timing_row(step, t, wait_s, holder, lateness_s, arrivals, ages, takes)
         now = time.monotonic()
@@ -226,22 +175,23 @@ class Recorder:
 
     def _timing_row(self, step: int, t: float, wait_s: float, holder: str, lateness_s: float | None,
                     arrivals: dict[str, float], ages: dict[str, float | None], takes: int) -> None:
-        self._timing.writerow([
+        self._rows.line("timing.csv", self._csv_line([
             step, repr(t), f"{wait_s:.9f}", holder, "" if lateness_s is None else f"{lateness_s:.6f}",
             *(f"{arrivals[n]:.9f}" if n in arrivals else "" for n in self._stepping),
             *("" if ages.get(label) is None else f"{ages[label]:.6f}" for label in self._async_labels),
-            *([takes] if self._counts_takes else [])])
+            *([takes] if self._counts_takes else [])]))
 
     def positions(self, step: int | None = None) -> dict[str, int]:
         """Where each record file ends now (for a checkpoint); flushes them."""
         try:
-            return {name: f.position() for name, f in self._files.items()}
+            return {**self._rows.positions(), **{name: f.position() for name, f in self._files.items()}}
         except OSError as exc:
             raise RecordError.writing(self.run_dir, "the records", exc, step) from None
 
     def cut(self, positions: dict[str, int], steps: int) -> None:
         """Back to a checkpoint: every record file ends where ``positions`` says, ``steps`` rows recorded."""
         try:
+            self._rows.cut(positions)
             for name, f in self._files.items():
                 f.cut(positions[name])
         except OSError as exc:
@@ -250,6 +200,7 @@ class Recorder:
 
     def flush(self, step: int | None = None) -> None:
         """Write what is buffered; RecordError naming the file if the disk refuses it."""
+        self._rows.flush(step)
         for name, f in self._files.items():
             try:
                 f.flush()
@@ -273,7 +224,7 @@ class Recorder:
 
     @property
     def closed(self) -> bool:
-        return self._values_file.closed
+        return self._events_file.closed
 
     def free_reserve(self) -> None:
         """Give back the reserve's space (at the start of a shutdown, so that the nodes' last
@@ -286,7 +237,7 @@ class Recorder:
         self.free_reserve()
         self.meta.update(status=status, finished_at=time.time(), **extra)
         self.meta["wall_time_s"] = self.meta["finished_at"] - self.meta["started_at"]
-        unwritten = []
+        unwritten = self._rows.close()
         for name, f in self._files.items():
             try:
                 f.close()

@@ -1,0 +1,317 @@
+"""Who turns the recorder's rows into text and writes ``values.csv`` and ``timing.csv``.
+
+:class:`LocalRows` does it in the recorder's own thread: a distributed server formats a
+point's rows while the nodes integrate the step from it, off the barrier's critical path.
+
+:class:`RowWriter` has a process of its own do it, for a run in one process: there the
+master's thread steps every node itself, and the text of a row (a float's shortest repr is
+about 0.45 µs; a row of a few ports costs more than a small FMU's step) would be on its
+critical path. The master packs each row's cells (msgpack, a quarter of a microsecond) and
+sends them down a pipe in batches; the writer, on another core, makes the same text
+(:func:`~hycosim.server.record_files.joined_row`, the same formats) into the same files.
+A cell msgpack cannot carry (an integer beyond 64 bits) goes as its row's text.
+
+The guarantees of the records hold: what is sent is written as it arrives, and the master
+sends at least at every flush (every 0.1 s); if the master's process dies (a crashed FMU
+takes it down), the writer reads the end of its pipe, writes what came and exits; a write the
+disk refuses is answered, and the master stops the run with the file's name at its next flush;
+every wait for the writer has a timeout.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import select
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import msgpack
+
+from hycosim.server.record_files import ROW_FILES, RecordError, RecordFile, joined_row
+
+# What the master sends, each a msgpack array: [VALUES, cells], [TIMING, cells of the timing
+# format], [TEXT, file name, text], [POSITIONS], [CUT, {file name: offset}], [CLOSE].
+VALUES, TIMING, TEXT, POSITIONS, CUT, CLOSE = range(6)
+# Rows a batch holds: small enough that the pipe takes it without waiting (about 100 bytes a
+# row), large enough that a write is rare.
+BATCH_ROWS = 256
+ANSWER_TIMEOUT_S = 30.0
+
+
+class LocalRows:
+    """The rows formatted and buffered in this thread, written at each flush."""
+
+    def __init__(self, run_dir: Path, timing_format: str | None, resume_at: dict[str, int]):
+        self._run_dir = run_dir
+        self._files: dict[str, RecordFile] = {}
+        try:
+            for name in ROW_FILES:
+                self._files[name] = RecordFile(run_dir / name, resume_at.get(name))
+        except OSError as exc:
+            self.close()
+            raise RecordError(f"cannot open the run's records in {run_dir}: {exc.strerror or exc}") from None
+        self._values = self._files["values.csv"].buffer.write
+        self._timing = self._files["timing.csv"].buffer.write
+        self._timing_format = timing_format
+
+    def values(self, cells: list[Any]) -> None:
+        """A ``values.csv`` row of cells none of which needs a quote."""
+        self._values(joined_row(cells))
+
+    def timing(self, cells: tuple[Any, ...]) -> None:
+        """A ``timing.csv`` row: the cells of the timing format."""
+        self._timing(self._timing_format % cells)  # type: ignore[operator]
+
+    def line(self, name: str, text: str) -> None:
+        """A row of file ``name`` as text (a header, a row through csv.writer)."""
+        self._files[name].buffer.write(text)
+
+    def flush(self, step: int | None = None) -> None:
+        """Write what is buffered; RecordError naming the file if the disk refuses it."""
+        for name, f in self._files.items():
+            try:
+                f.flush()
+            except OSError as exc:
+                raise RecordError.writing(self._run_dir, name, exc, step) from None
+
+    def positions(self) -> dict[str, int]:
+        """Where each file ends once everything is written (flushes); OSError if it cannot be."""
+        return {name: f.position() for name, f in self._files.items()}
+
+    def cut(self, positions: dict[str, int]) -> None:
+        """Each file back to its offset in ``positions`` (a checkpoint's)."""
+        for name, f in self._files.items():
+            f.cut(positions[name])
+
+    def close(self) -> list[str]:
+        """Write the rest and close; the files that could not be written, with why."""
+        unwritten = []
+        for name, f in self._files.items():
+            try:
+                f.close()
+            except OSError as exc:
+                unwritten.append(f"{name}: {exc.strerror or exc}")
+        return unwritten
+
+
+class RowWriter:
+    """The rows written by a process of its own (``python -m hycosim.server.row_writer``): see
+    the module's text. Same methods as :class:`LocalRows`."""
+
+    def __init__(self, run_dir: Path, timing_format: str | None, resume_at: dict[str, int],
+                 timeout: float = ANSWER_TIMEOUT_S):
+        self._run_dir = run_dir
+        self._timeout = timeout
+        spec = json.dumps({"run_dir": str(run_dir), "timing_format": timing_format, "resume_at": resume_at})
+        # This hycosim, wherever the master found it (an installed wheel, a checkout on sys.path).
+        home = str(Path(__file__).resolve().parents[2])
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [home, os.environ.get("PYTHONPATH")])))
+        # Its own session: a Ctrl-C at the terminal reaches the master, which closes the writer in order.
+        self._proc = subprocess.Popen([sys.executable, "-m", "hycosim.server.row_writer", spec], env=env,
+                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, start_new_session=True)
+        self._to, self._from = self._proc.stdin.fileno(), self._proc.stdout.fileno()  # type: ignore[union-attr]
+        os.set_blocking(self._to, False)
+        self._pack = msgpack.Packer().pack
+        self._batch = bytearray()
+        self._rows = 0
+        self._replies = msgpack.Unpacker()
+        self._closed = False
+        try:
+            self._answer("opened")
+        except RecordError:
+            self._end()
+            raise
+
+    @property
+    def pid(self) -> int:
+        """The writer's process id."""
+        return self._proc.pid
+
+    def values(self, cells: list[Any]) -> None:
+        """A ``values.csv`` row of cells none of which needs a quote."""
+        try:
+            self._batch += self._pack((VALUES, cells))
+        except (OverflowError, TypeError, ValueError):  # an integer beyond 64 bits: the row as text
+            self._batch += self._pack((TEXT, "values.csv", joined_row(cells)))
+        self._rows += 1
+        if self._rows >= BATCH_ROWS:
+            self._send(cells[0])  # a row's first cell is its step
+
+    def timing(self, cells: tuple[Any, ...]) -> None:
+        """A ``timing.csv`` row: the cells of the timing format."""
+        self._batch += self._pack((TIMING, cells))
+
+    def line(self, name: str, text: str) -> None:
+        """A row of file ``name`` as text (a header, a row through csv.writer)."""
+        self._batch += self._pack((TEXT, name, text))
+        self._rows += 1
+        if self._rows >= BATCH_ROWS:
+            self._send()
+
+    def flush(self, step: int | None = None) -> None:
+        """Send what is batched; RecordError if the writer said a file was refused, or is gone."""
+        self._send(step)
+
+    def positions(self) -> dict[str, int]:
+        """Where each file ends once everything sent is written."""
+        self._batch += self._pack((POSITIONS,))
+        self._send()
+        return self._answer("positions")[1]
+
+    def cut(self, positions: dict[str, int]) -> None:
+        """Each file back to its offset in ``positions`` (a checkpoint's); what is batched is dropped."""
+        self._batch = bytearray(self._pack((CUT, {name: positions[name] for name in ROW_FILES})))
+        self._send()
+        self._answer("cut")
+
+    def close(self) -> list[str]:
+        """Send the rest, have the writer write and close its files and exit; the files (or the
+        writer) that could not be written, with why."""
+        if self._closed:
+            return []
+        try:
+            self._batch += self._pack((CLOSE,))
+            self._write(bytes(self._batch))
+            self._batch.clear()
+            return list(self._answer("closed", past_errors=True)[1])
+        except RecordError as exc:
+            return [str(exc)]
+        finally:
+            self._end()
+
+    def _send(self, step: int | None = None) -> None:
+        data, self._rows = bytes(self._batch), 0
+        self._batch.clear()
+        self._write(data, step)
+        self._take_replies(0.0, step)
+
+    def _write(self, data: bytes, step: int | None = None) -> None:
+        view = memoryview(data)
+        while view:
+            try:
+                view = view[os.write(self._to, view):]
+            except BlockingIOError:
+                if not select.select([], [self._to], [], self._timeout)[1]:
+                    raise RecordError(f"the run's row writer (pid {self._proc.pid}) took no rows for "
+                                      f"{self._timeout:g} s; {self._run_dir} holds what it wrote") from None
+            except (BrokenPipeError, OSError):
+                raise self._gone(step) from None
+
+    def _take_replies(self, wait: float, step: int | None = None, past_errors: bool = False) -> list[Any]:
+        """The writer's answers that came within ``wait`` seconds; RecordError for a refused file."""
+        if not select.select([self._from], [], [], wait)[0]:
+            return []
+        data = os.read(self._from, 1 << 16)
+        if not data:
+            raise self._gone(step)
+        self._replies.feed(data)
+        replies = list(self._replies)
+        for reply in replies:
+            if reply[0] == "error" and not past_errors:
+                raise RecordError.writing(self._run_dir, reply[1], reply[2], step)
+        return replies
+
+    def _answer(self, kind: str, past_errors: bool = False) -> list[Any]:
+        """Wait for the writer's answer ``kind`` (every wait has its end)."""
+        deadline = time.monotonic() + self._timeout
+        while (left := deadline - time.monotonic()) > 0:
+            for reply in self._take_replies(left, past_errors=past_errors):
+                if reply[0] == kind:
+                    return reply
+        raise RecordError(f"the run's row writer (pid {self._proc.pid}) did not answer in {self._timeout:g} s")
+
+    def _gone(self, step: int | None) -> RecordError:
+        code = self._proc.poll()
+        at = f" at step {step}" if step is not None else ""
+        return RecordError(f"the run's row writer stopped{at} (exit code {code}); "
+                           f"{self._run_dir} holds what it wrote")
+
+    def _end(self) -> None:
+        self._closed = True
+        for pipe in (self._proc.stdin, self._proc.stdout):
+            try:
+                pipe.close()  # type: ignore[union-attr]
+            except OSError:
+                pass
+        try:
+            self._proc.wait(timeout=self._timeout)
+        except subprocess.TimeoutExpired:
+            self._proc.kill()
+            self._proc.wait()
+
+
+def serve(run_dir: Path, timing_format: str | None, resume_at: dict[str, int]) -> int:
+    """The writer's side: rows from standard input into the files, answers on standard output,
+    until CLOSE or the end of the input (the master's process is gone: what came is written)."""
+    out = sys.stdout.buffer
+
+    def answer(*reply: Any) -> None:
+        try:
+            out.write(msgpack.packb(reply))
+            out.flush()
+        except BrokenPipeError:  # the master is gone: what came is still written
+            pass
+
+    files: dict[str, RecordFile] = {}
+    try:
+        for name in ROW_FILES:
+            files[name] = RecordFile(run_dir / name, resume_at.get(name))
+    except OSError as exc:
+        answer("error", name, exc.strerror or str(exc))
+        return 1
+    answer("opened")
+    values, timing = files["values.csv"].buffer.write, files["timing.csv"].buffer.write
+    unpacker = msgpack.Unpacker(strict_map_key=False)
+    while data := os.read(0, 1 << 20):
+        unpacker.feed(data)
+        for message in unpacker:
+            kind = message[0]
+            if kind == VALUES:
+                values(joined_row(message[1]))
+            elif kind == TIMING:
+                timing(timing_format % tuple(message[1]))  # type: ignore[operator]
+            elif kind == TEXT:
+                files[message[1]].buffer.write(message[2])
+            elif kind == POSITIONS:
+                ends = {}
+                for name, f in files.items():
+                    try:
+                        ends[name] = f.position()
+                    except OSError as exc:
+                        answer("error", name, exc.strerror or str(exc))
+                        break
+                else:
+                    answer("positions", ends)
+            elif kind == CUT:
+                for name, f in files.items():
+                    f.cut(message[1][name])
+                answer("cut")
+            elif kind == CLOSE:
+                answer("closed", _close(files))
+                return 0
+        for name, f in files.items():
+            try:
+                f.flush()
+            except OSError as exc:  # kept for the next flush; the master stops the run
+                answer("error", name, exc.strerror or str(exc))
+    _close(files)
+    return 0
+
+
+def _close(files: dict[str, RecordFile]) -> list[str]:
+    unwritten = []
+    for name, f in files.items():
+        try:
+            f.close()
+        except OSError as exc:
+            unwritten.append(f"{name}: {exc.strerror or exc}")
+    return unwritten
+
+
+if __name__ == "__main__":
+    _spec = json.loads(sys.argv[1])
+    sys.exit(serve(Path(_spec["run_dir"]), _spec["timing_format"], _spec["resume_at"]))

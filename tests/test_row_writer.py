@@ -1,0 +1,122 @@
+"""The rows of a run in one process are written by a process of its own (server/row_writer.py):
+the same bytes as the recorder's own, the same answers for a checkpoint's ends and cuts, and the
+guarantees of the records when the disk fills, when the writer dies and when the master dies."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+
+import pytest
+
+from hycosim.server.record_files import RecordError
+from hycosim.server.row_writer import LocalRows, RowWriter
+from tests.helpers import (descendants, hycosim, meta, read_rows, reap, recorded_rows, running, spawn, wait_for,
+                           write_project)
+from tests.test_faults import _mount_tmpfs
+
+FORMAT = "%d,%r,%.9f,%s,%s,%.9f\r\n"
+
+
+def _rows(kind, run_dir, resume_at=None):
+    return kind(run_dir, FORMAT, resume_at or {})
+
+
+def _write(rows, first: int, count: int) -> None:
+    for k in range(first, first + count):
+        rows.values([k, k * 0.1, "free", k / 3, -k, 2**40 + k])
+        rows.timing((k, k * 0.1, 1e-6 * k, "a", "", 2e-6))
+
+
+@pytest.mark.parametrize("kind", [LocalRows, RowWriter])
+def test_checkpoint_ends_cuts_and_a_resume_give_the_rows_a_run_straight_through_writes(tmp_path, kind):
+    straight = tmp_path / "straight"
+    straight.mkdir()
+    rows = _rows(LocalRows, straight)
+    _write(rows, 0, 900)
+    assert rows.close() == []
+
+    cut_back = tmp_path / "cut"
+    cut_back.mkdir()
+    rows = _rows(kind, cut_back)
+    _write(rows, 0, 300)
+    ends = rows.positions()
+    assert ends == {name: (cut_back / name).stat().st_size for name in ends}  # everything sent is written
+    _write(rows, 300, 500)  # a stretch taken again after a recovery
+    rows.cut(ends)
+    _write(rows, 300, 300)
+    ends = rows.positions()
+    _write(rows, 600, 77)  # what a killed server had written after its last checkpoint
+    assert rows.close() == []
+    rows = _rows(kind, cut_back, ends)  # a resume from that checkpoint
+    _write(rows, 600, 300)
+    assert rows.close() == []
+    for name in ("values.csv", "timing.csv"):
+        assert (cut_back / name).read_bytes() == (straight / name).read_bytes()
+
+
+def test_a_row_writer_that_dies_stops_the_run_at_the_next_flush_with_what_it_wrote_named(tmp_path):
+    rows = RowWriter(tmp_path, FORMAT, {}, timeout=5.0)
+    _write(rows, 0, 10)
+    rows.flush(9)
+    wait_for(lambda: (tmp_path / "values.csv").stat().st_size > 0, 10, "the first rows on disk")
+    assert rows.pid in descendants(os.getpid())
+    os.kill(rows.pid, signal.SIGKILL)
+    wait_for(lambda: not running(rows.pid), 10, "the writer gone")
+    _write(rows, 10, 10)
+    with pytest.raises(RecordError, match=r"the run's row writer stopped at step 19 \(exit code -9\)"):
+        rows.flush(19)
+    assert rows.close()  # says what could not be written
+    assert (tmp_path / "values.csv").read_text().splitlines()[:10] == \
+        [f"{k},{k * 0.1!r},free,{k / 3!r},{-k},{2**40 + k}" for k in range(10)]
+
+
+def test_a_run_in_one_process_on_a_disk_that_fills_stops_naming_the_file_and_keeps_its_rows(tmp_path):
+    disk = tmp_path / "disk"
+    if not _mount_tmpfs(disk, "400k"):
+        pytest.skip("needs root and mount (a small tmpfs stands in for a full disk)")
+    try:
+        cfg = write_project(tmp_path / "p.json", [
+            {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+            {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+        ], [{"from": "clock.y", "to": "g.u"}], cosim={"stepSize": 1.0, "stopTime": 50000.0}, name="full")
+        res = hycosim("run", str(cfg), "--in-process", "--runs-dir", str(disk), "--no-progress")
+        assert res.returncode == 3, res.stdout + res.stderr
+        assert "cannot write the run's records at step" in res.stderr and "No space left on device" in res.stderr
+        assert "Traceback" not in res.stderr and "internal error" not in res.stderr
+        run = next(disk.iterdir())
+        m = meta(run)
+        assert m["status"] == "failed" and "No space left on device" in m["reason"] and m["steps"] > 100
+        rows = read_rows(run)
+        assert 100 < len(rows) <= m["steps"]
+        assert [int(r["step"]) for r in rows] == list(range(len(rows)))
+        assert all(float(rows[k]["g.y"]) == float(rows[k - 1]["clock.y"]) for k in range(1, len(rows)))
+    finally:
+        subprocess.run(["umount", str(disk)], capture_output=True)
+
+
+def test_a_killed_run_in_one_process_leaves_its_rows_whole_and_its_writer_ends(tmp_path):
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+    ], [{"from": "clock.y", "to": "g.u"}], cosim={"stepSize": 1.0, "stopTime": 5e6}, name="killed")
+    runs = tmp_path / "runs"
+    run = spawn("run", str(cfg), "--in-process", "--runs-dir", str(runs), "--no-progress")
+    try:
+        wait_for(lambda: recorded_rows(runs) > 3000, 60, "rows on disk")
+        writers = [p for p in descendants(run.pid) if running(p)]
+        assert len(writers) == 1
+        run.kill()  # as a crashed FMU takes the process down
+        run.wait(timeout=10)
+        wait_for(lambda: not running(writers[0]), 10, "the writer ended")
+    finally:
+        reap(run)
+    text = (next(runs.iterdir()) / "values.csv").read_bytes().decode()
+    assert text.endswith("\r\n")  # whole rows only
+    rows = text.split("\r\n")[1:-1]
+    assert len(rows) > 3000
+    for k, row in enumerate(rows):
+        step, t, mode, y, v, gy, gu = row.split(",")
+        assert (int(step), float(t), mode) == (k, float(k), "free")
+        assert float(gu) == float(y) and (k == 0 or float(gy) == float(rows[k - 1].split(",")[3]))
