@@ -45,8 +45,10 @@ def test_checkpoint_ends_cuts_and_a_resume_give_the_rows_a_run_straight_through_
     assert ends == {name: (cut_back / name).stat().st_size for name in ends}  # everything sent is written
     _write(rows, 300, 500)  # a stretch taken again after a recovery
     rows.cut(ends)
-    _write(rows, 300, 300)
-    ends = rows.positions()
+    for k in range(300, 600):  # an answer that comes while rows are sent is kept for its wait
+        _write(rows, k, 1)
+        ends = rows.positions()
+        assert ends["values.csv"] == (cut_back / "values.csv").stat().st_size
     _write(rows, 600, 77)  # what a killed server had written after its last checkpoint
     assert rows.close() == []
     rows = _rows(kind, cut_back, ends)  # a resume from that checkpoint
@@ -120,3 +122,24 @@ def test_a_killed_run_in_one_process_leaves_its_rows_whole_and_its_writer_ends(t
         step, t, mode, y, v, gy, gu = row.split(",")
         assert (int(step), float(t), mode) == (k, float(k), "free")
         assert float(gu) == float(y) and (k == 0 or float(gy) == float(rows[k - 1].split(",")[3]))
+
+
+def test_an_answer_read_while_rows_are_sent_is_kept_for_the_wait_that_asks_for_it(tmp_path, monkeypatch):
+    import select as real_select
+    import time
+    from types import SimpleNamespace
+
+    from hycosim.server import row_writer
+
+    def late_poll(r, w, x, timeout):
+        if timeout == 0.0:  # the poll after a send: the writer's answer has come by then
+            time.sleep(0.05)
+        return real_select.select(r, w, x, timeout)
+
+    rows = RowWriter(tmp_path, FORMAT, {}, timeout=5.0)
+    monkeypatch.setattr(row_writer, "select", SimpleNamespace(select=late_poll))
+    _write(rows, 0, 5)
+    ends = rows.positions()
+    assert ends["values.csv"] == (tmp_path / "values.csv").stat().st_size > 0
+    rows.cut(ends)
+    assert rows.close() == []

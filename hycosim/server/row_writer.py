@@ -119,6 +119,7 @@ class RowWriter:
         self._batch = bytearray()
         self._rows = 0
         self._replies = msgpack.Unpacker()
+        self._answers: list[list[Any]] = []  # answers read (while sending rows) before they were waited for
         self._closed = False
         try:
             self._answer("opened")
@@ -201,28 +202,34 @@ class RowWriter:
             except (BrokenPipeError, OSError):
                 raise self._gone(step) from None
 
-    def _take_replies(self, wait: float, step: int | None = None, past_errors: bool = False) -> list[Any]:
-        """The writer's answers that came within ``wait`` seconds; RecordError for a refused file."""
+    def _take_replies(self, wait: float, step: int | None = None, past_errors: bool = False) -> None:
+        """Keep the writer's answers that came within ``wait`` seconds; RecordError for a refused file."""
         if not select.select([self._from], [], [], wait)[0]:
-            return []
+            return
         data = os.read(self._from, 1 << 16)
         if not data:
             raise self._gone(step)
         self._replies.feed(data)
-        replies = list(self._replies)
-        for reply in replies:
-            if reply[0] == "error" and not past_errors:
-                raise RecordError.writing(self._run_dir, reply[1], reply[2], step)
-        return replies
+        for reply in self._replies:
+            if reply[0] == "error":
+                if not past_errors:
+                    raise RecordError.writing(self._run_dir, reply[1], reply[2], step)
+            else:
+                self._answers.append(reply)
 
     def _answer(self, kind: str, past_errors: bool = False) -> list[Any]:
         """Wait for the writer's answer ``kind`` (every wait has its end)."""
         deadline = time.monotonic() + self._timeout
-        while (left := deadline - time.monotonic()) > 0:
-            for reply in self._take_replies(left, past_errors=past_errors):
+        while True:
+            for reply in self._answers:
                 if reply[0] == kind:
+                    self._answers.remove(reply)
                     return reply
-        raise RecordError(f"the run's row writer (pid {self._proc.pid}) did not answer in {self._timeout:g} s")
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise RecordError(f"the run's row writer (pid {self._proc.pid}) did not answer in "
+                                  f"{self._timeout:g} s")
+            self._take_replies(left, past_errors=past_errors)
 
     def _gone(self, step: int | None) -> RecordError:
         code = self._proc.poll()
