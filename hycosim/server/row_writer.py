@@ -89,13 +89,7 @@ class LocalRows:
 
     def close(self) -> list[str]:
         """Write the rest and close; the files that could not be written, with why."""
-        unwritten = []
-        for name, f in self._files.items():
-            try:
-                f.close()
-            except OSError as exc:
-                unwritten.append(f"{name}: {exc.strerror or exc}")
-        return unwritten
+        return _close(self._files)
 
 
 class RowWriter:
@@ -310,6 +304,7 @@ def serve(run_dir: Path, timing_format: str | None, resume_at: dict[str, int]) -
 
 
 def _close(files: dict[str, RecordFile]) -> list[str]:
+    """Close every file; those that could not be written, with why."""
     unwritten = []
     for name, f in files.items():
         try:
