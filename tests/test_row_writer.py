@@ -1,20 +1,19 @@
 """The rows of a run in one process are written by a process of its own (server/row_writer.py):
 the same bytes as the recorder's own, the same answers for a checkpoint's ends and cuts, and the
-guarantees of the records when the disk fills, when the writer dies and when the master dies."""
+guarantees of the records when the writer dies and when the master dies (a full disk:
+tests/test_faults.py, in processes and in process)."""
 
 from __future__ import annotations
 
 import os
 import signal
-import subprocess
 
 import pytest
 
 from hycosim.server.record_files import RecordError
 from hycosim.server.row_writer import LocalRows, RowWriter
-from tests.helpers import (descendants, hycosim, meta, read_rows, reap, recorded_rows, running, spawn, wait_for,
-                           write_project)
-from tests.test_faults import _mount_tmpfs
+from tests.helpers import descendants, reap, recorded_rows, running, spawn, wait_for
+from tests.test_faults import _pair
 
 FORMAT = "%d,%r,%.9f,%s,%s,%.9f\r\n"
 
@@ -74,35 +73,8 @@ def test_a_row_writer_that_dies_stops_the_run_at_the_next_flush_with_what_it_wro
         [f"{k},{k * 0.1!r},free,{k / 3!r},{-k},{2**40 + k}" for k in range(10)]
 
 
-def test_a_run_in_one_process_on_a_disk_that_fills_stops_naming_the_file_and_keeps_its_rows(tmp_path):
-    disk = tmp_path / "disk"
-    if not _mount_tmpfs(disk, "400k"):
-        pytest.skip("needs root and mount (a small tmpfs stands in for a full disk)")
-    try:
-        cfg = write_project(tmp_path / "p.json", [
-            {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
-            {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
-        ], [{"from": "clock.y", "to": "g.u"}], cosim={"stepSize": 1.0, "stopTime": 50000.0}, name="full")
-        res = hycosim("run", str(cfg), "--in-process", "--runs-dir", str(disk), "--no-progress")
-        assert res.returncode == 3, res.stdout + res.stderr
-        assert "cannot write the run's records at step" in res.stderr and "No space left on device" in res.stderr
-        assert "Traceback" not in res.stderr and "internal error" not in res.stderr
-        run = next(disk.iterdir())
-        m = meta(run)
-        assert m["status"] == "failed" and "No space left on device" in m["reason"] and m["steps"] > 100
-        rows = read_rows(run)
-        assert 100 < len(rows) <= m["steps"]
-        assert [int(r["step"]) for r in rows] == list(range(len(rows)))
-        assert all(float(rows[k]["g.y"]) == float(rows[k - 1]["clock.y"]) for k in range(1, len(rows)))
-    finally:
-        subprocess.run(["umount", str(disk)], capture_output=True)
-
-
 def test_a_killed_run_in_one_process_leaves_its_rows_whole_and_its_writer_ends(tmp_path):
-    cfg = write_project(tmp_path / "p.json", [
-        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
-        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
-    ], [{"from": "clock.y", "to": "g.u"}], cosim={"stepSize": 1.0, "stopTime": 5e6}, name="killed")
+    cfg = _pair(tmp_path, stepSize=1.0, stopTime=5e6, realTime=False)
     runs = tmp_path / "runs"
     run = spawn("run", str(cfg), "--in-process", "--runs-dir", str(runs), "--no-progress")
     try:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import io
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 #: The record files of every row: what a run in one process has a process of its own write.
 ROW_FILES = ("values.csv", "timing.csv")
@@ -90,3 +90,23 @@ class RecordFile:
         finally:
             os.close(self._fd)
             self._fd = -1
+
+
+def flush_all(run_dir: Path, files: Mapping[str, RecordFile], step: int | None = None) -> None:
+    """Flush each of ``files`` (by name, in ``run_dir``); RecordError naming the first the disk refuses."""
+    for name, f in files.items():
+        try:
+            f.flush()
+        except OSError as exc:
+            raise RecordError.writing(run_dir, name, exc, step) from None
+
+
+def close_all(files: Mapping[str, RecordFile]) -> list[str]:
+    """Close every one of ``files`` (by name); those that could not be written, with why."""
+    unwritten = []
+    for name, f in files.items():
+        try:
+            f.close()
+        except OSError as exc:
+            unwritten.append(f"{name}: {exc.strerror or exc}")
+    return unwritten

@@ -15,9 +15,7 @@ close: the space it frees is what the last buffered rows and ``meta.json`` are w
 
 from __future__ import annotations
 
-import csv
 import errno
-import io
 import json
 import time
 from pathlib import Path
@@ -27,7 +25,7 @@ from hycosim.core.schema import PortType
 
 from hycosim.core.config import LoadedProject
 from hycosim.core.recordings import SAMPLES_FILE, encode_sample
-from hycosim.server.record_files import RecordError, RecordFile
+from hycosim.server.record_files import RecordError, RecordFile, close_all, flush_all
 from hycosim.server.row_writer import LocalRows, RowWriter
 
 __all__ = ["FLUSH_EVERY_S", "RESERVE_BYTES", "RESERVE_NAME", "RecordError", "Recorder"]
@@ -111,18 +109,15 @@ class Recorder:
             raise RecordError(f"cannot open the run's records in {run_dir}: {exc.strerror or exc}") from None
         self._rows = (RowWriter if rows_apart else LocalRows)(run_dir, self._timing_format, at)
         self._values_row, self._timing_cells = self._rows.values, self._rows.timing
-        self._csv_text = io.StringIO()
-        self._csv = csv.writer(self._csv_text)
         if resume_at is None:
             out_cols = [c for n in project.nodeLists for p in n.output for c in p.columns(n.nodeName)]
             in_cols = [c for n in project.nodeLists for p in n.input for c in p.columns(n.nodeName)]
-            self._rows.line("values.csv", self._csv_line(["step", "t", "mode",
-                                                           *(["stepped"] if self._marks_steps else []),
-                                                           *out_cols, *in_cols]))
-            self._rows.line("timing.csv", self._csv_line(["step", "t", "wait_s", "holder", "lateness_s",
-                                                           *(f"arrival_s:{n}" for n in self._stepping),
-                                                           *(f"age_s:{label}" for label in self._async_labels),
-                                                           *(["takes"] if self._counts_takes else [])]))
+            self._rows.csv_row("values.csv", ["step", "t", "mode", *(["stepped"] if self._marks_steps else []),
+                                              *out_cols, *in_cols])
+            self._rows.csv_row("timing.csv", ["step", "t", "wait_s", "holder", "lateness_s",
+                                              *(f"arrival_s:{n}" for n in self._stepping),
+                                              *(f"age_s:{label}" for label in self._async_labels),
+                                              *(["takes"] if self._counts_takes else [])])
         self._flushed = time.monotonic()
         self.meta = dict(meta)
         if resume_at is None:
@@ -131,14 +126,6 @@ class Recorder:
             self.meta.update(status="running")
         self.write_meta()
         self._files = {"events.jsonl": self._events_file, SAMPLES_FILE: self._samples_file}
-
-    def _csv_line(self, cells: list[Any]) -> str:
-        """csv.writer's text of a row whose cells may need quotes."""
-        self._csv.writerow(cells)
-        text = self._csv_text.getvalue()
-        self._csv_text.seek(0)
-        self._csv_text.truncate()
-        return text
 
     def row(self, step: int, t: float, mode: str, outputs: dict[str, list[Any]], inputs: dict[str, list[Any]],
             stepped: list[str] | None = None) -> None:
@@ -153,7 +140,7 @@ class Recorder:
         if self._joined:
             self._values_row(cells)
         else:
-            self._rows.line("values.csv", self._csv_line(cells))
+            self._rows.csv_row("values.csv", cells)
 
     def sample(self, node: str, point: int, t: float, values: list[Any]) -> None:
         """A sample of asynchronous ``node`` received while point ``point`` was gathered (written
@@ -175,11 +162,11 @@ class Recorder:
 
     def _timing_row(self, step: int, t: float, wait_s: float, holder: str, lateness_s: float | None,
                     arrivals: dict[str, float], ages: dict[str, float | None], takes: int) -> None:
-        self._rows.line("timing.csv", self._csv_line([
+        self._rows.csv_row("timing.csv", [
             step, repr(t), f"{wait_s:.9f}", holder, "" if lateness_s is None else f"{lateness_s:.6f}",
             *(f"{arrivals[n]:.9f}" if n in arrivals else "" for n in self._stepping),
             *("" if ages.get(label) is None else f"{ages[label]:.6f}" for label in self._async_labels),
-            *([takes] if self._counts_takes else [])]))
+            *([takes] if self._counts_takes else [])])
 
     def positions(self, step: int | None = None) -> dict[str, int]:
         """Where each record file ends now (for a checkpoint); flushes them."""
@@ -201,11 +188,7 @@ class Recorder:
     def flush(self, step: int | None = None) -> None:
         """Write what is buffered; RecordError naming the file if the disk refuses it."""
         self._rows.flush(step)
-        for name, f in self._files.items():
-            try:
-                f.flush()
-            except OSError as exc:
-                raise RecordError.writing(self.run_dir, name, exc, step) from None
+        flush_all(self.run_dir, self._files, step)
 
     def event(self, record: dict[str, Any]) -> None:
         try:
@@ -237,12 +220,7 @@ class Recorder:
         self.free_reserve()
         self.meta.update(status=status, finished_at=time.time(), **extra)
         self.meta["wall_time_s"] = self.meta["finished_at"] - self.meta["started_at"]
-        unwritten = self._rows.close()
-        for name, f in self._files.items():
-            try:
-                f.close()
-            except OSError as exc:
-                unwritten.append(f"{name}: {exc.strerror or exc}")
+        unwritten = self._rows.close() + close_all(self._files)
         if unwritten:
             self.meta["unwritten"] = unwritten
         try:

@@ -20,6 +20,8 @@ every wait for the writer has a timeout.
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import os
 import select
@@ -31,7 +33,7 @@ from typing import Any
 
 import msgpack
 
-from hycosim.server.record_files import ROW_FILES, RecordError, RecordFile, joined_row
+from hycosim.server.record_files import ROW_FILES, RecordError, RecordFile, close_all, flush_all, joined_row
 
 # What the master sends, each a msgpack array: [VALUES, cells], [TIMING, cells of the timing
 # format], [TEXT, file name, text], [POSITIONS], [CUT, {file name: offset}], [CLOSE].
@@ -57,6 +59,7 @@ class LocalRows:
         self._values = self._files["values.csv"].buffer.write
         self._timing = self._files["timing.csv"].buffer.write
         self._timing_format = timing_format
+        self._csv = {name: csv.writer(f.buffer) for name, f in self._files.items()}
 
     def values(self, cells: list[Any]) -> None:
         """A ``values.csv`` row of cells none of which needs a quote."""
@@ -66,17 +69,13 @@ class LocalRows:
         """A ``timing.csv`` row: the cells of the timing format."""
         self._timing(self._timing_format % cells)  # type: ignore[operator]
 
-    def line(self, name: str, text: str) -> None:
-        """A row of file ``name`` as text (a header, a row through csv.writer)."""
-        self._files[name].buffer.write(text)
+    def csv_row(self, name: str, cells: list[Any]) -> None:
+        """A row of file ``name`` through csv.writer (a header, a row whose cells may need quotes)."""
+        self._csv[name].writerow(cells)
 
     def flush(self, step: int | None = None) -> None:
         """Write what is buffered; RecordError naming the file if the disk refuses it."""
-        for name, f in self._files.items():
-            try:
-                f.flush()
-            except OSError as exc:
-                raise RecordError.writing(self._run_dir, name, exc, step) from None
+        flush_all(self._run_dir, self._files, step)
 
     def positions(self) -> dict[str, int]:
         """Where each file ends once everything is written (flushes); OSError if it cannot be."""
@@ -89,7 +88,7 @@ class LocalRows:
 
     def close(self) -> list[str]:
         """Write the rest and close; the files that could not be written, with why."""
-        return _close(self._files)
+        return close_all(self._files)
 
 
 class RowWriter:
@@ -114,6 +113,8 @@ class RowWriter:
         self._rows = 0
         self._replies = msgpack.Unpacker()
         self._answers: list[list[Any]] = []  # answers read (while sending rows) before they were waited for
+        self._csv_text = io.StringIO()
+        self._csv = csv.writer(self._csv_text)
         self._closed = False
         try:
             self._answer("opened")
@@ -140,9 +141,13 @@ class RowWriter:
         """A ``timing.csv`` row: the cells of the timing format."""
         self._batch += self._pack((TIMING, cells))
 
-    def line(self, name: str, text: str) -> None:
-        """A row of file ``name`` as text (a header, a row through csv.writer)."""
-        self._batch += self._pack((TEXT, name, text))
+    def csv_row(self, name: str, cells: list[Any]) -> None:
+        """A row of file ``name`` through csv.writer (a header, a row whose cells may need quotes),
+        sent as its text."""
+        self._csv.writerow(cells)
+        self._batch += self._pack((TEXT, name, self._csv_text.getvalue()))
+        self._csv_text.seek(0)
+        self._csv_text.truncate()
         self._rows += 1
         if self._rows >= BATCH_ROWS:
             self._send()
@@ -292,26 +297,15 @@ def serve(run_dir: Path, timing_format: str | None, resume_at: dict[str, int]) -
                     f.cut(message[1][name])
                 answer("cut")
             elif kind == CLOSE:
-                answer("closed", _close(files))
+                answer("closed", close_all(files))
                 return 0
         for name, f in files.items():
             try:
                 f.flush()
             except OSError as exc:  # kept for the next flush; the master stops the run
                 answer("error", name, exc.strerror or str(exc))
-    _close(files)
+    close_all(files)
     return 0
-
-
-def _close(files: dict[str, RecordFile]) -> list[str]:
-    """Close every file; those that could not be written, with why."""
-    unwritten = []
-    for name, f in files.items():
-        try:
-            f.close()
-        except OSError as exc:
-            unwritten.append(f"{name}: {exc.strerror or exc}")
-    return unwritten
 
 
 if __name__ == "__main__":
