@@ -9,11 +9,13 @@ failure is an :class:`FmuError` that names the node and, where there is one, the
 
 from __future__ import annotations
 
+import ctypes
 import json
 import math
 import shutil
 import struct
 import tempfile
+from ctypes import c_double
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -26,7 +28,7 @@ from fmpy.model_description import ModelDescription, ScalarVariable
 from hycosim.core.schema import Node, PortType
 from hycosim.core.schema import Port as NodePort
 from hycosim.core.hints import did_you_mean
-from hycosim.fmu_bridge.value_access import Port, port_access
+from hycosim.fmu_bridge.value_access import Port, bare_function, port_access
 
 # FMI 2 type names and their FMI 3 counterparts, per port type.
 _COMPATIBLE = {
@@ -641,8 +643,11 @@ class FmuInstance:
         self._reader = port_access(self.fmu, [Port(m.vr, m.type, m.size) for m in self.outputs], self.fmi3, False)
         self._output_ports = [m.port for m in self.outputs]
         self._writer = port_access(self.fmu, [Port(m.vr, m.type, m.size) for m in self.inputs], self.fmi3, True)
-        self._do_step_c = (getattr(self.fmu.dll, "fmi2DoStep") if mapping.interface == CO_SIMULATION
+        # fmi2DoStep called straight (a step's call less), on arguments converted here or per
+        # call (value_access.bare_function); None where fmpy's call is used.
+        self._do_step_c = (bare_function(self.fmu.dll, "fmi2DoStep") if mapping.interface == CO_SIMULATION
                            and not self.fmi3 and getattr(self.fmu, "fmiCallLogger", None) is None else None)
+        self._component = ctypes.c_void_p(self.fmu.component)
 
     def _instantiate(self, kwargs: dict[str, Any]) -> Any:
         """The fmpy object of the FMU's co-simulation interface, instantiated."""
@@ -756,7 +761,7 @@ class FmuInstance:
                 or reader.conversions() != [_PYTHON_TYPES.get(p.type) for p in outputs]:
             return None
 
-        do_step_c, fmu = self._do_step_c, self.fmu
+        do_step_c, component = self._do_step_c, self._component
 
         def step(t: float, h: float, values: list[Any]) -> list[Any]:
             try:
@@ -766,7 +771,7 @@ class FmuInstance:
             if do_step_c is None:
                 self.do_step(t, h)
             else:  # do_step's FMI 2 call, made here: a step's call less for each node
-                status = do_step_c(fmu.component, t, h, 1)
+                status = do_step_c(component, c_double(t), c_double(h), 1)
                 if status > 1:  # fmi2Warning
                     raise self._step_refused(status, t, h)
                 self.time = t + h
@@ -864,7 +869,8 @@ class FmuInstance:
         """Advance from t to t+h; the FMU's own micro-steps stay inside it."""
         try:
             if self._do_step_c is not None:
-                status = self._do_step_c(self.fmu.component, t, h, 1)  # noSetFMUStatePriorToCurrentPoint, as fmpy
+                # noSetFMUStatePriorToCurrentPoint, as fmpy
+                status = self._do_step_c(self._component, c_double(t), c_double(h), 1)
                 if status > 1:  # fmi2Warning
                     raise FMICallException(function="fmi2DoStep", status=status)
             elif not self.fmi3:
