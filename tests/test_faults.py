@@ -462,12 +462,13 @@ def test_a_node_that_crashes_in_native_code_is_reported_with_its_signal_and_stac
     assert len(read_rows(run_dir)) >= 5  # the steps before the crash are on disk
 
 
-def test_nan_outputs_are_routed_and_recorded_and_the_first_on_each_port_is_reported(tmp_path):
+@pytest.mark.parametrize("where", ["--processes", "--in-process"])
+def test_nan_outputs_are_routed_and_recorded_and_the_first_on_each_port_is_reported(tmp_path, where):
     cfg = write_project(tmp_path / "p.json", [
         {"nodeName": "src", "UID": 1, "model": "tests.models.nan_model:Diverging", "output": ["y"]},
         {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
     ], [{"from": "src.y", "to": "g.u"}], cosim={"stepSize": 0.01, "stopTime": 0.3})
-    res = hycosim("run", str(cfg), "--runs-dir", str(tmp_path / "runs"), "--no-progress", timeout=90)
+    res = hycosim("run", str(cfg), "--runs-dir", str(tmp_path / "runs"), "--no-progress", where, timeout=90)
     assert res.returncode == 0, res.stderr
     run_dir = next((tmp_path / "runs").iterdir())
     rows = read_rows(run_dir)

@@ -668,3 +668,47 @@ def test_the_servers_intake_a_nodes_release_check_and_a_checkpoint_name_the_same
         assert intake.startswith(f"g.p{wrong} got {type(vals[wrong]).__name__} ")
         assert node_says == f"STEP 3 gives node 'g' a {type(vals[wrong]).__name__} for input {wrong}"
         assert checkpoint.startswith(f"p{wrong} holds {type(vals[wrong]).__name__} ")
+
+
+_TYPED = {PortType.REAL: st.floats(allow_nan=True, allow_infinity=True) | st.sampled_from([1e308, -1e308]),
+          PortType.INTEGER: st.integers(-(2 ** 31), 2 ** 31 - 1), PortType.BOOLEAN: st.booleans(),
+          PortType.STRING: st.text(max_size=4), PortType.BINARY: st.binary(max_size=4)}
+
+
+@st.composite
+def _direct_outputs(draw):
+    """Output ports, and one value per port of its type as a node's runtime makes it in process,
+    maybe with one value that is no number (a model or runtime gone wrong)."""
+    types = draw(st.lists(st.sampled_from(list(PortType)), min_size=1, max_size=5))
+    vals = [draw(_TYPED[t]) for t in types]
+    if draw(st.booleans()):
+        vals[draw(st.integers(0, len(vals) - 1))] = draw(st.sampled_from(["1", None, b"\x00", [], {}, [1.0]]))
+    return types, vals
+
+
+@given(_direct_outputs())
+def test_an_in_process_nodes_outputs_are_taken_and_noted_as_a_frames_are(given_):
+    """In process the master checks a node's outputs with one sum where every port is a scalar
+    number (Intake.check_direct): on values of their ports' types, and on ones that are no
+    number, it takes, refuses and notes non-finite values exactly as the check of a frame does
+    (a sum that overflows, or is no number, falls back to that check)."""
+    from hycosim.core.schema import Node
+
+    types, vals = given_
+    _quiet()
+    ports = [{"name": f"p{i}", "type": t.value} for i, t in enumerate(types)]
+    node = Node.model_validate({"nodeName": "g", "UID": 1, "model": "gain", "output": ports})
+    verdicts = []
+    for check in ("check_values", "check_direct"):
+        intake = Intake([node])
+        try:
+            getattr(intake, check)("g", 4, 0.4, list(vals))
+            verdicts.append((None, intake.non_finite))
+        except Dropped as exc:
+            verdicts.append((exc.detail, intake.non_finite))
+    assert verdicts[0] == verdicts[1]
+    wrong = next((i for i, (v, t) in enumerate(zip(vals, types)) if type(v) not in WIRE_TYPES[t]), None)
+    assert (verdicts[1][0] is None) == (wrong is None)
+    noted = {f"g.p{i}" for i, v in enumerate(vals) if type(v) is float and not math.isfinite(v) and
+             (wrong is None or i < wrong)}
+    assert set(verdicts[1][1]) == noted

@@ -19,7 +19,7 @@ from typing import Any
 import structlog
 
 from hycosim.core import frames
-from hycosim.core.schema import Node, array_misfit, wire_types
+from hycosim.core.schema import Node, PortType, array_misfit, wire_types
 from hycosim.core.drops import DropLog
 
 
@@ -57,6 +57,10 @@ class Intake:
         self._types = {n.nodeName: [wire_types(p) for p in n.output] for n in nodes}
         # Array outputs, (index, port): checked element by element after the plain pass.
         self._arrays = {n.nodeName: [(i, p) for i, p in enumerate(n.output) if p.shape is not None] for n in nodes}
+        # Nodes whose outputs are all scalar numbers: one sum tells whether their values, typed
+        # by the node's runtime in process, are all finite (check_direct).
+        self._summable = {n.nodeName for n in nodes if all(
+            p.shape is None and p.type in (PortType.REAL, PortType.INTEGER, PortType.BOOLEAN) for p in n.output)}
         self.non_finite: dict[str, dict[str, float]] = {}  # "node.port" → first {"step", "t"} (or "t")
         self._log = structlog.get_logger("server.intake")
         self.drops = DropLog(self._log)
@@ -156,6 +160,21 @@ class Intake:
                 if type(x) is float and not math.isfinite(x):
                     self._note_non_finite(f"{node}.{spec.name}[{j}]", step, t, x)
                     break
+
+    def check_direct(self, node: str, step: int, t: float, values: list[Any]) -> None:
+        """:meth:`check_values` for what an in-process node's direct step returned. Its runtime
+        made one value per output, each of its port's type (the conversion a node applies before
+        it sends a frame; an FMU's listed step reads buffers of those types, matched to the
+        ports when it was built), so where every output is a scalar number one sum says whether
+        all are finite, and the values are looked at one by one only when it does not (a
+        non-finite value to note, a sum that overflowed, a value that is no number)."""
+        if node in self._summable:
+            try:
+                if math.isfinite(sum(values)):
+                    return
+            except TypeError:
+                pass
+        self.check_values(node, step, t, values)
 
     def _note_non_finite(self, label: str, step: int | None, t: float, value: float) -> None:
         if label in self.non_finite:

@@ -946,9 +946,9 @@ class Relay:
     def _call(self, nodes: list[str], k: int, t: float, h: float, mode: str, released_at: float) -> dict[str, float]:
         """The release of step k to ``nodes`` hosted in process, as calls: each steps on the inputs
         routed for it and returns its outputs at t + h, checked by the intake as an OUTPUTS
-        frame's are; return arrival offsets. A node whose model ended the run or failed sent its
-        END instead, which is gathered as in a release by frames."""
-        direct, inputs, outputs, check = self._direct, self.router.inputs, self.outputs, self.intake.check_values
+        frame's are (Intake.check_direct); return arrival offsets. A node whose model ended
+        the run or failed sent its END instead, which is gathered as in a release by frames."""
+        direct, inputs, outputs, check = self._direct, self.router.inputs, self.outputs, self.intake.check_direct
         driven = self.coordinator.driven_nodes()
         arrivals: dict[str, float] = {}
         ended = []
