@@ -243,9 +243,9 @@ def test_the_servers_intake_accepts_only_frames_it_can_use(loaded, sent):
     elif frame.kind == frames.BATCH:
         assert not spec.asynchronous and 0 <= frame.step < frames.MAX_STEP and math.isfinite(frame.t)
         assert len(frame.earlier) < frames.MAX_BATCH
-        for values in [*frame.earlier, frame.values]:  # each step's outputs, all of its ports, each typed
-            assert type(values) is list and len(values) == len(spec.output)
-            assert all(type(v) in WIRE_TYPES[p.type] for v, p in zip(values, spec.output))
+        for step_values in [*frame.earlier, frame.values]:  # each step's outputs, all of its ports, each typed
+            assert type(step_values) is list and len(step_values) == len(spec.output)
+            assert all(type(v) in WIRE_TYPES[p.type] for v, p in zip(step_values, spec.output))
     elif frame.kind == frames.STATE:
         assert not spec.asynchronous and 0 <= frame.step < frames.MAX_STEP
         assert 0 <= frame.index < frame.count <= frames.MAX_CHUNKS and len(frame.chunk) <= frames.STATE_CHUNK
@@ -253,9 +253,9 @@ def test_the_servers_intake_accepts_only_frames_it_can_use(loaded, sent):
         # A source only says that it stopped or failed: it neither ends a run nor steps in a batch.
         assert not spec.asynchronous or (frame.clean is False and frame.earlier == [] and frame.last is None)
         assert len(frame.earlier) < frames.MAX_BATCH
-        for values in [*frame.earlier, *([] if frame.last is None else [frame.last])]:
-            assert type(values) is list and len(values) == len(spec.output)
-            assert all(type(v) in WIRE_TYPES[p.type] for v, p in zip(values, spec.output))
+        for step_values in [*frame.earlier, *([] if frame.last is None else [frame.last])]:
+            assert type(step_values) is list and len(step_values) == len(spec.output)
+            assert all(type(v) in WIRE_TYPES[p.type] for v, p in zip(step_values, spec.output))
     else:
         assert frame.kind == frames.HELLO
 
@@ -595,8 +595,9 @@ def test_a_batched_release_is_gathered_whole_from_each_nodes_answer_whatever_els
     spec = relay.project
     for node in _UIDS:
         outputs = spec.node(node).output
-        for values in [*relay.ledger.earlier[node], relay.outputs[node]]:
-            assert len(values) == len(outputs) and all(type(v) in WIRE_TYPES[p.type] for v, p in zip(values, outputs))
+        for step_values in [*relay.ledger.earlier[node], relay.outputs[node]]:
+            assert len(step_values) == len(outputs) and all(
+                type(v) in WIRE_TYPES[p.type] for v, p in zip(step_values, outputs))
         assert len(relay.ledger.earlier[node]) == 9
 
 
@@ -611,8 +612,8 @@ def test_a_source_stops_a_gathering_only_with_an_unclean_unbatched_end(relay, cl
     from hycosim.server.relay import RunError
 
     relay.ledger.expect_all(30, 0.0)
-    genuine = [(f"hycosim/recv/up/{node}", frames.encode(frames.OUTPUTS, uid, 30, 0.3, values))
-               for (node, uid), values in zip(_UIDS.items(), ([0.0, 1.0], [1.0, 2, True, "x", b"y"], [1.0]))]
+    genuine = [(f"hycosim/recv/up/{node}", frames.encode(frames.OUTPUTS, uid, 30, 0.3, outs))
+               for (node, uid), outs in zip(_UIDS.items(), ([0.0, 1.0], [1.0, 2, True, "x", b"y"], [1.0]))]
     relay.inbox = _Queued([("hycosim/recv/up/src", frames.encode(frames.END, 4, step, t, clean, message, earlier,
                                                                        last)),
                            *genuine])
