@@ -496,3 +496,25 @@ def test_a_node_whose_native_teardown_aborts_at_exit_still_ends_with_its_outcome
     run_dir = next((tmp_path / "runs").iterdir())
     assert meta(run_dir)["status"] == "completed" and len(read_rows(run_dir)) == 21
     assert "node 'late' finished after 20 steps" in (run_dir / "node-late.stderr.txt").read_text()
+
+
+@pytest.mark.parametrize("where", ["--processes", "--in-process"])
+def test_a_run_whose_folder_is_removed_while_it_runs_says_so_in_one_line(tmp_path, where):
+    """The run's files are gone when it ends: the command names the folder and the likely cause
+    (exit 3), with no traceback."""
+    import shutil
+
+    cfg = _pair(tmp_path, stopTime=2.0)
+    runs = tmp_path / "runs"
+    proc = spawn("run", str(cfg), "--runs-dir", str(runs), "--no-progress", where)
+    try:
+        wait_for(lambda: any(_steps_on_disk(d) >= 5 for d in runs.glob("*")), 30, "the run's first rows")
+        run_dir = next(runs.iterdir())
+        shutil.rmtree(run_dir)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        reap(proc)
+    assert proc.returncode == 3, err
+    assert f"error: the run ended, but its results cannot be read: {run_dir}" in " ".join(err.split())
+    assert "moved or removed while the run wrote it" in " ".join(err.split())
+    assert "Traceback" not in err and "│" not in err

@@ -80,7 +80,6 @@ def run(
     (FILE: a project JSON or an SSP package)."""
     from hycosim.core.security import SecurityError, router_security
     from hycosim.embedded import run_embedded
-    from hycosim.server.report import summarise
 
     file = project_file(file, step, stop)
     loaded = load(file)
@@ -110,8 +109,7 @@ def run(
     if result.code:
         err.print(f"[red]error:[/red] {result.message}\n  results so far: {result.run_dir}", highlight=False)
         raise typer.Exit(result.code)
-    summary = summarise(result.run_dir)
-    print_summary(summary)
+    _print_summary(result.run_dir)
 
 
 def _refuse_unfit_fmus(loaded) -> None:
@@ -133,7 +131,6 @@ def _run_in_process(loaded, runs_dir: Path, progress: bool, *, listen: Optional[
                     dashboard: bool) -> None:
     from hycosim.embedded import run_progress
     from hycosim.inprocess import CannotHost, check_hostable, run_in_process
-    from hycosim.server.report import summarise
 
     for option, given in (("--listen", listen), ("--resume", resume), ("--dashboard", dashboard)):
         if given:  # each needs a network or processes an in-process run has not
@@ -148,7 +145,20 @@ def _run_in_process(loaded, runs_dir: Path, progress: bool, *, listen: Optional[
         code, run_dir, message = run_in_process(loaded, runs_dir=runs_dir, on_progress=show)
     if code:
         fail(message, code, [f"results so far: {run_dir}"] if run_dir else [])
-    print_summary(summarise(run_dir))
+    _print_summary(run_dir)
+
+
+def _print_summary(run_dir: Path) -> None:
+    """The summary of a finished run; exit 3 naming the folder where its files cannot be read
+    (moved or removed while the run wrote them)."""
+    from hycosim.server.report import RunDirError, summarise
+
+    try:
+        summary = summarise(run_dir)
+    except RunDirError as exc:
+        fail(f"the run ended, but its results cannot be read: {exc} (was the folder moved or removed while "
+             "the run wrote it?)", 3)
+    print_summary(summary)
 
 
 @app.command()
