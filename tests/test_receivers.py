@@ -672,7 +672,8 @@ def test_the_servers_intake_a_nodes_release_check_and_a_checkpoint_name_the_same
 
 
 _TYPED = {PortType.REAL: st.floats(allow_nan=True, allow_infinity=True) | st.sampled_from([1e308, -1e308]),
-          PortType.INTEGER: st.integers(-(2 ** 31), 2 ** 31 - 1), PortType.BOOLEAN: st.booleans(),
+          PortType.INTEGER: st.integers(-(2 ** 31), 2 ** 31 - 1) | st.sampled_from([2 ** 1100, -(2 ** 1100)]),
+          PortType.BOOLEAN: st.booleans(),
           PortType.STRING: st.text(max_size=4), PortType.BINARY: st.binary(max_size=4)}
 
 
@@ -692,7 +693,8 @@ def test_an_in_process_nodes_outputs_are_taken_and_noted_as_a_frames_are(given_)
     """In process the master checks a node's outputs with one sum where every port is a scalar
     number (Intake.check_direct): on values of their ports' types, and on ones that are no
     number, it takes, refuses and notes non-finite values exactly as the check of a frame does
-    (a sum that overflows, or is no number, falls back to that check)."""
+    (a sum that overflows, holds an integer beyond a float's range or is no number falls back to
+    that check)."""
     from hycosim.core.schema import Node
 
     types, vals = given_

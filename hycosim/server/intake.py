@@ -167,12 +167,13 @@ class Intake:
         it sends a frame; an FMU's listed step reads buffers of those types, matched to the
         ports when it was built), so where every output is a scalar number one sum says whether
         all are finite, and the values are looked at one by one only when it does not (a
-        non-finite value to note, a sum that overflowed, a value that is no number)."""
+        non-finite value to note, a sum that overflowed, an integer beyond a float's range, a
+        value that is no number)."""
         if node in self._summable:
             try:
                 if math.isfinite(sum(values)):
                     return
-            except TypeError:
+            except (TypeError, OverflowError):
                 pass
         self.check_values(node, step, t, values)
 
