@@ -151,8 +151,15 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
                                  "--log-file", str(run_dir / f"node-{name}.log.jsonl")],
                                 stdout=err, stderr=subprocess.STDOUT, env=env)
 
-    nodes: dict[str, subprocess.Popen] = {spec.nodeName: start_node(spec.nodeName, mode)
-                                          for spec in loaded.project.nodeLists}
+    nodes: dict[str, subprocess.Popen] = {}
+    for spec in loaded.project.nodeLists:
+        try:
+            nodes[spec.nodeName] = start_node(spec.nodeName, mode)
+        except OSError as exc:
+            # The run's folder went (or became unwritable) after the server started: stop what
+            # was started rather than leave the server waiting for nodes until its attach timeout.
+            _stop_dashboard(board)
+            return _abandon(server, nodes, run_dir, _unstartable(spec.nodeName, run_dir, exc))
     restartable = loaded.project.coSimulation.checkpointEvery is not None
     restarted: dict[str, int] = {}
     last_cause: dict[str, str] = {}  # node → why its last process before the start ended
@@ -197,14 +204,19 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
                         if again:
                             restarted[name] = restarted.get(name, 0) + 1
                             last_cause[name] = cause
-                            with open(run_dir / f"node-{name}.stderr.txt", "a") as log:
-                                log.write(f"\n{_LAUNCHER_LINE} started again ({restarted[name]} of {restarts}): {cause}\n")
-                            nodes[name] = start_node(name, "a")
-                            continue
+                            try:
+                                with open(run_dir / f"node-{name}.stderr.txt", "a") as log:
+                                    log.write(f"\n{_LAUNCHER_LINE} started again ({restarted[name]} of {restarts}): "
+                                              f"{cause}\n")
+                                nodes[name] = start_node(name, "a")
+                                continue
+                            except OSError as exc:
+                                cause = f"{cause}; {_unstartable(name, run_dir, exc)}"
                         failures[name] = cause + (f" (after {restarted[name]} restart(s))" if name in restarted else "")
                 # A node failed: stop the server, once it has started its records (a server
                 # stopped while it still imports would leave no meta.json to say what happened).
-                if failures and not server_stopped and server.poll() is None and (run_dir / "meta.json").exists():
+                if failures and not server_stopped and server.poll() is None and (
+                        (run_dir / "meta.json").exists() or not run_dir.is_dir()):
                     server.send_signal(signal.SIGINT)
                     server_stopped = True
     except KeyboardInterrupt as exc:  # Ctrl-C, SIGTERM or SIGHUP: the server is told the same
@@ -228,6 +240,29 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
         return EmbeddedResult(code if code and code >= 128 else 130, run_dir, message or "interrupted by Ctrl-C", {})
     finally:
         _stop_dashboard(board)
+
+
+def _unstartable(name: str, run_dir: Path, exc: OSError) -> str:
+    """Why node ``name``'s process could not be started: its log file in the run's folder."""
+    gone = "; the run's folder was moved or removed" if not run_dir.is_dir() else ""
+    return f"node {name!r} could not be started: its log file {exc.filename} cannot be opened ({exc.strerror}{gone})"
+
+
+def _abandon(server: subprocess.Popen, nodes: dict[str, subprocess.Popen], run_dir: Path,
+             message: str) -> EmbeddedResult:
+    """A run that cannot go on before it started: the server and the nodes started so far are
+    stopped (each wait bounded), and the run ends with ``message``."""
+    # Stopped once it has started its records (where it still can), so that its meta.json
+    # is there to say why the run ended.
+    deadline = time.monotonic() + 10.0
+    while (server.poll() is None and run_dir.is_dir() and not (run_dir / "meta.json").exists()
+           and time.monotonic() < deadline):
+        time.sleep(0.05)
+    if server.poll() is None:
+        server.send_signal(signal.SIGINT)
+    result = _shut_down(server, nodes, run_dir, 3, message, {}, False)
+    _record_failure(run_dir, message)
+    return result
 
 
 def _start_dashboard(command: list[str], run_dir: Path, env: dict[str, str], console: Console) -> subprocess.Popen:

@@ -134,6 +134,9 @@ CASES = {
     "nodeNum disagrees": (lambda d: d.update(nodeNum=4), "nodeNum", "nodeNum is 4"),
     "linkNum disagrees": (lambda d: d.update(linkNum=1), "linkNum", "linkNum is 1"),
     "duplicate name": (lambda d: d["nodeLists"][1].update(nodeName="a"), "nodeLists[1].nodeName", "duplicate node name"),
+    # A run's folder holds files named after each node; a file name has at most 255 bytes.
+    "node name too long for a file name": (lambda d: d["nodeLists"][0].update(nodeName="a" * 201),
+                                           "nodeLists[0].nodeName", "at most 200 characters"),
     "duplicate UID": (lambda d: d["nodeLists"][2].update(UID=1), "nodeLists[2].UID", "duplicate UID 1"),
     "link from an input": (lambda d: d["linkLists"][0].update({"from": "b.u"}), "linkLists[0]", "not an output of node 'b'"),
     "link to an output": (lambda d: d["linkLists"][0].update({"to": "b.y"}), "linkLists[0]", "not an input of node 'b'"),

@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import time
+from pathlib import Path
 
 import msgpack
 import pytest
@@ -496,6 +497,41 @@ def test_a_node_whose_native_teardown_aborts_at_exit_still_ends_with_its_outcome
     run_dir = next((tmp_path / "runs").iterdir())
     assert meta(run_dir)["status"] == "completed" and len(read_rows(run_dir)) == 21
     assert "node 'late' finished after 20 steps" in (run_dir / "node-late.stderr.txt").read_text()
+
+
+def test_a_node_whose_log_file_cannot_be_opened_stops_the_started_server_and_names_the_file(tmp_path):
+    """The launcher starts the server, then each node with its log file in the run's folder. A
+    node it cannot start (here: its log file's path is over the system's 4,095 bytes, the
+    server's files just under) ends the run at once, naming node and file (exit 3), with
+    the server stopped rather than left waiting for nodes until its attach timeout."""
+    cfg = _pair(tmp_path, attachTimeout=60.0)
+    # runs/<project>-<YYYYmmdd-HHMMSS>: a run folder of 4,075 characters, so that
+    # server.stderr.txt fits (4,093) and node-clock.stderr.txt does not (4,097).
+    runs = str(tmp_path / "runs")
+    target = 4075 - 1 - len("faults-20261128-014459")
+    while len(runs) < target:
+        runs += "/" + "d" * min(200, target - len(runs) - 1)
+    assert len(runs) == target
+    began = time.monotonic()
+    res = hycosim("run", str(cfg), "--runs-dir", runs, "--no-progress", timeout=60)
+    took = time.monotonic() - began
+    err = " ".join(res.stderr.split())
+    assert res.returncode == 3, res.stderr
+    assert "error: node 'clock' could not be started: its log file" in err and "node-clock.stderr.txt" in err
+    assert "File name too long" in err and "Traceback" not in err
+    assert took < 40, f"the launcher took {took:.0f} s: the server waited for its nodes"
+    leftover = [pid for pid in os.listdir("/proc") if pid.isdigit() and _cmdline_has(pid, str(cfg))]
+    assert leftover == [], "processes of the run still running"
+    run_dir = next(Path(runs).iterdir())
+    assert meta(run_dir)["status"] == "failed" and "node 'clock' could not be started" in meta(run_dir)["reason"]
+
+
+def _cmdline_has(pid, text):
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as f:
+            return text.encode() in f.read()
+    except OSError:
+        return False
 
 
 @pytest.mark.parametrize("where", ["--processes", "--in-process"])

@@ -157,8 +157,10 @@ def _as_port(value: Any) -> Any:
 
 
 class Node(_Strict):
-    # No leading underscore: hycosim's own keys (_server, _local) start with one.
-    nodeName: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_\-]*$")
+    # No leading underscore: hycosim's own keys (_server, _local) start with one. A run's folder
+    # holds files named after each node ("node-NAME.stderr.txt"), and a file name has at most
+    # 255 bytes.
+    nodeName: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_\-]*$", max_length=200)
     UID: int = Field(ge=0)
     input: list[Port] = Field(default_factory=list)
     output: list[Port] = Field(default_factory=list)
