@@ -70,6 +70,9 @@ def _coerce(port: Port) -> Callable[[Any], Any]:
 # well inside the 10 s a supervisor (docker, systemd) gives before it kills.
 _STOPPED_WAIT = 2.0
 
+# The releases of a step, the frames a stepping node acts on at every point.
+_STEP_KINDS = frozenset((frames.STEP, frames.STEPS))
+
 
 class NodeRunError(RuntimeError):
     """The node cannot go on; the message names the node and the step."""
@@ -322,7 +325,7 @@ class NodeRuntime:
                 self._release_for not in frame.inputs:
             return None  # a release of other nodes (this one is not due, or not yet in Gauss-Seidel order)
         if kind in (frames.START, frames.STEP, frames.STEPS):
-            return frames.check_release(frame, self._release_for, self._in_types, self._interpolates(),
+            return frames.check_release(frame, self._release_for, self._in_types, self._interpolating,
                                         self._in_arrays)
         if kind == frames.INIT:
             if self.name not in frame.inputs:
@@ -335,7 +338,7 @@ class NodeRuntime:
             if inner.kind not in (frames.START, frames.STEP, frames.STEPS):
                 raise frames.FrameError(f"a replay of a {frames.KIND_NAMES[inner.kind]} frame")
             return frames.Replay(self.name, frames.check_release(inner, self._release_for, self._in_types,
-                                                              self._interpolates(), self._in_arrays))
+                                                              self._interpolating, self._in_arrays))
         if kind == frames.ROLLBACK:
             k, t = frame.step, frame.t
             if not (0 <= k < frames.MAX_STEP and math.isfinite(t)):
@@ -547,45 +550,11 @@ class NodeRuntime:
     def _on_release(self, frame: frames.Frame) -> bool:
         """Act on one frame from the server while stepping; True once this node is done (the
         run's STOP, or its model ended the simulation)."""
+        if frame.kind not in _STEP_KINDS:  # the run's control: checked after the releases, which come each step
+            done, frame = self._on_control(frame)
+            if frame is None:
+                return done
         impl, at = self.impl, self._stepping  # a Node: only a stepping node has _stepping
-        if frame.kind == frames.STOP:
-            self._on_stop(frame)
-            return True
-        if frame.kind == frames.REPLAY:
-            # Back after a link cut: the release we may have missed, or already answered.
-            inner = frame.release
-            if inner.kind in (frames.STEP, frames.STEPS) and inner.step > at.done:
-                frame = inner
-            else:
-                self._send(at.last_out)
-                self._log.info("outputs re-sent", step=at.done + 1)
-                return False
-        if frame.kind == frames.CHECKPOINT:
-            if frame.step == at.done + self._rate:  # at the end of this node's last step
-                at.pending_state = self._checkpoint_state(impl, frame.step)
-            return False
-        if frame.kind == frames.RESTORE:
-            restored = self._restore(impl, frame)
-            if restored is not None:
-                # The whole run went back to a checkpoint: this node's saved states are of the future.
-                k, _, at.last_out = restored
-                self.steps, at.done, at.mode, at.saved_step, at.pending_state = k, k - 1, None, -1, None
-            return False
-        if frame.kind == frames.ROLLBACK:
-            k, t = frame.step, frame.t
-            if at.saved_step != k:
-                # Not from this run's server, which rolls back only to the step it just released.
-                self.drops.drop("not a release", f"ROLLBACK to step {k}; the state saved is of step {at.saved_step}",
-                                self.steps)
-                return False
-            impl.set_state(at.saved)
-            self._log.info("rollback", step=k, t=t)
-            return False
-        if frame.kind == frames.INIT:
-            return self._on_init(impl, at, frame)
-        if frame.kind not in (frames.STEP, frames.STEPS):  # a START: this run has started already
-            self.drops.drop("not a release", "a START while the run is under way", self.steps)
-            return False
         k = frame.step
         self._enter_step(impl, at, k, frame.mode, self.name in frame.driven)
         values = dict(zip(self._in_names, frame.inputs[self.name]))
@@ -610,6 +579,50 @@ class NodeRuntime:
                 self._send(frames.encode(frames.STATE, self.spec.UID, k, i, len(chunks), chunk))
             at.pending_state = None
         return False
+
+    def _on_control(self, frame: frames.Frame) -> tuple[bool, frames.Frame | None]:
+        """A frame from the server while stepping that is no STEP or STEPS: (True, None) once this
+        node is done (the run's STOP, or its model ended the simulation in an INIT's answer),
+        (False, None) once acted on, or (False, the release) for a REPLAY of a release not yet
+        answered, to be stepped."""
+        impl, at = self.impl, self._stepping
+        if frame.kind == frames.STOP:
+            self._on_stop(frame)
+            return True, None
+        if frame.kind == frames.REPLAY:
+            # Back after a link cut: the release we may have missed, or already answered.
+            inner = frame.release
+            if inner.kind in _STEP_KINDS and inner.step > at.done:
+                return False, inner
+            self._send(at.last_out)
+            self._log.info("outputs re-sent", step=at.done + 1)
+            return False, None
+        if frame.kind == frames.CHECKPOINT:
+            if frame.step == at.done + self._rate:  # at the end of this node's last step
+                at.pending_state = self._checkpoint_state(impl, frame.step)
+            return False, None
+        if frame.kind == frames.RESTORE:
+            restored = self._restore(impl, frame)
+            if restored is not None:
+                # The whole run went back to a checkpoint: this node's saved states are of the future.
+                k, _, at.last_out = restored
+                self.steps, at.done, at.mode, at.saved_step, at.pending_state = k, k - 1, None, -1, None
+            return False, None
+        if frame.kind == frames.ROLLBACK:
+            k, t = frame.step, frame.t
+            if at.saved_step != k:
+                # Not from this run's server, which rolls back only to the step it just released.
+                self.drops.drop("not a release", f"ROLLBACK to step {k}; the state saved is of step {at.saved_step}",
+                                self.steps)
+                return False, None
+            impl.set_state(at.saved)
+            self._log.info("rollback", step=k, t=t)
+            return False, None
+        if frame.kind == frames.INIT:
+            return self._on_init(impl, at, frame), None
+        # A START: this run has started already.
+        self.drops.drop("not a release", "a START while the run is under way", self.steps)
+        return False, None
 
     def _enter_step(self, impl: Node, at: _Stepping, k: int, mode: str, driven: bool) -> None:
         """Before the step from point k (by frame or by call): the state saved for a retake, once
@@ -674,7 +687,7 @@ class NodeRuntime:
         return frames.encode(frames.HELLO, self.spec.UID, {
             "rollback": rollback, "serialize": stepping and self.impl.can_serialize,
             "variableStep": stepping and self.impl.can_vary_step, "restart": restart, "batches": stepping,
-            "interpolates": self._interpolates(), "startFeedthrough": self._start_feedthrough(),
+            "interpolates": self._interpolating, "startFeedthrough": self._start_feedthrough(),
             "ports": self.spec.wire_ports(), "host": socket.gethostname()[:64]})
 
     def _start_feedthrough(self) -> dict[str, list[str]]:

@@ -355,28 +355,29 @@ def check_release(frame: Frame, node: str | None = None, input_types: tuple[tupl
     acts on it.
     """
     isfinite = math.isfinite
-    if frame.kind == START:
+    kind = frame.kind
+    if kind == STEP:  # first: the release of every step
+        k, t, h, inputs = frame.step, frame.t, frame.h, frame.inputs
+        if not (0 <= k < MAX_STEP and isfinite(t) and isfinite(h) and h > 0):
+            raise FrameError(f"STEP frame with step {short(k)}, t {short(t)}, h {short(h)}: out of range")
+        if node is not None and node in frame.slopes:
+            _check_slopes(k, node, frame.slopes[node], input_types, interpolates)
+    elif kind == START:
         t0, h, wall0, rt = frame.t0, frame.h, frame.wall_t0, frame.real_time_factor
         if not (isfinite(t0) and isfinite(h) and isfinite(wall0) and h > 0
                 and (rt is None or (isfinite(rt) and rt > 0))):
             raise FrameError(f"START frame with times that are not finite or a step size not above 0: "
                              f"{short([t0, h, wall0, rt])}")
         return frame
-    if frame.kind == INIT:
+    elif kind == INIT:
         k, inputs = 0, frame.inputs
         if not isfinite(frame.t0):
             raise FrameError(f"INIT frame at t0 {short(frame.t0)}: not finite")
-    elif frame.kind == STEPS:
+    elif kind == STEPS:
         k, times, inputs = frame.step, frame.times, frame.inputs
         if not (0 <= k < MAX_STEP and 2 <= len(times) <= MAX_BATCH + 1 and all(type(x) in _NUM for x in times)
                 and all(isfinite(x) for x in times) and all(a < b for a, b in zip(times, times[1:]))):
             raise FrameError(f"STEPS frame with step {short(k)}, times {short(times)}: out of range or not rising")
-    elif frame.kind == STEP:
-        k, t, h, inputs = frame.step, frame.t, frame.h, frame.inputs
-        if not (0 <= k < MAX_STEP and isfinite(t) and isfinite(h) and h > 0):
-            raise FrameError(f"STEP frame with step {short(k)}, t {short(t)}, h {short(h)}: out of range")
-        if node is not None and node in frame.slopes:
-            _check_slopes(k, node, frame.slopes[node], input_types, interpolates)
     else:
         raise FrameError(f"a {KIND_NAMES.get(frame.kind, frame.kind)} frame is not a release")
     if node is not None:

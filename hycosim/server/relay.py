@@ -195,6 +195,7 @@ class Relay:
         self._short_steps = 0
         self.intake = Intake(self.project.nodeLists)
         self.stepping = [n.nodeName for n in self.project.stepping_nodes()]
+        self._stepping_set = frozenset(self.stepping)
         self.coupling = loaded.coupling
         # Each stepping node's outstanding step and the answers kept for later points; batched
         # releases (STEPS, multi-rate) span this many base steps once the nodes said they can.
@@ -926,7 +927,10 @@ class Relay:
         end of its own step (k + its rate, or the last point). ``times``: a batched release
         over these base points, after which a node as fast as the batch or faster owes its
         outputs (one BATCH, with those of its steps before the last)."""
-        inputs = {n: (inputs or self.router.inputs)[n] for n in nodes}
+        source = inputs or self.router.inputs
+        # A release of every stepping node on the router's inputs (the usual one) sends them as
+        # they are: the copy by node would only be the same dict again.
+        inputs = source if source.keys() == self._stepping_set else {n: source[n] for n in nodes}
         if times is None:
             self._last_release = frames.encode(frames.STEP, k, t, h, mode, inputs, self.coordinator.driven_nodes(),
                                                slopes or {})
@@ -997,7 +1001,8 @@ class Relay:
 
     def _record_point(self, p: _Point, seen: _Seen) -> None:
         """Point p as the loop saw it, with the inputs the step from it is taken on (an iterated
-        step's last) and how the step to it went."""
+        step's last) and how the step to it went; and shown."""
+        self._show(p, seen)
         self.recorder.row(p.k, p.t, seen.mode, seen.outputs, self.router.inputs, seen.stepped)
         self.recorder.timing(p.k, p.t, p.wait, seen.holder, seen.lateness, p.arrivals, seen.ages, p.takes)
 
@@ -1154,7 +1159,8 @@ class Relay:
     def _arrive(self, p: _Point, final: bool) -> _Seen:
         """Point p before the step from it (``final``: at stopTime): a checkpoint when one is
         due, the sources' values held, the guards (maybe a mode switch), the inputs routed, the
-        pace of a real-time run, the point shown."""
+        pace of a real-time run. What the release needs, and nothing else: the point is shown
+        with its record (:meth:`_record_point`), once the release is sent."""
         H = self.cosim.stepSize
         # A multi-rate run's checkpoints wait for a point where no node is inside its step.
         if self._checkpoints and self._checkpoint_at - 1e-9 * H <= p.t and not final and p.k % self.coupling.period == 0:
@@ -1170,7 +1176,6 @@ class Relay:
         ages = self.router.route(mode, p.t, self.outputs, self.histories)
         lateness = self._pace(p.t)
         holder = max(p.arrivals, key=p.arrivals.get) if p.arrivals else ""
-        self._show(p, mode, lateness, holder, ages)
         stepped = self.coupling.due(p.k) if self.coupling.multirate and not final else None
         # The outputs kept: the step replaces them before point p is recorded.
         return _Seen(mode, dict(self.outputs), view, ages, lateness, holder, stepped)
@@ -1200,13 +1205,14 @@ class Relay:
             time.sleep(ahead)
         return max(0.0, -ahead)
 
-    def _show(self, p: _Point, mode: str, lateness: float | None, holder: str, ages: dict[str, float | None]) -> None:
+    def _show(self, p: _Point, seen: _Seen) -> None:
         """Point p for the progress bar and the status answer."""
-        self.progress.step, self.progress.t, self.progress.mode = p.k, p.t, mode
-        self.progress.lateness_s = lateness
+        self.progress.step, self.progress.t, self.progress.mode = p.k, p.t, seen.mode
+        self.progress.lateness_s = seen.lateness
         now = time.perf_counter()
         if self.transport.serves_status:  # in process nobody asks: a fifth of a step's work saved
-            self.latest.point((now, holder, p.wait, p.arrivals), p.k, p.t, mode, self.outputs, self.router.inputs, ages)
+            self.latest.point((now, seen.holder, p.wait, p.arrivals), p.k, p.t, seen.mode, seen.outputs,
+                              self.router.inputs, seen.ages)
         self._rate.point(self.progress, p.k, now)
 
     def _next_point(self, p: _Point, short: bool) -> tuple[float, list[float] | None]:
