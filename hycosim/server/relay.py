@@ -930,7 +930,8 @@ class Relay:
         source = inputs or self.router.inputs
         # A release of every stepping node on the router's inputs (the usual one) sends them as
         # they are: the copy by node would only be the same dict again.
-        inputs = source if source.keys() == self._stepping_set else {n: source[n] for n in nodes}
+        inputs = source if nodes is self.stepping and source.keys() == self._stepping_set else {
+            n: source[n] for n in nodes}
         if times is None:
             self._last_release = frames.encode(frames.STEP, k, t, h, mode, inputs, self.coordinator.driven_nodes(),
                                                slopes or {})
