@@ -16,7 +16,7 @@ import zenoh
 from hycosim.core import frames
 from hycosim.core.keys import ProjectKeys
 from hycosim.core.session import client_config
-from tests.helpers import hycosim, meta, read_rows, reap, spawn, wait_for, write_project
+from tests.helpers import hycosim, kill_process, meta, read_rows, reap, spawn, wait_for, write_project
 
 
 def _pair(tmp_path, **cosim):
@@ -524,6 +524,33 @@ def test_a_node_whose_log_file_cannot_be_opened_stops_the_started_server_and_nam
     assert leftover == [], "processes of the run still running"
     run_dir = next(Path(runs).iterdir())
     assert meta(run_dir)["status"] == "failed" and "node 'clock' could not be started" in meta(run_dir)["reason"]
+
+
+def test_a_node_that_cannot_be_started_again_after_it_died_ends_the_run_naming_it(tmp_path):
+    """A node killed mid-run is started again (checkpoints on), its log file opened again for
+    appending. Where that file cannot be opened (here a folder has taken its place), the run
+    ends at once naming node and file (exit 3), not with a traceback from the launcher."""
+    cfg = _pair(tmp_path, stopTime=6.0, checkpointEvery=0.5)
+    runs = tmp_path / "runs"
+    proc = spawn("run", str(cfg), "--runs-dir", str(runs), "--no-progress", "--restarts", "2")
+    try:
+        wait_for(lambda: any(_steps_on_disk(d) >= 60 for d in runs.glob("*")), 30, "the run's first rows")
+        run_dir = next(runs.iterdir())
+        log = run_dir / "node-g.stderr.txt"
+        log.unlink()
+        log.mkdir()
+        kill_process(f"hycosim node g {cfg}")
+        began = time.monotonic()
+        _, err = proc.communicate(timeout=60)
+    finally:
+        reap(proc)
+    err = " ".join(err.split())
+    assert proc.returncode == 3, err
+    assert f"node 'g' could not be started: its log file {log} cannot be opened (Is a directory)" in err
+    assert "Traceback" not in err
+    assert time.monotonic() - began < 30
+    assert meta(run_dir)["status"] == "failed" and "could not be started" in meta(run_dir)["reason"]
+    assert _steps_on_disk(run_dir) >= 60  # what was recorded stays
 
 
 def _cmdline_has(pid, text):
