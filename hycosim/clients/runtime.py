@@ -823,8 +823,7 @@ class NodeRuntime:
         run or failed instead, its END sent to the master as over the network."""
         impl, at = self.impl, self._stepping  # a Node (host attaches no player this way), started
         try:
-            if at.checkpoint or mode != at.mode or driven != at.driven:
-                self._enter_step(impl, at, k, mode, driven)
+            self._enter_step(impl, at, k, mode, driven)
             if self._listed is not None:  # the values go into the FMU's own buffers
                 out = self._listed(t, h, inputs)
             else:

@@ -195,7 +195,6 @@ class Relay:
         self._short_steps = 0
         self.intake = Intake(self.project.nodeLists)
         self.stepping = [n.nodeName for n in self.project.stepping_nodes()]
-        self._stepping_set = frozenset(self.stepping)
         self.coupling = loaded.coupling
         # Each stepping node's outstanding step and the answers kept for later points; batched
         # releases (STEPS, multi-rate) span this many base steps once the nodes said they can.
@@ -927,11 +926,7 @@ class Relay:
         end of its own step (k + its rate, or the last point). ``times``: a batched release
         over these base points, after which a node as fast as the batch or faster owes its
         outputs (one BATCH, with those of its steps before the last)."""
-        source = inputs or self.router.inputs
-        # A release of every stepping node on the router's inputs (the usual one) sends them as
-        # they are: the copy by node would only be the same dict again.
-        inputs = source if nodes is self.stepping and source.keys() == self._stepping_set else {
-            n: source[n] for n in nodes}
+        inputs = {n: (inputs or self.router.inputs)[n] for n in nodes}
         if times is None:
             self._last_release = frames.encode(frames.STEP, k, t, h, mode, inputs, self.coordinator.driven_nodes(),
                                                slopes or {})
