@@ -63,7 +63,7 @@ test-long: $(STAMP) bytecode
 
 bench: $(STAMP) bytecode chromium tbb
 	$(PY) -m pip install --quiet -e ".[scenario,dashboard,models,test,docs,bench]"
-	$(PY) benchmarks/barrier.py --table benchmarks/results/barrier.md
+	$(PY) benchmarks/barrier.py --cpu --table benchmarks/results/barrier.md
 	$(PY) benchmarks/inprocess.py --table benchmarks/results/inprocess.md
 	$(PY) benchmarks/crosscheck.py --table benchmarks/results/crosscheck.md
 	$(PY) benchmarks/fmu_overhead.py --table benchmarks/results/fmu_overhead.md

@@ -6,7 +6,7 @@ Rates count macro steps per second of the stepping loop only (start-up excluded)
 Processes are not pinned to cores: on 2 cores the scheduler decides, as it would for a user.
 
     python benchmarks/barrier.py [--n 2 4] [--steps 3000] [--repeat 3] [--systems hycosim helics-tcp ...]
-                                 [--wait-strategy auto|block|yield] [--timeout 120] [--json]
+                                 [--wait-strategy auto|block|yield] [--timeout 120] [--cpu] [--json]
 
 On a small machine one run of any system scatters by ±20 % (who shares a core with whom
 is the scheduler's choice), so every system runs ``--repeat`` times, the rounds
@@ -14,13 +14,26 @@ interleaved (system after system, then again), and the table shows the median.
 A run that fails or passes ``--timeout`` (its whole process group is killed) is reported
 and left out of the median; the exit status is 1 when some system and N has no run left.
 
+With ``--cpu``, each round also measures the CPU time a macro step costs all of a system's
+processes together (user and system time, every thread), where no process polls
+(``waitStrategy`` ``block``): a run of 4 × ``--steps`` less a run of ``--steps``, over
+3 × ``--steps``, so that start-up and shutdown cancel out. On a machine with fewer cores
+than processes the rate depends on how the scheduler shares the cores; the CPU a step costs
+does much less. The times come from the rusage of reaped processes: this process is made
+their subreaper, so that a process a run leaves to end by itself (a master that does not wait
+for its simulators) is reaped and counted here too, and before each run all are reaped.
+
 HELICS and mosaik come from the optional extra: pip install -e '.[bench]'.
 """
 
 from __future__ import annotations
 
 import argparse
+import ctypes
 import json
+import os
+import resource
+import signal
 import subprocess
 import sys
 import tempfile
@@ -28,7 +41,7 @@ import time
 from pathlib import Path
 
 import _table
-from _procs import free_port, run, start, wait_all
+from _procs import descendants, free_port, run, start, wait_all
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
@@ -120,6 +133,65 @@ RUNNERS = {
 }
 
 
+CPU_LENGTHS = 4  # the longer of the two runs --cpu compares, in --steps
+_PR_SET_CHILD_SUBREAPER = 36  # linux/prctl.h
+
+
+def become_subreaper() -> None:
+    """Have the processes a run leaves behind reparented to this one rather than to init, so
+    that :func:`reap` counts their CPU time (Linux)."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.prctl(_PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) != 0:
+        raise OSError(ctypes.get_errno(), "prctl(PR_SET_CHILD_SUBREAPER) failed")
+
+
+def reap(timeout: float = 10.0) -> None:
+    """Wait (up to ``timeout`` s) until no process below this one is left, reaping each; any
+    still running then is killed (and reaped, for a few seconds more), so that the next run's
+    figures are its own."""
+    deadline, killed = time.monotonic() + timeout, False
+    while True:
+        while True:
+            try:
+                pid, _ = os.waitpid(-1, os.WNOHANG)
+            except ChildProcessError:
+                pid = 0
+            if pid == 0:
+                break
+        left = descendants(os.getpid())
+        if not left or (killed and time.monotonic() > deadline):
+            return
+        if not killed and time.monotonic() > deadline:
+            for pid in left:
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+            deadline, killed = time.monotonic() + 3.0, True
+        time.sleep(0.02)
+
+
+def cpu_seconds(system: str, n: int, steps: int, timeout: float) -> float:
+    """The CPU time (user + system) of all the processes of one run of ``system``, waiting by
+    blocking (the runners that take a wait strategy get ``block``)."""
+    reap()  # what an earlier run left is not this one's
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    try:
+        RUNNERS[system](n, steps, "block", timeout)
+    finally:
+        reap()
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+
+
+def cpu_per_step(system: str, n: int, steps: int, timeout: float) -> float:
+    """µs of CPU a macro step costs all of a system's processes: a run of CPU_LENGTHS × ``steps``
+    less a run of ``steps``, over the steps between them."""
+    short = cpu_seconds(system, n, steps, timeout)
+    long = cpu_seconds(system, n, CPU_LENGTHS * steps, timeout)
+    return (long - short) / ((CPU_LENGTHS - 1) * steps) * 1e6
+
+
 def _median(values: list[float]) -> float:
     ordered = sorted(values)
     mid = len(ordered) // 2
@@ -139,10 +211,16 @@ def main() -> None:
     ap.add_argument("--timeout", type=float, default=120.0,
                     help="seconds one run of one system may take; a run past it is reported as failed "
                          "and left out of the median (a HELICS zmq run once hung here for good)")
+    ap.add_argument("--cpu", action="store_true",
+                    help="also measure the CPU a macro step costs all of a system's processes, "
+                         f"waiting by blocking (two more runs a round: --steps and {CPU_LENGTHS} x --steps)")
     _table.add_argument(ap)
     args = ap.parse_args()
     runs: dict[tuple[str, int], list[float]] = {(system, n): [] for n in args.n for system in args.systems}
+    cpu: dict[tuple[str, int], list[float]] = {key: [] for key in runs}
     skipped: set[str] = set()
+    if args.cpu:
+        become_subreaper()
     for n in args.n:
         for _ in range(args.repeat):
             for system in args.systems:
@@ -150,6 +228,9 @@ def main() -> None:
                     continue
                 try:
                     runs[(system, n)].append(RUNNERS[system](n, args.steps, args.wait_strategy, args.timeout))
+                    if args.cpu:
+                        time.sleep(0.5)
+                        cpu[(system, n)].append(cpu_per_step(system, n, args.steps, args.timeout))
                 except ImportError as exc:
                     skipped.add(system)
                     print(f"# {system}: skipped ({exc}; pip install -e '.[bench]')", file=sys.stderr)
@@ -158,13 +239,20 @@ def main() -> None:
                 time.sleep(0.5)  # let sockets of the last run close
         for system in args.systems:
             if args.json:
-                rates = runs[(system, n)]
-                print(json.dumps({"system": system, "n": n, "steps_per_s": _median(rates) if rates else None,
-                                  "runs": [round(r, 1) for r in rates]}), flush=True)
+                rates, costs = runs[(system, n)], cpu[(system, n)]
+                line = {"system": system, "n": n, "steps_per_s": _median(rates) if rates else None,
+                        "runs": [round(r, 1) for r in rates]}
+                if args.cpu:
+                    line |= {"cpu_us_per_step": _median(costs) if costs else None,
+                             "cpu_runs": [round(c, 1) for c in costs]}
+                print(json.dumps(line), flush=True)
     empty = sorted(f"{system} N={n}" for (system, n), rates in runs.items() if not rates and system not in skipped)
-    _table.write(args.table, _manual_table(args, runs, skipped))
+    tables = [_manual_table(args, runs, skipped)] + ([_cpu_table(args, cpu, skipped)] if args.cpu else [])
+    _table.write(args.table, *tables)
     if not args.json:
         _print_table(args, runs, skipped)
+        if args.cpu:
+            print("\n" + "\n".join(_cpu_table(args, cpu, skipped).markdown()))
     if empty:
         print(f"# no run completed for {', '.join(empty)}", file=sys.stderr)
         sys.exit(1)
@@ -179,6 +267,18 @@ def _manual_table(args: argparse.Namespace, runs: dict[tuple[str, int], list[flo
              *(_table.ratio(medians[("hycosim", n)], medians[(s, n)]) for s in others)] for n in args.n]
     return _table.Table(f"Macro steps/s, medians of {args.repeat} interleaved rounds of {args.steps:,} steps:",
                         header, rows)
+
+
+def _cpu_table(args: argparse.Namespace, cpu: dict[tuple[str, int], list[float]], skipped: set[str]) -> _table.Table:
+    systems = [s for s in args.systems if s not in skipped]
+    medians = {key: (_median(costs) if costs else None) for key, costs in cpu.items()}
+    others = [s for s in systems if s != "hycosim"] if "hycosim" in systems else []
+    header = ["N", *systems, *(f"hycosim / {s}" for s in others)]
+    rows = [[n, *(_table.rate(medians[(s, n)]) for s in systems),
+             *(_table.ratio(medians[("hycosim", n)], medians[(s, n)]) for s in others)] for n in args.n]
+    return _table.Table(f"CPU µs a macro step costs all of a system's processes, waiting by blocking (a run of "
+                        f"{CPU_LENGTHS * args.steps:,} steps less one of {args.steps:,}), medians of {args.repeat} "
+                        "rounds:", header, rows)
 
 
 def _print_table(args: argparse.Namespace, runs: dict[tuple[str, int], list[float]], skipped: set[str]) -> None:

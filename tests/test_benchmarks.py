@@ -58,6 +58,26 @@ def test_barrier_benchmark_json_reports_medians_of_its_runs(tmp_path):
                    "hycosim / zenoh-floor": f"{rate['hycosim'] / rate['zenoh-floor']:.2f}"}
 
 
+def test_barrier_benchmark_measures_the_cpu_a_step_costs_every_process_of_a_run(tmp_path):
+    res = subprocess.run([sys.executable, "benchmarks/barrier.py", "--n", "2", "--steps", "1000", "--repeat", "1",
+                          "--systems", "hycosim", "zenoh-floor", "--cpu", "--json", "--table", str(tmp_path / "b.md")],
+                         capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
+    assert res.returncode == 0, res.stderr
+    lines = {r["system"]: r for r in map(json.loads, res.stdout.splitlines())}
+    for r in lines.values():
+        assert len(r["cpu_runs"]) == 1 and r["cpu_us_per_step"] == pytest.approx(r["cpu_runs"][0], abs=0.1)
+        # Every process of the run counts. On loopback each part of a step's critical path is
+        # some process's CPU, so a step's CPU is not far below its wall time (the rate's, taken
+        # polling); a quarter of it leaves room for noise, and only the run's own process
+        # (the children not counted) would be below it.
+        assert 1e6 / r["steps_per_s"] * 0.25 < r["cpu_us_per_step"] < 20_000, r
+    [rates, [row]] = manual_tables(tmp_path / "b.md")
+    cost = {s: r["cpu_us_per_step"] for s, r in lines.items()}
+    assert row == {"N": "2", "hycosim": f"{cost['hycosim']:,.0f}", "zenoh-floor": f"{cost['zenoh-floor']:,.0f}",
+                   "hycosim / zenoh-floor": f"{cost['hycosim'] / cost['zenoh-floor']:.2f}"}
+    assert "CPU µs a macro step costs" in (tmp_path / "b.md").read_text()
+
+
 def test_barrier_benchmark_kills_a_run_past_its_timeout_and_says_so():
     # Steps enough that neither finishes in 0.5 s (200 floor steps did, on a machine at rest).
     res = subprocess.run([sys.executable, "benchmarks/barrier.py", "--n", "2", "--steps", "1000000", "--repeat", "1",
