@@ -247,38 +247,38 @@ def main() -> None:
                              "cpu_runs": [round(c, 1) for c in costs]}
                 print(json.dumps(line), flush=True)
     empty = sorted(f"{system} N={n}" for (system, n), rates in runs.items() if not rates and system not in skipped)
-    tables = [_manual_table(args, runs, skipped)] + ([_cpu_table(args, cpu, skipped)] if args.cpu else [])
+    tables = [_manual_table(args, runs, skipped, _rate_caption(args))]
+    if args.cpu:
+        tables.append(_manual_table(args, cpu, skipped, _cpu_caption(args)))
     _table.write(args.table, *tables)
     if not args.json:
         _print_table(args, runs, skipped)
         if args.cpu:
-            print("\n" + "\n".join(_cpu_table(args, cpu, skipped).markdown()))
+            print("\n" + "\n".join(tables[1].markdown()))
     if empty:
         print(f"# no run completed for {', '.join(empty)}", file=sys.stderr)
         sys.exit(1)
 
 
-def _manual_table(args: argparse.Namespace, runs: dict[tuple[str, int], list[float]], skipped: set[str]) -> _table.Table:
+def _manual_table(args: argparse.Namespace, figures: dict[tuple[str, int], list[float]], skipped: set[str],
+                  caption: str) -> _table.Table:
+    """The medians of ``figures`` (rates, or CPU a step) by N and system, and hycosim's ratio to each other."""
     systems = [s for s in args.systems if s not in skipped]
-    medians = {key: (_median(rates) if rates else None) for key, rates in runs.items()}
+    medians = {key: (_median(values) if values else None) for key, values in figures.items()}
     others = [s for s in systems if s != "hycosim"] if "hycosim" in systems else []
     header = ["N", *systems, *(f"hycosim / {s}" for s in others)]
     rows = [[n, *(_table.rate(medians[(s, n)]) for s in systems),
              *(_table.ratio(medians[("hycosim", n)], medians[(s, n)]) for s in others)] for n in args.n]
-    return _table.Table(f"Macro steps/s, medians of {args.repeat} interleaved rounds of {args.steps:,} steps:",
-                        header, rows)
+    return _table.Table(caption, header, rows)
 
 
-def _cpu_table(args: argparse.Namespace, cpu: dict[tuple[str, int], list[float]], skipped: set[str]) -> _table.Table:
-    systems = [s for s in args.systems if s not in skipped]
-    medians = {key: (_median(costs) if costs else None) for key, costs in cpu.items()}
-    others = [s for s in systems if s != "hycosim"] if "hycosim" in systems else []
-    header = ["N", *systems, *(f"hycosim / {s}" for s in others)]
-    rows = [[n, *(_table.rate(medians[(s, n)]) for s in systems),
-             *(_table.ratio(medians[("hycosim", n)], medians[(s, n)]) for s in others)] for n in args.n]
-    return _table.Table(f"CPU µs a macro step costs all of a system's processes, waiting by blocking (a run of "
-                        f"{CPU_LENGTHS * args.steps:,} steps less one of {args.steps:,}), medians of {args.repeat} "
-                        "rounds:", header, rows)
+def _rate_caption(args: argparse.Namespace) -> str:
+    return f"Macro steps/s, medians of {args.repeat} interleaved rounds of {args.steps:,} steps:"
+
+
+def _cpu_caption(args: argparse.Namespace) -> str:
+    return (f"CPU µs a macro step costs all of a system's processes, waiting by blocking (a run of "
+            f"{CPU_LENGTHS * args.steps:,} steps less one of {args.steps:,}), medians of {args.repeat} rounds:")
 
 
 def _print_table(args: argparse.Namespace, runs: dict[tuple[str, int], list[float]], skipped: set[str]) -> None:
