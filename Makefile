@@ -79,7 +79,7 @@ bench: $(STAMP) bytecode chromium tbb
 docs: $(STAMP)
 	$(PY) -m mkdocs build --strict -d site
 
-# The rod and robot-scene FMUs that hycosim/configs/grasp-fmu.json uses.
+# The rod and robot-scene FMUs that hycosim/scenario/configs/grasp-fmu.json uses.
 fmus: $(STAMP) bytecode
 	$(VENV)/bin/hycosim scene fmus -o hycosim/build/fmus
 

@@ -112,7 +112,7 @@ def write_package(out_dir: Path, steps: int) -> tuple[Path, Path]:
     """Build the FMUs into ``out_dir`` and write the project (``small3.json``) and its SSP
     package (``small3.ssp``, through hycosim's SSP export); return both paths."""
     from hycosim.core.config import load_project
-    from hycosim.fmu_bridge.ssp import write_ssp
+    from hycosim.fmi.ssp import write_ssp
 
     fmus = build(out_dir)
     config = out_dir / "small3.json"

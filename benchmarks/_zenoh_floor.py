@@ -15,8 +15,8 @@ import msgpack
 import zenoh
 
 from hycosim.core.schema import polls_before_blocking
-from hycosim.core.inbox import Inbox
-from hycosim.core.session import client_config, prefer_shared_runtime, router_config
+from hycosim.transport.inbox import Inbox
+from hycosim.transport.session import client_config, prefer_shared_runtime, router_config
 
 
 def _conf(endpoint: str, router: bool) -> zenoh.Config:

@@ -27,10 +27,10 @@ sys.path.insert(0, str(REPO))
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
-from hycosim.clients.camera.detect import RodDetector  # noqa: E402
-from hycosim.clients.camera.emulated import CameraSetup, EmulatedRodCamera  # noqa: E402
-from hycosim.clients.camera.tracker import Tracker  # noqa: E402
-from hycosim.clients.rod.model import RodModel, RodParams, pendulum_period  # noqa: E402
+from hycosim.scenario.camera.detect import RodDetector  # noqa: E402
+from hycosim.scenario.camera.emulated import CameraSetup, EmulatedRodCamera  # noqa: E402
+from hycosim.scenario.camera.tracker import Tracker  # noqa: E402
+from hycosim.scenario.rod.model import RodModel, RodParams, pendulum_period  # noqa: E402
 
 
 def accuracy_and_rate() -> dict:

@@ -238,7 +238,7 @@ def main() -> None:
     args = ap.parse_args()
 
     from hycosim.core.config import load_project
-    from hycosim.fmu_bridge.ssp import write_ssp
+    from hycosim.fmi.ssp import write_ssp
 
     result: dict[str, dict] = {}
     with tempfile.TemporaryDirectory(prefix="hycosim-crosscheck-") as tmp:

@@ -35,9 +35,9 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(REPO))
 
-from hycosim.fmu_bridge.bridge_fmu import build_bridge_fmu  # noqa: E402
+from hycosim.bridge.bridge_fmu import build_bridge_fmu  # noqa: E402
 from hycosim.core.config import load_project, parse_project  # noqa: E402
-from hycosim.fmu_bridge.model_fmu import build_model_fmu  # noqa: E402
+from hycosim.bridge.model_fmu import build_model_fmu  # noqa: E402
 
 import _table  # noqa: E402
 from _procs import free_port, run, start, stop_all  # noqa: E402
@@ -68,9 +68,9 @@ def cosim(cfg: Path, tmp: Path, timeout: float) -> float:
 
 
 def in_process(fmu: Path, steps: int) -> tuple[float, float]:
-    from hycosim.clients.fmu_node import FmuNode
-    from hycosim.clients.node import NodeContext
-    from hycosim.clients.reference.gain import Gain
+    from hycosim.node.fmu_node import FmuNode
+    from hycosim.node.interface import NodeContext
+    from hycosim.node.reference.gain import Gain
 
     doc = {"nodeNum": 2, "nodeLists": [
         {"nodeName": "f", "UID": 1, "fmu": str(fmu), "input": ["u"], "output": ["y"]},
@@ -98,8 +98,8 @@ def model_exchange(fmu: Path, steps: int) -> tuple[float, float]:
     import structlog
     from fmpy import simulate_fmu
 
-    from hycosim.clients.fmu_node import FmuNode
-    from hycosim.clients.node import NodeContext
+    from hycosim.node.fmu_node import FmuNode
+    from hycosim.node.interface import NodeContext
 
     h, stop = 0.01, steps * 0.01
     structlog.configure(wrapper_class=structlog.make_filtering_bound_logger(logging.WARNING))  # its events: not here

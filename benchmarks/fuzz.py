@@ -39,8 +39,8 @@ import zenoh  # noqa: E402
 
 from benchmarks._procs import free_port  # noqa: E402
 from hycosim.core import frames  # noqa: E402
-from hycosim.core.keys import SERVER_TOKEN, ProjectKeys  # noqa: E402
-from hycosim.core.session import client_config  # noqa: E402
+from hycosim.transport.keys import SERVER_TOKEN, ProjectKeys  # noqa: E402
+from hycosim.transport.session import client_config  # noqa: E402
 from tests.wire_strategies import examples, forgeable, gateway_streams, payloads, send_to_gateway  # noqa: E402
 
 NODES = [

@@ -31,7 +31,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from hycosim.clients.policy.paper import plot_against, train_paper  # noqa: E402
+from hycosim.scenario.policy.paper import plot_against, train_paper  # noqa: E402
 
 
 class Evaluation(BaseModel):

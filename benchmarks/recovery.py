@@ -49,7 +49,7 @@ from hycosim.server import checkpoints  # noqa: E402
 
 def project(dir_: Path, stop: float, every: float) -> Path:
     """The grasp scenario on FMUs plus a pendulum: four nodes, FMU and Python, checkpoints on."""
-    from hycosim.clients.scene_fmus import ensure_scene_fmus
+    from hycosim.scenario.scene_fmus import ensure_scene_fmus
 
     fmus = ensure_scene_fmus(REPO / "build" / "fmus")
     doc = json.loads((REPO / "hycosim" / "configs" / "grasp-fmu.json").read_text())
@@ -201,7 +201,7 @@ def server_kills(cfg: Path, runs: Path, kills: int, after: float) -> tuple[Path,
 
 def replay_trial(tmp: Path, stop: float) -> dict:
     """A grasp trial of the paper's scenario, then the same with its camera replayed."""
-    from hycosim.clients.scene_fmus import ensure_scene_fmus
+    from hycosim.scenario.scene_fmus import ensure_scene_fmus
 
     fmus = ensure_scene_fmus(REPO / "build" / "fmus")
     doc = json.loads((REPO / "hycosim" / "configs" / "grasp-paper.json").read_text())

@@ -27,10 +27,10 @@ import _table  # noqa: E402
 from fmpy import extract, read_model_description  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 
-from hycosim.clients.robot import kr6  # noqa: E402
-from hycosim.clients.robot.scene import RobotScene  # noqa: E402
-from hycosim.clients.rod.model import RodModel  # noqa: E402
-from hycosim.clients.scene_fmus import build_scene_fmus  # noqa: E402
+from hycosim.scenario.robot import kr6  # noqa: E402
+from hycosim.scenario.robot.scene import RobotScene  # noqa: E402
+from hycosim.scenario.rod.model import RodModel  # noqa: E402
+from hycosim.scenario.scene_fmus import build_scene_fmus  # noqa: E402
 
 H = 0.01
 

@@ -47,8 +47,8 @@ from barrier import ring_config  # noqa: E402
 # The flooder: asks until killed; prints its tally (answers, busy replies) each half second.
 _FLOODER = r"""
 import sys, time
-from hycosim.core.keys import ProjectKeys
-from hycosim.core.session import client_config, open_session
+from hycosim.transport.keys import ProjectKeys
+from hycosim.transport.session import client_config, open_session
 endpoint, project = sys.argv[1], sys.argv[2]
 session = None
 while session is None:  # a short attempt, again and again: one of 2 s could outlast a short run

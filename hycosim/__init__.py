@@ -1,7 +1,7 @@
 """hycosim: hybrid time/event co-simulation on the FMI standard, relayed over Eclipse Zenoh.
 
 ``hycosim.core`` holds the project file, frames, keys and sessions; ``hycosim.fmu_bridge``
-everything FMU and SSP; ``hycosim.server`` the relay and its coordinator; ``hycosim.clients``
+everything FMU and SSP; ``hycosim.server`` the relay and its coordinator; ``hycosim.node``
 the node runtime and the nodes; ``hycosim.dashboard`` the web dashboard; ``hycosim.cli`` the
 command line.
 """

@@ -2,7 +2,7 @@
 
 The same project file, the same master (:class:`hycosim.server.relay.Relay`) and the same
 node runtime as a distributed run, with the transport replaced by calls
-(:mod:`hycosim.core.local_bus`): each release steps every node there and then, in this
+(:mod:`hycosim.transport.local_bus`): each release steps every node there and then, in this
 thread. The run directory is a distributed run's, ``values.csv`` byte for byte.
 
 What one process cannot give: a node whose native code crashes takes the run down with it,
@@ -20,11 +20,11 @@ from typing import Any, Callable
 from hycosim.core import logs
 from hycosim.core.config import LoadedProject, in_process_refusals
 from hycosim.core.folders import run_dir_for
-from hycosim.core.local_bus import LocalBus
+from hycosim.transport.local_bus import LocalBus
 
-from hycosim.clients.loader import NodeLoadError, load_node
-from hycosim.clients.node import NodeModelError
-from hycosim.clients.runtime import NodeRunError, NodeRuntime
+from hycosim.node.loader import NodeLoadError, load_node
+from hycosim.node.interface import NodeModelError
+from hycosim.node.runtime import NodeRunError, NodeRuntime
 from hycosim.server.main import IN_PROCESS, serve
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from hycosim.clients.node import AsyncSource, Node, NodeContext, SimulationEnded
+from hycosim.node.interface import AsyncSource, Node, NodeContext, SimulationEnded
 
 
 class Text(Node):

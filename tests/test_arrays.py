@@ -248,7 +248,7 @@ def test_an_iterated_step_measures_an_array_input_element_by_element():
 
 @given(shape=st.lists(st.integers(1, 3), min_size=1, max_size=3), data=st.data())
 def test_an_array_parameter_is_taken_flat_or_nested_exactly_as_its_shape(shape, data):
-    from hycosim.fmu_bridge.fmu_loader import array_elements
+    from hycosim.fmi.loader import array_elements
 
     size = math.prod(shape)
     flat = list(range(size))

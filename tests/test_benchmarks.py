@@ -162,8 +162,8 @@ def test_memory_benchmark_reports_peaks_growth_and_ratios(tmp_path):
 
 
 def test_a_python_node_process_loads_neither_fmpy_nor_numpy():
-    # What a node playing a Python model imports (hycosim.clients.main and what it loads for a gain).
-    code = ("import sys, hycosim.clients.main, hycosim.clients.loader, hycosim.clients.reference.gain; "
+    # What a node playing a Python model imports (hycosim.node.main and what it loads for a gain).
+    code = ("import sys, hycosim.node.main, hycosim.node.loader, hycosim.node.reference.gain; "
             "print(sorted(m for m in ('fmpy', 'numpy', 'torch', 'mujoco', 'cv2') if m in sys.modules))")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=REPO, env=env())
     assert res.returncode == 0, res.stderr

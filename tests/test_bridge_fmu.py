@@ -15,8 +15,8 @@ import pytest
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
-from hycosim.fmu_bridge import gateway_protocol as gp
-from hycosim.fmu_bridge.bridge_fmu import BridgeBuildError, build_bridge_fmu
+from hycosim.bridge import gateway_protocol as gp
+from hycosim.bridge.bridge_fmu import BridgeBuildError, build_bridge_fmu
 from hycosim.core.config import load_project
 from tests.helpers import REPO, column, env, hycosim, meta, read_rows, reap, spawn, write_project
 
@@ -292,8 +292,8 @@ def test_gateway_drops_forged_releases_and_passes_only_the_servers(tmp_path):
     import zenoh
 
     from hycosim.core import frames
-    from hycosim.core.keys import ProjectKeys
-    from hycosim.core.session import client_config
+    from hycosim.transport.keys import ProjectKeys
+    from hycosim.transport.session import client_config
 
     cfg = _project(tmp_path, stop=0.5)
     server, clock = _start(cfg, tmp_path / "run")
@@ -391,7 +391,7 @@ def test_a_bridge_fmu_attaching_mid_run_is_told_the_run_is_under_way(tmp_path):
 
 
 def test_a_malformed_hello_is_named_by_what_is_wrong_with_it():
-    from hycosim.fmu_bridge import gateway_protocol as gp
+    from hycosim.bridge import gateway_protocol as gp
 
     good = gp.hello(7, "rod", 4, 2)[gp.HEADER.size:]
     assert gp.parse_hello(good) == (7, "rod", 4, 2)

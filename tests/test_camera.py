@@ -12,12 +12,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hycosim.clients.camera.calibration import Calibration, CalibrationError, calibrate_from_image
-from hycosim.clients.camera.detect import RodDetector
-from hycosim.clients.camera.emulated import CameraSetup, EmulatedRodCamera
-from hycosim.clients.camera.sources import CameraError, DeviceSource, VideoFileSource, device_number
-from hycosim.clients.camera.tracker import Tracker
-from hycosim.clients.rod.model import RodModel, RodParams
+from hycosim.scenario.camera.calibration import Calibration, CalibrationError, calibrate_from_image
+from hycosim.scenario.camera.detect import RodDetector
+from hycosim.scenario.camera.emulated import CameraSetup, EmulatedRodCamera
+from hycosim.scenario.camera.sources import CameraError, DeviceSource, VideoFileSource, device_number
+from hycosim.scenario.camera.tracker import Tracker
+from hycosim.scenario.rod.model import RodModel, RodParams
 from tests.helpers import column, hycosim, meta, read_rows, run_project, write_project
 from tests.wire_strategies import deep_json, values
 
@@ -230,8 +230,8 @@ def test_camera_correction_over_zenoh_brings_the_twin_onto_the_emulated_rod(tmp_
     ([0.6], "parameters.physical must be an object of the rod's parameters"),
 ])
 def test_the_emulated_rods_parameters_are_checked_by_name(tmp_path, physical, expected):
-    from hycosim.clients.camera.node import CameraNode
-    from hycosim.clients.node import NodeContext
+    from hycosim.scenario.camera.node import CameraNode
+    from hycosim.node.interface import NodeContext
 
     ctx = NodeContext(name="cam", uid=9, inputs=[], outputs=[], parameters={"physical": physical},
                       step_size=0.01, start_time=0.0, project_dir=tmp_path)
@@ -244,7 +244,7 @@ def test_live_frames_are_stamped_in_simulated_time_from_when_the_run_asks_for_th
     stamped from when the device opened, every frame was late by the attach wait."""
     import time
 
-    from hycosim.clients.camera.sources import LiveSource
+    from hycosim.scenario.camera.sources import LiveSource
 
     path = tmp_path / "live.avi"
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (320, 240))
@@ -267,8 +267,8 @@ def test_live_frames_are_stamped_in_simulated_time_from_when_the_run_asks_for_th
 
 
 def test_a_camera_device_needs_a_real_time_run(tmp_path):
-    from hycosim.clients.camera.node import CameraNode
-    from hycosim.clients.node import NodeContext
+    from hycosim.scenario.camera.node import CameraNode
+    from hycosim.node.interface import NodeContext
 
     Calibration(1, 1, 0, 0, (0, 0), 1).save(tmp_path / "cal.json")
     ctx = NodeContext(name="cam", uid=9, inputs=[], outputs=[], parameters={"source": "0", "calibration": "cal.json"},

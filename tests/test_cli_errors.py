@@ -92,8 +92,8 @@ def test_status_ignores_answers_that_are_not_a_hycosim_servers(tmp_path):
     """Anyone on the network may answer on the status key; a stranger's answer is no server."""
     import zenoh
 
-    from hycosim.core.keys import ProjectKeys
-    from hycosim.core.session import router_config
+    from hycosim.transport.keys import ProjectKeys
+    from hycosim.transport.session import router_config
     from tests.helpers import free_endpoint
 
     endpoint = free_endpoint()

@@ -16,7 +16,7 @@ from fmpy.fmi3 import FMU3Slave
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hycosim.fmu_bridge.fmu_loader import MAX_TICKS, Clock, clock_ticks, clocks_of
+from hycosim.fmi.loader import MAX_TICKS, Clock, clock_ticks, clocks_of
 from tests.fmi3_fmus import build
 from tests.helpers import column, hycosim, meta, read_rows, run_killing, run_project, write_project
 

@@ -15,7 +15,7 @@ from hycosim.core.schema import polls_before_blocking
 
 from hycosim.core.config import ConfigError, gateway_address, load_project, parse_project, server_endpoint
 from hycosim.core.endpoints import PROTOCOLS, Address, EndpointError, parse_address, parse_endpoint
-from hycosim.core.session import zenoh_message
+from hycosim.transport.session import zenoh_message
 from tests.helpers import REPO, hycosim, write_project
 
 GOOD = {
@@ -106,7 +106,7 @@ def test_validate_checks_that_every_node_can_be_loaded_as_written(tmp_path):
     assert "nodeLists[0]: node 'g': model 'gain' has no parameter 'kk'" in lines[0] and "did you mean 'k'?" in lines[0]
     assert "nodeLists[1]: node 'rod'" in lines[1] and "did you mean 'initial_angle_deg'?" in lines[1]
     assert "nodeLists[2]: node 'x': cannot load model 'no_such_module:Thing'" in lines[2]
-    assert "nodeLists[3]: node 'src' is asynchronous but hycosim.clients.reference.gain:Gain is not an AsyncSource" in lines[3]
+    assert "nodeLists[3]: node 'src' is asynchronous but hycosim.node.reference.gain:Gain is not an AsyncSource" in lines[3]
     assert "nodeLists[4]: node 'f': FMU file" in lines[4] and "missing.fmu does not exist" in lines[4]
     assert "nodeLists[6]: node 'twin': model 'rod' has no input 'meas_angel'" in lines[5]
     assert "did you mean 'meas_angle'?" in lines[5]
@@ -116,7 +116,7 @@ def test_validate_checks_that_every_node_can_be_loaded_as_written(tmp_path):
 
 
 def test_a_model_module_that_fails_to_import_is_named_not_raised(tmp_path, monkeypatch):
-    from hycosim.clients.loader import NodeLoadError, check_node
+    from hycosim.node.loader import NodeLoadError, check_node
 
     (tmp_path / "half_written.py").write_text("class Thing(:\n")
     (tmp_path / "raising.py").write_text("raise RuntimeError('needs a licence server')\n")

@@ -96,8 +96,8 @@ def _grasp_parameters() -> dict:
 def test_every_shipped_model_gives_exactly_the_outputs_it_declares(tmp_path):
     """The port names a model declares are what load and validate check entries against: they
     must be the model's real outputs, not a list that drifted from its code."""
-    from hycosim.clients.loader import REFERENCE_MODELS, model_class
-    from hycosim.clients.node import AsyncSource, NodeContext
+    from hycosim.node.loader import REFERENCE_MODELS, model_class
+    from hycosim.node.interface import AsyncSource, NodeContext
     from hycosim.core.schema import Node as NodeSpec
 
     grasp = _grasp_parameters()

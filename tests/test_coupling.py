@@ -261,7 +261,7 @@ def test_coupling_keys_give_a_plan_or_errors_that_name_them(doc):
 
 def _recovering(tmp_path: Path, **extra) -> Path:
     nodes = [
-        {"nodeName": "rod", "UID": 1, "model": "hycosim.clients.rod.node:RodNode", "parameters": {"initial_angle_deg": 35},
+        {"nodeName": "rod", "UID": 1, "model": "hycosim.scenario.rod.node:RodNode", "parameters": {"initial_angle_deg": 35},
          "output": ["angle", "omega"]},
         {"nodeName": "g1", "UID": 2, "model": "gain", "parameters": {"k": 2.0}, "input": ["u"], "output": ["y"]},
         {"nodeName": "g2", "UID": 3, "model": "gain", "parameters": {"k": 0.5, "work_s": 0.003}, "input": ["u"],
@@ -306,8 +306,8 @@ def test_a_forged_batch_of_another_number_of_steps_is_dropped_and_the_run_record
     import zenoh
 
     from hycosim.core import frames
-    from hycosim.core.keys import ProjectKeys
-    from hycosim.core.session import client_config
+    from hycosim.transport.keys import ProjectKeys
+    from hycosim.transport.session import client_config
     from tests.helpers import free_endpoint, reap, recorded_rows, spawn, wait_for
 
     def project(name: str, endpoint: str) -> Path:

@@ -264,8 +264,8 @@ def test_a_dashboard_whose_server_is_busy_answering_others_says_so_and_keeps_try
     on the status key that only ever says busy."""
     import zenoh
 
-    from hycosim.core.keys import ProjectKeys
-    from hycosim.core.session import router_config
+    from hycosim.transport.keys import ProjectKeys
+    from hycosim.transport.session import router_config
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     with zenoh.open(router_config(endpoint)) as server:
@@ -291,8 +291,8 @@ def test_a_feed_that_fails_on_an_answer_says_so_and_connects_again():
     the page waiting on an empty table for good)."""
     import zenoh
 
-    from hycosim.core.keys import ProjectKeys
-    from hycosim.core.session import router_config
+    from hycosim.transport.keys import ProjectKeys
+    from hycosim.transport.session import router_config
 
     class FailsOnce(LiveFeed):
         failed = False

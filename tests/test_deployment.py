@@ -15,11 +15,11 @@ import zenoh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hycosim.clients.scene_fmus import build_scene_fmus
+from hycosim.scenario.scene_fmus import build_scene_fmus
 from hycosim.core import frames
-from hycosim.core.keys import ProjectKeys
-from hycosim.core.security import SecurityError, read_credentials
-from hycosim.core.session import ConnectError, client_config, open_session, router_config
+from hycosim.transport.keys import ProjectKeys
+from hycosim.transport.security import SecurityError, read_credentials
+from hycosim.transport.session import ConnectError, client_config, open_session, router_config
 from tests.helpers import REPO, env, free_endpoint, hycosim, meta, read_rows, reap, spawn, wait_for, write_project
 from tests.netns import hosts, netns_available
 

@@ -14,8 +14,8 @@ import pytest
 import zenoh
 
 from hycosim.core import frames
-from hycosim.core.keys import ProjectKeys
-from hycosim.core.session import client_config
+from hycosim.transport.keys import ProjectKeys
+from hycosim.transport.session import client_config
 from tests.helpers import hycosim, kill_process, meta, read_rows, reap, spawn, wait_for, write_project
 
 

@@ -14,7 +14,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from hycosim.core.config import load_project
-from hycosim.fmu_bridge.fmu_loader import MAX_ELEMENTS, FmuError, check_fmu
+from hycosim.fmi.loader import MAX_ELEMENTS, FmuError, check_fmu
 from tests.fmi3_fmus import build
 from tests.helpers import column, hycosim, read_rows, run_project, write_project
 

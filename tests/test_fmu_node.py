@@ -13,9 +13,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from hycosim.core.config import load_project
-from hycosim.fmu_bridge.fmu_loader import FmuError, FmuInstance
-from hycosim.fmu_bridge.fmu_open import open_fmu
-from hycosim.fmu_bridge.model_fmu import ModelFmuError, build_model_fmu
+from hycosim.fmi.loader import FmuError, FmuInstance
+from hycosim.fmi.fmu_open import open_fmu
+from hycosim.bridge.model_fmu import ModelFmuError, build_model_fmu
 from tests.helpers import REPO, column, hycosim, meta, read_rows, run_project, write_project
 
 MODELS = REPO / "tests" / "models"
@@ -200,7 +200,7 @@ def test_a_parameter_is_set_only_within_the_range_its_variable_declares(value, l
     (the FMU's own fault) holds nothing."""
     from fmpy.model_description import ModelDescription, ScalarVariable
 
-    from hycosim.fmu_bridge.fmu_loader import check_parameters
+    from hycosim.fmi.loader import check_parameters
 
     var = ScalarVariable("k", 0)
     var.type, var.min, var.max = "Real", low, high

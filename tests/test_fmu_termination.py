@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from hycosim.fmu_bridge.model_fmu import build_model_fmu
+from hycosim.bridge.model_fmu import build_model_fmu
 from tests.helpers import REPO, column, hycosim, meta, read_rows, write_project
 
 FMI_HEADERS = Path(__import__("fmpy").__file__).parent / "c-code"

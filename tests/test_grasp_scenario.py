@@ -11,8 +11,8 @@ from pathlib import Path
 from fmpy import simulate_fmu
 from fmpy.validation import validate_fmu
 
-from hycosim.clients.rod.model import LIMITS, RodModel, RodParams
-from hycosim.clients.scene_fmus import build_scene_fmus
+from hycosim.scenario.rod.model import LIMITS, RodModel, RodParams
+from hycosim.scenario.scene_fmus import build_scene_fmus
 from tests.helpers import REPO, column, hycosim, read_rows, run_project
 
 
@@ -86,9 +86,9 @@ def test_scene_fmus_run_in_plain_fmpy_and_as_nodes(tmp_path):
     text = res.stderr.replace("\n", " ")
     assert "node 'rod': parameter 'length' is -0.6, below the minimum 0.001 that Rod.fmu declares for it" in text
     assert "node 'robot': parameter 'pivot_z' is 1000000.0, above the maximum 100 that RobotScene6.fmu declares" in text
-    assert "node 'controller': model 'hycosim.clients.robot.controller:ReferenceController': parameter 'mass' is 0.0; " \
+    assert "node 'controller': model 'hycosim.scenario.robot.controller:ReferenceController': parameter 'mass' is 0.0; " \
            "it must be at least 0.001" in text
-    from hycosim.fmu_bridge.fmu_loader import describe
+    from hycosim.fmi.loader import describe
 
     bounds = {v.name: (float(v.min), float(v.max)) for v in describe(fmus["rod"]).modelVariables
               if v.causality == "parameter"}
@@ -136,7 +136,7 @@ def test_scene_fmus_rebuilt_while_read_and_twice_at_once_are_always_whole(tmp_pa
 
 
 def test_the_papers_scenario_config_validates_runs_and_names_a_missing_or_old_fmu(tmp_path):
-    """hycosim/configs/grasp-paper.json: the rod and robot scene as FMUs, the camera and the policy."""
+    """hycosim/scenario/configs/grasp-paper.json: the rod and robot scene as FMUs, the camera and the policy."""
     fmus = build_scene_fmus(tmp_path / "build" / "fmus")
     (tmp_path / "configs").mkdir()
     cfg = _shortened(REPO / "hycosim" / "configs" / "grasp-paper.json", tmp_path / "configs" / "grasp-paper.json", 1.5)

@@ -8,8 +8,8 @@ import time
 import pytest
 import zenoh
 
-from hycosim.core.inbox import LOCAL, Inbox
-from hycosim.core.session import FramePublisher, client_config, open_session, router_config
+from hycosim.transport.inbox import LOCAL, Inbox
+from hycosim.transport.session import FramePublisher, client_config, open_session, router_config
 from tests.helpers import free_endpoint
 
 

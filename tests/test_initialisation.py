@@ -72,7 +72,7 @@ def test_the_chain_agrees_with_ecos_at_every_point_where_the_schemes_agree(tmp_p
     step (y(t) = u(t − H), the input it stepped on): one step apart, exactly."""
     ecospy = pytest.importorskip("ecospy", reason="ecospy is in the [test] extra")
     from hycosim.core.config import load_project
-    from hycosim.fmu_bridge.ssp import write_ssp
+    from hycosim.fmi.ssp import write_ssp
 
     cfg = _chain(tmp_path / "chain.json", small, stop=0.2)
     rows = read_rows(run_project(cfg, tmp_path / "runs"))
@@ -186,7 +186,7 @@ def test_validate_names_an_fmu_output_whose_start_dependencies_are_unsaid_and_th
 def test_fmi3_fmus_take_part_in_the_initialisation_as_fmi2_ones_do(tmp_path, small):
     """An FMI 3 feedthrough (pythonfmu3, y = 2u read at once) behind the Dahlquist and before a
     second one: the first row is consistent through both; without the phase it starts late."""
-    from hycosim.fmu_bridge.model_fmu import build_model_fmu
+    from hycosim.bridge.model_fmu import build_model_fmu
     from tests.helpers import REPO
 
     ft3 = build_model_fmu(REPO / "tests" / "models" / "feedthrough_model3.py", tmp_path, fmi_version="3.0")

@@ -11,10 +11,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hycosim.clients.scene_fmus import build_scene_fmus
+from hycosim.scenario.scene_fmus import build_scene_fmus
 from hycosim.core import frames
 from hycosim.core.config import load_project
-from hycosim.core.local_bus import LocalBus
+from hycosim.transport.local_bus import LocalBus
 from tests.me_fmus import build_me_fmus
 from tests.helpers import REPO, hycosim, meta, read_rows, run_project, write_project
 from tests.wire_strategies import payloads
@@ -189,8 +189,8 @@ def test_a_model_that_ends_the_run_inside_a_step_ends_it_at_the_same_point_in_pr
 @settings(max_examples=200)
 @given(st.lists(payloads, min_size=1, max_size=4))
 def test_a_hosted_node_takes_anything_released_without_raising_into_the_master(gain_project, released):
-    from hycosim.clients.loader import load_node
-    from hycosim.clients.runtime import NodeRuntime
+    from hycosim.node.loader import load_node
+    from hycosim.node.runtime import NodeRuntime
 
     bus = LocalBus(gain_project.project.projectName)
     runtime = NodeRuntime(gain_project, "g", load_node(gain_project.project.node("g"), REPO,

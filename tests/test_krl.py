@@ -18,12 +18,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hycosim.clients.krl.controller import MAX_FRAME_BYTES, EmulatedController, Program, parse_ack, stream_program
-from hycosim.clients.krl.eki import AXES, EkiConfig, EkiError, frame, parse_frame
-from hycosim.clients.krl.export import ExportError, export, read_path
-from hycosim.clients.robot import kr6
-from hycosim.clients.robot.scene import SceneParams
-from hycosim.clients.rod.model import RodParams
+from hycosim.scenario.krl.controller import MAX_FRAME_BYTES, EmulatedController, Program, parse_ack, stream_program
+from hycosim.scenario.krl.eki import AXES, EkiConfig, EkiError, frame, parse_frame
+from hycosim.scenario.krl.export import ExportError, export, read_path
+from hycosim.scenario.robot import kr6
+from hycosim.scenario.robot.scene import SceneParams
+from hycosim.scenario.rod.model import RodParams
 from tests.helpers import REPO, hycosim, run_project
 
 TWIN = RodParams(length=0.6, mass=0.3, damping=0.002, pivot=(0.62, 0.0, 1.0), grasp_distance=0.4,
@@ -242,7 +242,7 @@ def test_a_trial_that_cannot_run_is_recorded_and_the_others_go_on(tmp_path):
 
 @pytest.mark.long
 def test_the_papers_eighty_trials(tmp_path):
-    from hycosim.trials import run_trials, summarise
+    from hycosim.scenario.trials import run_trials, summarise
 
     table = summarise(run_trials([30, 40, 50, 60], 20, tmp_path / "trials"))
     assert all(row["success_pct"] >= 95 for row in table.values())
@@ -422,7 +422,7 @@ def test_an_eki_file_is_read_whole_or_refused_by_name_and_its_frames_read_or_rej
 def test_the_trials_table_shows_a_dash_where_the_paper_or_the_run_has_no_figure():
     """Table 2 has 30°, 40°, 50° and 60°: another angle (30.5° included) has no paper row, and
     an angle with no grasp has no error or time; the table says "–", never nan."""
-    from hycosim.trials import PAPER, figure_text, paper_figures
+    from hycosim.scenario.trials import PAPER, figure_text, paper_figures
 
     assert paper_figures(30) == paper_figures(30.0) == PAPER[30]
     assert paper_figures(30.5) is None and paper_figures(45) is None

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from fmpy import simulate_fmu
 
-from hycosim.clients.fmu_node import FmuNode
-from hycosim.clients.node import NodeContext
+from hycosim.node.fmu_node import FmuNode
+from hycosim.node.interface import NodeContext
 from hycosim.core.schema import Node
 from hycosim.core.config import load_project
 from tests.helpers import column, hycosim, meta, read_rows, run_project, write_project

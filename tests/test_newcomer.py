@@ -6,7 +6,7 @@ import json
 import re
 import shutil
 
-from hycosim.fmu_bridge.model_fmu import build_model_fmu
+from hycosim.bridge.model_fmu import build_model_fmu
 from tests.helpers import REPO, hycosim
 
 # The paper's form: nodes with nodeName, UID, input and output only (each played by a bridge FMU

@@ -10,8 +10,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hycosim.clients.loader import NodeLoadError, model_class
-from hycosim.clients.node import AsyncSource, NodeContext
+from hycosim.node.loader import NodeLoadError, model_class
+from hycosim.node.interface import AsyncSource, NodeContext
 from hycosim.core.schema import Node as NodeSpec
 from tests.helpers import hycosim, write_project
 

@@ -15,15 +15,15 @@ from gymnasium.utils.env_checker import check_env
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hycosim.clients.policy.ddpg import DDPG, CheckpointError, DDPGConfig, ReplayBuffer, load_policy
-from hycosim.clients.policy.env import MAX_STEPS, GraspEnv, reward
-from hycosim.clients.policy.features import ACT_DIM, NO_AIM, OBS_DIM, choice_action
-from hycosim.clients.node import NodeContext, pack_state, unpack_state
-from hycosim.clients.policy.node import PRETRAINED, PolicyNode
-from hycosim.clients.policy.paper import PaperGraspEnv, joint_targets, plot_against, train_paper
-from hycosim.clients.policy.train import (SELECTION_SEED, TrainConfig, _episode, evaluate, evaluate_checkpoint, focus_options,
+from hycosim.scenario.policy.ddpg import DDPG, CheckpointError, DDPGConfig, ReplayBuffer, load_policy
+from hycosim.scenario.policy.env import MAX_STEPS, GraspEnv, reward
+from hycosim.scenario.policy.features import ACT_DIM, NO_AIM, OBS_DIM, choice_action
+from hycosim.node.interface import NodeContext, pack_state, unpack_state
+from hycosim.scenario.policy.node import PRETRAINED, PolicyNode
+from hycosim.scenario.policy.paper import PaperGraspEnv, joint_targets, plot_against, train_paper
+from hycosim.scenario.policy.train import (SELECTION_SEED, TrainConfig, _episode, evaluate, evaluate_checkpoint, focus_options,
                                   train, wilson)
-from hycosim.clients.robot import kr6
+from hycosim.scenario.robot import kr6
 from tests.helpers import REPO, column, descendants, hycosim, read_rows, reap, run_project, running, spawn, wait_for
 
 
@@ -515,8 +515,8 @@ def test_a_resumed_training_history_of_any_shape_is_gone_on_from_or_refused_by_n
     """``last.pt``'s history is a user's file: a structure-aware change anywhere in a valid one
     (an entry replaced by junk or removed) is refused by name, or what the trainer reads of it
     (scores, failure-focused episodes, the learning curve) works."""
-    from hycosim.clients.policy.history import ResumeError, check_resumable
-    from hycosim.clients.policy.train import EVAL_ANGLES, _score, plot_learning_curve
+    from hycosim.scenario.policy.history import ResumeError, check_resumable
+    from hycosim.scenario.policy.train import EVAL_ANGLES, _score, plot_learning_curve
 
     history = data.draw(_valid_history())
     for _ in range(data.draw(st.integers(0, 2))):
@@ -552,8 +552,8 @@ def test_a_resumed_history_is_read_as_it_was_checked(tmp_path):
     """Two histories the check takes that the trainer could not use as they were written (found
     by exploring the test above afresh): a figure that is a one-element tensor (the check takes
     it as a float) and an episode whose angle is null (the record allows one)."""
-    from hycosim.clients.policy.history import check_resumable
-    from hycosim.clients.policy.train import EVAL_ANGLES, _score, plot_learning_curve
+    from hycosim.scenario.policy.history import check_resumable
+    from hycosim.scenario.policy.train import EVAL_ANGLES, _score, plot_learning_curve
 
     figures = {f"{a:g}": {"success": 1.0, "precise": 0.5, "time_s": 0.7} for a in EVAL_ANGLES}
     figures["40"]["time_s"] = torch.tensor([0.9])

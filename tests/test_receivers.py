@@ -20,15 +20,15 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from hycosim.core import frames
-from hycosim.fmu_bridge import gateway_protocol as gp
+from hycosim.bridge import gateway_protocol as gp
 from hycosim.core.schema import WIRE_TYPES, PortType
 from hycosim.core.config import load_project
 from hycosim.core.drops import DropLog
-from hycosim.server.gateway import _Connection, translate_release
+from hycosim.bridge.gateway import _Connection, translate_release
 from hycosim.server.intake import Dropped, Intake
 from hycosim.server.recorder import Recorder
 from hycosim.server.relay import Relay
-from hycosim.clients.runtime import NodeRuntime
+from hycosim.node.runtime import NodeRuntime
 from tests.helpers import write_project
 from tests.wire_strategies import frame_arrays, gateway_streams, names, payloads, values
 

@@ -21,14 +21,14 @@ from tests.helpers import (REPO, hycosim, kill_process, meta, reap, recorded_row
                            write_project)
 from tests.wire_strategies import deep_json
 
-from hycosim.clients.node import NodeContext
+from hycosim.node.interface import NodeContext
 
 
 def _project(tmp_path: Path, every: float | None = 0.5, clock: bool = False) -> Path:
     """Four nodes, the MuJoCo rod among them; one gain takes a little time per step so that a
     kill lands mid-run."""
     nodes = [
-        {"nodeName": "rod", "UID": 1, "model": "hycosim.clients.rod.node:RodNode", "parameters": {"initial_angle_deg": 35},
+        {"nodeName": "rod", "UID": 1, "model": "hycosim.scenario.rod.node:RodNode", "parameters": {"initial_angle_deg": 35},
          "input": [], "output": ["angle", "omega"]},
         {"nodeName": "pend", "UID": 2, "model": "pendulum", "parameters": {"theta0": 0.5}, "input": ["theta_in"],
          "output": ["theta", "omega"]},
@@ -204,8 +204,8 @@ def _continue_identically(make, inputs: dict, steps: int = 25) -> int:
     return len(data)
 
 
-@pytest.mark.parametrize("model", ["hycosim.clients.rod.node:RodNode", "hycosim.clients.robot.node:RobotNode",
-                                   "hycosim.clients.robot.controller:ReferenceController", "hycosim.clients.policy.node:PolicyNode"])
+@pytest.mark.parametrize("model", ["hycosim.scenario.rod.node:RodNode", "hycosim.scenario.robot.node:RobotNode",
+                                   "hycosim.scenario.robot.controller:ReferenceController", "hycosim.scenario.policy.node:PolicyNode"])
 def test_a_scenario_node_goes_on_in_another_process_from_its_state(model):
     import importlib
 
@@ -224,9 +224,9 @@ def test_a_scenario_node_goes_on_in_another_process_from_its_state(model):
 
 
 def test_the_scene_fmus_serialise_their_whole_state(tmp_path):
-    from hycosim.clients.scene_fmus import ensure_scene_fmus
+    from hycosim.scenario.scene_fmus import ensure_scene_fmus
     from hycosim.core.config import load_project
-    from hycosim.clients.loader import load_node
+    from hycosim.node.loader import load_node
 
     ensure_scene_fmus(REPO / "hycosim" / "build" / "fmus")  # where the shipped config names them (make fmus)
     loaded = load_project(REPO / "hycosim" / "configs" / "grasp-paper.json")

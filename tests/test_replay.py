@@ -11,11 +11,11 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from hycosim.clients.loader import NodeLoadError, check_node
-from hycosim.clients.replay import SamplePlayer
+from hycosim.node.loader import NodeLoadError, check_node
+from hycosim.node.replay import SamplePlayer
 from hycosim.core.schema import CoSimulation, Node
 from hycosim.core.recordings import Recording, RecordingError, Sample, encode_sample
-from hycosim.clients.scene_fmus import build_scene_fmus
+from hycosim.scenario.scene_fmus import build_scene_fmus
 from tests.helpers import REPO, hycosim, meta, read_rows, run_killing, run_project
 from tests.wire_strategies import deep_json
 

@@ -119,7 +119,7 @@ def _plots_panels(run: Path, png: Path, ports: list[str], panels: int) -> None:
 
 def test_retakes_refuse_what_cannot_take_a_step_again_by_name(tmp_path):
     (tmp_path / "hold.py").write_text(
-        "from hycosim.clients.node import Node\n"
+        "from hycosim.node.interface import Node\n"
         "class Hold(Node):\n"
         "    def outputs(self):\n        return {'y': 0.0}\n"
         "    def step(self, t, h, inputs):\n        pass\n")
@@ -135,7 +135,7 @@ def test_retakes_refuse_what_cannot_take_a_step_again_by_name(tmp_path):
 
 
 _SAVED = """
-from hycosim.clients.node import Node, pack_state, unpack_state
+from hycosim.node.interface import Node, pack_state, unpack_state
 
 class Saved(Node):  # saves its state and says nothing of can_rollback: the default follows the methods
     def setup(self, ctx):

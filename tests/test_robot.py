@@ -10,12 +10,12 @@ import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
-from hycosim.clients.node import NodeContext, NodeModelError
-from hycosim.clients.robot import kr6
-from hycosim.clients.robot.controller import ReferenceController
-from hycosim.clients.robot.node import initial_pose
-from hycosim.clients.robot.reach import analyse_reach
-from hycosim.clients.robot.scene import RobotScene, SceneParams, grasp_rotation
+from hycosim.node.interface import NodeContext, NodeModelError
+from hycosim.scenario.robot import kr6
+from hycosim.scenario.robot.controller import ReferenceController
+from hycosim.scenario.robot.node import initial_pose
+from hycosim.scenario.robot.reach import analyse_reach
+from hycosim.scenario.robot.scene import RobotScene, SceneParams, grasp_rotation
 
 
 def _flange(scene: RobotScene) -> np.ndarray:

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
-from hycosim.clients.rod.model import RodModel, RodParams, pendulum_period
+from hycosim.scenario.rod.model import RodModel, RodParams, pendulum_period
 
 
 def _period(rod: RodModel, seconds: float = 6.0) -> float:

@@ -14,8 +14,8 @@ import pytest
 import zenoh
 
 from hycosim.core import frames
-from hycosim.core.keys import SERVER_TOKEN, ProjectKeys
-from hycosim.core.session import open_session, router_config
+from hycosim.transport.keys import SERVER_TOKEN, ProjectKeys
+from hycosim.transport.session import open_session, router_config
 from tests.helpers import HYCOSIM, REPO, env, free_port, meta, read_rows, reap, spawn, wait_for, write_project
 from tests.test_faults import _pair as fault_pair
 
@@ -235,7 +235,7 @@ def test_the_launcher_sent_sigterm_stops_the_run_and_keeps_its_records(tmp_path)
 
 _SELF_ENDING = '''
 import os, signal
-from hycosim.clients.node import Node
+from hycosim.node.interface import Node
 
 class Quitter(Node):
     def setup(self, ctx):
@@ -278,7 +278,7 @@ def _dashboard(tmp_path) -> list[str]:
 
 
 def _controller(tmp_path) -> list[str]:
-    from hycosim.clients.krl.eki import EkiConfig
+    from hycosim.scenario.krl.eki import EkiConfig
 
     eki = tmp_path / "eki.xml"
     eki.write_text(EkiConfig().to_xml())

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hycosim.fmu_bridge.model_fmu import build_model_fmu
+from hycosim.bridge.model_fmu import build_model_fmu
 from tests.helpers import REPO, free_endpoint, hycosim, read_rows, run_project, write_project
 
 _SSD = """<?xml version="1.0" encoding="UTF-8"?>
@@ -255,7 +255,7 @@ def _mutated_ssd(draw) -> str:
           deadline=None)
 @given(ssd=_mutated_ssd())
 def test_any_package_is_read_whole_or_refused_by_name(tmp_path_factory, gain, ssd):
-    from hycosim.fmu_bridge.ssp import SspError, project_from_ssp
+    from hycosim.fmi.ssp import SspError, project_from_ssp
 
     tmp = tmp_path_factory.mktemp("fuzz")
     package = _package(tmp / "m.ssp", gain, ssd=ssd)
@@ -295,7 +295,7 @@ def test_two_fmus_of_one_name_in_different_folders_stay_two(tmp_path, gain):
     package = _package(tmp_path / "two.ssp", gain, ssd=ssd)
     with zipfile.ZipFile(package, "a") as z:
         z.write(other, "resources/v3/GainModel.fmu")
-    from hycosim.fmu_bridge.ssp import project_from_ssp
+    from hycosim.fmi.ssp import project_from_ssp
 
     doc = project_from_ssp(package, tmp_path / "fmus", step=0.1)
     fmus = {n["nodeName"]: n["fmu"] for n in doc["nodeLists"]}
@@ -315,7 +315,7 @@ def test_fmu_entries_whose_file_names_would_meet_stay_apart(tmp_path, gain, thir
     with zipfile.ZipFile(package, "a") as z:
         z.write(other, "resources/v3/GainModel.fmu")
         z.writestr(third, gain.read_bytes())
-    from hycosim.fmu_bridge.ssp import project_from_ssp
+    from hycosim.fmi.ssp import project_from_ssp
 
     doc = project_from_ssp(package, tmp_path / "fmus", step=0.1)
     fmus = {n["nodeName"]: tmp_path / n["fmu"] for n in doc["nodeLists"]}
@@ -330,7 +330,7 @@ _ENTRY = st.text(alphabet="ab./\\_-A é:", max_size=12)
 
 @given(sources=st.lists(_ENTRY, max_size=8))
 def test_each_fmu_entry_of_a_package_gets_a_file_name_of_its_own(sources):
-    from hycosim.fmu_bridge.ssp import fmu_file_names
+    from hycosim.fmi.ssp import fmu_file_names
 
     names = fmu_file_names(sources)
     assert set(names) == set(sources)

@@ -10,7 +10,7 @@ import subprocess
 import threading
 import time
 
-from hycosim.core.session import SHARED_RUNTIME, client_config, open_session, router_config
+from hycosim.transport.session import SHARED_RUNTIME, client_config, open_session, router_config
 from tests.helpers import HYCOSIM, REPO, free_endpoint, hycosim, meta, read_rows, run_project, write_project
 
 LIMIT = 32 * 1024

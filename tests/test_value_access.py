@@ -1,4 +1,4 @@
-"""An FMU's ports read and written in one C call per type (fmu_bridge.value_access) give what
+"""An FMU's ports read and written in one C call per type (fmi.value_access) give what
 fmpy's calls, one variable at a time, give: two instances of one FMU, one driven through each,
 stay equal value for value over drawn inputs."""
 
@@ -14,7 +14,7 @@ from fmpy.fmi3 import FMU3Slave
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hycosim.fmu_bridge.value_access import Port, port_access
+from hycosim.fmi.value_access import Port, port_access
 from tests.fmi3_fmus import build as build3
 
 _FIXTURES = settings(suppress_health_check=[HealthCheck.function_scoped_fixture])

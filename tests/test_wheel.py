@@ -100,9 +100,9 @@ def test_the_wheel_holds_only_the_hycosim_package_its_data_and_licence(installed
     tops = {line.split(",", 1)[0].split("/", 1)[0] for line in record.splitlines() if line}
     assert tops == {"hycosim", info}, tops
     assert top_level in ([], ["hycosim"]), top_level
-    for data in ("hycosim/project.schema.json", "hycosim/configs/grasp-paper.json", "hycosim/configs/default.json",
-                 "hycosim/clients/policy/pretrained/ddpg_grasp.pt", "hycosim/dashboard/static/index.html",
-                 "hycosim/fmu_bridge/templates/bridge_fmu.c", f"{info}/licenses/LICENSE"):
+    for data in ("hycosim/project.schema.json", "hycosim/scenario/configs/grasp-paper.json", "hycosim/configs/default.json",
+                 "hycosim/scenario/policy/pretrained/ddpg_grasp.pt", "hycosim/dashboard/static/index.html",
+                 "hycosim/bridge/templates/bridge_fmu.c", f"{info}/licenses/LICENSE"):
         assert data in names, data
     assert not any(n.startswith(("hycosim/build/", "tests/", "benchmarks/")) for n in names)
     assert "License-Expression: Apache-2.0" in metadata
@@ -110,7 +110,7 @@ def test_the_wheel_holds_only_the_hycosim_package_its_data_and_licence(installed
     assert not re.search(r"^Requires-Dist: (torch|mujoco|opencv|starlette)[^;]*$", metadata, re.M)
     with tarfile.open(installed.sdist) as sdist:
         members = sdist.getnames()
-    assert any(m.endswith("/LICENSE") for m in members) and any(m.endswith("/hycosim/configs/grasp.json")
+    assert any(m.endswith("/LICENSE") for m in members) and any(m.endswith("/hycosim/scenario/configs/grasp.json")
                                                                 for m in members)
 
 
@@ -131,8 +131,8 @@ def test_the_core_install_runs_fmus_from_the_docs_and_names_a_missing_extra(inst
     res = installed.hycosim("--version")
     assert res.returncode == 0 and res.stdout.strip() == f"hycosim {version}", res.stdout + res.stderr
     # The installed package, not this checkout, and none of the extras' packages.
-    res = installed.python("import sys, hycosim, hycosim.core.config, hycosim.server.relay, hycosim.clients.runtime, "
-                           "hycosim.fmu_bridge.fmu_open, hycosim.cli; print(hycosim.__file__); print(sorted(m for m in "
+    res = installed.python("import sys, hycosim, hycosim.core.config, hycosim.server.relay, hycosim.node.runtime, "
+                           "hycosim.fmi.fmu_open, hycosim.cli; print(hycosim.__file__); print(sorted(m for m in "
                            "('torch', 'mujoco', 'cv2', 'matplotlib', 'starlette', 'gymnasium') if m in sys.modules))")
     assert res.returncode == 0, res.stderr
     where, loaded = res.stdout.split("\n")[:2]
@@ -147,7 +147,7 @@ def test_the_core_install_runs_fmus_from_the_docs_and_names_a_missing_extra(inst
     blocks = dict(re.findall(r"<!-- file: ([\w.\-]+) -->\n```[a-z]*\n(.*?)```", page, re.S))
     for name in ("gain.py", "two.json"):
         (installed.work / name).write_text(blocks[name])
-    from hycosim.fmu_bridge.model_fmu import build_model_fmu
+    from hycosim.bridge.model_fmu import build_model_fmu
 
     build_model_fmu(installed.work / "gain.py", installed.work)
     res = installed.hycosim("validate", "two.json")
@@ -194,7 +194,7 @@ def test_the_scenario_extra_runs_a_grasp_trial_from_the_installed_package(instal
        st.text(max_size=40))
 def test_a_missing_modules_hint_is_total_and_names_an_extra_only_for_its_packages(missing, module_name):
     """The name an ImportError carries comes from whatever a user's model imports."""
-    from hycosim.clients.loader import _missing_module_hint
+    from hycosim.node.loader import _missing_module_hint
     from hycosim.core.extras import extra_providing
 
     extra = extra_providing(missing)

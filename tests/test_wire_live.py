@@ -21,9 +21,9 @@ import zenoh
 
 from hycosim.core import frames
 from hycosim.core.config import load_project
-from hycosim.core.keys import SERVER_TOKEN, ProjectKeys
-from hycosim.core.security import router_security
-from hycosim.core.session import ConnectError, client_config, open_session, router_config
+from hycosim.transport.keys import SERVER_TOKEN, ProjectKeys
+from hycosim.transport.security import router_security
+from hycosim.transport.session import ConnectError, client_config, open_session, router_config
 from tests.helpers import HYCOSIM, env, free_endpoint, meta, read_rows, REPO, wait_for, write_project
 from tests.wire_strategies import examples, forgeable, gateway_streams, payloads, send_to_gateway
 

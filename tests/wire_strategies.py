@@ -15,7 +15,7 @@ import msgpack
 from hypothesis import strategies as st
 
 from hycosim.core import frames
-from hycosim.fmu_bridge import gateway_protocol as gp
+from hycosim.bridge import gateway_protocol as gp
 
 NAMES = ["a", "g", "clock", "src", "s", "_server", "_local", "nobody", ""]
 

@@ -7,9 +7,10 @@ from typing import Annotated
 
 import typer
 
-from hycosim.cli.commands import fmu, krl, policy, project, results, run, scene
+from hycosim.cli.commands import fmu, project, results, run
 from hycosim.cli.output import err, out, say_error
 from hycosim.core import signals
+from hycosim.scenario.commands import krl, policy, scene
 
 
 def _show_version(value: bool) -> None:
@@ -63,7 +64,7 @@ def main() -> None:
     """Console entry point."""
     import faulthandler
 
-    from hycosim.core.session import prefer_shared_runtime
+    from hycosim.transport.session import prefer_shared_runtime
 
     # A model that crashes in native code (an FMU's binary, an extension) kills the process
     # without a word from Python; the fault handler at least prints the stack it was at.

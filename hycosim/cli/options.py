@@ -38,7 +38,7 @@ def checked_endpoint(option: str, value: str, parse=parse_endpoint) -> str:
 
 def monitor_credentials(endpoint: str, tls_ca: Path | None, password_file: Path | None) -> tuple[dict | None, str | None]:
     """A monitor's TLS settings and password (``status``, ``dashboard``); exit 2 naming what is wrong."""
-    from hycosim.core.security import SecurityError, ca_settings, read_password
+    from hycosim.transport.security import SecurityError, ca_settings, read_password
 
     if endpoint.startswith("tls/") and tls_ca is None:
         fail(f"{endpoint} is a TLS endpoint: give --tls-ca with the CA that signed "

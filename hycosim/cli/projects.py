@@ -27,7 +27,7 @@ def from_ssp(package: Path, project_file: Path, side: Path | None = None, step: 
     """Import the SSP package into ``project_file`` (its FMUs in a folder beside it); exit 2 with
     what is wrong."""
     from hycosim.core import json_text
-    from hycosim.fmu_bridge.ssp import SspError, project_from_ssp
+    from hycosim.fmi.ssp import SspError, project_from_ssp
 
     side = side or (package.with_name(package.stem + SSP_SIDE_SUFFIX) if
                     package.with_name(package.stem + SSP_SIDE_SUFFIX).is_file() else None)

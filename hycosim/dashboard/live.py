@@ -23,8 +23,8 @@ import structlog
 import zenoh
 
 from hycosim.core import json_text
-from hycosim.core.keys import SERVER_TOKEN, ProjectKeys
-from hycosim.core.session import ConnectError, client_config, open_session
+from hycosim.transport.keys import SERVER_TOKEN, ProjectKeys
+from hycosim.transport.session import ConnectError, client_config, open_session
 from hycosim.dashboard.changes import Watchers
 from hycosim.dashboard.series import ThinnedSeries
 

@@ -18,15 +18,15 @@ from hycosim.core import json_text, logs, signals
 from hycosim.core.config import LoadedProject, gateway_address, server_endpoint
 from hycosim.core.endpoints import GATEWAY_PORT, EndpointError, parse_address, parse_endpoint
 from hycosim.core.folders import make_folder, run_dir_for
-from hycosim.core.local_bus import LocalBus
-from hycosim.core.security import SecurityError, router_security
-from hycosim.core.session import open_session, router_config
+from hycosim.transport.local_bus import LocalBus
+from hycosim.transport.security import SecurityError, router_security
+from hycosim.transport.session import open_session, router_config
 
 from hycosim.server import checkpoints
 from hycosim.server.coordinator import GuardEvaluationError
 from hycosim.server.recorder import Recorder, RecordError
 from hycosim.server.relay import Relay, RunError
-from hycosim.server.transport import InProcessTransport, Transport, ZenohTransport
+from hycosim.transport.server_side import InProcessTransport, Transport, ZenohTransport
 
 
 # The project file as the run began, in its run directory.

@@ -18,7 +18,7 @@ Read top to bottom, :meth:`Relay.run` and :meth:`Relay._loop` are the whole algo
 4. STOP at stopTime, on Ctrl-C, or on a fault, with everything recorded so far on disk.
 
 The transport (Zenoh sessions and keys, or calls in one process) is given as a
-:class:`~hycosim.server.transport.Transport`; the loop does not know which (only the
+:class:`~hycosim.transport.server_side.Transport`; the loop does not know which (only the
 gateway for bridge FMUs asks for the transport's Zenoh session).
 """
 
@@ -37,17 +37,17 @@ import structlog
 from hycosim.core import frames, signals
 from hycosim.core.schema import FREE_MODE
 from hycosim.core.config import LoadedProject
-from hycosim.core.inbox import LOCAL
-from hycosim.core.keys import ProjectKeys
-from hycosim.core.local_bus import DirectStep
-from hycosim.core.session import FrameTooLarge
+from hycosim.transport.inbox import LOCAL
+from hycosim.transport.keys import ProjectKeys
+from hycosim.transport.local_bus import DirectStep
+from hycosim.transport.session import FrameTooLarge
 from hycosim.core.sim_clock import RealTimeClock
 
 from hycosim.server import checkpoints, initialisation, plans
 from hycosim.server.answer_budget import AnswerBudget
 from hycosim.server.async_sources import SampleHistory
 from hycosim.server.coordinator import Coordinator, GuardEvaluationError
-from hycosim.server.gateway import Gateway, GatewayError
+from hycosim.bridge.gateway import Gateway, GatewayError
 from hycosim.server.intake import Dropped, Intake, port_mismatch
 from hycosim.server.ledger import ENDED, LATER, TAKE, Ledger
 from hycosim.server.localisation import bisect_crossing
@@ -56,7 +56,7 @@ from hycosim.server.recorder import Recorder, RecordError
 from hycosim.server.retakes import IterationLog, StepSizer, control_step, input_change, iterate_step
 from hycosim.server.routing import OutputView, Router
 from hycosim.server.status_view import LatestPoints
-from hycosim.server.transport import Transport
+from hycosim.transport.server_side import Transport
 
 RECENT_KEPT = 4096  # the latest points kept for the status answers
 

@@ -2,7 +2,7 @@
 
 import ctypes
 
-from hycosim.clients.node import Node
+from hycosim.node.interface import Node
 
 
 class Crashing(Node):

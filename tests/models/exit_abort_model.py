@@ -4,7 +4,7 @@ node's work is done: glibc's "corrupted double-linked list" from a library's tea
 import atexit
 import os
 
-from hycosim.clients.node import Node
+from hycosim.node.interface import Node
 
 
 class AbortsAtExit(Node):

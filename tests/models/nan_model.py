@@ -1,6 +1,6 @@
 """A model that diverges: its output turns NaN at t = 0.1 s, as an unstable integrator's does."""
 
-from hycosim.clients.node import Node
+from hycosim.node.interface import Node
 
 
 class Diverging(Node):

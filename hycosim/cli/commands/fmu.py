@@ -27,7 +27,7 @@ def fmu_build(
     """Write one native FMI 2.0 co-simulation bridge FMU per stepping node of the project."""
     from fmpy.validation import validate_fmu
 
-    from hycosim.fmu_bridge.bridge_fmu import BridgeBuildError, build_bridge_fmus
+    from hycosim.bridge.bridge_fmu import BridgeBuildError, build_bridge_fmus
 
     loaded = load(file)
     if server is not None:
@@ -56,7 +56,7 @@ def fmu_inspect(
     """List an FMU's co-simulation capabilities and variables; with --config, the port mapping."""
     import fmpy
 
-    from hycosim.fmu_bridge.fmu_loader import (CO_SIMULATION, MODEL_EXCHANGE, FmuError, check_platform,
+    from hycosim.fmi.loader import (CO_SIMULATION, MODEL_EXCHANGE, FmuError, check_platform,
                                                clock_refusal, clocks_of, describe, map_driven, map_ports, shape_of)
 
     try:

@@ -28,7 +28,7 @@ def validate(
     loaded = load(project_file(file, step, stop))
     p = loaded.project
     if models:
-        from hycosim.clients.loader import NodeLoadError, check_node
+        from hycosim.node.loader import NodeLoadError, check_node
 
         problems = []
         for i, node in enumerate(p.nodeLists):
@@ -64,7 +64,7 @@ def _say_what_nodes_take_part_in(loaded: Any) -> None:
     from rich.table import Table
 
     from hycosim.cli.output import print_table
-    from hycosim.clients.loader import why_no_checkpoint, why_no_interpolation, why_no_retake
+    from hycosim.node.loader import why_no_checkpoint, why_no_interpolation, why_no_retake
 
     p, folder = loaded.project, loaded.path.parent
     cosim = p.coSimulation
@@ -91,7 +91,7 @@ def _say_what_nodes_take_part_in(loaded: Any) -> None:
 def _say_clocks(loaded: Any) -> None:
     """The clocks of each FMU node that has any, as hycosim ticks them (an FMU with a clock it
     cannot tick was refused, naming it)."""
-    from hycosim.clients.loader import fmu_mapping
+    from hycosim.node.loader import fmu_mapping
 
     for n in loaded.project.nodeLists:
         if n.fmu and not n.replay:
@@ -118,7 +118,7 @@ def _say_in_process(loaded: Any) -> None:
 def _check_retakes(file: Path, loaded: Any) -> None:
     """Iterative coupling and the error-controlled step need every stepping node to take a step
     again: name each one that cannot, exit 2."""
-    from hycosim.clients.loader import why_no_retake
+    from hycosim.node.loader import why_no_retake
 
     cosim = loaded.project.coSimulation
     for key, variable in (("iterate", False), ("stepControl", True)):
@@ -130,7 +130,7 @@ def _check_retakes(file: Path, loaded: Any) -> None:
             fail(f"{file}: coSimulation.{key}: every stepping node must be able to take a step again"
                  f"{' with another length' if variable else ''}", details=[f"node {name!r}: {why}" for name, why in unable])
     if cosim.iterate is not None and cosim.iterate.interpolate:
-        from hycosim.clients.loader import why_no_interpolation
+        from hycosim.node.loader import why_no_interpolation
 
         for n in loaded.project.stepping_nodes():
             if n.input and (why := why_no_interpolation(n, loaded.path.parent)):
@@ -141,7 +141,7 @@ def _check_retakes(file: Path, loaded: Any) -> None:
 def _warn_unstated_start_dependencies(file: Path, loaded: Any) -> None:
     """Name each linked FMU output whose start dependencies its model structure leaves unsaid:
     the initialisation takes it as reading every input."""
-    from hycosim.clients.loader import fmu_mapping
+    from hycosim.node.loader import fmu_mapping
 
     p = loaded.project
     fed = {r.dst_node for r in loaded.routes}
@@ -156,7 +156,7 @@ def _warn_unstated_start_dependencies(file: Path, loaded: Any) -> None:
 
 def _warn_algebraic_loops(file: Path, loaded: Any) -> None:
     """Name each cycle of direct feedthrough, which a step-by-step scheme takes a step late."""
-    from hycosim.clients.loader import feedthrough_of
+    from hycosim.node.loader import feedthrough_of
     from hycosim.core.coupling import algebraic_loops
 
     p = loaded.project
@@ -213,7 +213,7 @@ def export_ssp(
     output: Annotated[Path, typer.Option("-o", "--output", help="the .ssp package to write")] = Path("system.ssp"),
 ) -> None:
     """Write a project whose nodes are all FMUs as an SSP 1.0 package (FMPy's simulate_ssp reads it)."""
-    from hycosim.fmu_bridge.ssp import SspError, write_ssp
+    from hycosim.fmi.ssp import SspError, write_ssp
 
     loaded = load(file)
     try:

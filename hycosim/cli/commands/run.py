@@ -51,7 +51,7 @@ def node(
                                                                "when the project has 'security'")] = None,
 ) -> None:
     """Attach one node of the project to a running server (local or on another host)."""
-    from hycosim.clients.main import run_node
+    from hycosim.node.main import run_node
 
     loaded = load(file)
     code, message = run_node(loaded, name, connect, log_file, password_file)
@@ -78,7 +78,7 @@ def run(
 ) -> None:
     """Run the server and every node as local processes on loopback, or all in this process
     (FILE: a project JSON or an SSP package)."""
-    from hycosim.core.security import SecurityError, router_security
+    from hycosim.transport.security import SecurityError, router_security
     from hycosim.embedded import run_embedded
 
     file = project_file(file, step, stop)
@@ -117,7 +117,7 @@ def _refuse_unfit_fmus(loaded) -> None:
     that it cannot run (a port on an array of another shape, clocks, a parameter it lacks): named
     before a run directory is made, not by the node's process after the launch. Reads model
     descriptions only; a missing file is left to the node, which says how to build it."""
-    from hycosim.clients.loader import NodeLoadError, check_node
+    from hycosim.node.loader import NodeLoadError, check_node
 
     for spec in loaded.project.nodeLists:
         if spec.fmu and not (spec.replay or spec.asynchronous) and loaded.resolve(spec.fmu).is_file():
@@ -172,8 +172,8 @@ def status(
 ) -> None:
     """Ask a running server who is attached."""
     from hycosim.core import json_text
-    from hycosim.core.keys import ProjectKeys
-    from hycosim.core.session import ConnectError, client_config, open_session
+    from hycosim.transport.keys import ProjectKeys
+    from hycosim.transport.session import ConnectError, client_config, open_session
 
     endpoint = checked_endpoint("endpoint", endpoint)
     tls, password = monitor_credentials(endpoint, tls_ca, password_file)

@@ -1,0 +1,147 @@
+"""A node played by any FMI 2.0 or 3.0 FMU, through fmpy: co-simulation, or Model Exchange
+integrated by the node (fmi.model_exchange)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Any
+
+import structlog
+
+from hycosim.core.schema import Node as NodeSpec, Port
+from hycosim.fmi.loader import FmuError, FmuInstance, FmuTerminated
+from hycosim.fmi.fmu_open import open_fmu
+
+from hycosim.node.interface import Node, NodeContext, NodeModelError, SimulationEnded
+
+
+def _model_error(exc: FmuError) -> Exception:
+    # FmuError stays inside this module: the runtime of a node that plays no FMU never
+    # imports fmpy (and numpy), some 13 MB and a tenth of a second per process.
+    if isinstance(exc, FmuTerminated):
+        return SimulationEnded(exc.t, str(exc))
+    return NodeModelError(str(exc))
+
+
+@contextmanager
+def _node_errors() -> Iterator[None]:
+    try:
+        yield
+    except FmuError as exc:
+        raise _model_error(exc) from None
+
+
+class FmuNode(Node):
+    """Ports map to FMU variables by name (a port's ``variable`` renames); node parameters
+    and input start values are set before initialisation; one doStep per macro step (a Model
+    Exchange FMU: its integration over the step).
+
+    The driven flag has no FMI call: an FMU that can be driven names an input for it in
+    the node's ``drivenVariable``, which set_mode sets before the next doStep.
+    """
+
+    def __init__(self, spec: NodeSpec, path):
+        self.spec = spec
+        self.path = path
+        self.fmu: FmuInstance | None = None
+        self._checkpoint: Any = None
+        self._derivatives: dict[str, list[float]] = {}  # for the next step's inputs
+
+    def setup(self, ctx: NodeContext) -> None:
+        with _node_errors():
+            self.fmu = open_fmu(self.path, self.spec, dict(ctx.parameters), ctx.stop_time)
+            self.fmu.initialize(ctx.start_time)
+
+    @property
+    def can_rollback(self) -> bool:
+        return bool(self.fmu and self.fmu.can_rollback)
+
+    @property
+    def can_vary_step(self) -> bool:
+        return bool(self.fmu and self.fmu.variable_step)
+
+    @property
+    def can_interpolate(self) -> bool:
+        return bool(self.fmu and self.fmu.can_interpolate)
+
+    def set_input_derivatives(self, derivatives: dict[str, list[float]]) -> None:
+        # Given to the FMU after the inputs' values, in step: FMI 2 calls set the derivatives of
+        # the values set last, and an FMU may take a new value as one held over the step.
+        self._derivatives = derivatives
+
+    @property
+    def start_feedthrough(self) -> dict[str, list[str]]:
+        return {out: sorted(ins) for out, ins in self.fmu.start_feedthrough().items() if ins} if self.fmu else {}
+
+    def start_inputs(self, inputs: dict[str, Any]) -> None:
+        # After exitInitializationMode, before the first doStep: inputs may be set and outputs
+        # read at the start time (FMI 2 slaveInitialized, FMI 3 Step Mode).
+        with _node_errors():
+            self.fmu.set_inputs(inputs)
+
+    def outputs(self) -> dict[str, Any]:
+        try:  # _node_errors written out: a context manager costs a tenth of this call
+            return self.fmu.get_outputs()
+        except FmuError as exc:
+            raise _model_error(exc) from None
+
+    def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
+        try:  # _node_errors written out, as in outputs
+            self.fmu.set_inputs(inputs)
+            if self._derivatives:
+                self.fmu.set_input_derivatives(self._derivatives)
+                self._derivatives = {}
+            self.fmu.do_step(t, h)
+        except FmuError as exc:
+            raise _model_error(exc) from None
+        events = getattr(self.fmu, "events", None)  # a Model Exchange FMU's, inside the step
+        if events:
+            log = structlog.get_logger("node").bind(node=self.spec.nodeName)
+            for at, kind in events:
+                log.info("fmu event", t=at, kind=kind)
+            events.clear()
+
+    def listed_step(self, inputs: list[str], outputs: list[Port]) -> Callable[[float, float, list[Any]], list[Any]] | None:
+        stepped = self.fmu.listed_step(inputs, outputs) if self.fmu is not None else None
+        if stepped is None:
+            return None
+
+        def step(t: float, h: float, values: list[Any]) -> list[Any]:
+            try:  # _node_errors written out, as in outputs
+                return stepped(t, h, values)
+            except FmuError as exc:
+                raise _model_error(exc) from None
+        return step
+
+    def set_mode(self, mode: str, driven: bool) -> None:
+        with _node_errors():
+            self.fmu.set_driven(driven)
+
+    def get_state(self) -> Any:
+        with _node_errors():
+            state = self.fmu.get_state()
+            if self._checkpoint is not None:
+                self.fmu.free_state(self._checkpoint)
+        self._checkpoint = state
+        return state
+
+    def set_state(self, state: Any) -> None:
+        with _node_errors():
+            self.fmu.set_state(state)
+
+    @property
+    def can_serialize(self) -> bool:
+        return bool(self.fmu and self.fmu.can_serialize)
+
+    def serialize_state(self) -> bytes:
+        with _node_errors():
+            return self.fmu.serialize_state()
+
+    def deserialize_state(self, data: bytes) -> None:
+        with _node_errors():
+            self.fmu.deserialize_state(data)
+
+    def teardown(self) -> None:
+        if self.fmu is not None:
+            self.fmu.close()

@@ -1,0 +1,272 @@
+"""Finding the implementation a node entry names: a reference model, ``module:Class`` or
+``file.py:Class``.
+
+A model beside the project file loads without the user setting PYTHONPATH: ``module:Class``
+is looked up on the import path with the project file's folder last on it (so that a module
+there never shadows an installed one, nor the standard library; processes run ``python -P``),
+and ``path/to/file.py:Class`` names a file relative to the project file.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import sys
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from hycosim.core.schema import CoSimulation
+from hycosim.core.schema import Node as NodeSpec
+from hycosim.core.extras import extra_providing, install_hint
+from hycosim.core.hints import did_you_mean
+
+from hycosim.node.interface import AsyncSource, Node, missing_state_methods
+
+REFERENCE_MODELS = {
+    "gain": "hycosim.node.reference.gain:Gain",
+    "ramp": "hycosim.node.reference.ramp:Ramp",
+    "pendulum": "hycosim.node.reference.pendulum:Pendulum",
+    "bouncing_ball": "hycosim.node.reference.bouncing_ball:BouncingBall",
+    "ramp_source": "hycosim.node.reference.ramp_source:RampSource",
+    "rod": "hycosim.scenario.rod.node:RodNode",
+    "robot": "hycosim.scenario.robot.node:RobotNode",
+    "reference_controller": "hycosim.scenario.robot.controller:ReferenceController",
+    "camera": "hycosim.scenario.camera.node:CameraNode",
+    "policy": "hycosim.scenario.policy.node:PolicyNode",
+}
+
+
+# The FMUs `hycosim scene fmus` builds (clients.scene_fmus), named in a missing-file message.
+SCENE_FMUS = ("Rod.fmu", "RobotScene6.fmu")
+
+
+class NodeLoadError(RuntimeError):
+    """A node entry whose implementation cannot be found or made."""
+
+
+def _fmu_path(spec: NodeSpec, project_dir: Path) -> Path:
+    path = (project_dir / spec.fmu).resolve()
+    if not path.is_file():
+        hint = (f"; build it with: hycosim scene fmus -o {path.parent}" if path.name in SCENE_FMUS
+                else f"; a bridge FMU is built with: hycosim fmu build PROJECT -o {path.parent}")
+        raise NodeLoadError(f"node {spec.nodeName!r}: FMU file {path} does not exist{hint}")
+    if spec.asynchronous:
+        raise NodeLoadError(f"node {spec.nodeName!r}: an FMU node steps; it cannot be asynchronous")
+    return path
+
+
+def _import(module_name: str, project_dir: Path):
+    """The module a model names: a ``.py`` file relative to the project's folder, or a module
+    on the import path, with that folder last on it."""
+    if module_name.endswith(".py"):
+        path = (project_dir / module_name).resolve()
+        if not path.is_file():
+            raise ImportError(f"no file {path}")
+        name = f"hycosim_model_{path.stem}_{abs(hash(str(path))):x}"
+        if name not in sys.modules:
+            spec = importlib.util.spec_from_file_location(name, path)
+            module = importlib.util.module_from_spec(spec)
+            sys.modules[name] = module
+            try:
+                spec.loader.exec_module(module)
+            except BaseException:
+                del sys.modules[name]
+                raise
+        return sys.modules[name]
+    folder = str(project_dir.resolve())
+    if folder not in sys.path:
+        sys.path.append(folder)
+    return importlib.import_module(module_name)
+
+
+# The top-level packages hycosim installed before 0.2.0, when its modules moved under hycosim.
+_OLD_TOP_LEVEL = ("clients", "core", "server", "fmu_bridge", "dashboard")
+
+
+def _missing_module_hint(missing: str | None, module_name: str) -> str:
+    """What to do about a module that is not there: install the extra that brings it, or name
+    the module as hycosim names it now."""
+    extra = extra_providing(missing)
+    if extra is not None:
+        return f"; this model needs hycosim's [{extra}] extra: {install_hint(extra)}"
+    if missing is not None and missing.partition(".")[0] in _OLD_TOP_LEVEL and module_name.startswith(missing):
+        return f"; hycosim's modules are under hycosim. since 0.2.0: 'hycosim.{module_name}'"
+    return ""
+
+
+def model_class(spec: NodeSpec, project_dir: Path | None = None) -> type[Node] | type[AsyncSource]:
+    """The class a Python node entry names, imported and checked against the entry: a Node
+    for a stepping node, an AsyncSource for an asynchronous one, taking the parameters given.
+    ``project_dir``: the project file's folder, where the user's own models may lie."""
+    if not spec.model:
+        raise NodeLoadError(f"node {spec.nodeName!r} names no 'model' to run; give a reference model "
+                            f"({', '.join(sorted(REFERENCE_MODELS))}), 'module:Class' or 'file.py:Class'")
+    target = REFERENCE_MODELS.get(spec.model, spec.model)
+    module_name, _, class_name = target.rpartition(":")
+    if not module_name or not class_name:
+        raise NodeLoadError(f"node {spec.nodeName!r}: model {spec.model!r} is neither a reference model "
+                            f"({', '.join(sorted(REFERENCE_MODELS))}) nor 'module:Class' or 'file.py:Class'")
+    try:
+        cls = getattr(_import(module_name, project_dir or Path.cwd()), class_name)
+    except Exception as exc:  # the user's module may fail to import in any way (SyntaxError, its own errors)
+        detail = str(exc) if isinstance(exc, (ImportError, AttributeError)) else f"{type(exc).__name__}: {exc}"
+        if isinstance(exc, ModuleNotFoundError):
+            detail += _missing_module_hint(exc.name, module_name)
+        raise NodeLoadError(f"node {spec.nodeName!r}: cannot load model {spec.model!r}: {detail}") from None
+    kind = AsyncSource if spec.asynchronous else Node
+    if not (isinstance(cls, type) and issubclass(cls, kind)):
+        raise NodeLoadError(f"node {spec.nodeName!r} is asynchronous but {target} is not an AsyncSource"
+                            if spec.asynchronous else f"node {spec.nodeName!r}: {target} is not a Node")
+    _check_names(spec, "parameter", spec.parameters, cls.PARAMETERS)
+    _check_names(spec, "input", spec.input_names(), cls.INPUTS)
+    _check_names(spec, "output", spec.output_names(), cls.OUTPUTS)
+    wrong = cls.parameter_problems(spec.parameters)
+    if wrong:
+        raise NodeLoadError(f"node {spec.nodeName!r}: model {spec.model!r}: {'; '.join(wrong)}")
+    return cls
+
+
+def _check_names(spec: NodeSpec, kind: str, given: Iterable[str], declared: frozenset[str] | None) -> None:
+    unknown = sorted(set(given) - declared) if declared is not None else []
+    if unknown:
+        raise NodeLoadError(f"node {spec.nodeName!r}: model {spec.model!r} has no {kind} "
+                            f"{', '.join(map(repr, unknown))} (its {kind}s: {', '.join(sorted(declared)) or 'none'})"
+                            + did_you_mean(unknown, declared))
+
+
+def _player(spec: NodeSpec, project_dir: Path, cosim: CoSimulation) -> Node | AsyncSource:
+    from hycosim.core.recordings import RecordingError
+
+    from hycosim.node.replay import player
+
+    try:
+        return player(spec, project_dir, cosim)
+    except RecordingError as exc:
+        raise NodeLoadError(f"node {spec.nodeName!r}: {exc}") from None
+
+
+def check_node(spec: NodeSpec, project_dir: Path, cosim: CoSimulation | None = None) -> None:
+    """Raise NodeLoadError if the node's implementation could not be loaded as the entry says
+    (without making it: no model is set up, no FMU binary loaded). A stepping node with neither
+    model nor FMU is played by a bridge FMU in some tool: nothing to load here. A node that
+    replays a recording (``cosim``: the project's, whose step size it must have) needs only that."""
+    if spec.replay:
+        _player(spec, project_dir, cosim or CoSimulation())  # reads the recording whole, as the node will
+    elif spec.fmu:
+        from hycosim.fmi.loader import FmuError, check_fmu
+
+        try:
+            check_fmu(_fmu_path(spec, project_dir), spec)
+        except FmuError as exc:
+            raise NodeLoadError(str(exc)) from None
+    elif spec.model:
+        model_class(spec, project_dir)
+    elif spec.asynchronous:
+        model_class(spec, project_dir)  # refused: an asynchronous node needs a model
+
+
+def why_no_checkpoint(spec: NodeSpec, project_dir: Path) -> str | None:
+    """Why the node cannot take part in checkpoints (its state cannot outlive its process), or
+    None if it can. The node must load (:func:`check_node`)."""
+    if spec.asynchronous or spec.replay:
+        return None  # a source is not rolled back (it goes on sampling); a player's state is its time
+    if spec.fmu:
+        from hycosim.fmi.loader import check_fmu
+
+        cs = check_fmu(_fmu_path(spec, project_dir), spec).capabilities
+        if not (getattr(cs, "canGetAndSetFMUstate", False) and getattr(cs, "canSerializeFMUstate", False)):
+            return "its FMU does not declare canGetAndSetFMUstate and canSerializeFMUstate"
+        return None
+    if spec.model:
+        cls = model_class(spec, project_dir)
+        if cls.serialize_state is not Node.serialize_state:
+            return None  # a model that serialises its own way
+        # A model that overrides can_rollback answers only once set up: its HELLO tells the run.
+        return missing_state_methods(cls)
+    return "a bridge FMU cannot serialise the state of the tool it runs in"
+
+
+def why_no_retake(spec: NodeSpec, project_dir: Path, variable: bool) -> str | None:
+    """Why the node cannot take a step again after a rollback (shorter, with ``variable``), or
+    None if it can or its bridge FMU's tool will say when it attaches. The node must load."""
+    if spec.asynchronous or not (spec.fmu or spec.model or spec.replay):
+        return None
+    if spec.fmu:
+        from hycosim.fmi.loader import check_fmu
+
+        mapping = check_fmu(_fmu_path(spec, project_dir), spec)
+        if not getattr(mapping.capabilities, "canGetAndSetFMUstate", False):
+            return "its FMU does not declare canGetAndSetFMUstate"
+        if variable and not mapping.variable_step:
+            return "its FMU does not declare canHandleVariableCommunicationStepSize"
+        return None
+    if spec.replay:
+        return None  # a player's state is its time
+    cls = model_class(spec, project_dir)
+    if (why := missing_state_methods(cls)) is not None:
+        return why
+    if variable:
+        try:
+            fixed = not cls().can_vary_step  # a model says so before its setup
+        except Exception as exc:  # the user's constructor may fail in any way; the run will say how
+            return f"its model {cls.__name__} cannot be made ({type(exc).__name__}: {exc})"
+        if fixed:
+            return f"its model {cls.__name__} takes steps of one length only (can_vary_step)"
+    return None
+
+
+def why_no_interpolation(spec: NodeSpec, project_dir: Path) -> str | None:
+    """Why the node cannot make its inputs follow a polynomial over a step (iterative
+    coupling's ``interpolate``), or None if it can. The node must load."""
+    if spec.fmu:
+        from hycosim.fmi.loader import MODEL_EXCHANGE, check_fmu
+
+        mapping = check_fmu(_fmu_path(spec, project_dir), spec)
+        if mapping.interface == MODEL_EXCHANGE:
+            return "a Model Exchange FMU's node holds its inputs over a step"
+        if mapping.md.fmiVersion.startswith("3"):
+            return "FMI 3 co-simulation has no input derivatives"
+        if not getattr(mapping.capabilities, "canInterpolateInputs", False):
+            return "its FMU does not declare canInterpolateInputs"
+        return None
+    if spec.model and not spec.replay:
+        cls = model_class(spec, project_dir)
+        if cls.set_input_derivatives is Node.set_input_derivatives:
+            return f"its model {cls.__name__} has no set_input_derivatives"
+        return None
+    return "a recording or a bridge FMU holds its inputs"
+
+
+def fmu_mapping(spec: NodeSpec, project_dir: Path) -> Any:
+    """The checked mapping of an FMU node's ports onto its FMU's variables (fmi.loader.FmuMapping)."""
+    from hycosim.fmi.loader import check_fmu
+
+    return check_fmu(_fmu_path(spec, project_dir), spec)
+
+
+def feedthrough_of(spec: NodeSpec, project_dir: Path) -> dict[str, set[str]]:
+    """Each output port of the node → the input ports it depends on directly (an FMU's model
+    structure, a Python model's FEEDTHROUGH); empty for a node that does not say (a bridge FMU,
+    a recording, an asynchronous source). The node must load."""
+    if spec.fmu:
+        from hycosim.fmi.loader import check_fmu
+
+        return check_fmu(_fmu_path(spec, project_dir), spec).feedthrough()
+    if spec.model and not spec.asynchronous:
+        declared = model_class(spec, project_dir).FEEDTHROUGH or {}
+        inputs = set(spec.input_names())
+        return {out: set(ins) & inputs for out, ins in declared.items() if out in spec.output_names()}
+    return {}
+
+
+def load_node(spec: NodeSpec, project_dir: Path, cosim: CoSimulation | None = None) -> Node | AsyncSource:
+    """Instantiate the implementation named by the node's ``model`` or ``fmu``, or the player
+    of the recording its ``replay`` names."""
+    if spec.replay:
+        return _player(spec, project_dir, cosim or CoSimulation())
+    if spec.fmu:
+        from hycosim.node.fmu_node import FmuNode
+
+        return FmuNode(spec, _fmu_path(spec, project_dir))
+    return model_class(spec, project_dir)()

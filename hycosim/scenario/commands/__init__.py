@@ -1,0 +1,1 @@
+"""The grasp demo's commands (``scene``, ``camera``, ``train``, ``evaluate``, ``trials``, ``krl``)."""
