@@ -52,7 +52,7 @@ def project(dir_: Path, stop: float, every: float) -> Path:
     from hycosim.scenario.scene_fmus import ensure_scene_fmus
 
     fmus = ensure_scene_fmus(REPO / "build" / "fmus")
-    doc = json.loads((REPO / "hycosim" / "configs" / "grasp-fmu.json").read_text())
+    doc = json.loads((REPO / "hycosim" / "scenario" / "configs" / "grasp-fmu.json").read_text())
     doc["projectName"] = "recovery"
     doc["serverIP"] = f"127.0.0.1:{free_port()}"
     for node in doc["nodeLists"]:
@@ -204,7 +204,7 @@ def replay_trial(tmp: Path, stop: float) -> dict:
     from hycosim.scenario.scene_fmus import ensure_scene_fmus
 
     fmus = ensure_scene_fmus(REPO / "build" / "fmus")
-    doc = json.loads((REPO / "hycosim" / "configs" / "grasp-paper.json").read_text())
+    doc = json.loads((REPO / "hycosim" / "scenario" / "configs" / "grasp-paper.json").read_text())
     doc["serverIP"] = f"127.0.0.1:{free_port()}"
     doc["coSimulation"]["stopTime"] = stop
     for node in doc["nodeLists"]:

@@ -6,7 +6,7 @@ import pytest
 
 from tests.helpers import REPO, hycosim
 
-GRASP = str(REPO / "hycosim" / "configs" / "grasp.json")
+GRASP = str(REPO / "hycosim" / "scenario" / "configs" / "grasp.json")
 
 
 @pytest.mark.parametrize("args, message", [

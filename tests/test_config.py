@@ -74,7 +74,7 @@ def test_a_guard_naming_a_node_with_a_dash_says_that_is_why_it_does_not_parse(tm
                         "cannot name node 'c-1': '-' is a minus there; give the node a name without '-')"]
 
 
-@pytest.mark.parametrize("path", sorted((REPO / "hycosim" / "configs").glob("*.json")), ids=lambda p: p.name)
+@pytest.mark.parametrize("path", sorted((REPO / "hycosim").glob("**/configs/*.json")), ids=lambda p: p.name)
 def test_shipped_configs_validate(path):
     # grasp-fmu.json and grasp-paper.json name FMUs that `hycosim scene fmus` builds (into
     # build/fmus, which a fresh clone lacks); test_grasp_scenario checks their models once built.
@@ -354,7 +354,7 @@ def test_wait_strategy_polls_only_where_the_processes_fit_the_cores(tmp_path):
 # Project files as a hand leaves them: a project this suite or the repository ships, with up
 # to three edits anywhere in its tree (a value replaced by one of another kind or range, a key
 # deleted or added, a list entry repeated), none at all a third of the time.
-_BASES = [GOOD, *(json.loads(p.read_text()) for p in sorted((REPO / "hycosim" / "configs").glob("*.json")))]
+_BASES = [GOOD, *(json.loads(p.read_text()) for p in sorted((REPO / "hycosim").glob("**/configs/*.json")))]
 _JUNK = st.sampled_from([None, -1, 0, 1, 2.5, -0.0, 1e308, float("nan"), float("inf"), "", "x", "a.y", "free", "é²",
                          "0", [], {}, [1], {"a": 1}, True, False, "x" * 300, 2 ** 70, "..", "/etc/passwd",
                          "a.y >= 0.3", "__import__('os')", "1 +", "a.b.c", "tcp/127.0.0.1:²", "hold"]

@@ -90,7 +90,7 @@ def _grasp_parameters() -> dict:
 
     from tests.helpers import REPO
 
-    return json.loads((REPO / "hycosim" / "configs" / "grasp-policy.json").read_text())["nodeLists"][0]["parameters"]
+    return json.loads((REPO / "hycosim" / "scenario" / "configs" / "grasp-policy.json").read_text())["nodeLists"][0]["parameters"]
 
 
 def test_every_shipped_model_gives_exactly_the_outputs_it_declares(tmp_path):

@@ -47,7 +47,7 @@ def _shortened(src: Path, dst: Path, stop: float, replace: dict | None = None) -
 
 
 def test_reference_controller_grasps_the_rod_over_zenoh(tmp_path):
-    cfg = _shortened(REPO / "hycosim" / "configs" / "grasp.json", tmp_path / "grasp.json", 2.0)
+    cfg = _shortened(REPO / "hycosim" / "scenario" / "configs" / "grasp.json", tmp_path / "grasp.json", 2.0)
     run = run_project(cfg, tmp_path / "runs")
     _check_grasp(run, read_rows(run))
 
@@ -63,7 +63,7 @@ def test_scene_fmus_run_in_plain_fmpy_and_as_nodes(tmp_path):
     res = simulate_fmu(str(fmus["robot"]), stop_time=0.2, output_interval=0.01, output=["q1", "reachable"],
                        start_values={"q_cmd1": 0.5})
     assert math.isclose(res["q1"][-1], 0.5) and math.isclose(res["q1"][1], math.radians(360) * 0.01)
-    cfg = _shortened(REPO / "hycosim" / "configs" / "grasp-fmu.json", tmp_path / "grasp-fmu.json", 1.5,
+    cfg = _shortened(REPO / "hycosim" / "scenario" / "configs" / "grasp-fmu.json", tmp_path / "grasp-fmu.json", 1.5,
                      {"rod": fmus["rod"], "robot": fmus["robot"]})
     res = hycosim("validate", str(cfg))
     assert res.returncode == 0, res.stderr
@@ -139,7 +139,7 @@ def test_the_papers_scenario_config_validates_runs_and_names_a_missing_or_old_fm
     """hycosim/scenario/configs/grasp-paper.json: the rod and robot scene as FMUs, the camera and the policy."""
     fmus = build_scene_fmus(tmp_path / "build" / "fmus")
     (tmp_path / "configs").mkdir()
-    cfg = _shortened(REPO / "hycosim" / "configs" / "grasp-paper.json", tmp_path / "configs" / "grasp-paper.json", 1.5)
+    cfg = _shortened(REPO / "hycosim" / "scenario" / "configs" / "grasp-paper.json", tmp_path / "configs" / "grasp-paper.json", 1.5)
     res = hycosim("validate", str(cfg))  # the shipped relative paths, ../build/fmus, resolve beside it
     assert res.returncode == 0, res.stderr
     run = run_project(cfg, tmp_path / "runs", timeout=180)

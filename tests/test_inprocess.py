@@ -89,9 +89,9 @@ def test_step_control_multi_rate_batches_and_a_located_event_record_the_same_val
 def test_the_shipped_configs_it_accepts_record_what_they_record_in_processes(tmp_path):
     build_scene_fmus(REPO / "hycosim" / "build" / "fmus")
     for name in ("grasp", "grasp-fmu", "grasp-policy"):
-        doc = json.loads((REPO / "hycosim" / "configs" / f"{name}.json").read_text())
+        doc = json.loads((REPO / "hycosim" / "scenario" / "configs" / f"{name}.json").read_text())
         doc["coSimulation"]["stopTime"] = 2.5  # past the grasp: a mode switch in both
-        cfg = REPO / "hycosim" / "configs" / f".{name}-short-{tmp_path.name}.json"  # FMU paths are relative to it
+        cfg = REPO / "hycosim" / "scenario" / "configs" / f".{name}-short-{tmp_path.name}.json"  # FMU paths are relative to it
         cfg.write_text(json.dumps(doc))
         try:
             distributed, inprocess = _run_both(cfg, tmp_path)
@@ -102,7 +102,7 @@ def test_the_shipped_configs_it_accepts_record_what_they_record_in_processes(tmp
 
 
 def test_a_replayed_node_and_an_ssp_package_record_the_same_values_in_process(tmp_path):
-    doc = json.loads((REPO / "hycosim" / "configs" / "grasp.json").read_text())
+    doc = json.loads((REPO / "hycosim" / "scenario" / "configs" / "grasp.json").read_text())
     doc["coSimulation"]["stopTime"] = 1.0
     (cfg := tmp_path / "grasp.json").write_text(json.dumps(doc))
     recorded = run_project(cfg, tmp_path / "recorded")
@@ -143,12 +143,12 @@ def test_a_node_one_process_cannot_host_is_named_and_nothing_is_run(tmp_path):
                   str(tmp_path / "runs"))
     assert res.returncode == 2 and "node 'sensor': an asynchronous source" in res.stderr, res.stderr
     assert not (tmp_path / "runs").exists()
-    doc = json.loads((REPO / "hycosim" / "configs" / "grasp.json").read_text())
+    doc = json.loads((REPO / "hycosim" / "scenario" / "configs" / "grasp.json").read_text())
     doc["coSimulation"]["transport"] = "inprocess"
     (cfg := tmp_path / "grasp.json").write_text(json.dumps(doc))
     res = hycosim("run", str(cfg), "--listen", "tcp/127.0.0.1:7447", "--runs-dir", str(tmp_path / "runs"))
     assert res.returncode == 2 and "--listen is for a run in processes" in res.stderr, res.stderr
-    res = hycosim("validate", str(REPO / "hycosim" / "configs" / "grasp-paper.json"))
+    res = hycosim("validate", str(REPO / "hycosim" / "scenario" / "configs" / "grasp-paper.json"))
     assert res.returncode == 0 and "in one process (--in-process): no, node 'camera'" in res.stdout, res.stdout
 
 

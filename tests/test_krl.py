@@ -33,7 +33,7 @@ TWIN = RodParams(length=0.6, mass=0.3, damping=0.002, pivot=(0.62, 0.0, 1.0), gr
 @pytest.fixture(scope="module")
 def grasp_run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("krl")
-    doc = json.loads((REPO / "hycosim" / "configs" / "grasp.json").read_text())
+    doc = json.loads((REPO / "hycosim" / "scenario" / "configs" / "grasp.json").read_text())
     doc["coSimulation"]["stopTime"] = 1.2
     cfg = tmp / "grasp.json"
     cfg.write_text(json.dumps(doc))
@@ -211,7 +211,7 @@ def test_short_trials_run_produces_the_table_and_files(tmp_path):
     project = json.loads(next(out.glob("30deg-00/project.json")).read_text())
     assert [n["nodeName"] for n in project["nodeLists"] if "fmu" in n] == ["rod", "robot"]
     # The trials' twin is the paper scenario's: the camera corrects it at the same rate.
-    paper = json.loads((REPO / "hycosim" / "configs" / "grasp-paper.json").read_text())
+    paper = json.loads((REPO / "hycosim" / "scenario" / "configs" / "grasp-paper.json").read_text())
     gains = [doc["nodeLists"][0]["parameters"]["observer_gain"] for doc in (project, paper)]
     assert gains[0] == gains[1] > 0
     assert all(r["success"] == "True" for r in rows)  # the shipped policy grasps every trial at 30–50°

@@ -369,7 +369,7 @@ def test_missing_or_incompatible_checkpoint_gives_a_clear_error(tmp_path):
     with pytest.raises(CheckpointError, match="not readable"):
         load_policy(tmp_path / "evil.pt")
     assert not marker.exists()
-    doc = json.loads((REPO / "hycosim" / "configs" / "grasp-policy.json").read_text())
+    doc = json.loads((REPO / "hycosim" / "scenario" / "configs" / "grasp-policy.json").read_text())
     doc["nodeLists"][2]["parameters"]["checkpoint"] = str(tmp_path / "none.pt")
     cfg = tmp_path / "p.json"
     cfg.write_text(json.dumps(doc))
@@ -403,7 +403,7 @@ def test_missing_or_incompatible_checkpoint_gives_a_clear_error(tmp_path):
 
 def test_pretrained_policy_node_grasps_inside_a_cosimulation(tmp_path):
     assert PRETRAINED.is_file()
-    doc = json.loads((REPO / "hycosim" / "configs" / "grasp-policy.json").read_text())
+    doc = json.loads((REPO / "hycosim" / "scenario" / "configs" / "grasp-policy.json").read_text())
     doc["coSimulation"]["stopTime"] = 1.5
     cfg = tmp_path / "p.json"
     cfg.write_text(json.dumps(doc))

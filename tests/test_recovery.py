@@ -229,15 +229,15 @@ def test_the_scene_fmus_serialise_their_whole_state(tmp_path):
     from hycosim.node.loader import load_node
 
     ensure_scene_fmus(REPO / "hycosim" / "build" / "fmus")  # where the shipped config names them (make fmus)
-    loaded = load_project(REPO / "hycosim" / "configs" / "grasp-paper.json")
+    loaded = load_project(REPO / "hycosim" / "scenario" / "configs" / "grasp-paper.json")
     for name in ("rod", "robot"):
         spec = loaded.project.node(name)
         made = []
 
         def make():
-            node = load_node(spec, REPO / "hycosim" / "configs")
+            node = load_node(spec, REPO / "hycosim" / "scenario" / "configs")
             node.setup(NodeContext(name, spec.UID, list(spec.input), list(spec.output), dict(spec.parameters), 0.01,
-                                   0.0, project_dir=REPO / "hycosim" / "configs"))
+                                   0.0, project_dir=REPO / "hycosim" / "scenario" / "configs"))
             made.append(node)
             return node
 

@@ -35,7 +35,7 @@ def grasp_run(tmp_path_factory) -> tuple[Path, Path]:
     """The reference grasp (rod, robot scene, controller: Python nodes), run once: (project, run)."""
     tmp = tmp_path_factory.mktemp("grasp")
     cfg = tmp / "grasp.json"
-    doc = json.loads((REPO / "hycosim" / "configs" / "grasp.json").read_text())
+    doc = json.loads((REPO / "hycosim" / "scenario" / "configs" / "grasp.json").read_text())
     doc["coSimulation"]["stopTime"] = 2.0
     cfg.write_text(json.dumps(doc))
     return cfg, run_project(cfg, tmp / "runs")
@@ -60,7 +60,7 @@ def test_a_grasp_trial_with_its_camera_replayed_reproduces_the_trials_values(tmp
     """The paper's scenario (rod and robot FMUs, policy, camera at 60 Hz, paced by the wall clock):
     played back, the camera gives the same samples at the same points, so every value matches."""
     fmus = build_scene_fmus(tmp_path / "build" / "fmus")
-    doc = json.loads((REPO / "hycosim" / "configs" / "grasp-paper.json").read_text())
+    doc = json.loads((REPO / "hycosim" / "scenario" / "configs" / "grasp-paper.json").read_text())
     doc["coSimulation"]["stopTime"] = 1.5
     for n in doc["nodeLists"]:
         if n.get("fmu"):

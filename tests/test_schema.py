@@ -11,7 +11,7 @@ from hycosim.core.schema import project_json_schema
 from hycosim.cli.commands.project import SCHEMA_FILE
 from tests.helpers import REPO, hycosim
 
-CONFIGS = sorted((REPO / "hycosim" / "configs").glob("*.json"))
+CONFIGS = sorted((REPO / "hycosim").glob("**/configs/*.json"))
 
 
 def test_the_shipped_schema_is_the_models_and_hycosim_schema_prints_it():

@@ -66,11 +66,13 @@ def end_process(code: int) -> NoReturn:
     os._exit(code)
 
 
-def say_outcome(console: Console, text: str) -> None:
-    """Print a process's last word. Its stderr may be a file on a disk that just filled up
-    (a launched node's): the exit status still tells the outcome, so a failed print is let go."""
+def say_outcome(console: Console, text: str, error: bool = False) -> None:
+    """Print a process's last word, as it is (a message may quote brackets, which rich would
+    take for markup), after ``error:`` where it is one. Its stderr may be a file on a disk that
+    just filled up (a launched node's): the exit status still tells the outcome, so a failed
+    print is let go."""
     try:
-        console.print(text, highlight=False)
+        console.print(Text.assemble(("error:", "red"), " ", text) if error else Text(text), highlight=False)
     except OSError:
         pass
 

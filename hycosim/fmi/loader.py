@@ -454,16 +454,23 @@ def check_parameters(md: ModelDescription, node: str, parameters: dict[str, Any]
 
 def array_elements(value: Any, shape: tuple[int, ...]) -> list[Any] | None:
     """The elements of an array value as a project file gives them, row-major: a flat list of
-    every element, or lists nested as ``shape``; None if it is neither."""
+    every element, or lists nested exactly as ``shape``; None if it is neither."""
     if type(value) is not list:
         return None
     if len(value) == math.prod(shape) and not any(type(v) is list for v in value):
         return value
-    if len(shape) < 2 or len(value) != shape[0]:
+    return _nested_elements(value, shape) if len(shape) >= 2 else None
+
+
+def _nested_elements(value: Any, shape: tuple[int, ...]) -> list[Any] | None:
+    # Below the top, a row is nested as the rest of the shape: [[0, 0, 0, 0]] is no 1x2x2 array.
+    if type(value) is not list or len(value) != shape[0]:
         return None
+    if len(shape) == 1:
+        return None if any(type(v) is list for v in value) else value
     out: list[Any] = []
     for row in value:
-        inner = array_elements(row, shape[1:])  # None, or exactly the row's elements
+        inner = _nested_elements(row, shape[1:])
         if inner is None:
             return None
         out.extend(inner)

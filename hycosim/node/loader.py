@@ -23,22 +23,45 @@ from hycosim.core.hints import did_you_mean
 
 from hycosim.node.interface import AsyncSource, Node, missing_state_methods
 
+# The framework's own models. Other packages (the grasp demo among them) add theirs as entry points
+# of the group MODEL_GROUP, ``name = "module:Class"``, read without importing them.
 REFERENCE_MODELS = {
     "gain": "hycosim.node.reference.gain:Gain",
     "ramp": "hycosim.node.reference.ramp:Ramp",
     "pendulum": "hycosim.node.reference.pendulum:Pendulum",
     "bouncing_ball": "hycosim.node.reference.bouncing_ball:BouncingBall",
     "ramp_source": "hycosim.node.reference.ramp_source:RampSource",
-    "rod": "hycosim.scenario.rod.node:RodNode",
-    "robot": "hycosim.scenario.robot.node:RobotNode",
-    "reference_controller": "hycosim.scenario.robot.controller:ReferenceController",
-    "camera": "hycosim.scenario.camera.node:CameraNode",
-    "policy": "hycosim.scenario.policy.node:PolicyNode",
 }
+MODEL_GROUP = "hycosim.models"
+# FMU files a package knows how to build (the scene FMUs): an entry point named for the file,
+# pointing at the command (a format string with {folder}) that builds it there.
+FMU_BUILDER_GROUP = "hycosim.fmu_builders"
 
 
-# The FMUs `hycosim scene fmus` builds (clients.scene_fmus), named in a missing-file message.
-SCENE_FMUS = ("Rod.fmu", "RobotScene6.fmu")
+def _entry_points(group: str):
+    # importlib.metadata costs ~30 ms to import: only a name that is no reference model pays it.
+    from importlib.metadata import entry_points
+
+    return entry_points(group=group)
+
+
+def known_models() -> dict[str, str]:
+    """Every model a node entry may name: the reference models and those installed packages
+    register (entry points of ``hycosim.models``), each as ``module:Class``."""
+    registered = {ep.name: ep.value for ep in _entry_points(MODEL_GROUP)}
+    return {**registered, **REFERENCE_MODELS}
+
+
+def fmu_build_command(path: Path) -> str | None:
+    """The command that builds the FMU file ``path`` where an installed package registered
+    one for its name (``hycosim.fmu_builders``), else None."""
+    for ep in _entry_points(FMU_BUILDER_GROUP):
+        if ep.name == path.name:
+            try:
+                return str(ep.load()).format(folder=path.parent)
+            except Exception:  # a damaged package's entry point: no hint rather than no message
+                return None
+    return None
 
 
 class NodeLoadError(RuntimeError):
@@ -48,8 +71,8 @@ class NodeLoadError(RuntimeError):
 def _fmu_path(spec: NodeSpec, project_dir: Path) -> Path:
     path = (project_dir / spec.fmu).resolve()
     if not path.is_file():
-        hint = (f"; build it with: hycosim scene fmus -o {path.parent}" if path.name in SCENE_FMUS
-                else f"; a bridge FMU is built with: hycosim fmu build PROJECT -o {path.parent}")
+        command = fmu_build_command(path)
+        hint = f"; build it with: {command}" if command else ""
         raise NodeLoadError(f"node {spec.nodeName!r}: FMU file {path} does not exist{hint}")
     if spec.asynchronous:
         raise NodeLoadError(f"node {spec.nodeName!r}: an FMU node steps; it cannot be asynchronous")
@@ -82,6 +105,9 @@ def _import(module_name: str, project_dir: Path):
 
 # The top-level packages hycosim installed before 0.2.0, when its modules moved under hycosim.
 _OLD_TOP_LEVEL = ("clients", "core", "server", "fmu_bridge", "dashboard")
+# Where 0.3.0 moved the packages a model could name.
+_MOVED = {"hycosim.clients.": "hycosim.node (the reference models) or hycosim.scenario (the grasp demo's)",
+          "hycosim.fmu_bridge.": "hycosim.fmi or hycosim.bridge"}
 
 
 def _missing_module_hint(missing: str | None, module_name: str) -> str:
@@ -92,6 +118,9 @@ def _missing_module_hint(missing: str | None, module_name: str) -> str:
         return f"; this model needs hycosim's [{extra}] extra: {install_hint(extra)}"
     if missing is not None and missing.partition(".")[0] in _OLD_TOP_LEVEL and module_name.startswith(missing):
         return f"; hycosim's modules are under hycosim. since 0.2.0: 'hycosim.{module_name}'"
+    for old, new in _MOVED.items():
+        if module_name.startswith(old):
+            return f"; {old.rstrip('.')} moved in 0.3.0 to {new}"
     return ""
 
 
@@ -100,13 +129,15 @@ def model_class(spec: NodeSpec, project_dir: Path | None = None) -> type[Node] |
     for a stepping node, an AsyncSource for an asynchronous one, taking the parameters given.
     ``project_dir``: the project file's folder, where the user's own models may lie."""
     if not spec.model:
-        raise NodeLoadError(f"node {spec.nodeName!r} names no 'model' to run; give a reference model "
-                            f"({', '.join(sorted(REFERENCE_MODELS))}), 'module:Class' or 'file.py:Class'")
-    target = REFERENCE_MODELS.get(spec.model, spec.model)
-    module_name, _, class_name = target.rpartition(":")
+        raise NodeLoadError(f"node {spec.nodeName!r} names no 'model' to run; give a known model "
+                            f"({', '.join(sorted(known_models()))}), 'module:Class' or 'file.py:Class'")
+    target = REFERENCE_MODELS.get(spec.model) or (spec.model if ":" in spec.model else known_models().get(spec.model))
+    module_name, _, class_name = (target or "").rpartition(":")
     if not module_name or not class_name:
-        raise NodeLoadError(f"node {spec.nodeName!r}: model {spec.model!r} is neither a reference model "
-                            f"({', '.join(sorted(REFERENCE_MODELS))}) nor 'module:Class' or 'file.py:Class'")
+        known = known_models()
+        raise NodeLoadError(f"node {spec.nodeName!r}: model {spec.model!r} is neither a known model "
+                            f"({', '.join(sorted(known))}) nor 'module:Class' or 'file.py:Class'"
+                            f"{did_you_mean([spec.model], known)}")
     try:
         cls = getattr(_import(module_name, project_dir or Path.cwd()), class_name)
     except Exception as exc:  # the user's module may fail to import in any way (SyntaxError, its own errors)

@@ -16,6 +16,8 @@ from hycosim.bridge import model_fmu
 from hycosim.bridge.model_fmu import build_model_fmu
 
 HERE = Path(__file__).resolve().parent
+# What builds them, named by the node loader when a project's FMU file is missing.
+BUILD_COMMAND = "hycosim scene fmus -o {folder}"
 _PACKAGED = ("__init__.py", "rod/__init__.py", "rod/model.py", "rod/bounded.py", "robot/__init__.py",
              "robot/kr6.py", "robot/ik.py", "robot/scene.py")
 

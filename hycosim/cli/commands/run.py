@@ -35,7 +35,7 @@ def server(
     code, rdir, message = serve(loaded, listen=listen, runs_dir=runs_dir, run_dir=run_dir,
                                 progress_jsonl=progress_jsonl, gateway=gateway, resume=resume)
     if code:
-        say_outcome(err, f"[red]error:[/red] {message}" + (f"\n  results so far: {rdir}" if rdir else ""))
+        say_outcome(err, message + (f"\n  results so far: {rdir}" if rdir else ""), error=True)
     elif not progress_jsonl:
         say_outcome(out, f"{message}; results in {rdir}")
     end_process(code)
@@ -55,7 +55,7 @@ def node(
 
     loaded = load(file)
     code, message = run_node(loaded, name, connect, log_file, password_file)
-    say_outcome(err if code else out, ("[red]error:[/red] " if code else "") + message)
+    say_outcome(err if code else out, message, error=bool(code))
     end_process(code)
 
 
@@ -107,7 +107,7 @@ def run(
     if result.code >= 128:
         ignore_stops()  # a Ctrl-C pressed twice: the run is over, say so
     if result.code:
-        err.print(f"[red]error:[/red] {result.message}\n  results so far: {result.run_dir}", highlight=False)
+        say_outcome(err, f"{result.message}\n  results so far: {result.run_dir}", error=True)
         raise typer.Exit(result.code)
     _print_summary(result.run_dir)
 

@@ -9,6 +9,7 @@ from typing import Annotated, Optional
 
 import typer
 from rich.table import Table
+from rich.text import Text
 
 from hycosim.cli.extras import require_extra
 from hycosim.cli.options import finite
@@ -162,7 +163,7 @@ def trials(
              + (f"{', '.join(f'{a:g}°' for a in outside)} outside (0°, 90°)" if outside else "no angle given"))
     def progress(r) -> None:
         if r.error:
-            err.print(f"{r.angle:g}° #{r.trial}: [red]not run[/red]: {r.error}", highlight=False)
+            err.print(Text.assemble(f"{r.angle:g}° #{r.trial}: ", ("not run", "red"), f": {r.error}"), highlight=False)
             return
         err.print(f"{r.angle:g}° #{r.trial}: {'grasped' if r.success else 'missed'}"
                   + (f", {r.grasp_error_mm:.1f} mm, {r.execution_time_s:.2f} s" if r.success else ""), highlight=False)
