@@ -108,7 +108,7 @@ def test_the_answer_budget_grants_at_most_its_rate_and_burst_and_refuses_only_be
     """Questions at any times: the answers granted by any moment are at most the burst plus the
     rate times the time gone by, every refusal is counted, and a question that finds the
     bucket refilled for one more is never refused."""
-    from hycosim.server.answer_budget import AnswerBudget
+    from hycosim.transport.answer_budget import AnswerBudget
 
     now = [0.0]
     budget = AnswerBudget(per_s, burst, clock=lambda: now[0])
@@ -127,7 +127,7 @@ def test_the_answer_budget_grants_at_most_its_rate_and_burst_and_refuses_only_be
 
 
 def test_an_asker_within_the_budget_is_never_refused():
-    from hycosim.server.answer_budget import AnswerBudget
+    from hycosim.transport.answer_budget import AnswerBudget
 
     now = [0.0]
     budget = AnswerBudget(32.0, 20, clock=lambda: now[0])

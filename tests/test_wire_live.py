@@ -113,7 +113,7 @@ def test_a_peer_asking_the_status_in_a_loop_gets_the_budgets_answers_and_busy_fo
     peer asking as fast as it can (before, it took a fast ring from 3,000 steps/s to 500) gets
     at most the budget's answers and a 'busy' error at once for the rest, each one counted in
     meta.json; `hycosim status` says the server is busy; the run goes on to its end."""
-    from hycosim.server.answer_budget import ANSWERS_PER_S, BURST
+    from hycosim.transport.answer_budget import ANSWERS_PER_S, BURST
 
     endpoint = free_endpoint()
     proc = _run(_project(tmp_path / "asked.json", endpoint), tmp_path / "asked", endpoint)

@@ -44,7 +44,7 @@ from hycosim.transport.session import FrameTooLarge
 from hycosim.core.sim_clock import RealTimeClock
 
 from hycosim.server import checkpoints, initialisation, plans
-from hycosim.server.answer_budget import AnswerBudget
+from hycosim.transport.answer_budget import AnswerBudget
 from hycosim.server.async_sources import SampleHistory
 from hycosim.server.coordinator import Coordinator, GuardEvaluationError
 from hycosim.bridge.gateway import Gateway, GatewayError

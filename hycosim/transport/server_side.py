@@ -19,7 +19,7 @@ from hycosim.transport.inbox import Inbox
 from hycosim.transport.keys import SERVER_TOKEN, ProjectKeys
 from hycosim.transport.local_bus import DirectStep, LocalBus
 from hycosim.transport.session import FramePublisher
-from hycosim.server.answer_budget import AnswerBudget
+from hycosim.transport.answer_budget import AnswerBudget
 
 
 class RelayInbox(Protocol):
