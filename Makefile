@@ -4,18 +4,26 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: setup run test test-long bench fmus trials train baseline docs clean chromium tbb bytecode
+.PHONY: setup run test test-long bench fmus trials train baseline docs clean chromium tbb bytecode lock
 
 setup: $(STAMP)
 
 # torch is pinned to the CPU build that pip finds on this machine's disk; pinning it
 # before anything else keeps pip from resolving a CUDA build for a dependent.
-$(STAMP): pyproject.toml
+# constraints.txt holds the versions the suite last passed with (`make lock` writes it): pyproject
+# keeps lower bounds for users, while a fresh clone and CI install what was tested, not
+# whatever pip resolves that day (a new mujoco or opencv major release).
+$(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip setuptools wheel
-	$(PY) -m pip install --quiet "torch==2.13.0"
-	$(PY) -m pip install --quiet -e ".[scenario,dashboard,models,test,docs]"
+	$(PY) -m pip install --quiet -c constraints.txt "torch==2.13.0"
+	$(PY) -m pip install --quiet -c constraints.txt -e ".[scenario,dashboard,models,test,docs]"
 	touch $(STAMP)
+
+# Refresh constraints.txt from what .venv holds now (after `make test` passed on it). torch's
+# local label (+cpu) is dropped: the pin names the release, the Makefile the build.
+lock: $(STAMP)
+	$(PY) -m pip freeze --exclude-editable --exclude hycosim | sed 's/+cpu$$//' | LC_ALL=C sort -f > constraints.txt
 
 # Every run starts a process per node and one for the server, each importing the package. Where
 # PYTHONDONTWRITEBYTECODE is set (as on these machines) each of them compiled its modules from
@@ -62,7 +70,7 @@ test-long: $(STAMP) bytecode
 	$(PY) -m pytest -q -p no:cacheprovider -m long
 
 bench: $(STAMP) bytecode chromium tbb
-	$(PY) -m pip install --quiet -e ".[scenario,dashboard,models,test,docs,bench]"
+	$(PY) -m pip install --quiet -c constraints.txt -e ".[scenario,dashboard,models,test,docs,bench]"
 	$(PY) benchmarks/barrier.py --cpu --table benchmarks/results/barrier.md
 	$(PY) benchmarks/inprocess.py --table benchmarks/results/inprocess.md
 	$(PY) benchmarks/crosscheck.py --table benchmarks/results/crosscheck.md

@@ -1,7 +1,7 @@
 """The paper's own formulation of the grasp policy against the engineered one, for the same
 training time on this machine.
 
-The paper's formulation (``clients/policy/paper.py``): state = TCP position, six joint angles,
+The paper's formulation (``hycosim/scenario/policy/paper.py``): state = TCP position, six joint angles,
 the rod's grasp-point position and angle; action = six joint targets; Equation 6 as reward;
 plain DDPG from scratch, no demonstrations. It is trained for ``--minutes`` of wall time
 per seed and evaluated every ``--eval-every`` episodes (success per release angle, the

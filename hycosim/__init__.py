@@ -1,9 +1,11 @@
 """hycosim: hybrid time/event co-simulation on the FMI standard, relayed over Eclipse Zenoh.
 
-``hycosim.core`` holds the project file, frames, keys and sessions; ``hycosim.fmu_bridge``
-everything FMU and SSP; ``hycosim.server`` the relay and its coordinator; ``hycosim.node``
-the node runtime and the nodes; ``hycosim.dashboard`` the web dashboard; ``hycosim.cli`` the
-command line.
+``hycosim.core`` holds what every part shares (the project file, frames, run files);
+``hycosim.transport`` Zenoh sessions and the in-process bus; ``hycosim.server`` the relay and
+its coordinator; ``hycosim.node`` the node interface and runtime; ``hycosim.fmi`` FMU import
+(co-simulation, Model Exchange, SSP); ``hycosim.bridge`` FMU export and the gateway;
+``hycosim.scenario`` the paper's grasp demo; ``hycosim.dashboard`` the web dashboard;
+``hycosim.cli`` the command line.
 """
 
 

@@ -26,7 +26,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from hycosim.core import signals
 from hycosim.core.config import LoadedProject
 from hycosim.core.folders import run_dir_for
-from hycosim.core.signals import FAILED_ELSEWHERE
+from hycosim.core.signals import FAILED_ELSEWHERE, NODE_UNLOADABLE
 
 
 def free_loopback_endpoint() -> str:
@@ -41,6 +41,7 @@ class EmbeddedResult:
     run_dir: Path
     message: str
     node_failures: dict[str, str] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)  # what went amiss without harming the records
 
 
 _LAUNCHER_LINE = "[hycosim run]"  # what the launcher itself writes into a node's stderr file
@@ -199,7 +200,8 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
                         # that fails before the start as the one before it did (a broken model), one
                         # the server stopped (FAILED_ELSEWHERE), one whose server is gone.
                         again = (restarted.get(name, 0) < restarts and code is None and not server_stopped
-                                 and proc.returncode != FAILED_ELSEWHERE and server.poll() is None
+                                 and proc.returncode not in (FAILED_ELSEWHERE, NODE_UNLOADABLE)
+                                 and server.poll() is None
                                  and (restartable if started else last_cause.get(name) != cause))
                         if again:
                             restarted[name] = restarted.get(name, 0) + 1
@@ -313,6 +315,7 @@ def _shut_down(server: subprocess.Popen, nodes: dict[str, subprocess.Popen], run
     grace = 15.0 if code == 0 else 2.0
     deadline = time.monotonic() + grace
     interrupted = set()
+    warnings: list[str] = []
     for name, proc in nodes.items():
         try:
             proc.wait(timeout=max(0.0, deadline - time.monotonic()))
@@ -326,6 +329,12 @@ def _shut_down(server: subprocess.Popen, nodes: dict[str, subprocess.Popen], run
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+        if code == 0 and name in interrupted and name not in failures:
+            # The run completed: the node had sent its last outputs, every record is whole. A
+            # model slow to let go (its teardown, a thread) is the node's business, not the run's.
+            warnings.append(f"node {name!r} had not exited {grace:g} s after the run completed and was killed "
+                            f"(its records are complete; see {run_dir / f'node-{name}.stderr.txt'})")
+            continue
         if proc.returncode not in (0, FAILED_ELSEWHERE) and name not in failures and not (code and name in interrupted):
             failures[name] = _node_failure(run_dir, name, proc.returncode)
     if user_stopped:
@@ -341,4 +350,4 @@ def _shut_down(server: subprocess.Popen, nodes: dict[str, subprocess.Popen], run
         _record_failure(run_dir, message)
     elif failures:
         message += "".join(f"\n  node {n}: {m}" for n, m in failures.items() if m)
-    return EmbeddedResult(code, run_dir, message, failures)
+    return EmbeddedResult(code, run_dir, message, failures, warnings)

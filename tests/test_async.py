@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 from hycosim.server.async_sources import SampleHistory
 from tests.helpers import column, meta, read_rows, run_project, write_project
@@ -81,6 +82,9 @@ def test_extrapolated_and_held_samples_over_zenoh(tmp_path):
             checked += 1
     assert checked > 50
     assert meta(run)["samples_received"]["sensor"] >= int(rate * 0.9)
+    # A source's last word counts what it sent: samples, not the steps it never takes.
+    said = re.search(r"node 'sensor' finished after (\d+) samples", (run / "node-sensor.stderr.txt").read_text())
+    assert said and int(said[1]) >= meta(run)["samples_received"]["sensor"], (run / "node-sensor.stderr.txt").read_text()
 
 
 def test_real_time_pacing_keeps_its_pace_when_the_wall_clock_is_stepped(monkeypatch):

@@ -327,9 +327,10 @@ def test_gateway_refuses_an_fmu_for_a_node_already_attached_over_zenoh(tmp_path)
     endpoint = json.loads(cfg.read_text())["serverIP"]
     server, clock = _start(cfg, tmp_path / "run")
     deadline = time.monotonic() + 30
-    while "attached 1/2" not in hycosim("status", endpoint, "--project", "bridge").stdout:
+    while "attached 1/2" not in (said := hycosim("status", endpoint, "--project", "bridge").stdout):
         assert time.monotonic() < deadline, "clock never attached"
         time.sleep(0.2)
+    assert "attached 1/2: clock; waiting for tool" in said, said  # who is there, and who is not
     sock, kind, payload = _raw_attach(cfg, server, uid=1, name="clock", n_out=2, n_in=0)
     sock.close()
     assert kind == gp.REFUSE and payload.decode() == (

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from tests.helpers import REPO, hycosim
@@ -160,3 +162,107 @@ def test_an_output_folder_that_is_a_file_is_named_as_no_folder(tmp_path):
         assert f"{tmp_path / 'runs'}: " in res.stderr and "Traceback" not in res.stderr
         assert "exists and is not a folder" in res.stderr and "File exists" not in res.stderr
     assert (tmp_path / "runs").read_text() == "a file"
+
+
+def test_help_shows_plain_metavars_and_whole_sentences():
+    """Help as a user reads it: FILE, not {file}; no <bool> after a flag; each command's line in
+    the list one whole summary (a docstring's line breaks fell mid-sentence there)."""
+    import subprocess
+
+    from tests.helpers import HYCOSIM, env
+
+    def wide(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run([*HYCOSIM, *args], capture_output=True, text=True, timeout=120,
+                              env=dict(env(), COLUMNS="240"), cwd=REPO)
+
+    res = wide("--help")
+    assert res.returncode == 0 and "<bool>" not in res.stdout and "{" not in res.stdout, res.stdout
+    listing = res.stdout.split("Commands", 1)[1]
+    rows = [line.strip("│ ").strip() for line in listing.splitlines() if line.startswith("│")]
+    assert len(rows) >= 15, rows
+    assert all(row.endswith((".", ")")) for row in rows), [r for r in rows if not r.endswith((".", ")"))]
+    res = wide("validate", "--help")
+    assert "Usage: hycosim validate [OPTIONS] FILE" in res.stdout and "<bool>" not in res.stdout, res.stdout
+
+
+def test_an_unknown_node_of_a_pairs_link_is_named_once(tmp_path):
+    project = tmp_path / "p.json"
+    project.write_text(json.dumps({
+        "projectName": "p", "nodeNum": 1, "linkNum": 1,
+        "nodeLists": [{"nodeName": "a", "UID": 1, "model": "gain", "input": ["u"], "output": ["y"]}],
+        "linkLists": [{"from": "zz", "to": "a", "pairs": [["y", "u"], ["y", "u2"], ["y", "u3"]]}],
+        "coSimulation": {"stepSize": 0.1, "stopTime": 1.0}}))
+    res = hycosim("validate", str(project))
+    assert res.returncode == 2 and res.stderr.count("unknown node 'zz'") == 1, res.stderr
+
+
+def test_fmu_build_into_a_missing_tree_is_refused_and_makes_nothing(tmp_path):
+    project = tmp_path / "p.json"
+    project.write_text(json.dumps({
+        "projectName": "p", "nodeNum": 1, "linkNum": 0,
+        "nodeLists": [{"nodeName": "tool", "UID": 1, "input": ["u"], "output": ["y"]}],
+        "linkLists": [], "coSimulation": {"stepSize": 0.1, "stopTime": 1.0}}))
+    res = hycosim("fmu", "build", str(project), "-o", str(tmp_path / "no" / "such" / "dir"))
+    assert res.returncode == 2 and "no/such: its parent folder" not in res.stderr
+    assert f"its parent folder {tmp_path / 'no' / 'such'} does not exist" in res.stderr, res.stderr
+    assert not (tmp_path / "no").exists()
+
+
+def test_a_reader_that_stops_early_ends_the_command_quietly(tmp_path):
+    """`hycosim report RUN | head -1`: exit 0, no traceback, when the pipe closes."""
+    import subprocess
+    import sys
+
+    doc = {"projectName": "chain", "nodeNum": 2, "linkNum": 1,
+           "nodeLists": [{"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+                         {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]}],
+           "linkLists": [{"from": "clock.y", "to": "g.u"}], "coSimulation": {"stepSize": 0.01, "stopTime": 0.2}}
+    (tmp_path / "p.json").write_text(json.dumps(doc))
+    res = hycosim("run", str(tmp_path / "p.json"), "--in-process", "--no-progress", "--runs-dir", str(tmp_path / "runs"))
+    assert res.returncode == 0, res.stderr
+    run = next((tmp_path / "runs").iterdir())
+    script = (f"set -o pipefail; {sys.executable} -m hycosim report {run} | head -c 1 >/dev/null; "
+              f"echo status=$?")
+    res = subprocess.run(["bash", "-c", script], capture_output=True, text=True, cwd=REPO, timeout=120,
+                         env=dict(__import__("os").environ, PYTHONPATH=str(REPO), COLUMNS="60"))
+    assert "status=0" in res.stdout and "Traceback" not in res.stderr and "BrokenPipe" not in res.stderr, (
+        res.stdout, res.stderr)
+
+
+def test_run_of_a_model_that_is_not_there_ends_at_once_with_2_and_makes_no_run_directory(tmp_path):
+    import time
+
+    for model, says in (("gian", "did you mean 'gain'?"), ("nowhere_module:Thing", "no module named 'nowhere_module'"),
+                        ("missing.py:Thing", "no file")):
+        project = tmp_path / "p.json"
+        project.write_text(json.dumps({
+            "projectName": "p", "nodeNum": 2, "linkNum": 1,
+            "nodeLists": [{"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+                          {"nodeName": "g", "UID": 2, "model": model, "input": ["u"], "output": ["y"]}],
+            "linkLists": [{"from": "clock.y", "to": "g.u"}], "coSimulation": {"stepSize": 0.1, "stopTime": 1.0}}))
+        for mode in ("--processes", "--in-process"):
+            started = time.monotonic()
+            res = hycosim("run", str(project), mode, "--runs-dir", str(tmp_path / "runs"))
+            took = time.monotonic() - started
+            assert res.returncode == 2 and says in res.stderr and "node 'g'" in res.stderr, (model, mode, res.stderr)
+            assert res.stderr.count("error:") == 1 and "Traceback" not in res.stderr, res.stderr
+            assert not (tmp_path / "runs").exists(), (model, mode)
+            assert took < 2.0 + 1.0, took  # the CLI's imports are ~0.6 s of it on 2 busy cores
+
+
+def test_a_node_whose_model_fails_to_import_is_not_started_again(tmp_path):
+    """What the launcher can see only by importing it: the node says it cannot load (exit 2)
+    and is not retried, since starting it again fails alike."""
+    (tmp_path / "broken.py").write_text("import no_such_module_anywhere\n")
+    project = tmp_path / "p.json"
+    project.write_text(json.dumps({
+        "projectName": "p", "nodeNum": 2, "linkNum": 1,
+        "nodeLists": [{"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+                      {"nodeName": "g", "UID": 2, "model": "broken.py:Thing", "input": ["u"], "output": ["y"]}],
+        "linkLists": [{"from": "clock.y", "to": "g.u"}],
+        "coSimulation": {"stepSize": 0.1, "stopTime": 1.0, "attachTimeout": 20.0}}))
+    res = hycosim("run", str(project), "--runs-dir", str(tmp_path / "runs"), "--no-progress", "--restarts", "3")
+    assert res.returncode != 0 and "no_such_module_anywhere" in res.stderr, res.stderr
+    run = next((tmp_path / "runs").iterdir())
+    log = (run / "node-g.stderr.txt").read_text()
+    assert "started again" not in log and log.count("no_such_module_anywhere") == 1, log

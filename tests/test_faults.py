@@ -581,3 +581,28 @@ def test_a_run_whose_folder_is_removed_while_it_runs_says_so_in_one_line(tmp_pat
     assert f"error: the run ended, but its results cannot be read: {run_dir}" in " ".join(err.split())
     assert "moved or removed while the run wrote it" in " ".join(err.split())
     assert "Traceback" not in err and "│" not in err
+
+
+_SLOW_TO_LEAVE = """
+import time
+
+from hycosim.node.reference.gain import Gain
+
+
+class SlowToLeave(Gain):
+    def teardown(self):
+        time.sleep(60)  # past the launcher's grace after a completed run
+"""
+
+
+def test_a_node_slow_to_exit_after_a_completed_run_is_a_warning_not_a_failure(tmp_path):
+    (tmp_path / "slow.py").write_text(_SLOW_TO_LEAVE)
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "lazy", "UID": 2, "model": "slow.py:SlowToLeave", "input": ["u"], "output": ["y"]},
+    ], [{"from": "clock.y", "to": "lazy.u"}], cosim={"stepSize": 0.01, "stopTime": 0.2})
+    res = hycosim("run", str(cfg), "--runs-dir", str(tmp_path / "runs"), "--no-progress", timeout=120)
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "warning: node 'lazy' had not exited" in res.stderr and "records are complete" in res.stderr, res.stderr
+    run = next((tmp_path / "runs").iterdir())
+    assert meta(run)["status"] == "completed" and len(read_rows(run)) == 21

@@ -170,10 +170,91 @@ def test_the_core_install_runs_fmus_from_the_docs_and_names_a_missing_extra(inst
         assert res.returncode == 2, (args, res.stdout, res.stderr)
         assert f"[{extra}] extra" in res.stderr and f"pip install 'hycosim[{extra}]'" in res.stderr, res.stderr
         assert "Traceback" not in res.stderr, res.stderr
-    # A project whose node is one of the scenario's Python models names the extra too.
-    res = installed.hycosim("validate", str(next(installed.venv.glob("lib/python*/site-packages/hycosim/configs"))
-                                           / "grasp.json"))
+    # A project whose node is one of the scenario's Python models names the extra too, and
+    # `run` says so at once, before it makes a run directory or starts a process.
+    shipped_grasp = next(installed.venv.glob("lib/python*/site-packages/hycosim/scenario/configs")) / "grasp.json"
+    res = installed.hycosim("validate", str(shipped_grasp))
     assert res.returncode == 2 and "[scenario] extra" in res.stderr and "Traceback" not in res.stderr, res.stderr
+    started = time.monotonic()
+    res = installed.hycosim("run", str(shipped_grasp), "--runs-dir", "grasp-runs")
+    took = time.monotonic() - started
+    assert res.returncode == 2 and "pip install 'hycosim[scenario]'" in res.stderr, res.stdout + res.stderr
+    assert not (installed.work / "grasp-runs").exists() and took < 5, took
+
+
+def test_the_core_install_writes_and_runs_an_example_from_anywhere(installed):
+    res = installed.hycosim("examples")
+    assert res.returncode == 0, res.stderr
+    listed = {line.split()[0] for line in res.stdout.splitlines() if line.strip()}
+    assert {"default", "grasp", "grasp-fmu", "grasp-paper", "grasp-policy"} <= listed, res.stdout
+    assert "[scenario]" in res.stdout  # what the grasp examples need, as written (no markup eaten)
+    res = installed.hycosim("examples", "default", "-o", "d")
+    assert res.returncode == 0 and (installed.work / "d" / "default.json").is_file(), res.stdout + res.stderr
+    assert (installed.work / "d" / "project.schema.json").is_file()
+    res = installed.hycosim("validate", "d/default.json")
+    assert res.returncode == 0 and res.stdout.startswith("OK d/default.json"), res.stdout + res.stderr
+    res = installed.hycosim("run", "d/default.json", "--no-progress", "--runs-dir", "d/runs")
+    assert res.returncode == 0, res.stdout + res.stderr
+    run = next((installed.work / "d" / "runs").glob("pendulum-catch-*"))
+    assert json.loads((run / "meta.json").read_text())["status"] == "completed"
+    # An example whose FMUs get built needs the extra that builds them, and says so.
+    res = installed.hycosim("examples", "grasp-fmu", "-o", "g")
+    assert res.returncode == 2 and "[scenario] extra" in res.stderr and "Traceback" not in res.stderr, res.stderr
+    res = installed.hycosim("examples", "nope")
+    assert res.returncode == 2 and "no example named 'nope'" in res.stderr, res.stderr
+
+
+def _readme_commands() -> list[list[str]]:
+    """The commands of README's table, each as the words that name it (``fmu build``)."""
+    table = (REPO / "README.md").read_text().split("## Commands", 1)[1].split("\n## ", 1)[0]
+    commands = []
+    for cell in re.findall(r"`(hycosim [^`]+)`", table):
+        words = []
+        for word in cell.split()[1:]:
+            if not re.fullmatch(r"[a-z][a-z-]*", word):
+                break
+            words.append(word)
+        if words and words not in commands:
+            commands.append(words)
+    return commands
+
+
+def test_every_command_of_the_readme_ends_in_a_core_install_with_0_or_2_and_no_traceback(installed):
+    commands = _readme_commands()
+    assert len(commands) >= 20 and ["krl", "controller"] in commands and ["examples"] in commands, commands
+    # Each with no arguments, then with the least that gets past its usage check.
+    minimal = {("krl", "controller"): ["--eki", "foo.xml"], ("krl", "export"): ["nothere"],
+               ("validate",): ["x.json"], ("run",): ["x.json"], ("report",): ["nothere"],
+               ("fmu", "inspect"): ["x.fmu"], ("fmu", "build"): ["x.json", "-o", "/no/such/dir"],
+               ("scene", "reach"): ["x.json"], ("evaluate",): ["x.pt"], ("import",): ["x.ssp", "-o", "y.json"]}
+    for words in commands:
+        for extra_args in ([], minimal.get(tuple(words), [])):
+            res = installed.hycosim(*words, *extra_args, timeout=120)
+            said = res.stdout + res.stderr
+            assert res.returncode in (0, 2), (words, extra_args, res.returncode, said[-1500:])
+            assert "Traceback" not in said, (words, extra_args, said[-3000:])
+    assert not (installed.work / "runs").exists() or not any((installed.work / "runs").glob("x-*"))
+
+
+def test_the_models_extra_runs_getting_started_as_written(installed, tmp_path):
+    """Every step of docs/getting-started.md, from pip install 'hycosim[models]' alone."""
+    installed.pip_install(f"{installed.wheel}[models]", "models")
+    folder = installed.work / "tour"
+    folder.mkdir()
+    page = (REPO / "docs" / "getting-started.md").read_text()
+    assert "pip install 'hycosim[models]'" in page.split("## 1.", 1)[0]
+    blocks = re.finditer(r"<!-- (?:file: (?P<name>[\w.\-]+)|shell) -->\n```[a-z]*\n(?P<body>.*?)```", page, re.S)
+    ran = 0
+    for block in blocks:
+        if block["name"]:
+            (folder / block["name"]).write_text(block["body"])
+            continue
+        script = "\n".join(line[2:] for line in block["body"].splitlines() if line.startswith("$ "))
+        res = subprocess.run(["bash", "-e", "-c", script], capture_output=True, text=True, cwd=folder,
+                             env=_user_env(installed.venv), timeout=300)
+        assert res.returncode == 0, f"{script}\n--- exit {res.returncode}\n{res.stdout[-2000:]}\n{res.stderr[-3000:]}"
+        ran += 1
+    assert ran >= 5 and (folder / "Gain.fmu").is_file()
 
 
 def test_the_scenario_extra_runs_a_grasp_trial_from_the_installed_package(installed):
@@ -187,6 +268,25 @@ def test_the_scenario_extra_runs_a_grasp_trial_from_the_installed_package(instal
     # Built where the user is, not inside the installed package.
     assert not list(installed.venv.glob("lib/python*/site-packages/hycosim/build"))
     print(f"\ninstall times (s): {installed.timings}")
+
+
+def test_the_scenario_extra_writes_the_fmu_example_and_runs_it_from_its_folder(installed):
+    before = sorted(str(p) for p in installed.venv.glob("lib/python*/site-packages/hycosim/**/*"))
+    res = installed.hycosim("examples", "grasp-fmu", "-o", "g", timeout=600)
+    assert res.returncode == 0, res.stdout + res.stderr
+    g = installed.work / "g"
+    assert (g / "fmus" / "Rod.fmu").is_file() and (g / "fmus" / "RobotScene6.fmu").is_file()
+    doc = json.loads((g / "grasp-fmu.json").read_text())
+    assert {n["fmu"] for n in doc["nodeLists"] if "fmu" in n} == {"fmus/Rod.fmu", "fmus/RobotScene6.fmu"}
+    res = subprocess.run([str(installed.venv / "bin" / "hycosim"), "run", "grasp-fmu.json", "--no-progress"],
+                         capture_output=True, text=True, cwd=g, env=_user_env(installed.venv), timeout=600)
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-3000:]
+    run = next((g / "runs").glob("grasp-fmu-*"))
+    assert json.loads((run / "meta.json").read_text())["status"] == "completed"
+    assert '"to": "grasp"' in (run / "events.jsonl").read_text()
+    # Nothing was written into the installed package (no FMUs, no run, no cache).
+    after = sorted(str(p) for p in installed.venv.glob("lib/python*/site-packages/hycosim/**/*"))
+    assert [p for p in after if p not in before and "__pycache__" not in p] == []
 
 
 @given(st.one_of(st.none(), st.text(max_size=40), st.sampled_from(["cv2", "torch.nn", "clients", "clients.rod",

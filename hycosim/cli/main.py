@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import inspect
+import os
+import stat
 import sys
 from typing import Annotated
 
+import click
 import typer
 
 from hycosim.cli.commands import examples, fmu, project, results, run
@@ -60,6 +64,25 @@ def _join_multi_value_options(argv: list[str]) -> list[str]:
     return out
 
 
+def _is_pipe(fd: int) -> bool:
+    try:
+        return stat.S_ISFIFO(os.fstat(fd).st_mode)
+    except OSError:
+        return False
+
+
+def _help_in_sentences(group: click.Group) -> None:
+    """Each command's docstring as paragraphs of whole sentences: rich keeps a docstring's line
+    breaks, which then fell mid-sentence in ``--help`` and its list of commands."""
+    for command in group.commands.values():
+        if command.help:
+            paragraphs = [" ".join(p.split()) for p in inspect.cleandoc(command.help).split("\n\n")]
+            command.help = "\n\n".join(paragraphs)
+            command.short_help = command.short_help or paragraphs[0]
+        if isinstance(command, click.Group):
+            _help_in_sentences(command)
+
+
 def main() -> None:
     """Console entry point."""
     import faulthandler
@@ -73,8 +96,16 @@ def main() -> None:
     signals.raise_on_stop(heard)  # SIGTERM and SIGHUP (a supervisor, a closed terminal) are ways out like Ctrl-C
     prefer_shared_runtime()  # before any session opens; the server and nodes it starts inherit it
     try:
-        app(args=_join_multi_value_options(sys.argv[1:]), prog_name="hycosim")
+        piped = _is_pipe(1)
+        command = typer.main.get_command(app)
+        _help_in_sentences(command)
+        command(args=_join_multi_value_options(sys.argv[1:]), prog_name="hycosim")
     except SystemExit as exc:
+        if exc.code == 1 and piped and not _is_pipe(1):
+            # Click ends a command whose stdout pipe closed (`hycosim report RUN | head -1`) with
+            # 1, having put /dev/null in its place. The reader went because it had what it
+            # wanted: not a failure.
+            sys.exit(0)
         # Typer ends a command a stop signal interrupted with 130 whatever the signal; a
         # supervisor's SIGTERM (143) or a closed terminal's SIGHUP (129) is told apart, as
         # the server, the nodes and the launcher tell it.
@@ -82,6 +113,11 @@ def main() -> None:
         if stop is not None:
             sys.exit(signals.exit_code(stop))
         raise
+    except BrokenPipeError:
+        # The reader went (`hycosim report RUN | head -1`): it had what it wanted. Nothing more
+        # is written, not even the flush at exit, which would raise again.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        sys.exit(0)
     except Exception as exc:
         if heard:  # Ctrl-C while MuJoCo's or torch's extension initialised surfaces as an ImportError
             stop = signals.Stopped(heard[0])

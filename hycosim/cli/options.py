@@ -13,8 +13,9 @@ from hycosim.core.endpoints import EndpointError, parse_endpoint
 
 
 def finite(value: float | None) -> float | None:
-    """A float option's check where its range does not make one: Typer refuses nan for an option
-    with a bound, but takes nan and inf without one and inf past a lower bound alone."""
+    """A float option's check where its range does not make one: nan passes a bounded range
+    (every comparison with it is false), nan and inf an option without bounds, inf one with a
+    lower bound alone. Every float option takes it."""
     if value is not None and not math.isfinite(value):
         raise typer.BadParameter(f"{value} is not a finite number")
     return value

@@ -133,6 +133,12 @@ def _resolve_routes(project: Project, issues: list[Issue]) -> list[Route]:
                 continue
             pairs = [(src[0], src[1], dst[0], dst[1])]
         else:
+            # A link's nodes are named once for all its pairs: an unknown one is said once.
+            unknown = [(key, name) for key, name in (("from", link.source), ("to", link.target)) if name not in nodes]
+            for key, name in unknown:
+                issues.append(Issue(f"{where}.{key}", f"unknown node {name!r}", f"nodes are {sorted(nodes)}"))
+            if unknown:
+                continue
             pairs = [(link.source, o, link.target, n) for o, n in link.pairs]
         for j, (sn, sp, dn, dp) in enumerate(pairs):
             pw = where if link.pairs is None else f"{where}.pairs[{j}]"

@@ -61,6 +61,9 @@ def configure(log_file: Path | None = None, level: str = "info", stream: IO[str]
             structlog.dev.ConsoleRenderer() if terminal else structlog.processors.JSONRenderer(),
         ],
         wrapper_class=structlog.make_filtering_bound_logger(logging.getLevelName(level.upper())),
-        logger_factory=structlog.PrintLoggerFactory(_LossyStream(out)),
+        # One write a line (the line and its newline together): processes sharing one stdout
+        # (containers, nodes started by hand with PYTHONUNBUFFERED) would otherwise
+        # interleave a line of one with the newline of another.
+        logger_factory=structlog.WriteLoggerFactory(_LossyStream(out)),
         cache_logger_on_first_use=False,
     )

@@ -18,6 +18,8 @@ STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 # The exit status of a node whose run the server stopped because it failed elsewhere (the
 # server's reason is the node's message); launchers tell it from the node's own failure.
 FAILED_ELSEWHERE = 5
+# A node whose model cannot be loaded (bad input, as the command line's 2): started again, it fails alike.
+NODE_UNLOADABLE = 2
 
 
 class _Held:

@@ -90,7 +90,7 @@ class Node(ABC):
     @classmethod
     def parameter_problems(cls, parameters: dict[str, Any]) -> list[str]:
         """What is wrong with the values of a node entry's ``parameters``, each a sentence
-        naming the parameter (``clients.parameters`` has the checks). The loader refuses the
+        naming the parameter (``hycosim.node.parameters`` has the checks). The loader refuses the
         entry with them before the run, as it refuses names outside PARAMETERS. Empty:
         nothing wrong, or the model does not check."""
         return []

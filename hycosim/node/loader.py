@@ -10,6 +10,7 @@ and ``path/to/file.py:Class`` names a file relative to the project file.
 from __future__ import annotations
 
 import importlib
+import importlib.machinery
 import importlib.util
 import sys
 from collections.abc import Iterable
@@ -18,7 +19,7 @@ from typing import Any
 
 from hycosim.core.schema import CoSimulation
 from hycosim.core.schema import Node as NodeSpec
-from hycosim.core.extras import extra_providing, install_hint
+from hycosim.core.extras import extra_providing, install_hint, missing_modules
 from hycosim.core.hints import did_you_mean
 
 from hycosim.node.interface import AsyncSource, Node, missing_state_methods
@@ -156,6 +157,51 @@ def model_class(spec: NodeSpec, project_dir: Path | None = None) -> type[Node] |
     if wrong:
         raise NodeLoadError(f"node {spec.nodeName!r}: model {spec.model!r}: {'; '.join(wrong)}")
     return cls
+
+
+def locate_node(spec: NodeSpec, project_dir: Path) -> None:
+    """Raise NodeLoadError for what fails however often it is tried, found without importing a
+    model or loading an FMU: a model name that is neither known nor ``module:Class``, a module
+    or ``.py`` file that is not there, a registered model whose extra is not installed, an FMU
+    file that does not exist. A launcher calls it before it starts anything."""
+    if spec.replay or not (spec.fmu or spec.model or spec.asynchronous):
+        return
+    if spec.fmu:
+        _fmu_path(spec, project_dir)
+        return
+    if not spec.model:
+        model_class(spec, project_dir)  # refused: an asynchronous node needs a model
+    known = None if spec.model in REFERENCE_MODELS or ":" in spec.model else known_models()
+    target = REFERENCE_MODELS.get(spec.model) or (spec.model if known is None else known.get(spec.model))
+    module_name, _, class_name = (target or "").rpartition(":")
+    if not module_name or not class_name:
+        model_class(spec, project_dir)  # names the problem as a load does
+    if module_name.endswith(".py"):
+        if not (project_dir / module_name).is_file():
+            raise NodeLoadError(f"node {spec.nodeName!r}: cannot load model {spec.model!r}: "
+                                f"no file {(project_dir / module_name).resolve()}")
+        return
+    top = module_name.partition(".")[0]
+    if top != "hycosim" and importlib.machinery.PathFinder.find_spec(top, [*sys.path, str(project_dir)]) is None \
+            and top not in sys.builtin_module_names:
+        raise NodeLoadError(f"node {spec.nodeName!r}: cannot load model {spec.model!r}: no module named {top!r}"
+                            + _missing_module_hint(top, module_name))
+    for extra in _extras_of(module_name):
+        missing = missing_modules(extra)
+        if missing:
+            raise NodeLoadError(f"node {spec.nodeName!r}: model {spec.model!r} needs hycosim's [{extra}] extra "
+                                f"({', '.join(missing)} not installed): {install_hint(extra)}")
+
+
+def _extras_of(module_name: str) -> set[str]:
+    # The extras a registered model declares (``name = "module:Class [extra]"``) hold for every
+    # module of its package: the grasp configs name the demo's modules directly.
+    needs: set[str] = set()
+    for ep in _entry_points(MODEL_GROUP):
+        package = ep.value.partition(":")[0].rpartition(".")[0]
+        if ep.extras and package and (module_name == package or module_name.startswith(package + ".")):
+            needs.update(ep.extras)
+    return needs
 
 
 def _check_names(spec: NodeSpec, kind: str, given: Iterable[str], declared: frozenset[str] | None) -> None:

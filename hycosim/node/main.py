@@ -10,7 +10,7 @@ from hycosim.core.config import LoadedProject, server_endpoint
 from hycosim.core.endpoints import EndpointError, parse_endpoint
 from hycosim.transport.security import SecurityError, node_password
 from hycosim.transport.session import ConnectError
-from hycosim.core.signals import FAILED_ELSEWHERE
+from hycosim.core.signals import FAILED_ELSEWHERE, NODE_UNLOADABLE
 
 from hycosim.node.loader import NodeLoadError, load_node
 from hycosim.node.interface import NodeModelError
@@ -39,7 +39,13 @@ def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
         runtime.run()
     except RunFailedElsewhere as exc:
         return FAILED_ELSEWHERE, str(exc)
-    except (NodeLoadError, NodeRunError, NodeModelError, ConnectError, SecurityError) as exc:
+    except NodeLoadError as exc:
+        # Cannot pass by itself (a model that does not load, a missing file): 2, never restarted.
+        if interrupted:
+            stop = signals.Stopped(interrupted[0])
+            return signals.exit_code(stop), f"node {name!r} {signals.describe(stop)}"
+        return NODE_UNLOADABLE, str(exc)
+    except (NodeRunError, NodeModelError, ConnectError, SecurityError) as exc:
         if interrupted:
             # Ctrl-C while a model's extension module initialised surfaces as an ImportError.
             stop = signals.Stopped(interrupted[0])
@@ -50,4 +56,6 @@ def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+    if spec.asynchronous and not spec.replay:
+        return 0, f"node {name!r} finished after {runtime.samples} samples"
     return 0, f"node {name!r} finished after {runtime.steps} steps"

@@ -105,6 +105,7 @@ class NodeRuntime:
         self._log = structlog.get_logger("node").bind(node=node_name)
         self.drops = DropLog(self._log)
         self.steps = 0
+        self.samples = 0  # an asynchronous source's samples sent
         self._server_lost: float | None = None
         self._server_seen = False  # its liveliness token, which tells this node when it goes
         # Zenoh: the inbox the blocking loops read. In process (host) there is none: the
@@ -719,6 +720,7 @@ class NodeRuntime:
                 for ts, values in impl.samples_until(sim_now):
                     self._send(frames.encode(frames.SAMPLE, self.spec.UID, seq, ts, self._pack_outputs(values)))
                     seq += 1
+                    self.samples = seq
             except Exception as exc:
                 self._source_failed(exc, sim_now)
             if clock is not None:

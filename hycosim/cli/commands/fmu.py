@@ -30,6 +30,9 @@ def fmu_build(
     from hycosim.bridge.bridge_fmu import BridgeBuildError, build_bridge_fmus
 
     loaded = load(file)
+    if not output.is_dir() and not output.parent.is_dir():
+        # One folder is made for the FMUs; a tree of them is more likely a mistyped path.
+        fail(f"-o {output}: its parent folder {output.parent} does not exist")
     if server is not None:
         server = checked_endpoint("--server", server, partial(parse_address, default_port=GATEWAY_PORT))
     unknown = [n for n in node or [] if n not in {x.nodeName for x in loaded.project.nodeLists}]

@@ -12,7 +12,7 @@ import typer
 from rich.table import Table
 
 from hycosim.cli.extras import require_extra
-from hycosim.cli.options import checked_endpoint, monitor_credentials
+from hycosim.cli.options import checked_endpoint, finite, monitor_credentials
 from hycosim.cli.output import fail, out, print_summary
 
 app = typer.Typer()
@@ -112,7 +112,7 @@ def dashboard(
     user: Annotated[Optional[str], typer.Option(help="user, when the server requires credentials")] = None,
     password_file: Annotated[Optional[Path], typer.Option(help="that user's password")] = None,
     tls_ca: Annotated[Optional[Path], typer.Option(help="CA certificate (PEM) for a tls/ endpoint")] = None,
-    retry: Annotated[float, typer.Option(min=0.05, max=3600.0,
+    retry: Annotated[float, typer.Option(min=0.05, max=3600.0, callback=finite,
                                          help="seconds between tries to reach a server that does not answer")] = 2.0,
     allow_origin: Annotated[Optional[list[str]], typer.Option(
         help="another site whose pages may open the feed (scheme://host[:port]): a page embedding the "

@@ -8,8 +8,8 @@ from typing import Annotated, Optional
 import typer
 
 from hycosim.cli.extras import require_extra
-from hycosim.cli.options import SspStep, SspStop, checked_endpoint, monitor_credentials
-from hycosim.cli.output import end_process, err, fail, out, print_summary, say_outcome
+from hycosim.cli.options import SspStep, SspStop, checked_endpoint, finite, monitor_credentials
+from hycosim.cli.output import end_process, err, fail, out, print_summary, say_outcome, warn
 from hycosim.cli.projects import load, project_file
 from hycosim.core.signals import ignore_stops
 
@@ -83,7 +83,7 @@ def run(
 
     file = project_file(file, step, stop)
     loaded = load(file)
-    _refuse_unfit_fmus(loaded)
+    _refuse_unfit_nodes(loaded)
     if in_process is None:
         in_process = loaded.project.coSimulation.transport == "inprocess"
     if in_process:
@@ -106,25 +106,29 @@ def run(
                           restarts=restarts, resume=resume, dashboard_port=dashboard_port if dashboard else None)
     if result.code >= 128:
         ignore_stops()  # a Ctrl-C pressed twice: the run is over, say so
+    for line in result.warnings:
+        warn(line)
     if result.code:
         say_outcome(err, f"{result.message}\n  results so far: {result.run_dir}", error=True)
         raise typer.Exit(result.code)
     _print_summary(result.run_dir)
 
 
-def _refuse_unfit_fmus(loaded) -> None:
-    """End the command (exit 2, as validate) on an FMU node whose model description already shows
-    that it cannot run (a port on an array of another shape, clocks, a parameter it lacks): named
-    before a run directory is made, not by the node's process after the launch. Reads model
-    descriptions only; a missing file is left to the node, which says how to build it."""
-    from hycosim.node.loader import NodeLoadError, check_node
+def _refuse_unfit_nodes(loaded) -> None:
+    """End the command (exit 2, as validate) on a node that cannot run however often it is
+    started: a model that is not there (or whose extra is missing), a missing FMU file, an FMU
+    whose model description already shows that it cannot run (a port on an array of another
+    shape, clocks, a parameter it lacks). Named before a run directory is made, not by the
+    node's process after the launch; reads model descriptions only, imports no model."""
+    from hycosim.node.loader import NodeLoadError, check_node, locate_node
 
     for spec in loaded.project.nodeLists:
-        if spec.fmu and not (spec.replay or spec.asynchronous) and loaded.resolve(spec.fmu).is_file():
-            try:
+        try:
+            locate_node(spec, loaded.resolve("."))
+            if spec.fmu and not (spec.replay or spec.asynchronous):
                 check_node(spec, loaded.resolve("."), loaded.project.coSimulation)
-            except NodeLoadError as exc:
-                fail(str(exc))
+        except NodeLoadError as exc:
+            fail(f"{loaded.path}: {exc}")
 
 
 def _run_in_process(loaded, runs_dir: Path, progress: bool, *, listen: Optional[str], resume: Optional[Path],
@@ -165,7 +169,8 @@ def _print_summary(run_dir: Path) -> None:
 def status(
     endpoint: str,
     project: Annotated[str, typer.Option(help="project name")] = "*",
-    timeout: Annotated[float, typer.Option(min=0.1, max=3600.0, help="seconds to wait for an answer")] = 3.0,
+    timeout: Annotated[float, typer.Option(min=0.1, max=3600.0, callback=finite,
+                                           help="seconds to wait for an answer")] = 3.0,
     user: Annotated[Optional[str], typer.Option(help="user, when the server requires credentials")] = None,
     password_file: Annotated[Optional[Path], typer.Option(help="that user's password")] = None,
     tls_ca: Annotated[Optional[Path], typer.Option(help="CA certificate (PEM) for a tls/ endpoint")] = None,
@@ -203,8 +208,11 @@ def status(
     if not answers:
         fail(f"no hycosim server answered on {endpoint} within {timeout:g} s", 3)
     for a in answers:
+        waiting = [n for n in a["expected"] if n not in a["attached"]]
+        who = (f": {', '.join(a['attached'])}" if a["attached"] else "") + (
+            f"; waiting for {', '.join(waiting)}" if waiting else "")
         out.print(f"{a['project']}: step {a['step']} t={a['t']:g} s mode={a['mode']}; "
-                  f"attached {len(a['attached'])}/{len(a['expected'])}: {', '.join(a['attached'])}", highlight=False)
+                  f"attached {len(a['attached'])}/{len(a['expected'])}{who}", highlight=False, markup=False)
 
 
 def _is_status(answer: object) -> bool:

@@ -8,6 +8,7 @@ from typing import Annotated, Optional
 
 import typer
 
+from hycosim.cli.extras import require_extra
 from hycosim.cli.options import finite
 from hycosim.cli.output import err, fail, out
 from hycosim.core.endpoints import Address
@@ -38,7 +39,7 @@ def krl_controller(
     programs: Annotated[int, typer.Option(min=0, help="stop after this many programs (0: run until stopped)")] = 0,
 ) -> None:
     """Listen as the robot's EKI endpoint and execute programs against the emulated physical rod."""
-
+    require_extra("scenario", "hycosim krl controller")
     from hycosim.scenario.krl.controller import EmulatedController
     from hycosim.scenario.krl.eki import EkiConfig, EkiError
     from hycosim.scenario.rod.model import RodParams

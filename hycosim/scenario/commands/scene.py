@@ -87,7 +87,7 @@ def camera(
                                                  help="emulated rod's release angle, degrees")] = 45.0,
     noise: Annotated[float, typer.Option(min=0.0, callback=finite,
                                          help="emulated image noise σ (grey levels)")] = 25.0,
-    fps: Annotated[float, typer.Option(min=1.0, max=1000.0, help="emulated frame rate")] = 60.0,
+    fps: Annotated[float, typer.Option(min=1.0, max=1000.0, callback=finite, help="emulated frame rate")] = 60.0,
 ) -> None:
     """Run the camera node alone: detect the rod in each frame and summarise (and annotate)."""
     require_extra("scenario", "hycosim camera")

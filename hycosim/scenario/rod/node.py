@@ -25,7 +25,7 @@ ROD_PARAMETERS = frozenset({"length", "mass", "radius", "damping", "pivot", "gra
 
 
 def rod_parameter_problems(parameters: dict[str, Any]) -> list[str]:
-    """What is wrong with the rod's description in a node's ``parameters`` (clients.parameters)."""
+    """What is wrong with the rod's description in a node's ``parameters`` (hycosim.node.parameters)."""
 
     def within(name: str) -> str | None:
         low, high = LIMITS[name]
