@@ -30,7 +30,7 @@ lock: $(STAMP)
 # source: 0.1 s of a process's 0.75 s of imports. Written here, they are read; a stale file is
 # not (its source is newer), so this only ever costs the time to compile what changed.
 bytecode: $(STAMP)
-	$(PY) -m compileall -q -x "hycosim/build" hycosim benchmarks >/dev/null
+	$(PY) -m compileall -q -x "hycosim/scenario/build" hycosim benchmarks >/dev/null
 
 # The whole scenario on loopback: one trial at 40° with the pretrained policy, camera
 # correction, EthernetKRL export and the emulated controller; ends with the table and figure.
@@ -87,9 +87,9 @@ bench: $(STAMP) bytecode chromium tbb
 docs: $(STAMP)
 	$(PY) -m mkdocs build --strict -d site
 
-# The rod and robot-scene FMUs that hycosim/scenario/configs/grasp-fmu.json uses.
+# The rod and robot-scene FMUs that the checkout's hycosim/scenario/configs/grasp-fmu.json uses.
 fmus: $(STAMP) bytecode
-	$(VENV)/bin/hycosim scene fmus -o hycosim/build/fmus
+	$(VENV)/bin/hycosim scene fmus -o hycosim/scenario/build/fmus
 
 clean:
 	rm -rf $(VENV) build site *.egg-info

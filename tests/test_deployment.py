@@ -37,8 +37,8 @@ def test_compose_file_is_valid_against_the_compose_schema():
     assert all("/config/grasp-paper.json" in s["command"] for s in spec["services"].values())
     # The image builds the FMUs where the config names them from /config.
     assert "hycosim scene fmus -o /build/fmus" in (REPO / "docker" / "Dockerfile").read_text()
-    assert {n["fmu"] for n in grasp["nodeLists"] if "fmu" in n} == {"../../build/fmus/Rod.fmu",
-                                                                     "../../build/fmus/RobotScene6.fmu"}
+    assert {n["fmu"] for n in grasp["nodeLists"] if "fmu" in n} == {"../build/fmus/Rod.fmu",
+                                                                     "../build/fmus/RobotScene6.fmu"}
 
 
 def test_compose_services_run_together_as_local_processes(tmp_path):
@@ -50,9 +50,8 @@ def test_compose_services_run_together_as_local_processes(tmp_path):
     port = endpoint.rsplit(":", 1)[1]
     doc = json.loads((REPO / "hycosim" / "scenario" / "configs" / "grasp-paper.json").read_text())
     doc["coSimulation"]["stopTime"] = 1.5
-    # Two folders deep, as /config's ../../build/fmus is the image's /build/fmus.
-    config_dir = tmp_path / "root" / "config"
-    config_dir.mkdir(parents=True)
+    config_dir = tmp_path / "config"
+    config_dir.mkdir()
     (config_dir / "grasp-paper.json").write_text(json.dumps(doc))
     build_scene_fmus(tmp_path / "build" / "fmus")
 

@@ -179,7 +179,7 @@ def test_a_pythonfmu_step_that_returns_false_ends_the_run_where_the_fmu_says(tmp
 def test_missing_fmu_file_and_bad_parameter(tmp_path, fmus):
     cfg = write_project(tmp_path / "p.json", [_gain_node(tmp_path / "nope.fmu")])
     res = hycosim("node", "g", str(cfg), timeout=60)
-    assert res.returncode == 3 and "nope.fmu does not exist" in res.stderr
+    assert res.returncode == 2 and "nope.fmu does not exist" in res.stderr
     with pytest.raises(FmuError, match="parameter 'gain' is not a variable of GainModel.fmu"):
         _instance(tmp_path, fmus["gain"], _gain_node(fmus["gain"], parameters={"gain": 1.0})).initialize(0.0)
     # a value the variable's type cannot take: named before the FMU is loaded, not a ValueError

@@ -87,7 +87,7 @@ def test_step_control_multi_rate_batches_and_a_located_event_record_the_same_val
 
 
 def test_the_shipped_configs_it_accepts_record_what_they_record_in_processes(tmp_path):
-    build_scene_fmus(REPO / "hycosim" / "build" / "fmus")
+    build_scene_fmus(REPO / "hycosim" / "scenario" / "build" / "fmus")
     for name in ("grasp", "grasp-fmu", "grasp-policy"):
         doc = json.loads((REPO / "hycosim" / "scenario" / "configs" / f"{name}.json").read_text())
         doc["coSimulation"]["stopTime"] = 2.5  # past the grasp: a mode switch in both
@@ -148,6 +148,7 @@ def test_a_node_one_process_cannot_host_is_named_and_nothing_is_run(tmp_path):
     (cfg := tmp_path / "grasp.json").write_text(json.dumps(doc))
     res = hycosim("run", str(cfg), "--listen", "tcp/127.0.0.1:7447", "--runs-dir", str(tmp_path / "runs"))
     assert res.returncode == 2 and "--listen is for a run in processes" in res.stderr, res.stderr
+    build_scene_fmus(REPO / "hycosim" / "scenario" / "build" / "fmus")  # where the shipped config names them
     res = hycosim("validate", str(REPO / "hycosim" / "scenario" / "configs" / "grasp-paper.json"))
     assert res.returncode == 0 and "in one process (--in-process): no, node 'camera'" in res.stdout, res.stdout
 

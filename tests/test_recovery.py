@@ -228,7 +228,7 @@ def test_the_scene_fmus_serialise_their_whole_state(tmp_path):
     from hycosim.core.config import load_project
     from hycosim.node.loader import load_node
 
-    ensure_scene_fmus(REPO / "hycosim" / "build" / "fmus")  # where the shipped config names them (make fmus)
+    ensure_scene_fmus(REPO / "hycosim" / "scenario" / "build" / "fmus")  # where the shipped config names them (make fmus)
     loaded = load_project(REPO / "hycosim" / "scenario" / "configs" / "grasp-paper.json")
     for name in ("rod", "robot"):
         spec = loaded.project.node(name)

@@ -104,7 +104,7 @@ def test_the_wheel_holds_only_the_hycosim_package_its_data_and_licence(installed
                  "hycosim/scenario/policy/pretrained/ddpg_grasp.pt", "hycosim/dashboard/static/index.html",
                  "hycosim/bridge/templates/bridge_fmu.c", f"{info}/licenses/LICENSE"):
         assert data in names, data
-    assert not any(n.startswith(("hycosim/build/", "tests/", "benchmarks/")) for n in names)
+    assert not any(n.startswith(("hycosim/build/", "hycosim/scenario/build/", "tests/", "benchmarks/")) for n in names)
     assert "License-Expression: Apache-2.0" in metadata
     assert re.search(r"^Requires-Dist: torch.*extra == .scenario.", metadata, re.M), "torch is no core dependency"
     assert not re.search(r"^Requires-Dist: (torch|mujoco|opencv|starlette)[^;]*$", metadata, re.M)

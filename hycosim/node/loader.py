@@ -49,7 +49,7 @@ def _entry_points(group: str):
 def known_models() -> dict[str, str]:
     """Every model a node entry may name: the reference models and those installed packages
     register (entry points of ``hycosim.models``), each as ``module:Class``."""
-    registered = {ep.name: ep.value for ep in _entry_points(MODEL_GROUP)}
+    registered = {ep.name: f"{ep.module}:{ep.attr}" for ep in _entry_points(MODEL_GROUP)}
     return {**registered, **REFERENCE_MODELS}
 
 
@@ -198,7 +198,7 @@ def _extras_of(module_name: str) -> set[str]:
     # module of its package: the grasp configs name the demo's modules directly.
     needs: set[str] = set()
     for ep in _entry_points(MODEL_GROUP):
-        package = ep.value.partition(":")[0].rpartition(".")[0]
+        package = ep.module.rpartition(".")[0]
         if ep.extras and package and (module_name == package or module_name.startswith(package + ".")):
             needs.update(ep.extras)
     return needs
