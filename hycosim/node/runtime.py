@@ -1,34 +1,31 @@
-"""The node runtime: attach one node to a relay server and step it until STOP.
+"""The node runtime: attach one node to a run and step it until STOP.
 
-One Zenoh client session, explicit declarations, closed on exit: a subscriber (the
-inbox) on the server's ``down`` key, a publisher on the node's own ``up`` key, a
-liveliness token announcing the node, and a liveliness subscriber that notices the
-server going away. Every wait has a timeout.
+Every frame the master releases goes through one handler, :meth:`NodeRuntime.handle`,
+whatever transport carried it (``hycosim.transport.node_side``): over Zenoh :meth:`run`
+pulls the frames from its link and feeds them to it, with the link grace and every wait
+bounded; in process (:meth:`host`) the master pushes them by calling :meth:`deliver`. An
+asynchronous source samples on its own clock and runs over Zenoh only.
 """
 
 from __future__ import annotations
 
-import json
 import math
-import os
 import signal
 import socket
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import structlog
-import zenoh
 
 from hycosim.core import frames, signals
 from hycosim.core.schema import WIRE_TYPES, Port, PortType, wire_types
 from hycosim.core.config import LoadedProject
 from hycosim.core.drops import DropLog
-from hycosim.transport.inbox import LOCAL, Inbox
-from hycosim.transport.keys import SERVER_TOKEN, ProjectKeys
+from hycosim.transport.inbox import LOCAL
 from hycosim.transport.local_bus import LocalBus
-from hycosim.transport.security import client_tls
-from hycosim.transport.session import ConnectError, FramePublisher, FrameTooLarge, client_config, open_session, token_held
+from hycosim.transport.node_side import LocalNodeLink, NodeLink, ZenohNodeLink
+from hycosim.transport.session import FrameTooLarge
 from hycosim.core.sim_clock import RealTimeClock
 
 from hycosim.node.interface import AsyncSource, Node, NodeContext, NodeModelError, SimulationEnded
@@ -92,7 +89,6 @@ class NodeRuntime:
         self.endpoint = endpoint
         self.password = password
         self.cosim = loaded.project.coSimulation
-        self.keys = ProjectKeys(loaded.project.projectName)
         self._out_ports = [(p.name, _coerce(p)) for p in self.spec.output]
         self._in_names = self.spec.input_names()
         self._in_types = tuple(wire_types(p) for p in self.spec.input)
@@ -108,14 +104,19 @@ class NodeRuntime:
         self.samples = 0  # an asynchronous source's samples sent
         self._server_lost: float | None = None
         self._server_seen = False  # its liveliness token, which tells this node when it goes
-        # Zenoh: the inbox the blocking loops read. In process (host) there is none: the
-        # master calls deliver with each frame, and nothing is waited for.
-        self.inbox: Inbox | None = None
-        self._bus: LocalBus | None = None
+        # Where frames go and come from (run: Zenoh; host: the in-process bus). Over Zenoh
+        # the handler's acknowledgements (a STOP after an END) are waited for; in process the
+        # master reads what a node sent as soon as its call returns.
+        self.link: NodeLink | None = None
+        self._pulls = False
+        self._phase = _START  # what the next frame is taken as (see handle)
+        self._returning = False  # a START again after a link cut, or the run's, to a restarted process
+        self._restoring: _Restoring | None = None
+        self._restart_deadline = 0.0
+        self._restoring_step = -1  # the step the run was at when a restarted process attached
         self._stepping: _Stepping | None = None
         self._interpolating = self._is_player = False  # set once the model is set up
         self._played: _Played | None = None
-        self._started = False
         self.failure: str | None = None  # in process: why this node ended the run, if it failed
         self._listed: Callable[[float, float, list[Any]], list[Any]] | None = None  # in process: Node.listed_step
 
@@ -139,9 +140,6 @@ class NodeRuntime:
                 raise NodeRunError(f"node {self.name!r}: output {port!r}: {exc}") from None
         return packed
 
-    def _on_server_liveliness(self, sample: zenoh.Sample) -> None:
-        self.inbox.inject(frames.encode(frames.LIVE, SERVER_TOKEN, sample.kind == zenoh.SampleKind.PUT))
-
     def _setup(self) -> None:
         try:
             self.impl.setup(self.context())
@@ -158,94 +156,123 @@ class NodeRuntime:
     def run(self) -> None:
         """Attach to the server over Zenoh and take part in the run until its STOP."""
         self._setup()
-        conf = client_config(self.endpoint, timeout_s=self.cosim.attachTimeout, low_latency=self.cosim.lowLatency,
-                             user=self.name if self.password is not None else None, password=self.password,
-                             tls=client_tls(self.loaded, self.endpoint))
         try:
-            session = open_session(conf, self.endpoint)
-        except ConnectError as exc:
-            if self.password is not None:
-                raise ConnectError(f"{exc} (node {self.name!r} authenticates as user {self.name!r}: "
-                                   "wrong credentials are refused this way too)") from None
-            raise
-        try:
-            # Before any declaration: a refused node leaves nothing behind to fire as it closes.
-            self._refuse_a_second_instance(session)
-            self.inbox = Inbox(session, self.keys.down, self.keys.down,
-                               poll=self.loaded.project.polls_before_blocking(os.cpu_count()))
-            self._publisher = FramePublisher(session, self.keys.up(self.name), low_latency=self.cosim.lowLatency)
-            # history: fetch the server's token now. Without it this session learnt of the token
-            # only if the router's announcement won a race with the subscription (it lost about one
-            # attach in fifteen with Zenoh receiving on the app runtime), and a session that never
-            # knew the token never reports it gone, so a cut link went unnoticed.
-            watch = session.liveliness().declare_subscriber(self.keys.alive(SERVER_TOKEN), self._on_server_liveliness,
-                                                            history=True)
-            # Declared after the subscriber: the server starts once it sees this token.
-            token = session.liveliness().declare_token(self.keys.alive(self.name))
+            link = ZenohNodeLink.open(self.loaded, self.name, self.endpoint, self.password)
+            self.link, self._pulls = link, True
             try:
-                # The server times out the attach; outwait it so that its STOP, naming who is
-                # missing, reaches this node rather than a timeout of our own.
-                try:
-                    start = self._wait(self.cosim.attachTimeout + self.cosim.stepTimeout, "START")
-                except NodeRunError as exc:
-                    raise NodeRunError(f"{exc}{self._other_projects(session)}") from None
-                # START again, after a link cut during the attach; or, to a process that
-                # replaces one that died, the run's START (a source) or last release (a player).
-                returning = start.kind == frames.REPLAY
-                if returning:
-                    start = start.release
-                if start.kind == frames.STOP:
-                    self._on_stop(start)
-                    return
-                if start.kind in (frames.STEP, frames.STEPS) and not isinstance(self.impl, AsyncSource):
-                    # The run is under way: this process is a restart. Say so at once (a node
-                    # process says HELLO once per run); a server that takes checkpoints
-                    # restores the run, and this node with it; one that does not stops the run.
-                    start = self._await_restore(start.step)
-                    if start is None:
-                        return
-                played = isinstance(self.impl, SamplePlayer)
-                if not played and (start.kind not in (frames.START, frames.RESTORE) or (
-                        start.kind == frames.RESTORE and isinstance(self.impl, AsyncSource))):
-                    at = f" (step {start.step})" if start.kind in (frames.STEP, frames.STEPS) else ""
-                    raise NodeRunError(f"node {self.name!r}: the run on {self.endpoint} was already under way{at} "
-                                       "when it attached; a node joins before the run starts")
-                try:
-                    if played:
-                        self._run_played(start, returning)
-                    elif isinstance(self.impl, AsyncSource):
-                        self._run_async(start, returning)
-                    elif start.kind == frames.RESTORE:
-                        self._run_stepping(bool(start.options.get("checkpoint")), restore=start)
+                if isinstance(self.impl, AsyncSource) and not isinstance(self.impl, SamplePlayer):
+                    start = self._source_start()
+                    if start.kind == frames.STOP:
+                        self._on_stop(start)
                     else:
-                        self._run_stepping(bool(start.options.get("checkpoint")))
-                except KeyboardInterrupt as exc:
-                    self._say_stopped(exc)
-                    raise
+                        self._run_async(start, self._returning)
+                    return
+                while not self.handle(self._pull()):
+                    pass
+            except KeyboardInterrupt as exc:
+                self._say_stopped(exc)
+                raise
             finally:
-                token.undeclare()
-                watch.undeclare()
-                self.inbox.close()
+                link.close()
         finally:
             try:
                 self.impl.teardown()
             finally:
-                session.close()
+                if self.link is not None:
+                    self.link.session.close()
 
-    def _refuse_a_second_instance(self, session: zenoh.Session) -> None:
-        """Stop if another process already holds this node's liveliness token.
+    def _pull(self) -> frames.Frame:
+        """The next frame over Zenoh, within what the phase the node is in allows."""
+        if self._phase == _START:
+            # The server times out the attach; outwait it so that its STOP, naming who is
+            # missing, reaches this node rather than a timeout of our own.
+            try:
+                return self._wait(self.cosim.attachTimeout + self.cosim.stepTimeout, "START")
+            except NodeRunError as exc:
+                raise NodeRunError(f"{exc}{self.link.other_projects()}") from None
+        if self._phase == _RESTART:
+            frame = self._next_frame(max(0.0, self._restart_deadline - time.monotonic()))
+            if frame is None:
+                wait = self.cosim.attachTimeout + self.cosim.stepTimeout
+                raise NodeRunError(f"node {self.name!r}: the run on {self.endpoint} was already under way "
+                                   f"(step {self._restoring_step}) when it attached, and the server did not restore "
+                                   f"it within {wait:g} s: a node restarted mid-run goes on only from a checkpoint "
+                                   "(coSimulation.checkpointEvery)")
+            return frame
+        if self._phase == _RESTORING:
+            frame = self._next_frame(self.cosim.stepTimeout)
+            if frame is None:
+                return self._restore_cut_short()
+            return frame
+        # The server enforces step timeouts; a node only needs to notice the server is gone,
+        # which liveliness tells; this bound is the last resort for a frozen server.
+        return self._wait(self.cosim.stepTimeout + 30.0, "release")
 
-        Two processes answering for one node would both send its outputs, and the server
-        would take whichever came first.
-        """
-        if token_held(session, self.keys.alive(self.name), timeout=min(5.0, self.cosim.attachTimeout)):
-            raise NodeRunError(f"node {self.name!r} is already attached to the server at {self.endpoint}: "
-                               "another process holds its liveliness token (one process per node)")
+    def _source_start(self) -> frames.Frame:
+        """An asynchronous source's START (a restarted one's too: a source has no state to restore)."""
+        start = self._wait(self.cosim.attachTimeout + self.cosim.stepTimeout, "START")
+        if start.kind == frames.REPLAY:
+            self._returning, start = True, start.release
+        if start.kind not in (frames.START, frames.STOP):
+            at = f" (step {start.step})" if start.kind in (frames.STEP, frames.STEPS) else ""
+            raise NodeRunError(f"node {self.name!r}: the run on {self.endpoint} was already under way{at} "
+                               "when it attached; a node joins before the run starts")
+        return start
+
+    def handle(self, frame: frames.Frame) -> bool:
+        """Act on one frame the master released to this node, accepted already (checked as every
+        receiver checks, and meant for it); True once the node is done: the run's STOP, or its
+        model ended the simulation. Every transport's frames come here."""
+        if self._phase == _STEPPING:
+            return self._on_release(frame)
+        if self._phase == _PLAYED:
+            return self._on_played(frame)
+        if self._phase == _START:
+            return self._on_start(frame)
+        if frame.kind == frames.STOP:  # restarting or restoring: the run ended instead
+            self._on_stop(frame)
+            return True
+        if self._phase == _RESTART:
+            return self._begin_restore(frame) if frame.kind == frames.RESTORE else False
+        return self._on_restore_piece(frame)
+
+    def _on_start(self, frame: frames.Frame) -> bool:
+        """The first frame of the run: its START (HELLO and the outputs at t0), or, to a process
+        that replaces one that died, the run's last release (say so, and wait to be restored)
+        or the first piece of a state to restore."""
+        if frame.kind == frames.REPLAY:
+            # START again after a link cut during the attach; or, to a process that replaces
+            # one that died, the run's START (a player) or last release.
+            self._returning, frame = True, frame.release
+        if frame.kind == frames.STOP:
+            self._on_stop(frame)
+            return True
+        if isinstance(self.impl, SamplePlayer):
+            self._begin_played(frame, self._returning)
+            self._phase = _PLAYED
+            return self._on_played(frame)
+        if frame.kind in _STEP_KINDS:
+            # The run is under way: this process is a restart. Say so at once (a node process
+            # says HELLO once per run); a server that takes checkpoints restores the run, and
+            # this node with it; one that does not stops the run.
+            self._send(self._hello(False, restart=True))
+            self._log.info("restarted: waiting for the run to be restored", step=frame.step)
+            self._restoring_step = frame.step
+            self._restart_deadline = time.monotonic() + self.cosim.attachTimeout + self.cosim.stepTimeout
+            self._phase = _RESTART
+            return False
+        if frame.kind == frames.RESTORE:
+            return self._begin_restore(frame)
+        if frame.kind != frames.START:
+            raise NodeRunError(f"node {self.name!r}: the run on {self.endpoint} was already under way "
+                               "when it attached; a node joins before the run starts")
+        self._phase = _STEPPING
+        return not self._begin_stepping(bool(frame.options.get("checkpoint")))
 
     def _send(self, payload: bytes) -> None:
         """Publish one frame; one too large for the link stops the node, naming its largest outputs."""
         try:
-            self._publisher.put(payload)
+            self.link.send(payload)
         except FrameTooLarge as exc:
             frame = frames.decode(payload)
             values = frame.values if frame.kind in (frames.OUTPUTS, frames.SAMPLE, frames.BATCH) else []
@@ -278,6 +305,8 @@ class NodeRuntime:
         Liveliness is handled here: if the server's token goes (a link cut), wait up to
         linkGrace for it to come back, then stop. Malformed frames are dropped.
         """
+        if not self._pulls:
+            return None  # in process the master pushes its frames: nothing comes by waiting
         deadline = time.monotonic() + timeout
         grace = self.cosim.linkGrace
         while True:
@@ -288,7 +317,7 @@ class NodeRuntime:
                     raise NodeRunError(f"node {self.name!r}: the server went away after step {self.steps} and did not "
                                        f"come back within the link grace of {grace:g} s")
                 wait = min(wait, self._server_lost + grace - now + 0.01)
-            msg = self.inbox.recv(max(wait, 0.0))
+            msg = self.link.receive(max(wait, 0.0))
             if msg is None:
                 if time.monotonic() < deadline:
                     continue  # woken for the grace check above
@@ -394,7 +423,7 @@ class NodeRuntime:
         try:
             self._send(frames.encode(frames.END, self.spec.UID, step, t, clean, message, earlier or [], last))
             # In process the master reads the END once this call returns: there is nothing to wait for.
-            deadline = time.monotonic() + (min(10.0, self.cosim.stepTimeout) if self.inbox is not None else 0.0)
+            deadline = time.monotonic() + (min(10.0, self.cosim.stepTimeout) if self._pulls else 0.0)
             while (left := deadline - time.monotonic()) > 0:
                 frame = self._next_frame(left)
                 if frame is None or frame.kind == frames.STOP:
@@ -471,81 +500,69 @@ class NodeRuntime:
             self._step_failed(exc, k, t, outs, impl=impl)
             return None  # the model ended the simulation (_step_failed raises for a failure)
 
-    def _await_restore(self, step: int) -> frames.Frame | None:
-        """A restarted process (the run was at ``step`` when it attached): say HELLO, then wait
-        for the server to restore the run from its last checkpoint. Return the first piece of
-        this node's state (a RESTORE frame), or None when the server stopped the run instead."""
-        self._send(self._hello(False, restart=True))
-        self._log.info("restarted: waiting for the run to be restored", step=step)
-        wait = self.cosim.attachTimeout + self.cosim.stepTimeout
-        deadline = time.monotonic() + wait
-        while (left := deadline - time.monotonic()) > 0:
-            frame = self._next_frame(left)
-            if frame is None:
-                break
-            if frame.kind == frames.STOP:
-                self._on_stop(frame)
-                return None
-            if frame.kind == frames.RESTORE:
-                return frame
-        raise NodeRunError(f"node {self.name!r}: the run on {self.endpoint} was already under way (step {step}) "
-                           f"when it attached, and the server did not restore it within {wait:g} s: a node "
-                           "restarted mid-run goes on only from a checkpoint (coSimulation.checkpointEvery)")
+    def _begin_restore(self, frame: frames.Frame) -> bool:
+        """The first piece of a state to restore, to a process that joins a run under way or to
+        one the run's server resumes: the node steps once it is set (see :meth:`_on_restore_piece`)."""
+        self._stepping = _Stepping(bool(frame.options.get("checkpoint")) and self.impl.can_rollback)
+        self._restoring, self._phase = _Restoring(first_of_run=True), _RESTORING
+        return self._on_restore_piece(frame)
 
-    def _restore(self, impl: Node, first: frames.Frame) -> tuple[int, float, bytes] | None:
-        """Collect the pieces of this node's state that ``first`` begins, set it, and answer with a
-        HELLO and the outputs at the checkpoint's point. Return (step, t, outputs sent), or None
-        when a piece is missing or the state is not this node's (the frame is dropped)."""
-        chunks = frames.Chunks()
-        frame = first
-        while True:
-            step, t = frame.step, frame.t
-            data = chunks.add(step, frame.index, frame.count, frame.chunk)
-            if data is not None:
-                break
-            frame = self._next_frame(self.cosim.stepTimeout)
-            if frame is None or frame.kind != frames.RESTORE:
-                self.drops.drop("not a release", f"the state to restore at step {step} came in part", self.steps)
-                return None
+    def _on_restore_piece(self, frame: frames.Frame) -> bool:
+        """One piece of the state the server restores (the whole run went back to a checkpoint):
+        once all are in, set it, answer with a HELLO and the outputs at the checkpoint's point,
+        and step from there. True if the model ended the simulation there."""
+        at, impl = self._restoring, self.impl
+        if frame.kind != frames.RESTORE:
+            self.drops.drop("not a release", f"the state to restore at step {at.step} came in part", self.steps)
+            return self._restore_failed()
+        at.step, at.t = frame.step, frame.t
+        data = at.chunks.add(frame.step, frame.index, frame.count, frame.chunk)
+        if data is None:
+            return False
         try:
             impl.deserialize_state(data)
         except Exception as exc:  # a state from another build of the model, or a forged frame
-            self.drops.drop("not a release", f"a state to restore at step {step} that does not fit: "
+            self.drops.drop("not a release", f"a state to restore at step {at.step} that does not fit: "
                             f"{type(exc).__name__}: {exc}", self.steps)
-            return None
-        self._log.info("restored", step=step, t=t)
+            return self._restore_failed()
+        self._log.info("restored", step=at.step, t=at.t)
+        self._restoring, self._phase = None, _STEPPING
         self._send(self._hello(impl.can_rollback))
-        out = self._step_model(impl, step - 1, t, None, {})
-        return None if out is None else (step, t, out)
+        out = self._step_model(impl, at.step - 1, at.t, None, {})
+        if out is None:
+            return True
+        st = self._stepping
+        st.last_out, self.steps, st.done = out, at.step, at.step - 1
+        if not at.first_of_run:  # this node's saved states are of the future
+            st.mode, st.saved_step, st.pending_state = None, -1, None
+        return False
 
-    def _run_stepping(self, checkpoint: bool, restore: frames.Frame | None = None) -> None:
-        if not self._begin_stepping(checkpoint, restore):
-            return
-        # The server enforces step timeouts; a node only needs to notice the server is gone,
-        # which liveliness tells; this bound is the last resort for a frozen server.
-        silence = self.cosim.stepTimeout + 30.0
-        while not self._on_release(self._wait(silence, "release")):
-            pass
+    def _restore_failed(self) -> bool:
+        """A state to restore that came in part or does not fit (the frame is dropped): a node
+        that has nothing else to step from stops; one under way goes on as it was."""
+        first, self._restoring, self._phase = self._restoring.first_of_run, None, _STEPPING
+        if first:
+            raise NodeRunError(f"node {self.name!r}: the state the server sent to restore could not be set "
+                               f"(see {self.name}'s log)")
+        return False
 
-    def _begin_stepping(self, checkpoint: bool, restore: frames.Frame | None = None) -> bool:
-        """Answer the START (HELLO and the outputs at t0) or restore the state a RESTORE begins;
-        False if the model ended the simulation there."""
+    def _restore_cut_short(self) -> frames.Frame:
+        """No next piece of a state within the step timeout: as a piece that is not one."""
+        self.drops.drop("not a release", f"the state to restore at step {self._restoring.step} came in part",
+                        self.steps)
+        self._restore_failed()
+        return self._pull()
+
+    def _begin_stepping(self, checkpoint: bool) -> bool:
+        """Answer the START: HELLO and the outputs at t0; False if the model ended the simulation there."""
         impl = self.impl
         assert isinstance(impl, Node)
         at = self._stepping = _Stepping(checkpoint and impl.can_rollback)
-        if restore is None:
-            self._send(self._hello(impl.can_rollback))
-            out = self._step_model(impl, -1, self.cosim.startTime, None, {})
-            if out is None:
-                return False
-            at.last_out = out
-        else:
-            restored = self._restore(impl, restore)
-            if restored is None:
-                raise NodeRunError(f"node {self.name!r}: the state the server sent to restore could not be set "
-                                   f"(see {self.name}'s log)")
-            k, _, at.last_out = restored
-            self.steps, at.done = k, k - 1
+        self._send(self._hello(impl.can_rollback))
+        out = self._step_model(impl, -1, self.cosim.startTime, None, {})
+        if out is None:
+            return False
+        at.last_out = out
         return True
 
     def _on_release(self, frame: frames.Frame) -> bool:
@@ -603,12 +620,8 @@ class NodeRuntime:
                 at.pending_state = self._checkpoint_state(impl, frame.step)
             return False, None
         if frame.kind == frames.RESTORE:
-            restored = self._restore(impl, frame)
-            if restored is not None:
-                # The whole run went back to a checkpoint: this node's saved states are of the future.
-                k, _, at.last_out = restored
-                self.steps, at.done, at.mode, at.saved_step, at.pending_state = k, k - 1, None, -1, None
-            return False, None
+            self._restoring, self._phase = _Restoring(first_of_run=False), _RESTORING
+            return self._on_restore_piece(frame), None
         if frame.kind == frames.ROLLBACK:
             k, t = frame.step, frame.t
             if at.saved_step != k:
@@ -654,20 +667,6 @@ class NodeRuntime:
         at.last_out = out
         return False
 
-    def _other_projects(self, session: zenoh.Session) -> str:
-        """A hint for a node that heard nothing from its server: the endpoint may serve another project."""
-        found = []
-        try:
-            for reply in session.get(ProjectKeys("*").status, timeout=2.0):
-                if reply.ok is not None:
-                    found.append(str(json.loads(reply.ok.payload.to_bytes()).get("project")))
-        except Exception:  # a hint only: a refused query (access control) or a bad answer gives none
-            return ""
-        if not found or self.loaded.project.projectName in found:
-            return ""
-        return (f"; the server there runs project {', '.join(map(repr, sorted(found)))}, not "
-                f"{self.loaded.project.projectName!r}: is this the project file the server was started with?")
-
     def _checkpoint_state(self, impl: Node, step: int) -> tuple[int, bytes] | None:
         """This node's state at point ``step`` for a checkpoint, or None if it cannot give one (the
         server then keeps its previous checkpoint)."""
@@ -702,7 +701,7 @@ class NodeRuntime:
     def _on_stop(self, frame: frames.Frame) -> None:
         """The server's STOP: the end of the run, or of a failed one, which is this node's failure too."""
         reason = frame.reason
-        self._log.info("stop", step=self.steps, reason=reason, waits=self.inbox.waits if self.inbox else None,
+        self._log.info("stop", step=self.steps, reason=reason, waits=self.link.waits if self.link else None,
                        dropped=dict(self.drops.counts))
         if reason not in frames.CLEAN_STOPS:  # the reason names the step where it matters
             raise RunFailedElsewhere(f"node {self.name!r}: the server stopped the run: {reason}")
@@ -753,17 +752,6 @@ class NodeRuntime:
                        f"{type(exc).__name__}: {exc}")
         self._end(self.steps + 1, sim_now, False, message)
 
-    def _run_played(self, frame: frames.Frame, restart: bool) -> None:
-        """An asynchronous node played from a recording, paced by the releases: before the server
-        gathers point k it gets every sample the recorded server had first had at k, then
-        OUTPUTS for k, the word that they are all sent (it waits for that as for a stepping
-        node's outputs). A release seen again (a located event's retry, a replay after a link
-        cut) sends no sample twice; a restore goes on from its point."""
-        self._begin_played(frame, restart)
-        silence = self.cosim.stepTimeout + 30.0
-        while not self._on_played(frame):
-            frame = self._wait(silence, "release")
-
     def _begin_played(self, frame: frames.Frame, restart: bool) -> None:
         self._send(self._hello(False, restart=restart))
         # The outputs it sends are held start values (the server ignores them); the last point
@@ -811,8 +799,7 @@ class NodeRuntime:
                                "run, which one process stepping every node cannot give it; run it without "
                                "--in-process")
         self._setup()
-        self._publisher = bus.publisher(self.name)
-        self._bus = bus
+        self.link = LocalNodeLink(bus, self.name)
         if not self._is_player:
             # An FMU steps on the master's lists as they are (no dicts between, no conversions).
             self._listed = self.impl.listed_step(list(self._in_names), list(self.spec.output))
@@ -840,8 +827,7 @@ class NodeRuntime:
                 self._step_failed(exc, k, t, impl=impl)
             except NodeRunError as failure:
                 self.failure = str(failure)
-            if self._bus is not None:
-                self._bus.leave(self.name)
+            self.link.close()
             return None
         self.steps, at.done = k + 1, k
         return out
@@ -858,33 +844,31 @@ class NodeRuntime:
         if frame is None:
             return
         try:
-            done = self._on_hosted(frame)
+            done = self.handle(frame)
         except NodeRunError as exc:
             self.failure, done = str(exc), True
-        if done and self._bus is not None:
-            self._bus.leave(self.name)
-
-    def _on_hosted(self, frame: frames.Frame) -> bool:
-        if self._is_player:
-            if not self._started:
-                self._started = True
-                self._begin_played(frame, False)
-            return self._on_played(frame)
-        if self._started:
-            return self._on_release(frame)
-        if frame.kind == frames.STOP:
-            self._on_stop(frame)
-            return True
-        if frame.kind != frames.START:
-            self.drops.drop("not a release", f"a {frames.KIND_NAMES[frame.kind]} frame before the run's START",
-                            self.steps)
-            return False
-        self._started = True
-        return not self._begin_stepping(bool(frame.options.get("checkpoint")))
+        if done:
+            self.link.close()
 
     def close(self) -> None:
         """An in-process node's end: its model's teardown (a Zenoh node's run does its own)."""
         self.impl.teardown()
+
+
+# What a node takes its next frame as: the run's first; after a restarted process's HELLO, a
+# state to restore; the pieces of one; a release (a stepping node, or a played recording).
+_START, _RESTART, _RESTORING, _STEPPING, _PLAYED = "start", "restart", "restoring", "stepping", "played"
+
+
+@dataclass
+class _Restoring:
+    """The pieces of a state to restore as they come, and whether the node has nothing else to
+    step from (its process joined the run, or the run's server resumes it)."""
+
+    first_of_run: bool
+    chunks: frames.Chunks = field(default_factory=frames.Chunks)
+    step: int = -1
+    t: float = 0.0
 
 
 @dataclass

@@ -1,0 +1,103 @@
+"""A node's end of a transport (hycosim.transport.node_side) and the runtime's one handler of
+the master's frames: what a Zenoh node pulls and what an in-process master pushes go through
+NodeRuntime.handle alike. Here the in-process end, frame by frame, reaches phases an
+in-process run never takes (a state restored in pieces), as a Zenoh node does."""
+
+from __future__ import annotations
+
+import inspect
+
+import pytest
+
+from hycosim.core import frames
+from hycosim.core.config import load_project
+from hycosim.node.interface import pack_state
+from hycosim.node.loader import load_node
+from hycosim.node.runtime import NodeRuntime
+from hycosim.transport.local_bus import LocalBus
+from hycosim.transport.node_side import LocalNodeLink, NodeLink, ZenohNodeLink
+from tests.helpers import write_project
+
+
+def test_both_ends_implement_the_node_link_protocol():
+    wanted = {name for name, _ in inspect.getmembers(NodeLink) if not name.startswith("_")}
+    assert wanted == {"send", "receive", "waits", "close"}
+    for cls in (ZenohNodeLink, LocalNodeLink):
+        assert wanted <= set(dir(cls)), cls
+
+
+@pytest.fixture
+def hosted(tmp_path):
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "g", "UID": 2, "model": "gain", "parameters": {"k": 2.0}, "input": ["u"], "output": ["y"]},
+    ], [{"from": "clock.y", "to": "g.u"}], cosim={"stepSize": 0.1, "stopTime": 1.0})
+    loaded = load_project(cfg)
+    spec = loaded.project.node("g")
+    runtime = NodeRuntime(loaded, "g", load_node(spec, tmp_path, loaded.project.coSimulation), endpoint="")
+    bus = LocalBus(loaded.project.projectName)
+    runtime.host(bus)
+    yield runtime, bus
+    runtime.close()
+
+
+def _sent(bus: LocalBus) -> list[frames.Frame]:
+    """What the node sent the master since last asked (the attach's LIVE left out)."""
+    out = []
+    while (msg := bus.inbox.recv(0.0)) is not None:
+        frame = frames.decode(msg[1])
+        if frame.kind != frames.LIVE or not frame.alive:
+            out.append(frame)
+    return out
+
+
+def _start(checkpoint: bool = False) -> bytes:
+    return frames.encode(frames.START, "run", 0.0, 0.1, 0.0, None, {"checkpoint": checkpoint})
+
+
+def _step(k: int, u: float) -> bytes:
+    return frames.encode(frames.STEP, k, 0.1 * k, 0.1, "free", {"g": [u]}, [], {})
+
+
+def test_the_in_process_end_sends_into_the_masters_inbox_and_leaves_at_stop(hosted):
+    runtime, bus = hosted
+    assert isinstance(runtime.link, LocalNodeLink) and runtime.link.receive(5.0) is None  # nothing is pulled
+    runtime.deliver(frames.decode(_start()))
+    hello, outputs = _sent(bus)
+    assert hello.kind == frames.HELLO and (outputs.kind, outputs.step, outputs.values) == (frames.OUTPUTS, 0, [0.0])
+    runtime.deliver(frames.decode(_step(0, 1.5)))
+    [outputs] = _sent(bus)
+    assert (outputs.step, outputs.values) == (1, [3.0])
+    runtime.deliver(frames.decode(frames.encode(frames.STOP, 1, frames.STOP_COMPLETED)))
+    [left] = _sent(bus)
+    assert (left.kind, left.node, left.alive) == (frames.LIVE, "g", False) and "g" not in bus.nodes
+
+
+def test_a_state_restored_in_pieces_goes_through_the_same_handler(hosted):
+    runtime, bus = hosted
+    runtime.deliver(frames.decode(_start(checkpoint=True)))
+    runtime.deliver(frames.decode(_step(0, 1.0)))
+    _sent(bus)
+    state = pack_state({"y": 7.0})
+    first, second = state[:3], state[3:]
+    runtime.deliver(frames.decode(frames.encode(frames.RESTORE, "g", 5, 0.5, 0, 2, first, {})))
+    assert _sent(bus) == []  # one piece of two: nothing to answer yet
+    runtime.deliver(frames.decode(frames.encode(frames.RESTORE, "g", 5, 0.5, 1, 2, second, {})))
+    hello, outputs = _sent(bus)
+    assert hello.kind == frames.HELLO and (outputs.step, outputs.t, outputs.values) == (5, 0.5, [7.0])
+    runtime.deliver(frames.decode(_step(5, 4.0)))  # and steps on from the restored point
+    [outputs] = _sent(bus)
+    assert (outputs.step, outputs.values) == (6, [8.0]) and runtime.steps == 6
+
+
+def test_a_state_that_comes_in_part_is_dropped_and_the_node_goes_on(hosted):
+    runtime, bus = hosted
+    runtime.deliver(frames.decode(_start(checkpoint=True)))
+    runtime.deliver(frames.decode(_step(0, 1.0)))
+    _sent(bus)
+    runtime.deliver(frames.decode(frames.encode(frames.RESTORE, "g", 5, 0.5, 0, 2, b"\x81", {})))
+    runtime.deliver(frames.decode(_step(1, 2.0)))  # the second piece never came
+    assert runtime.drops.counts == {"not a release": 1} and runtime.failure is None
+    runtime.deliver(frames.decode(_step(1, 2.0)))
+    [outputs] = _sent(bus)
+    assert (outputs.step, outputs.values) == (2, [4.0])
