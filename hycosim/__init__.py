@@ -5,11 +5,22 @@
 its coordinator; ``hycosim.node`` the node interface and runtime; ``hycosim.fmi`` FMU import
 (co-simulation, Model Exchange, SSP); ``hycosim.bridge`` FMU export and the gateway;
 ``hycosim.scenario`` the paper's grasp demo; ``hycosim.dashboard`` the web dashboard;
-``hycosim.cli`` the command line.
+``hycosim.cli`` the command line. ``hycosim.open(project)`` drives a run from Python
+(:mod:`hycosim.api`).
 """
 
 
-def __getattr__(name: str) -> str:
+# The Python API (hycosim.api), imported when first asked for: ``import hycosim`` stays as light
+# as every node process needs it.
+_API = frozenset({"open", "Simulation", "Outcome", "SimulationError", "ProjectError", "PortError", "TimeError",
+                  "ClosedError", "RunFailed"})
+
+
+def __getattr__(name: str):
+    if name in _API:
+        from hycosim import api
+
+        return getattr(api, name)
     # ``__version__`` is read from the installed metadata when first asked for, not at import:
     # importlib.metadata takes about 30 ms to import, and every node process imports hycosim.
     if name != "__version__":

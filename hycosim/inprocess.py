@@ -26,6 +26,7 @@ from hycosim.node.loader import NodeLoadError, load_node
 from hycosim.node.interface import NodeModelError
 from hycosim.node.runtime import NodeRunError, NodeRuntime
 from hycosim.server.main import IN_PROCESS, serve
+from hycosim.server.relay import PointGate, Relay
 
 
 class CannotHost(ValueError):
@@ -41,10 +42,13 @@ def check_hostable(loaded: LoadedProject) -> None:
 
 
 def run_in_process(loaded: LoadedProject, *, runs_dir: Path = Path("runs"),
-                   on_progress: Callable[[dict[str, Any]], None] | None = None) -> tuple[int, Path | None, str]:
+                   on_progress: Callable[[dict[str, Any]], None] | None = None,
+                   gate: PointGate | None = None, on_relay: Callable[[Relay], None] | None = None,
+                   ) -> tuple[int, Path | None, str]:
     """Run the project in this process; return (exit code, run directory, message) as
     :func:`hycosim.server.main.serve` does. Raise :class:`CannotHost` before anything is
-    written for a node one process cannot host."""
+    written for a node one process cannot host. ``gate`` and ``on_relay``: a caller that drives
+    the run point by point (:func:`hycosim.open`), as :func:`~hycosim.server.main.serve` takes them."""
     check_hostable(loaded)
     base = loaded.path.parent if loaded.path else Path.cwd()
     models = {}
@@ -66,7 +70,7 @@ def run_in_process(loaded: LoadedProject, *, runs_dir: Path = Path("runs"),
                 return 3, run_dir, str(exc)
             hosted.append(runtime)
         progress = None if on_progress is None else (lambda p: on_progress(asdict(p)))
-        return serve(loaded, run_dir=run_dir, bus=bus, on_progress=progress)
+        return serve(loaded, run_dir=run_dir, bus=bus, on_progress=progress, gate=gate, on_relay=on_relay)
     finally:
         for runtime in hosted:
             try:

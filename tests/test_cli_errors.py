@@ -247,7 +247,7 @@ def test_run_of_a_model_that_is_not_there_ends_at_once_with_2_and_makes_no_run_d
             assert res.returncode == 2 and says in res.stderr and "node 'g'" in res.stderr, (model, mode, res.stderr)
             assert res.stderr.count("error:") == 1 and "Traceback" not in res.stderr, res.stderr
             assert not (tmp_path / "runs").exists(), (model, mode)
-            assert took < 2.0 + 1.0, took  # the CLI's imports are ~0.6 s of it on 2 busy cores
+            assert took < 2.0, took  # ~0.4 s here, most of it the command line's imports
 
 
 def test_a_node_whose_model_fails_to_import_is_not_started_again(tmp_path):

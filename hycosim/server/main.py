@@ -25,7 +25,7 @@ from hycosim.transport.session import open_session, router_config
 from hycosim.server import checkpoints
 from hycosim.server.coordinator import GuardEvaluationError
 from hycosim.server.recorder import Recorder, RecordError
-from hycosim.server.relay import Relay, RunError
+from hycosim.server.relay import PointGate, Relay, RunError
 from hycosim.transport.server_side import InProcessTransport, Transport, ZenohTransport
 
 
@@ -101,7 +101,9 @@ def _resume_plan(loaded: LoadedProject, run_dir: Path) -> tuple[dict[str, Any], 
 def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = Path("runs"),
           run_dir: Path | None = None, progress_jsonl: bool = False,
           gateway: str | None = None, resume: Path | None = None,
-          bus: LocalBus | None = None, on_progress: Callable[[Any], None] | None = None) -> tuple[int, Path | None, str]:
+          bus: LocalBus | None = None, on_progress: Callable[[Any], None] | None = None,
+          gate: PointGate | None = None, on_relay: Callable[[Relay], None] | None = None,
+          ) -> tuple[int, Path | None, str]:
     """Run one co-simulation as its server; return (exit code, run directory, message).
 
     Addresses and the credentials and certificate files are checked before anything is
@@ -109,7 +111,9 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     on with the run in that directory, whose server died, from its last complete checkpoint
     (exit code 2 if it cannot be). ``bus``: the nodes are hosted in this process and attached
     to it (an in-process run): no session, no gateway, no status queryable. ``on_progress``:
-    called with the relay's Progress about ten times a second.
+    called with the relay's Progress about ten times a second. ``gate``: when the step from
+    each point is taken (:class:`hycosim.server.relay.PointGate`; default at once); ``on_relay``
+    is given the relay before it runs (a Python caller reads its points through it).
     """
     def done(code: int, run_dir: Path | None, message: str) -> tuple[int, Path | None, str]:
         # A launcher reading --progress-jsonl learns the outcome from this line, on every path.
@@ -191,10 +195,12 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         transport = ZenohTransport(session)
     relay = Relay(loaded, transport, recorder, progress_every_s=0.1, on_progress=on_progress,
                   gateway_address=(gw.host, gw.port) if gw is not None else None,
-                  gateway_required=gateway_required, resume=recorded)
+                  gateway_required=gateway_required, resume=recorded, gate=gate)
+    if on_relay is not None:
+        on_relay(relay)
     try:
         relay.run()
-        code, message = 0, f"completed {recorder.meta['steps']} macro steps"
+        code, message = 0, f"{'stopped after' if relay.stopped else 'completed'} {recorder.meta['steps']} macro steps"
         if relay.ending.by is not None:
             e = relay.ending.by
             message += f"; node {e['node']!r} ended the simulation at t={e['t']:g} s: {e['message']}"

@@ -30,7 +30,7 @@ import os
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterator, Mapping
+from typing import Any, Callable, Iterator, Mapping, Protocol
 
 import structlog
 
@@ -173,12 +173,33 @@ class _Rate:
         return rate
 
 
+class PointGate(Protocol):
+    """When the step from a macro-step point is taken (the run's points other than the last)."""
+
+    def hold(self, step: int, t: float) -> None:
+        """Return once the step from point ``step`` (at ``t``) may be taken. The relay is at
+        the point meanwhile: its outputs gathered and its inputs routed, nothing stepping."""
+
+
+class _OpenGate:
+    """Every step at once: a run from the command line."""
+
+    def hold(self, step: int, t: float) -> None:
+        return None
+
+
+_OPEN = _OpenGate()
+
+
 class Relay:
     def __init__(self, loaded: LoadedProject, transport: Transport, recorder: Recorder,
                  progress_every_s: float = 0.0, on_progress: Any = None,
                  gateway_address: tuple[str, int] | None = None, gateway_required: bool = False,
-                 resume: int | None = None):
+                 resume: int | None = None, gate: PointGate | None = None):
         self.loaded = loaded
+        # Who decides when the step from each point is taken: at once, or a Python caller
+        # driving the run (hycosim.open), which may look at the point meanwhile.
+        self._gate: PointGate = gate or _OPEN
         self.project = loaded.project
         self.cosim = self.project.coSimulation
         self.keys = ProjectKeys(self.project.projectName)
@@ -275,6 +296,11 @@ class Relay:
                 "run": self.recorder.run_dir.name, "stopTime": self.cosim.stopTime,
                 "lateness_s": self.progress.lateness_s, "dropped": self._dropped(),
                 **self.latest.answer(time.perf_counter(), since)}
+
+    @property
+    def stopped(self) -> bool:
+        """Whether the run was asked to stop before its stop time (a run driven from Python, closed)."""
+        return self._stop_requested.is_set()
 
     def request_stop(self) -> None:
         """Ask the loop to stop at the next macro-step point (thread-safe)."""
@@ -1269,6 +1295,8 @@ class Relay:
         while True:
             self._point = p.k
             seen = self._arrive(p, p.t >= end)
+            if p.t < end:
+                self._gate.hold(p.k, p.t)  # the step from p waits for a caller's word; a stop may come meanwhile
             if p.t >= end or self._stop_requested.is_set():
                 self._record_point(p, seen)
                 break

@@ -1,0 +1,299 @@
+"""A run driven from Python: :func:`open` a project, then step it, look at its ports, end it.
+
+The run is the one ``hycosim run --in-process`` makes: the same master, nodes and run
+directory, ``values.csv`` byte for byte. The master runs in a thread of its own and stops at
+every macro-step point until this object lets it take the next step; while it stands there
+its outputs are gathered and its inputs routed, so what :meth:`Simulation.get` reads is the
+point's record. Leaving the ``with`` block (or :meth:`Simulation.close`) before the stop time
+ends the run as stopped, every row recorded so far kept.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from hycosim.core.config import ConfigError, LoadedProject, load_project, parse_project
+from hycosim.core.hints import did_you_mean
+
+# How often a waiting caller looks whether the run's thread is still there (a wait is never blind).
+_LOOK_S = 0.5
+
+
+class SimulationError(Exception):
+    """What a run driven from Python raises: the project, a port, a time, a closed run, a run
+    that failed. Each case is a subclass; the message names the project, port or time."""
+
+
+class ProjectError(SimulationError):
+    """The project cannot be run: its file has errors, or a node cannot be hosted in process."""
+
+
+class PortError(SimulationError, KeyError):
+    """A name that is no port of the project (``node.port``)."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0])
+
+
+class TimeError(SimulationError):
+    """A time the run cannot reach: past its stop time, or a step past its end."""
+
+
+class ClosedError(SimulationError):
+    """A call on a run that is closed."""
+
+
+class RunFailed(SimulationError):
+    """The run failed (a node's model, a record that cannot be written); its run directory
+    keeps what was recorded."""
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """How a run ended: ``status`` as ``meta.json`` says it (completed, stopped, failed, …), the
+    exit code ``hycosim run`` would give, and its message."""
+
+    status: str
+    code: int
+    message: str
+
+
+class _Gate:
+    """Where the master waits at each point until the caller lets it step on (thread-safe)."""
+
+    def __init__(self) -> None:
+        self._cv = threading.Condition()
+        self.at: tuple[int, float] | None = None  # the point the master stands at
+        self._until_step = 0  # it steps on from points before this one
+        self._until_t = -math.inf  # and from points before this time
+        self._open = False  # closing: every step at once, to the stop the caller asked for
+
+    def hold(self, step: int, t: float) -> None:
+        with self._cv:
+            self.at = (step, t)
+            self._cv.notify_all()
+            self._cv.wait_for(lambda: self._open or (step < self._until_step and t < self._until_t))
+            self.at = None
+
+    def go(self, step: int, t: float) -> None:
+        """Let the master step on from every point before ``step`` and before time ``t``."""
+        with self._cv:
+            self._until_step, self._until_t = step, t
+            self._cv.notify_all()
+
+    def open_wide(self) -> None:
+        with self._cv:
+            self._open = True
+            self._cv.notify_all()
+
+    def wait(self, arrived, over, thread: threading.Thread) -> None:
+        """Until ``arrived()`` (the caller's condition on :attr:`at`) or ``over()`` (the run ended);
+        the run's thread is looked at every half second besides, so no wait outlives it."""
+        with self._cv:
+            while not self._cv.wait_for(lambda: arrived() or over() or not thread.is_alive(), timeout=_LOOK_S):
+                pass
+
+
+def _load(project: str | Path | dict[str, Any]) -> LoadedProject:
+    try:
+        if isinstance(project, dict):
+            return parse_project(project, "<project dict>")
+        path = Path(project)
+        if path.suffix.lower() == ".ssp":
+            return load_project(_from_ssp(path))
+        return load_project(path)
+    except ConfigError as exc:
+        raise ProjectError(f"{exc.source}: " + "; ".join(i.render() for i in exc.issues)) from None
+
+
+def _from_ssp(package: Path) -> Path:
+    """An SSP package's project (imported as ``hycosim run`` imports it, beside the package)."""
+    from hycosim.fmi.ssp import SspError, project_from_ssp
+
+    folder = package.parent / f".{package.name}.d"
+    side_file = package.with_name(package.stem + ".hycosim.json")
+    try:
+        side = json.loads(side_file.read_text()) if side_file.is_file() else None
+        folder.mkdir(exist_ok=True)
+        doc = project_from_ssp(package, folder / "project-fmus", side=side)
+        (folder / "project.json").write_text(json.dumps(doc, indent=1))
+    except (SspError, OSError, ValueError) as exc:
+        raise ProjectError(f"{package}: {exc}") from None
+    return folder / "project.json"
+
+
+def open(project: str | Path | dict[str, Any], *, runs_dir: str | Path = "runs") -> Simulation:  # noqa: A001
+    """Start a run of ``project`` (a project file, an SSP package, or a project as a dict) in
+    this process and stop at its first point, t = startTime, with the initialisation done.
+    Its run directory is made under ``runs_dir`` as ``hycosim run`` makes it."""
+    return Simulation(_load(project), Path(runs_dir))
+
+
+class Simulation:
+    """One run, driven step by step. Made by :func:`open`; use it in a ``with`` block."""
+
+    def __init__(self, loaded: LoadedProject, runs_dir: Path):
+        from hycosim.inprocess import CannotHost, check_hostable
+
+        try:
+            check_hostable(loaded)
+        except CannotHost as exc:
+            raise ProjectError(str(exc)) from None
+        self._loaded = loaded
+        self._cosim = loaded.project.coSimulation
+        self._ports = {f"{n.nodeName}.{p.name}": (n.nodeName, "outputs", i)
+                       for n in loaded.project.nodeLists for i, p in enumerate(n.output)}
+        self._ports.update({f"{n.nodeName}.{p.name}": (n.nodeName, "inputs", i)
+                            for n in loaded.project.nodeLists for i, p in enumerate(n.input)})
+        self._gate = _Gate()
+        self._relay = None
+        self._result: tuple[int, Path | None, str] | None = None
+        self._failure: BaseException | None = None
+        self._closed = False
+        self._over = False  # the run's thread is done with it
+        self._thread = threading.Thread(target=self._run, args=(runs_dir,), name=f"hycosim-{loaded.name}",
+                                        daemon=True)
+        self._thread.start()
+        self._gate.wait(lambda: self._gate.at is not None, lambda: self._over, self._thread)
+        if self._gate.at is None and self._result is not None and self._result[1] is None:
+            raise ProjectError(self._result[2])  # a model that could not load: nothing was run
+        self._raise_if_failed()
+
+    def _run(self, runs_dir: Path) -> None:
+        from hycosim.inprocess import run_in_process
+
+        def seen(relay: Any) -> None:
+            self._relay = relay
+
+        try:
+            self._result = run_in_process(self._loaded, runs_dir=runs_dir, gate=self._gate, on_relay=seen)
+        except BaseException as exc:  # told to the caller, in the caller's thread
+            self._failure = exc
+        finally:
+            self._over = True
+            self._gate.go(-1, -math.inf)  # wakes a waiting caller
+
+    # --- where the run is ------------------------------------------------------------
+
+    @property
+    def step_count(self) -> int:
+        """The macro steps taken so far (the index of the point the run stands at)."""
+        if self._gate.at is not None:
+            return self._gate.at[0]
+        return self._relay.progress.step if self._relay is not None else 0
+
+    @property
+    def time(self) -> float:
+        """The simulated time of the point the run stands at."""
+        if self._gate.at is not None:
+            return self._gate.at[1]
+        return self._relay.progress.t if self._relay is not None else self._cosim.startTime
+
+    @property
+    def run_dir(self) -> Path | None:
+        """The run directory, as ``hycosim run`` writes it."""
+        if self._result is not None:
+            return self._result[1]
+        return self._relay.recorder.run_dir if self._relay is not None else None
+
+    @property
+    def outcome(self) -> Outcome | None:
+        """How the run ended, once it has (None while it runs)."""
+        if self._result is None:
+            return None
+        code, run_dir, message = self._result
+        status = "failed"
+        try:
+            status = json.loads((run_dir / "meta.json").read_text()).get("status", status)
+        except (OSError, ValueError, TypeError):
+            pass
+        return Outcome(str(status), code, message)
+
+    @property
+    def ended(self) -> bool:
+        """Whether the run is over (its stop time reached, stopped, or failed)."""
+        return self._over or not self._thread.is_alive()
+
+    # --- driving it ------------------------------------------------------------------
+
+    def step(self) -> float:
+        """Take one macro step; return the new time."""
+        self._check_open()
+        if self.ended:
+            raise TimeError(f"the run of {self._loaded.name!r} is over (t={self.time:g} s): no step is left")
+        k = self.step_count
+        self._advance(k + 1, math.inf, lambda at: at[0] > k)
+        return self.time
+
+    def run_until(self, t: float) -> float:
+        """Step until the point at or past ``t`` (the stop time at most); return the time reached."""
+        self._check_open()
+        stop = self._cosim.stopTime
+        tolerance = 1e-9 * self._cosim.stepSize
+        if not (isinstance(t, (int, float)) and math.isfinite(t)):
+            raise TimeError(f"run_until({t!r}): not a finite time")
+        if t > stop + tolerance:
+            raise TimeError(f"run_until({t:g}): past the stop time of {self._loaded.name!r}, {stop:g} s")
+        if self.ended or t <= self.time + tolerance:
+            return self.time
+        self._advance(math.inf, t - tolerance, lambda at: at[1] >= t - tolerance)
+        return self.time
+
+    def _advance(self, step: int | float, t: float, arrived) -> None:
+        self._gate.go(step, t)
+        try:
+            self._gate.wait(lambda: self._gate.at is not None and arrived(self._gate.at), lambda: self._over,
+                            self._thread)
+        except KeyboardInterrupt:
+            self.close()
+            raise
+        self._raise_if_failed()
+
+    def get(self, port: str) -> Any:
+        """A port's value at the point the run stands at, as ``values.csv`` records it there (an
+        output as its node stepped it, an input as routed for the next step); arrays as lists."""
+        self._check_open()
+        where = self._ports.get(port) if isinstance(port, str) else None
+        if where is None:
+            raise PortError(f"{port!r} is no port of {self._loaded.name!r} (write node.port)"
+                            f"{did_you_mean([str(port)], self._ports)}")
+        node, side, i = where
+        values = self._relay.outputs if side == "outputs" else self._relay.router.inputs
+        value = values[node][i]
+        return list(value) if isinstance(value, (list, tuple)) else value
+
+    def close(self) -> None:
+        """End the run: one before its stop time is stopped at the point it stands at, every row
+        recorded so far kept. A second call does nothing."""
+        if self._closed:
+            return
+        self._closed = True
+        if self._thread.is_alive():
+            if self._relay is not None:
+                self._relay.request_stop()
+            self._gate.open_wide()
+            # A step under way ends first (in process a step is a call into the models).
+            self._thread.join(timeout=self._cosim.stepTimeout + 60.0)
+
+    def __enter__(self) -> Simulation:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise ClosedError(f"the run of {self._loaded.name!r} is closed")
+
+    def _raise_if_failed(self) -> None:
+        if self._failure is not None:
+            raise RunFailed(f"the run of {self._loaded.name!r} failed: {type(self._failure).__name__}: "
+                            f"{self._failure}") from self._failure
+        if self._result is not None and self._result[0] != 0:
+            code, run_dir, message = self._result
+            raise RunFailed(f"{message} (results so far: {run_dir})")

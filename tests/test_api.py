@@ -1,0 +1,141 @@
+"""hycosim.open: a run driven from Python, point by point, is the run `hycosim run` makes."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import hycosim
+from tests.helpers import REPO, hycosim as cli, meta, read_rows
+
+
+def _catch(tmp_path: Path) -> Path:
+    """The shipped default project without its asynchronous sensor (which one process cannot
+    host): a pendulum caught by a hand (an event, guards, a mode switch), a gain chain."""
+    doc = json.loads((REPO / "hycosim" / "configs" / "default.json").read_text())
+    doc.pop("$schema")
+    doc["nodeLists"] = [n for n in doc["nodeLists"] if n["nodeName"] not in ("sensor", "sensed")]
+    doc["linkLists"] = [ln for ln in doc["linkLists"] if not {"sensor", "sensed"} & {ln["from"].split(".")[0],
+                                                                                    ln["to"].split(".")[0]}]
+    doc["nodeNum"], doc["linkNum"] = len(doc["nodeLists"]), len(doc["linkLists"])
+    path = tmp_path / "catch.json"
+    path.write_text(json.dumps(doc, indent=1))
+    return path
+
+
+def test_a_run_driven_to_its_stop_time_writes_what_hycosim_run_writes(tmp_path):
+    project = _catch(tmp_path)
+    stop = json.loads(project.read_text())["coSimulation"]["stopTime"]
+    with hycosim.open(project, runs_dir=tmp_path / "api") as sim:
+        assert (sim.time, sim.step_count) == (0.0, 0)
+        assert sim.step() == pytest.approx(sim.time) and sim.step_count == 1
+        half = sim.run_until(stop / 2)
+        assert half == pytest.approx(stop / 2) and sim.time == half
+        assert sim.run_until(stop / 4) == half  # a time already passed: nothing is taken again
+        while not sim.ended:
+            sim.step()
+        assert sim.time == pytest.approx(stop)
+    assert sim.outcome.status == "completed" and sim.outcome.code == 0
+    for mode in ("--in-process", "--processes"):
+        res = cli("run", str(project), mode, "--no-progress", "--runs-dir", str(tmp_path / mode))
+        assert res.returncode == 0, res.stderr
+        run = next((tmp_path / mode).iterdir())
+        assert (run / "values.csv").read_bytes() == (sim.run_dir / "values.csv").read_bytes(), mode
+    assert (sim.run_dir / "events.jsonl").read_text().count('"to": "grasp"') == 1
+
+
+def test_get_reads_the_point_the_run_stands_at_as_its_row_records_it(tmp_path):
+    project = _catch(tmp_path)
+    seen = []
+    with hycosim.open(project, runs_dir=tmp_path / "runs") as sim:
+        for _ in range(30):
+            seen.append((sim.step_count, sim.get("pendulum.theta"), sim.get("delayed.u"), sim.get("hand.y")))
+            sim.step()
+    rows = read_rows(sim.run_dir)
+    for k, angle, routed, hand in seen:
+        assert float(rows[k]["pendulum.theta"]) == pytest.approx(angle, abs=1e-12)
+        assert float(rows[k]["delayed.u"]) == pytest.approx(routed, abs=1e-12)
+        assert float(rows[k]["hand.y"]) == pytest.approx(hand, abs=1e-12)
+    assert len({a for _, a, _, _ in seen}) > 20  # it swings: the values are the points', not one
+
+
+def test_leaving_the_block_early_stops_the_run_and_keeps_its_rows(tmp_path):
+    project = _catch(tmp_path)
+    with hycosim.open(project, runs_dir=tmp_path / "runs") as sim:
+        sim.run_until(0.3)
+        at = sim.step_count
+    assert sim.outcome.status == "stopped" and "stopped after" in sim.outcome.message
+    assert meta(sim.run_dir)["status"] == "stopped"
+    assert len(read_rows(sim.run_dir)) == at + 1  # every point up to where it stood
+    with pytest.raises(hycosim.ClosedError, match="closed"):
+        sim.step()
+    with pytest.raises(hycosim.ClosedError):
+        sim.get("pendulum.theta")
+    sim.close()  # a second close does nothing
+
+
+def test_what_the_api_refuses_is_named_by_one_class(tmp_path):
+    doc = {"projectName": "chain", "nodeNum": 2, "linkNum": 1,
+           "nodeLists": [{"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+                         {"nodeName": "g", "UID": 2, "model": "gain", "parameters": {"k": 2.0}, "input": ["u"],
+                          "output": ["y"]}],
+           "linkLists": [{"from": "clock.y", "to": "g.u"}], "coSimulation": {"stepSize": 0.1, "stopTime": 0.5}}
+    with hycosim.open(doc, runs_dir=tmp_path / "runs") as sim:  # a project as a dict
+        for call, error, says in ((lambda: sim.run_until(0.6), hycosim.TimeError, "past the stop time"),
+                                  (lambda: sim.run_until(float("nan")), hycosim.TimeError, "not a finite time"),
+                                  (lambda: sim.get("g.x"), hycosim.PortError, "did you mean 'g.y'"),
+                                  (lambda: sim.get(3), hycosim.PortError, "no port")):
+            with pytest.raises(error, match=says):
+                call()
+            assert issubclass(error, hycosim.SimulationError)
+        sim.run_until(0.5)
+        assert sim.ended and sim.get("g.y") == pytest.approx(2 * sim.get("g.u") - 0.0, abs=0.3)
+        with pytest.raises(hycosim.TimeError, match="over"):
+            sim.step()
+    bad = dict(doc, linkLists=[{"from": "clock.nope", "to": "g.u"}])
+    with pytest.raises(hycosim.ProjectError, match="clock.nope is not an output"):
+        hycosim.open(bad, runs_dir=tmp_path / "runs")
+    with pytest.raises(hycosim.ProjectError, match="no-such-file.json"):
+        hycosim.open(tmp_path / "no-such-file.json")
+
+
+_FAILS = """
+from hycosim.node.reference.gain import Gain
+
+
+class FailsLater(Gain):
+    def step(self, t, h, inputs):
+        if t >= 0.25:
+            raise RuntimeError("the model gave up")
+        super().step(t, h, inputs)
+"""
+
+
+def test_a_run_that_fails_raises_run_failed_and_keeps_its_records(tmp_path):
+    (tmp_path / "fails.py").write_text(_FAILS)
+    project = tmp_path / "p.json"
+    project.write_text(json.dumps({
+        "projectName": "fails", "nodeNum": 2, "linkNum": 1,
+        "nodeLists": [{"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+                      {"nodeName": "g", "UID": 2, "model": "fails.py:FailsLater", "input": ["u"], "output": ["y"]}],
+        "linkLists": [{"from": "clock.y", "to": "g.u"}], "coSimulation": {"stepSize": 0.1, "stopTime": 1.0}}))
+    with hycosim.open(project, runs_dir=tmp_path / "runs") as sim:
+        sim.step()
+        with pytest.raises(hycosim.RunFailed, match="the model gave up"):
+            sim.run_until(1.0)
+    assert sim.outcome.status == "failed" and sim.outcome.code == 3
+    assert len(read_rows(sim.run_dir)) >= 3 and meta(sim.run_dir)["status"] == "failed"
+
+
+def test_import_hycosim_stays_light():
+    res = subprocess.run([sys.executable, "-X", "importtime", "-c", "import hycosim; hycosim.__doc__"],
+                         capture_output=True, text=True, cwd=REPO, timeout=60)
+    imported = {line.rsplit("|", 1)[-1].strip() for line in res.stderr.splitlines() if "|" in line}
+    assert "hycosim" in imported and not {m for m in imported if m.startswith(("hycosim.", "zenoh", "fmpy"))}, imported
+    res = subprocess.run([sys.executable, "-c", "import hycosim, sys; hycosim.open; print('hycosim.api' in sys.modules)"],
+                         capture_output=True, text=True, cwd=REPO, timeout=60)
+    assert res.stdout.strip() == "True", res.stderr
