@@ -13,7 +13,7 @@ its coordinator; ``hycosim.node`` the node interface and runtime; ``hycosim.fmi`
 # The Python API (hycosim.api), imported when first asked for: ``import hycosim`` stays as light
 # as every node process needs it.
 _API = frozenset({"open", "Simulation", "Outcome", "SimulationError", "ProjectError", "PortError", "TimeError",
-                  "ClosedError", "RunFailed"})
+                  "ClosedError", "OverrideError", "RunFailed"})
 
 
 def __getattr__(name: str):

@@ -48,6 +48,10 @@ class ClosedError(SimulationError):
     """A call on a run that is closed."""
 
 
+class OverrideError(SimulationError):
+    """An override the port cannot take: no link feeds it, or the value is of another type or shape."""
+
+
 class RunFailed(SimulationError):
     """The run failed (a node's model, a record that cannot be written); its run directory
     keeps what was recorded."""
@@ -266,6 +270,41 @@ class Simulation:
         values = self._relay.outputs if side == "outputs" else self._relay.router.inputs
         value = values[node][i]
         return list(value) if isinstance(value, (list, tuple)) else value
+
+    def override(self, port: str, value: Any) -> None:
+        """From the step the run takes next until :meth:`release`, input ``port`` (one a link
+        feeds) sees ``value`` instead of what its links bring. Recorded (time, port, value) in
+        ``events.jsonl``, and held through a rollback to a checkpoint as the project's
+        ``scenario`` is."""
+        self._manipulate(port, value)
+
+    def release(self, port: str) -> None:
+        """Input ``port`` follows its links again from the step the run takes next."""
+        self._manipulate(port, None)
+
+    def _manipulate(self, port: str, value: Any) -> None:
+        from hycosim.core.scenario_checks import value_problem
+        from hycosim.core.schema import ScenarioAction
+
+        self._check_open()
+        if self.ended:
+            raise TimeError(f"the run of {self._loaded.name!r} is over: nothing is stepped any more")
+        if not isinstance(port, str) or port not in self._ports:
+            raise PortError(f"{port!r} is no port of {self._loaded.name!r} (write node.port)"
+                            f"{did_you_mean([str(port)], self._ports)}")
+        relay = self._relay
+        target = relay.scenario.target(port)
+        if target is None:
+            raise OverrideError(f"{port} is no input a link feeds: an override takes the place of what links bring")
+        if value is not None and (why := value_problem(target[2], value)) is not None:
+            raise OverrideError(f"{port} {why}, not {value!r}")
+        if value is None and not any(i == target[1] for i, _ in relay.router.pins.get(target[0], ())):
+            raise OverrideError(f"{port} is not overridden: there is nothing to release")
+        action = (ScenarioAction(t=self.time, override=port, value=value) if value is not None
+                  else ScenarioAction(t=self.time, release=port))
+        # The master stands at this point, its inputs routed: the step it takes next is on them.
+        relay.scenario.add(action)
+        relay.apply_scenario(self.step_count, self.time)
 
     def close(self) -> None:
         """End the run: one before its stop time is stopped at the point it stands at, every row

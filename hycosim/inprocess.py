@@ -19,6 +19,7 @@ from typing import Any, Callable
 
 from hycosim.core import logs
 from hycosim.core.config import LoadedProject, in_process_refusals
+from hycosim.core.schema import ScenarioAction
 from hycosim.core.folders import run_dir_for
 from hycosim.transport.local_bus import LocalBus
 
@@ -44,7 +45,7 @@ def check_hostable(loaded: LoadedProject) -> None:
 def run_in_process(loaded: LoadedProject, *, runs_dir: Path = Path("runs"),
                    on_progress: Callable[[dict[str, Any]], None] | None = None,
                    gate: PointGate | None = None, on_relay: Callable[[Relay], None] | None = None,
-                   ) -> tuple[int, Path | None, str]:
+                   scenario: list[ScenarioAction] | None = None) -> tuple[int, Path | None, str]:
     """Run the project in this process; return (exit code, run directory, message) as
     :func:`hycosim.server.main.serve` does. Raise :class:`CannotHost` before anything is
     written for a node one process cannot host. ``gate`` and ``on_relay``: a caller that drives
@@ -70,7 +71,8 @@ def run_in_process(loaded: LoadedProject, *, runs_dir: Path = Path("runs"),
                 return 3, run_dir, str(exc)
             hosted.append(runtime)
         progress = None if on_progress is None else (lambda p: on_progress(asdict(p)))
-        return serve(loaded, run_dir=run_dir, bus=bus, on_progress=progress, gate=gate, on_relay=on_relay)
+        return serve(loaded, run_dir=run_dir, bus=bus, on_progress=progress, gate=gate, on_relay=on_relay,
+                     scenario=scenario)
     finally:
         for runtime in hosted:
             try:

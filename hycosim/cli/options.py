@@ -21,6 +21,10 @@ def finite(value: float | None) -> float | None:
     return value
 
 
+# Time-triggered overrides beside the project's own scenario (a JSON list of actions).
+ScenarioFile = Annotated[Optional[Path], typer.Option(
+    "--scenario", help="a scenario file: overrides of inputs in time, beside the project's 'scenario'")]
+
 # An SSP package's macro step and stop time (SSP 1.0 has no step), for the commands that take a
 # package as they take a project file; the side file's coSimulation has the last word.
 SspStep = Annotated[Optional[float], typer.Option("--step", min=0.0, callback=finite,

@@ -17,6 +17,19 @@ def load(path: Path) -> LoadedProject:
         fail(f"{exc.source}: {len(exc.issues)} error(s)", details=[f"{exc.source}: {i.render()}" for i in exc.issues])
 
 
+def scenario_of(path: Path | None, loaded: LoadedProject) -> list | None:
+    """The actions of ``--scenario FILE`` checked against the project; exit 2 listing every problem."""
+    if path is None:
+        return None
+    from hycosim.core.scenario_checks import load_scenario
+
+    try:
+        return load_scenario(path, loaded.project, loaded.routes)
+    except ConfigError as exc:
+        fail(f"--scenario {exc.source}: {len(exc.issues)} error(s)",
+             details=[f"{exc.source}: {i.render()}" for i in exc.issues])
+
+
 # Beside a package, the parts of a project SSP has no word for (serverIP, events, asynchronous
 # nodes, coSimulation keys): `run` and `validate` of system.ssp read system.hycosim.json.
 SSP_SIDE_SUFFIX = ".hycosim.json"

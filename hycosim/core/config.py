@@ -17,6 +17,7 @@ from typing import Any, NamedTuple
 from pydantic import ValidationError
 
 from hycosim.core.coupling import CouplingPlan, coupling_issues, plan
+from hycosim.core.scenario_checks import scenario_issues
 from hycosim.core.endpoints import GATEWAY_PORT, SERVER_PORT, Address, EndpointError, gateway_beside, parse_address, parse_endpoint
 from hycosim.core.guards import Guard, GuardError
 from hycosim.core.schema import ASSIGNABLE, FREE_MODE, Issue, PortType, Project, Route
@@ -74,10 +75,11 @@ def _reject_duplicate_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
     return seen
 
 
-def _pydantic_issues(err: ValidationError) -> list[Issue]:
+def pydantic_issues(err: ValidationError, prefix: str = "") -> list[Issue]:
+    """Pydantic's errors as issues with a JSON path each (below ``prefix``) and a hint."""
     issues = []
     for e in err.errors():
-        path = ""
+        path = prefix
         for part in e["loc"]:
             path += f"[{part}]" if isinstance(part, int) else (f".{part}" if path else str(part))
         msg = e["msg"]
@@ -362,6 +364,7 @@ def check_semantics(project: Project) -> tuple[list[Route], dict[str, EventGuard
         if len(compiled) == len(given):
             guards[e.name] = EventGuards(**compiled)
     routes = _resolve_routes(project, issues)
+    issues += scenario_issues(project, routes, project.scenario)
     issues.extend(coupling_issues(project, routes))
     return routes, guards, issues
 
@@ -371,7 +374,7 @@ def parse_project(data: Any, source: str = "<config>", path: Path | None = None,
     try:
         project = Project.model_validate(data)
     except ValidationError as err:
-        raise ConfigError(source, _pydantic_issues(err)) from None
+        raise ConfigError(source, pydantic_issues(err)) from None
     routes, guards, issues = check_semantics(project)
     if issues:
         raise ConfigError(source, issues)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StrictInt, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt, field_validator, model_validator
 
 
 FREE_MODE = "free"
@@ -354,6 +354,42 @@ class Event(_Strict):
     description: str | None = None
 
 
+class Ramp(_Strict):
+    """An override that moves a Real input linearly to ``to`` over ``duration`` seconds, from
+    ``from`` (default: the value an override held there before, else the port's start value)."""
+
+    to: StrictFloat | StrictInt
+    duration: float = Field(gt=0)
+    start: StrictFloat | StrictInt | None = Field(default=None, alias="from")
+
+
+class ScenarioAction(_Strict):
+    """One manipulation at time ``t`` (seconds of simulated time): ``override`` an input that a
+    link feeds (with ``value``, or a ``ramp``), or ``release`` it to its links again. An
+    overridden input is what its node sees from the first macro-step point at or after ``t``."""
+
+    t: float
+    override: str | None = None
+    value: StrictBool | StrictInt | StrictFloat | str | list[Any] | None = None
+    ramp: Ramp | None = None
+    release: str | None = None
+    description: str | None = None
+
+    @model_validator(mode="after")
+    def _one_kind(self) -> "ScenarioAction":
+        if (self.override is None) == (self.release is None):
+            raise ValueError("an action either overrides a port ('override') or releases one ('release')")
+        if self.override is not None and (self.value is None) == (self.ramp is None):
+            raise ValueError("an override gives a 'value' or a 'ramp'")
+        if self.release is not None and (self.value is not None or self.ramp is not None):
+            raise ValueError("a release takes no 'value' or 'ramp'")
+        return self
+
+    @property
+    def target(self) -> str:
+        return self.override if self.override is not None else self.release
+
+
 class Tls(_Strict):
     """TLS on the server's ``tls/HOST:PORT`` endpoint; PEM files relative to the project JSON."""
 
@@ -388,6 +424,8 @@ class Project(_Strict):
     linkLists: list[Link] = Field(default_factory=list)
     coSimulation: CoSimulation = Field(default_factory=CoSimulation)
     events: list[Event] = Field(default_factory=list)
+    # Time-triggered manipulation of inputs (fault injection); --scenario FILE gives one too.
+    scenario: list[ScenarioAction] = Field(default_factory=list)
     security: Security | None = None
     description: str | None = None
 

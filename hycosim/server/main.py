@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import structlog
+from pydantic import TypeAdapter, ValidationError
 
 from hycosim import __version__
 from hycosim.core import json_text, logs, signals
@@ -26,6 +27,7 @@ from hycosim.server import checkpoints
 from hycosim.server.coordinator import GuardEvaluationError
 from hycosim.server.recorder import Recorder, RecordError
 from hycosim.server.relay import PointGate, Relay, RunError
+from hycosim.core.schema import ScenarioAction
 from hycosim.transport.server_side import InProcessTransport, Transport, ZenohTransport
 
 
@@ -103,7 +105,7 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
           gateway: str | None = None, resume: Path | None = None,
           bus: LocalBus | None = None, on_progress: Callable[[Any], None] | None = None,
           gate: PointGate | None = None, on_relay: Callable[[Relay], None] | None = None,
-          ) -> tuple[int, Path | None, str]:
+          scenario: list[ScenarioAction] | None = None) -> tuple[int, Path | None, str]:
     """Run one co-simulation as its server; return (exit code, run directory, message).
 
     Addresses and the credentials and certificate files are checked before anything is
@@ -114,6 +116,8 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     called with the relay's Progress about ten times a second. ``gate``: when the step from
     each point is taken (:class:`hycosim.server.relay.PointGate`; default at once); ``on_relay``
     is given the relay before it runs (a Python caller reads its points through it).
+    ``scenario``: overrides in time beside the project's own (``--scenario FILE``, checked);
+    kept in ``meta.json``, where a resumed run finds them.
     """
     def done(code: int, run_dir: Path | None, message: str) -> tuple[int, Path | None, str]:
         # A launcher reading --progress-jsonl learns the outcome from this line, on every path.
@@ -164,8 +168,15 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         "lowLatency": loaded.project.coSimulation.lowLatency,
         "waitStrategy": loaded.project.coSimulation.waitStrategy, "zenoh_runtime": os.environ.get("ZENOH_RUNTIME"),
     }
+    if scenario:
+        meta["scenario"] = [a.model_dump(by_alias=True, exclude_none=True) for a in scenario]
     if resume_at is not None:
         meta = {**old_meta, "endpoint": endpoint, "versions": meta["versions"]}
+        if not scenario and old_meta.get("scenario"):
+            try:
+                scenario = TypeAdapter(list[ScenarioAction]).validate_python(old_meta["scenario"])
+            except ValidationError as err:
+                return done(2, None, f"--resume: {resume / 'meta.json'}: its scenario cannot be read ({err.errors()[0]['msg']})")
     try:
         # In one process the master's thread steps every node: a process of its own writes the rows.
         recorder = Recorder(run_dir, loaded, meta, resume_at=resume_at, rows_apart=bus is not None)
@@ -195,7 +206,7 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         transport = ZenohTransport(session)
     relay = Relay(loaded, transport, recorder, progress_every_s=0.1, on_progress=on_progress,
                   gateway_address=(gw.host, gw.port) if gw is not None else None,
-                  gateway_required=gateway_required, resume=recorded, gate=gate)
+                  gateway_required=gateway_required, resume=recorded, gate=gate, scenario=scenario)
     if on_relay is not None:
         on_relay(relay)
     try:

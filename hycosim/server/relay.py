@@ -35,7 +35,7 @@ from typing import Any, Callable, Iterator, Mapping, Protocol
 import structlog
 
 from hycosim.core import frames, signals
-from hycosim.core.schema import FREE_MODE
+from hycosim.core.schema import FREE_MODE, ScenarioAction
 from hycosim.core.config import LoadedProject
 from hycosim.transport.inbox import LOCAL
 from hycosim.transport.keys import ProjectKeys
@@ -54,6 +54,7 @@ from hycosim.server.localisation import bisect_crossing
 from hycosim.server.interpolation import STARTUP_SPLIT, InputTrack
 from hycosim.server.recorder import Recorder, RecordError
 from hycosim.server.retakes import IterationLog, StepSizer, control_step, input_change, iterate_step
+from hycosim.server.scenario import Scenario
 from hycosim.server.routing import OutputView, Router
 from hycosim.server.status_view import LatestPoints
 from hycosim.transport.server_side import Transport
@@ -195,7 +196,8 @@ class Relay:
     def __init__(self, loaded: LoadedProject, transport: Transport, recorder: Recorder,
                  progress_every_s: float = 0.0, on_progress: Any = None,
                  gateway_address: tuple[str, int] | None = None, gateway_required: bool = False,
-                 resume: int | None = None, gate: PointGate | None = None):
+                 resume: int | None = None, gate: PointGate | None = None,
+                 scenario: list[ScenarioAction] | None = None):
         self.loaded = loaded
         # Who decides when the step from each point is taken: at once, or a Python caller
         # driving the run (hycosim.open), which may look at the point meanwhile.
@@ -207,6 +209,8 @@ class Relay:
         self.recorder = recorder
         self.coordinator = Coordinator(self.project.events, loaded.guards)
         self.router = Router(loaded)
+        # Overrides of inputs in time (the project's scenario, --scenario, a Python caller's).
+        self.scenario = Scenario(self.project, loaded.routes, [*self.project.scenario, *(scenario or [])])
         self._input_labels = {n.nodeName: [f"{n.nodeName}.{p.name}" for p in n.input] for n in self.project.nodeLists}
         # Iterative coupling and the error-controlled step, once the nodes said they can take part.
         self.iteration: IterationLog | None = None
@@ -1141,6 +1145,8 @@ class Relay:
             arrivals = self.gather(0, released_at)
         finally:
             self._starting = False
+        if self.scenario:  # what the nodes start on, overrides at t0 included
+            self._manipulate(0, cosim.startTime)
         if cosim.initialize.enabled:
             self._initialise()
         self._checkpoint_at = cosim.startTime
@@ -1150,6 +1156,7 @@ class Relay:
         """The run back at its last checkpoint (:meth:`_restore`): the point to go on from, and
         the checkpoint's server state."""
         s, arrivals, wait = self._restore(cause)
+        self.scenario.rewind(s["t"])  # its record after the checkpoint was cut with the others
         if self.sizer is not None:
             self.sizer.h = s["h"]
         self._checkpoint_at = self._next_checkpoint(s["t"])
@@ -1195,12 +1202,27 @@ class Relay:
         view = OutputView(self.router.output_index, self.outputs)
         self._switch(p, view)
         mode = self.coordinator.mode
+        if self.scenario:
+            self._manipulate(p.k, p.t)
         ages = self.router.route(mode, p.t, self.outputs, self.histories)
         lateness = self._pace(p.t)
         holder = max(p.arrivals, key=p.arrivals.get) if p.arrivals else ""
         stepped = self.coupling.due(p.k) if self.coupling.multirate and not final else None
         # The outputs kept: the step replaces them before point p is recorded.
         return _Seen(mode, dict(self.outputs), view, ages, lateness, holder, stepped)
+
+    def _manipulate(self, k: int, t: float) -> None:
+        """The scenario's overrides in force at point k, and the record of those taking effect there."""
+        self.router.pins = self.scenario.pins_at(t)
+        for entry in self.scenario.taking_effect(k, t):
+            self.recorder.event(entry)
+            self._log.info("scenario", step=k, **{key: v for key, v in entry.items() if key not in ("step",)})
+
+    def apply_scenario(self, k: int, t: float) -> None:
+        """A caller changed the scenario while the loop stands at point k (through a PointGate):
+        the inputs routed there take it, so the step from k is taken on them."""
+        self._manipulate(k, t)
+        self.router.route(self.coordinator.mode, t, self.outputs, self.histories)  # as the point routed them
 
     def _switch(self, p: _Point, view: OutputView) -> None:
         """Evaluate the guards at point p; a switch of mode is recorded (with the located event

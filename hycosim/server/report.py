@@ -14,7 +14,7 @@ import math
 from array import array
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterator, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
@@ -144,20 +144,43 @@ def read_meta(run_dir: Path) -> RunMeta:
         raise RunDirError(f"{path}: not a run's metadata ({_problem(err)})") from None
 
 
-def read_events(run_dir: Path) -> list[dict[str, Any]]:
-    """The mode switches of ``events.jsonl``, each checked against :class:`ModeSwitchRecord`."""
+class ScenarioRecord(BaseModel):
+    """A line of ``events.jsonl`` saying a scenario's action took effect (server.scenario)."""
+
+    model_config = ConfigDict(extra="allow")
+    scenario: Literal["override", "release"]
+    target: str
+    t_action: float
+    t: float
+    step: int
+
+
+def _event_records(run_dir: Path) -> Iterator[tuple[str, dict[str, Any]]]:
+    """Each line of ``events.jsonl`` checked as what it says it is: ("switch", a mode switch) or
+    ("scenario", an action of the scenario that took effect)."""
     path = run_dir / "events.jsonl"
     try:
         records = read_jsonl(path)
     except RunFileError as exc:
         raise RunDirError(str(exc)) from None
-    checked = []
     for number, record in enumerate(records, start=1):
+        kind, model = (("scenario", ScenarioRecord) if type(record) is dict and "scenario" in record
+                       else ("switch", ModeSwitchRecord))
         try:
-            checked.append(ModeSwitchRecord.model_validate(record).model_dump(by_alias=True))
+            yield kind, model.model_validate(record).model_dump(by_alias=True)
         except ValidationError as err:
-            raise RunDirError(f"{path}: record {number} is not a mode switch ({_problem(err)})") from None
-    return checked
+            what = "a scenario's action" if kind == "scenario" else "a mode switch"
+            raise RunDirError(f"{path}: record {number} is not {what} ({_problem(err)})") from None
+
+
+def read_events(run_dir: Path) -> list[dict[str, Any]]:
+    """The mode switches of ``events.jsonl``, each checked against :class:`ModeSwitchRecord`."""
+    return [record for kind, record in _event_records(run_dir) if kind == "switch"]
+
+
+def read_scenario(run_dir: Path) -> list[dict[str, Any]]:
+    """The scenario's actions that took effect, from ``events.jsonl`` (:class:`ScenarioRecord`)."""
+    return [record for kind, record in _event_records(run_dir) if kind == "scenario"]
 
 
 def summarise(run_dir: Path, slowest: int = 5) -> RunSummary:

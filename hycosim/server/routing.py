@@ -69,6 +69,8 @@ class Router:
         self.output_index = {(n.nodeName, p.name): (n.nodeName, i)
                              for n in project.nodeLists for i, p in enumerate(n.output)}
         self._async = {n.nodeName for n in project.async_nodes()}
+        # Inputs a scenario overrides: node → [(input index, value)], written over what the links bring.
+        self.pins: dict[str, list[tuple[int, Any]]] = {}
         self._plans: dict[str, list[_Hop]] = {}
         for mode in project.modes():
             hops = []
@@ -107,7 +109,14 @@ class Router:
             else:
                 value = outputs[hop.src_node][hop.src_index]
             inputs[hop.dst_node][hop.dst_index] = value if hop.convert is None else hop.convert(value)
+        self._pin(inputs)
         return ages
+
+    def _pin(self, inputs: dict[str, list[Any]]) -> None:
+        for node, pinned in self.pins.items():
+            row = inputs[node]
+            for i, value in pinned:
+                row[i] = value
 
     def candidate(self, mode: str, outputs: Mapping[str, list[Any]]) -> dict[str, list[Any]]:
         """The inputs :meth:`route` would give from stepping nodes' ``outputs`` now, as a copy
@@ -117,6 +126,7 @@ class Router:
             if hop.src_node not in self._async:
                 value = outputs[hop.src_node][hop.src_index]
                 inputs[hop.dst_node][hop.dst_index] = value if hop.convert is None else hop.convert(value)
+        self._pin(inputs)
         return inputs
 
     def route_into(self, node: str, mode: str, outputs: Mapping[str, list[Any]]) -> None:
@@ -127,3 +137,5 @@ class Router:
             if hop.src_node not in self._async:
                 value = outputs[hop.src_node][hop.src_index]
                 inputs[hop.dst_index] = value if hop.convert is None else hop.convert(value)
+        for i, value in self.pins.get(node, ()):
+            inputs[i] = value

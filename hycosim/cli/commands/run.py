@@ -10,7 +10,8 @@ import typer
 from hycosim.cli.extras import require_extra
 from hycosim.cli.options import SspStep, SspStop, checked_endpoint, finite, monitor_credentials
 from hycosim.cli.output import end_process, err, fail, out, print_summary, say_outcome, warn
-from hycosim.cli.projects import load, project_file
+from hycosim.cli.options import ScenarioFile
+from hycosim.cli.projects import load, project_file, scenario_of
 from hycosim.core.signals import ignore_stops
 
 app = typer.Typer()
@@ -27,13 +28,15 @@ def server(
                                                         "or the server's port + 1)")] = None,
     resume: Annotated[Optional[Path], typer.Option(help="go on with the run in this directory (its server died) "
                                                        "from its last checkpoint")] = None,
+    scenario: ScenarioFile = None,
 ) -> None:
     """Run the relay server for one co-simulation (Zenoh nodes and bridge FMUs)."""
     from hycosim.server.main import serve
 
     loaded = load(file)
+    actions = scenario_of(scenario, loaded)
     code, rdir, message = serve(loaded, listen=listen, runs_dir=runs_dir, run_dir=run_dir,
-                                progress_jsonl=progress_jsonl, gateway=gateway, resume=resume)
+                                progress_jsonl=progress_jsonl, gateway=gateway, resume=resume, scenario=actions)
     if code:
         say_outcome(err, message + (f"\n  results so far: {rdir}" if rdir else ""), error=True)
     elif not progress_jsonl:
@@ -75,6 +78,7 @@ def run(
                           "in this process, no sockets (default: coSimulation.transport)", show_default=False)] = None,
     step: SspStep = None,
     stop: SspStop = None,
+    scenario: ScenarioFile = None,
 ) -> None:
     """Run the server and every node as local processes on loopback, or all in this process
     (FILE: a project JSON or an SSP package)."""
@@ -83,11 +87,13 @@ def run(
 
     file = project_file(file, step, stop)
     loaded = load(file)
+    actions = scenario_of(scenario, loaded)
     _refuse_unfit_nodes(loaded)
     if in_process is None:
         in_process = loaded.project.coSimulation.transport == "inprocess"
     if in_process:
-        _run_in_process(loaded, runs_dir, progress, listen=listen, resume=resume, dashboard=dashboard)
+        _run_in_process(loaded, runs_dir, progress, listen=listen, resume=resume, dashboard=dashboard,
+                        scenario=actions)
         return
     listen = checked_endpoint("--listen", listen) if listen else None
     if resume is not None and not (resume / "meta.json").is_file():
@@ -103,7 +109,8 @@ def run(
     except SecurityError as exc:
         fail(str(exc))
     result = run_embedded(loaded, file, listen=listen, runs_dir=runs_dir, console=err, show_progress=progress,
-                          restarts=restarts, resume=resume, dashboard_port=dashboard_port if dashboard else None)
+                          restarts=restarts, resume=resume, dashboard_port=dashboard_port if dashboard else None,
+                          scenario_file=scenario)
     if result.code >= 128:
         ignore_stops()  # a Ctrl-C pressed twice: the run is over, say so
     for line in result.warnings:
@@ -132,7 +139,7 @@ def _refuse_unfit_nodes(loaded) -> None:
 
 
 def _run_in_process(loaded, runs_dir: Path, progress: bool, *, listen: Optional[str], resume: Optional[Path],
-                    dashboard: bool) -> None:
+                    dashboard: bool, scenario: list | None = None) -> None:
     from hycosim.embedded import run_progress
     from hycosim.inprocess import CannotHost, check_hostable, run_in_process
 
@@ -146,7 +153,7 @@ def _run_in_process(loaded, runs_dir: Path, progress: bool, *, listen: Optional[
         fail(str(exc))
     bar, show = run_progress(loaded, err, progress)
     with bar:
-        code, run_dir, message = run_in_process(loaded, runs_dir=runs_dir, on_progress=show)
+        code, run_dir, message = run_in_process(loaded, runs_dir=runs_dir, on_progress=show, scenario=scenario)
     if code:
         fail(message, code, [f"results so far: {run_dir}"] if run_dir else [])
     _print_summary(run_dir)

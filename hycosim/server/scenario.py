@@ -1,0 +1,89 @@
+"""Time-triggered manipulation of a run's inputs (a scenario; fault injection), as libcosim's
+manipulators and ECOS's scenarios do it.
+
+An action at time t overrides an input that a link feeds, with a value or a ramp, or releases
+it to its links again. Which actions are in force at a point follows from the point's time
+alone (the latest action on each port at or before it), so a run rolled back to a checkpoint,
+or resumed from one, has the same overrides there as it had; the record of the actions that
+took effect is rewound with it. Actions come from the project's ``scenario``, from
+``--scenario FILE`` and from a Python caller (:meth:`Scenario.add`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from hycosim.core.scenario_checks import Target, fed_inputs
+from hycosim.core.schema import Port, PortType, Project, ScenarioAction
+
+# A point "at" an action's time: the grid's own rounding, as the guards allow it.
+_AT = 1e-9
+
+
+class Scenario:
+    """The actions of one run, and what they make of its inputs at each point."""
+
+    def __init__(self, project: Project, routes: list[Any], actions: list[ScenarioAction]):
+        self._targets = fed_inputs(project, routes)
+        self._actions = sorted(actions, key=lambda a: a.t)  # stable: two at one time keep their order
+        self._reported = 0  # the actions whose taking effect is recorded
+
+    def __bool__(self) -> bool:
+        return bool(self._actions)
+
+    def target(self, name: str) -> tuple[str, int, Port] | None:
+        """Node, input index and port of an input a scenario may override, or None."""
+        found = self._targets.get(name)
+        return None if found is None else (found.node, found.index, found.port)
+
+    def add(self, action: ScenarioAction) -> None:
+        """An action from a caller, at the time the run stands at: after every action at or before
+        it, before the project's later ones."""
+        at = next((i for i, a in enumerate(self._actions) if a.t > action.t), len(self._actions))
+        self._actions.insert(at, action)
+
+    def pins_at(self, t: float) -> dict[str, list[tuple[int, Any]]]:
+        """The overridden inputs at time ``t``: node → [(input index, value)]."""
+        held: dict[str, tuple[Target, Any]] = {}
+        tol = _AT * max(1.0, abs(t))
+        for action in self._actions:
+            if action.t > t + tol:
+                break
+            target = self._targets[action.target]
+            if action.release is not None:
+                held.pop(action.target, None)
+            elif action.ramp is not None:
+                ramp = action.ramp
+                begin = ramp.start if ramp.start is not None else (
+                    held[action.target][1] if action.target in held else target.port.start_value())
+                share = min(1.0, max(0.0, (t - action.t) / ramp.duration))
+                held[action.target] = (target, float(begin + (ramp.to - begin) * share))
+            else:
+                value = action.value
+                held[action.target] = (target, float(value) if target.port.type is PortType.REAL and
+                                       target.port.shape is None else value)
+        pins: dict[str, list[tuple[int, Any]]] = {}
+        for target, value in held.values():
+            pins.setdefault(target.node, []).append((target.index, value))
+        return pins
+
+    def taking_effect(self, step: int, t: float) -> list[dict[str, Any]]:
+        """The record of each action that takes effect at point ``step`` (its time reached), once."""
+        tol = _AT * max(1.0, abs(t))
+        entries = []
+        while self._reported < len(self._actions) and self._actions[self._reported].t <= t + tol:
+            action = self._actions[self._reported]
+            entry: dict[str, Any] = {"scenario": "override" if action.override is not None else "release",
+                                     "target": action.target, "t_action": action.t, "t": t, "step": step}
+            if action.value is not None:
+                entry["value"] = action.value
+            if action.ramp is not None:
+                entry["ramp"] = action.ramp.model_dump(by_alias=True, exclude_none=True)
+            entries.append(entry)
+            self._reported += 1
+        return entries
+
+    def rewind(self, t: float) -> None:
+        """Back at a checkpoint at ``t``: the actions after it take effect (and are recorded) again."""
+        tol = _AT * max(1.0, abs(t))
+        self._reported = sum(1 for a in self._actions if a.t <= t + tol)
