@@ -7,7 +7,11 @@ export: parameters bound inline, linear transformations on links):
 * **ball**: a bouncing ball (a state event located inside its steps; e = 0.7 bound by the
   package, 0.8 in its FMU) whose h (--(100 h)-->), bounce count (Integer) and falling flag
   (Boolean) feed a feedthrough of each type (gain = 2 and offset = 10 bound by the package);
-* **vdp** and **bounce**: a Van der Pol oscillator, and the ball, on their own.
+* **vdp** and **bounce**: a Van der Pol oscillator, and the ball, on their own;
+* **override**: the chain with a scenario (hycosim's ``scenario``): ``ft.u`` overridden to 5.0 a
+  quarter into the run and released at its half, against libcosim's override manipulator
+  (``slave_real_values`` until ``reset_variables``). ECOS has no override: a value set on an
+  input a link feeds holds for one step, and is read back before it is set, so it is left out.
 
 Engines: hycosim in processes (``hycosim run``) and in one process (``--in-process``), ECOS
 (``ecospy``: an in-process C++ master that reads SSP), libcosim (``libcosimpy``: from the
@@ -61,7 +65,7 @@ import _small_fmus  # noqa: E402
 _ECOS = r"""
 import json, sys
 from ecospy import EcosSimulation
-ssp, steps, h, names = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), [a.split(":") for a in sys.argv[4:]]
+ssp, steps, h, names = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), [a.split(":") for a in sys.argv[5:]]
 rows = []
 with EcosSimulation(ssp_path=ssp, step_size=h) as sim:
     get = {"Real": sim.get_real, "Integer": sim.get_integer, "Boolean": sim.get_bool}
@@ -80,8 +84,12 @@ log_output_level(CosimLogLevel.ERROR)
 from libcosimpy.CosimEnums import CosimVariableType
 from libcosimpy.CosimExecution import CosimExecution
 from libcosimpy.CosimObserver import CosimObserver
-folder, steps, h, names = sys.argv[1], int(sys.argv[2]), float(sys.argv[3]), [a.split(":") for a in sys.argv[4:]]
+from libcosimpy.CosimManipulator import CosimManipulator
+folder, steps, h = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
+actions, names = json.loads(sys.argv[4]), [a.split(":") for a in sys.argv[5:]]  # actions: [point, variable, value/None]
 ex = CosimExecution.from_ssp_file(folder, step_size=round(h * 1e9))
+override = CosimManipulator.create_override()
+ex.add_manipulator(override)
 last, series = CosimObserver.create_last_value(), CosimObserver.create_time_series(steps + 2)
 ex.add_observer(last)
 ex.add_observer(series)
@@ -94,6 +102,12 @@ for n, t in names:
 read = {"Real": last.last_real_values, "Integer": last.last_integer_values, "Boolean": last.last_boolean_values}
 rows = []
 for k in range(1, steps + 1):
+    for _, var, value in (a for a in actions if a[0] == k - 1):
+        slave, ref = refs[var]
+        if value is None:
+            override.reset_variables(slave, CosimVariableType.REAL, [ref])
+        else:
+            override.slave_real_values(slave, [ref], [value])
     ex.step(1)
     rows.append([read[t](refs[n][0], [refs[n][1]])[0] for n, t in names])
 # t0 from the time series (libcosimpy's sample reader drops what follows a step number 0, so one
@@ -112,14 +126,15 @@ def systems(fmus: dict[str, Path], steps: int, h: float) -> dict[str, dict]:
         return {"projectName": name, "serverIP": "127.0.0.1:7447", "nodeNum": len(nodes), "nodeLists": nodes,
                 "linkNum": len(links), "linkLists": links, "coSimulation": cosim}
 
+    chain = project("chain", [
+        {"nodeName": "dahlquist", "UID": 1, "fmu": str(fmus["Dahlquist"]), "input": [], "output": ["x"]},
+        {"nodeName": "ft", "UID": 2, "fmu": str(fmus["Feedthrough"]), "input": ["u"], "output": ["y"]},
+        {"nodeName": "ft2", "UID": 3, "fmu": str(fmus["Feedthrough"]), "input": ["u"], "output": ["y"]},
+    ], [{"from": "dahlquist.x", "to": "ft.u", "factor": 2.0, "offset": 1.0}, {"from": "ft.y", "to": "ft2.u"}])
     ball = {"nodeName": "ball", "UID": 1, "fmu": str(fmus["Ball"]), "parameters": {"e": 0.7}, "input": [],
             "output": ["h", "v", {"name": "bounces", "type": "Integer"}, {"name": "falling", "type": "Boolean"}]}
     return {
-        "chain": project("chain", [
-            {"nodeName": "dahlquist", "UID": 1, "fmu": str(fmus["Dahlquist"]), "input": [], "output": ["x"]},
-            {"nodeName": "ft", "UID": 2, "fmu": str(fmus["Feedthrough"]), "input": ["u"], "output": ["y"]},
-            {"nodeName": "ft2", "UID": 3, "fmu": str(fmus["Feedthrough"]), "input": ["u"], "output": ["y"]},
-        ], [{"from": "dahlquist.x", "to": "ft.u", "factor": 2.0, "offset": 1.0}, {"from": "ft.y", "to": "ft2.u"}]),
+        "chain": chain,
         "ball": project("ball", [
             ball,
             {"nodeName": "types", "UID": 2, "fmu": str(fmus["Types"]), "parameters": {"gain": 2.0, "offset": 10},
@@ -130,6 +145,9 @@ def systems(fmus: dict[str, Path], steps: int, h: float) -> dict[str, dict]:
         "vdp": project("vdp", [
             {"nodeName": "vdp", "UID": 1, "fmu": str(fmus["VanDerPol"]), "input": [], "output": ["x0", "x1"]}], []),
         "bounce": project("bounce", [ball], []),
+        "override": dict(chain, projectName="override", scenario=[
+            {"t": round(steps // 4 * h, 12), "override": "ft.u", "value": 5.0},
+            {"t": round(steps // 2 * h, 12), "release": "ft.u"}]),
     }
 
 
@@ -160,9 +178,15 @@ def hycosim(cfg: Path, runs: Path, in_process: bool, timeout: float) -> dict[str
     return {c: [float(r[c]) for r in rows] for c in rows[0] if c not in ("step", "mode")}
 
 
+def actions(doc: dict, h: float) -> list[list]:
+    """A project's scenario as libcosim's override manipulator takes it: [point, variable, value],
+    a value of None resetting the variable (a release)."""
+    return [[round(a["t"] / h), a.get("override") or a["release"], a.get("value")] for a in doc.get("scenario", [])]
+
+
 def _engine(script: str, what: str, package: Path, steps: int, h: float, variables: dict[str, tuple[str, str]],
-            timeout: float) -> dict[str, list[float | None]]:
-    res = run([sys.executable, "-c", script, str(package), str(steps), str(h),
+            timeout: float, acts: list) -> dict[str, list[float | None]]:
+    res = run([sys.executable, "-c", script, str(package), str(steps), str(h), json.dumps(acts),
                *(f"{n}:{t}" for n, (t, _) in variables.items())], timeout)
     if res.returncode:
         raise RuntimeError(f"{what}: {res.stderr[-800:]}")
@@ -171,17 +195,20 @@ def _engine(script: str, what: str, package: Path, steps: int, h: float, variabl
 
 
 def ecos(ssp: Path, steps: int, h: float, variables: dict[str, tuple[str, str]],
-         timeout: float) -> dict[str, list[float | None]] | None:
-    """ECOS's value of each variable at every point, or None where ecospy (or libtbb12) is missing."""
+         timeout: float, acts: list) -> dict[str, list[float | None]] | None:
+    """ECOS's value of each variable at every point, or None where ecospy (or libtbb12) is missing
+    or the system has a scenario (ECOS overrides nothing)."""
+    if acts:
+        return None
     try:
         import ecospy  # noqa: F401
     except (ImportError, OSError):
         return None
-    return _engine(_ECOS, "ECOS", ssp, steps, h, variables, timeout)
+    return _engine(_ECOS, "ECOS", ssp, steps, h, variables, timeout, [])
 
 
 def libcosim(ssp: Path, steps: int, h: float, variables: dict[str, tuple[str, str]],
-             timeout: float) -> dict[str, list[float | None]] | None:
+             timeout: float, acts: list) -> dict[str, list[float | None]] | None:
     """libcosim's value of each variable at every point (from the package unpacked beside it),
     or None where libcosimpy is missing."""
     try:
@@ -191,7 +218,7 @@ def libcosim(ssp: Path, steps: int, h: float, variables: dict[str, tuple[str, st
     folder = ssp.with_suffix("")
     with zipfile.ZipFile(ssp) as z:
         z.extractall(folder)
-    return _engine(_LIBCOSIM, "libcosim", folder, steps, h, variables, timeout)
+    return _engine(_LIBCOSIM, "libcosim", folder, steps, h, variables, timeout, acts)
 
 
 def fmpy_single(node: dict, steps: int, h: float, names: list[str]) -> dict[str, list[float]]:
@@ -253,7 +280,7 @@ def main() -> None:
                 "hycosim in process": hycosim(cfg, root / f"inproc-{name}", True, args.timeout)}
             ssp = write_ssp(load_project(cfg), root / f"{name}.ssp")
             for engine, read in (("ECOS", ecos), ("libcosim", libcosim)):
-                theirs = read(ssp, args.steps, args.h, roles, args.timeout)
+                theirs = read(ssp, args.steps, args.h, roles, args.timeout, actions(doc, args.h))
                 if theirs is not None:
                     engines[engine] = theirs
             if len(doc["nodeLists"]) == 1:
