@@ -1,6 +1,7 @@
 """A run driven from Python: :func:`open` a project, then step it, look at its ports, end it.
 
-The run is the one ``hycosim run --in-process`` makes: the same master, nodes and run
+The run is the one ``hycosim run --in-process`` makes (``distributed=True``: ``hycosim run``'s,
+each node a process of its own over Zenoh on loopback): the same master, nodes and run
 directory, ``values.csv`` byte for byte. The master runs in a thread of its own and stops at
 every macro-step point until this object lets it take the next step; while it stands there
 its outputs are gathered and its inputs routed, so what :meth:`Simulation.get` reads is the
@@ -131,23 +132,67 @@ def _from_ssp(package: Path) -> Path:
     return folder / "project.json"
 
 
-def open(project: str | Path | dict[str, Any], *, runs_dir: str | Path = "runs") -> Simulation:  # noqa: A001
-    """Start a run of ``project`` (a project file, an SSP package, or a project as a dict) in
-    this process and stop at its first point, t = startTime, with the initialisation done.
-    Its run directory is made under ``runs_dir`` as ``hycosim run`` makes it."""
-    return Simulation(_load(project), Path(runs_dir))
+def _check_nodes(loaded: LoadedProject, base: Path) -> None:
+    """ProjectError for a node whose model or FMU is not there (nothing started yet)."""
+    from hycosim.node.loader import NodeLoadError, locate_node
+
+    for spec in loaded.project.nodeLists:
+        try:
+            locate_node(spec, base)
+        except NodeLoadError as exc:
+            raise ProjectError(str(exc)) from None
+
+
+def _absolute_paths(doc: dict[str, Any], base: Path) -> dict[str, Any]:
+    """The project with its nodes' FMU, recording and ``file.py`` model paths made absolute."""
+    nodes = []
+    for node in doc.get("nodeLists", []):
+        node = dict(node)
+        for key in ("fmu", "replay"):
+            if isinstance(node.get(key), str):
+                node[key] = str((base / node[key]).resolve())
+        model = node.get("model")
+        if isinstance(model, str) and ".py:" in model:
+            file, _, cls = model.rpartition(":")
+            node["model"] = f"{(base / file).resolve()}:{cls}"
+        nodes.append(node)
+    return {**doc, "nodeLists": nodes}
+
+
+def open(project: str | Path | dict[str, Any], *, runs_dir: str | Path = "runs",  # noqa: A001
+         distributed: bool = False) -> Simulation:
+    """Start a run of ``project`` (a project file, an SSP package, or a project as a dict) and
+    stop at its first point, t = startTime, with the initialisation done. Its run directory is
+    made under ``runs_dir`` as ``hycosim run`` makes it. In this process by default; with
+    ``distributed`` the master stays here and each node is a process of its own, attached over
+    Zenoh on loopback (asynchronous sources too)."""
+    if isinstance(project, dict) and distributed:
+        # The node processes read the project from a file: the dict is written into the run's
+        # folder, the files its nodes name made absolute (a dict's are relative to this folder).
+        from hycosim.core.folders import run_dir_for
+
+        _check_nodes(_load(project), Path.cwd())
+        folder = run_dir_for(Path(runs_dir), _load(project).name)
+        (folder / "project.json").write_text(json.dumps(_absolute_paths(project, Path.cwd()), indent=1))
+        return Simulation(_load(folder / "project.json"), Path(runs_dir), distributed=True, run_dir=folder)
+    return Simulation(_load(project), Path(runs_dir), distributed=distributed)
 
 
 class Simulation:
     """One run, driven step by step. Made by :func:`open`; use it in a ``with`` block."""
 
-    def __init__(self, loaded: LoadedProject, runs_dir: Path):
+    def __init__(self, loaded: LoadedProject, runs_dir: Path, *, distributed: bool = False,
+                 run_dir: Path | None = None):
         from hycosim.inprocess import CannotHost, check_hostable
 
-        try:
-            check_hostable(loaded)
-        except CannotHost as exc:
-            raise ProjectError(str(exc)) from None
+        if not distributed:
+            try:
+                check_hostable(loaded)
+            except CannotHost as exc:
+                raise ProjectError(f"{exc.args[0].split(' (run it without')[0]} (open it with distributed=True)") from None
+        else:  # what cannot load is named before a process starts
+            _check_nodes(loaded, loaded.path.parent)
+        self._distributed, self._run_dir = distributed, run_dir
         self._loaded = loaded
         self._cosim = loaded.project.coSimulation
         self._ports = {f"{n.nodeName}.{p.name}": (n.nodeName, "outputs", i)
@@ -175,12 +220,44 @@ class Simulation:
             self._relay = relay
 
         try:
-            self._result = run_in_process(self._loaded, runs_dir=runs_dir, gate=self._gate, on_relay=seen)
+            if self._distributed:
+                self._result = self._run_distributed(runs_dir, seen)
+            else:
+                self._result = run_in_process(self._loaded, runs_dir=runs_dir, gate=self._gate, on_relay=seen)
         except BaseException as exc:  # told to the caller, in the caller's thread
             self._failure = exc
         finally:
             self._over = True
             self._gate.go(-1, -math.inf)  # wakes a waiting caller
+
+    def _run_distributed(self, runs_dir: Path, seen) -> tuple[int, Path | None, str]:
+        """The master here (its Zenoh router on a free loopback port), each node a process of
+        its own, as ``hycosim run`` starts them; every process waited for, with a bound."""
+        import subprocess
+        import sys
+
+        from hycosim.core.folders import run_dir_for
+        from hycosim.embedded import free_loopback_endpoint
+        from hycosim.server.main import serve
+
+        endpoint = free_loopback_endpoint()
+        run_dir = self._run_dir or run_dir_for(runs_dir, self._loaded.name)
+        nodes = []
+        try:
+            for spec in self._loaded.project.nodeLists:
+                with (run_dir / f"node-{spec.nodeName}.stderr.txt").open("w") as err:
+                    nodes.append(subprocess.Popen(
+                        [sys.executable, "-P", "-m", "hycosim", "node", spec.nodeName, str(self._loaded.path),
+                         "--connect", endpoint, "--log-file", str(run_dir / f"node-{spec.nodeName}.log.jsonl")],
+                        stdout=err, stderr=subprocess.STDOUT))
+            return serve(self._loaded, listen=endpoint, run_dir=run_dir, gate=self._gate, on_relay=seen)
+        finally:
+            for proc in nodes:  # they leave on the server's STOP; a stuck one is stopped
+                try:
+                    proc.wait(timeout=15.0)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait(timeout=10.0)
 
     # --- where the run is ------------------------------------------------------------
 

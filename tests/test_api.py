@@ -139,3 +139,55 @@ def test_import_hycosim_stays_light():
     res = subprocess.run([sys.executable, "-c", "import hycosim, sys; hycosim.open; print('hycosim.api' in sys.modules)"],
                          capture_output=True, text=True, cwd=REPO, timeout=60)
     assert res.stdout.strip() == "True", res.stderr
+
+
+def test_a_distributed_run_driven_from_python_writes_what_hycosim_run_writes(tmp_path):
+    """distributed=True: the master in this process, each node a process over Zenoh."""
+    project = _catch(tmp_path)
+    with hycosim.open(project, runs_dir=tmp_path / "api", distributed=True) as sim:
+        sim.run_until(1.0)
+        angle = sim.get("pendulum.theta")
+        sim.run_until(json.loads(project.read_text())["coSimulation"]["stopTime"])
+    assert sim.outcome.status == "completed", sim.outcome
+    run = sim.run_dir
+    assert meta(run)["endpoint"].startswith("tcp/127.0.0.1:") and (run / "node-pendulum.log.jsonl").is_file()
+    assert float(read_rows(run)[round(1.0 / 0.01)]["pendulum.theta"]) == pytest.approx(angle, abs=1e-12)
+    res = cli("run", str(project), "--processes", "--no-progress", "--runs-dir", str(tmp_path / "cli"))
+    assert res.returncode == 0, res.stderr
+    assert (next((tmp_path / "cli").iterdir()) / "values.csv").read_bytes() == (run / "values.csv").read_bytes()
+
+
+def test_a_distributed_run_of_a_dict_left_early_is_stopped_and_its_nodes_are_gone(tmp_path):
+    doc = {"projectName": "chain", "nodeNum": 2, "linkNum": 1,
+           "nodeLists": [{"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+                         {"nodeName": "g", "UID": 2, "model": "gain", "parameters": {"k": 2.0}, "input": ["u"],
+                          "output": ["y"]}],
+           "linkLists": [{"from": "clock.y", "to": "g.u"}], "coSimulation": {"stepSize": 0.1, "stopTime": 5.0}}
+    with hycosim.open(doc, runs_dir=tmp_path / "runs", distributed=True) as sim:
+        sim.run_until(0.5)
+        sim.override("g.u", 3.0)
+        sim.step()
+        assert sim.get("g.y") == 6.0
+    assert sim.outcome.status == "stopped" and len(read_rows(sim.run_dir)) == 7
+    assert json.loads((sim.run_dir / "project.json").read_text()) == doc
+    for name in ("clock", "g"):
+        assert "finished after" in (sim.run_dir / f"node-{name}.stderr.txt").read_text()
+    with pytest.raises(hycosim.ProjectError, match="node 'g'"):
+        hycosim.open(dict(doc, nodeLists=[doc["nodeLists"][0], dict(doc["nodeLists"][1], model="gian")]),
+                     runs_dir=tmp_path / "bad", distributed=True)
+    assert not (tmp_path / "bad").exists()  # refused before a run directory is made
+
+
+def test_a_dict_names_its_files_from_the_current_folder_in_processes_too(tmp_path, monkeypatch):
+    (tmp_path / "twice.py").write_text("from hycosim.node.reference.gain import Gain\n\n\nclass Twice(Gain):\n"
+                                       "    def setup(self, ctx):\n        super().setup(ctx)\n        self.k = 2.0\n")
+    monkeypatch.chdir(tmp_path)
+    doc = {"projectName": "files", "nodeNum": 2, "linkNum": 1,
+           "nodeLists": [{"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+                         {"nodeName": "g", "UID": 2, "model": "twice.py:Twice", "input": ["u"], "output": ["y"]}],
+           "linkLists": [{"from": "clock.y", "to": "g.u"}], "coSimulation": {"stepSize": 0.1, "stopTime": 0.3}}
+    for distributed in (False, True):
+        with hycosim.open(doc, runs_dir=tmp_path / f"runs-{distributed}", distributed=distributed) as sim:
+            sim.run_until(0.3)
+            assert sim.get("g.y") == pytest.approx(0.4)
+        assert sim.outcome.status == "completed", (distributed, sim.outcome)
