@@ -9,10 +9,11 @@ steps/s (``meta.json``'s, or the engine's own clock around its stepping):
   through a linear transformation, a Van der Pol) as one SSP package: ECOS (``ecospy``, an
   in-process C++ master that reads SSP, recording every variable with its CSV writer as hycosim
   records every port), a bare Jacobi loop over fmpy's ``FMU2Slave`` (the floor of a Python
-  master), hycosim in process and in processes.
+  master), hycosim in process and in processes, and the same run driven from Python
+  (``hycosim.open(...).run_until(stop)``: its master waits at each point for the caller's word).
 
 It also checks that the in-process run's ``values.csv`` is byte-identical to the distributed
-run's, for the ring and for the package.
+run's, for the ring and for the package (and the Python-driven run's to both).
 
 Goals (issue 57): in process ≥ 10× the distributed run on the ring at N = 2 and 4; ≥ 0.25× ECOS
 on the package.
@@ -48,6 +49,27 @@ def hycosim_run(cfg: Path, runs: Path, in_process: bool, timeout: float) -> tupl
     if res.returncode:
         raise RuntimeError(f"{cfg.name} ({'in process' if in_process else 'processes'}): {res.stderr[-800:]}")
     run_dir = max(runs.iterdir(), key=lambda p: p.stat().st_mtime)
+    return float(json.loads((run_dir / "meta.json").read_text())["steps_per_s"]), (run_dir / "values.csv").read_bytes()
+
+
+_OPEN = r"""
+import json, sys
+import hycosim
+with hycosim.open(sys.argv[1], runs_dir=sys.argv[2]) as sim:
+    sim.run_until(float(sys.argv[3]))
+print("RUN " + json.dumps({"status": sim.outcome.status, "run_dir": str(sim.run_dir)}))
+"""
+
+
+def hycosim_open(package: Path, runs: Path, stop: float, timeout: float) -> tuple[float, bytes]:
+    """steps/s and values.csv of the run ``hycosim.open`` drives to its stop time (in a child process)."""
+    res = run([sys.executable, "-c", _OPEN, str(package), str(runs), repr(stop)], timeout, cwd=REPO)
+    if res.returncode:
+        raise RuntimeError(f"hycosim.open: {res.stderr[-800:]}")
+    said = json.loads(next(line for line in res.stdout.splitlines() if line.startswith("RUN "))[4:])
+    if said["status"] != "completed":
+        raise RuntimeError(f"hycosim.open: the run ended {said['status']}")
+    run_dir = Path(said["run_dir"])
     return float(json.loads((run_dir / "meta.json").read_text())["steps_per_s"]), (run_dir / "values.csv").read_bytes()
 
 
@@ -145,6 +167,10 @@ def main() -> None:
                 rates.setdefault(f"3 FMUs hycosim {'in process' if mode else 'processes'}", []).append(rate)
                 if r == 0:
                     identical.setdefault("3 FMUs", []).append(values)
+            rate, values = hycosim_open(package, root / f"runs-open-{r}", round(args.fmu_steps * h, 12), args.timeout)
+            rates.setdefault("3 FMUs hycosim.open", []).append(rate)
+            if r == 0:
+                identical.setdefault("3 FMUs", []).append(values)
             rates.setdefault("3 FMUs fmpy loop", []).append(fmpy_loop(fmus, args.fmu_steps, h, args.timeout))
             theirs = ecos(package, args.fmu_steps, h, root / f"ecos-{r}.csv", args.timeout)
             if theirs is not None:
@@ -155,21 +181,24 @@ def main() -> None:
     if "3 FMUs ECOS" in median:
         for who in ("hycosim in process", "hycosim processes", "fmpy loop"):
             ratios[f"3 FMUs {who} / ECOS"] = median[f"3 FMUs {who}"] / median["3 FMUs ECOS"]
-    same = {k: v[0] == v[1] for k, v in identical.items()}
+    ratios["3 FMUs hycosim.open / in process"] = median["3 FMUs hycosim.open"] / median["3 FMUs hycosim in process"]
+    same = {k: all(x == v[0] for x in v[1:]) for k, v in identical.items()}
     result = {"date": time.strftime("%Y-%m-%d"), "ring_steps": args.ring_steps, "fmu_steps": args.fmu_steps,
               "repeat": args.repeat, "median_steps_per_s": median, "ratios": ratios,
               "values_identical": same, "ecos": "3 FMUs ECOS" in median}
     rows = [[f"ring N={n}", _table.rate(median[f"ring N={n} processes"]), _table.rate(median[f"ring N={n} in process"]),
-             None, None, f"{ratios[f'ring N={n} in process / processes']:.1f}× in processes", same[f"ring N={n}"]]
+             None, None, None, f"{ratios[f'ring N={n} in process / processes']:.1f}× in processes", same[f"ring N={n}"]]
             for n in args.n]
     ecos_ratio = ratios.get("3 FMUs hycosim in process / ECOS")
     rows.append(["3 FMUs", _table.rate(median["3 FMUs hycosim processes"]), _table.rate(median["3 FMUs hycosim in process"]),
+                 _table.rate(median["3 FMUs hycosim.open"]),
                  _table.rate(median["3 FMUs fmpy loop"]), _table.rate(median.get("3 FMUs ECOS")),
                  f"{ecos_ratio:.2f}× ECOS" if ecos_ratio else None, same["3 FMUs"]])
     _table.write(args.table, _table.Table(
         f"Steps/s, medians of {args.repeat} interleaved rounds (the ring {args.ring_steps:,} steps, the three FMUs "
         f"{args.fmu_steps:,}); the ratio is of the run in process:",
-        ["system", "in processes", "in process", "fmpy loop", "ECOS", "ratio", "`values.csv` identical"], rows))
+        ["system", "in processes", "in process", "`hycosim.open`", "fmpy loop", "ECOS", "ratio",
+         "`values.csv` identical"], rows))
     if args.json:
         print(json.dumps(result, indent=1))
         return

@@ -79,6 +79,10 @@ class _Gate:
         self._open = False  # closing: every step at once, to the stop the caller asked for
 
     def hold(self, step: int, t: float) -> None:
+        if self._open or (step < self._until_step and t < self._until_t):
+            # Stepping on to where the caller asked (run_until): no lock taken, nobody woken.
+            # go() is called only while the master stands here, so the two bounds read together.
+            return
         with self._cv:
             self.at = (step, t)
             self._cv.notify_all()

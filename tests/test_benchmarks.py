@@ -359,11 +359,13 @@ def test_inprocess_benchmark_reports_ratios_against_the_distributed_run_and_ecos
     assert r["ecos"], "ECOS is a test dependency (ecospy, libtbb12): the comparison must run"
     assert r["values_identical"] == {"ring N=2": True, "3 FMUs": True}
     assert set(r["ratios"]) == {"ring N=2 in process / processes", "3 FMUs hycosim in process / ECOS",
-                                "3 FMUs hycosim processes / ECOS", "3 FMUs fmpy loop / ECOS"}
+                                "3 FMUs hycosim processes / ECOS", "3 FMUs fmpy loop / ECOS",
+                                "3 FMUs hycosim.open / in process"}
     assert all(v > 0 for v in r["median_steps_per_s"].values())
     [rows] = manual_tables(tmp_path / "inproc.md")
     assert [(x["system"], x["`values.csv` identical"]) for x in rows] == [("ring N=2", "True"), ("3 FMUs", "True")]
     assert rows[1]["ECOS"] == f"{r['median_steps_per_s']['3 FMUs ECOS']:,.0f}"
+    assert rows[1]["`hycosim.open`"] == f"{r['median_steps_per_s']['3 FMUs hycosim.open']:,.0f}"
     assert rows[1]["ratio"] == f"{r['ratios']['3 FMUs hycosim in process / ECOS']:.2f}× ECOS"
 
 
