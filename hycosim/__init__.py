@@ -14,6 +14,7 @@ its coordinator; ``hycosim.node`` the node interface and runtime; ``hycosim.fmi`
 # as every node process needs it.
 _API = frozenset({"open", "Simulation", "Outcome", "SimulationError", "ProjectError", "PortError", "TimeError",
                   "ClosedError", "OverrideError", "RunFailed"})
+_OBSERVERS = frozenset({"Observer", "LastValues", "TimeSeries"})
 
 
 def __getattr__(name: str):
@@ -21,6 +22,10 @@ def __getattr__(name: str):
         from hycosim import api
 
         return getattr(api, name)
+    if name in _OBSERVERS:
+        from hycosim.server import observers
+
+        return getattr(observers, name)
     # ``__version__`` is read from the installed metadata when first asked for, not at import:
     # importlib.metadata takes about 30 ms to import, and every node process imports hycosim.
     if name != "__version__":

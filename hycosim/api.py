@@ -387,6 +387,18 @@ class Simulation:
         relay.scenario.add(action)
         relay.apply_scenario(self.step_count, self.time)
 
+    def add_observer(self, observer: Any) -> None:
+        """Tell ``observer`` (a :class:`hycosim.Observer`: :class:`hycosim.LastValues`,
+        :class:`hycosim.TimeSeries` or your own) of every point the run records from the one it
+        stands at on, of rollbacks to a checkpoint and of the run's end."""
+        self._check_open()
+        if self.ended:
+            raise TimeError(f"the run of {self._loaded.name!r} is over: no point is left to observe")
+        missing = [m for m in ("step_complete", "state_restored", "run_ended") if not callable(getattr(observer, m, None))]
+        if missing:
+            raise SimulationError(f"{type(observer).__name__} is no observer: it lacks {', '.join(missing)}")
+        self._relay.add_observer(observer)
+
     def close(self) -> None:
         """End the run: one before its stop time is stopped at the point it stands at, every row
         recorded so far kept. A second call does nothing."""

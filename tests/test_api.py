@@ -191,3 +191,70 @@ def test_a_dict_names_its_files_from_the_current_folder_in_processes_too(tmp_pat
             sim.run_until(0.3)
             assert sim.get("g.y") == pytest.approx(0.4)
         assert sim.outcome.status == "completed", (distributed, sim.outcome)
+
+
+class _Counting:
+    """A user's observer: any object with the three methods."""
+
+    def __init__(self):
+        self.points, self.ended = [], None
+
+    def step_complete(self, step, t, values):
+        self.points.append((step, values["g.u"], values["clock.y"]))
+
+    def state_restored(self, step, t):
+        raise AssertionError("nothing is restored in this run")
+
+    def run_ended(self, status):
+        self.ended = status
+
+
+def test_observers_see_every_point_as_values_csv_records_it(tmp_path):
+    project = _catch(tmp_path)
+    series, last = hycosim.TimeSeries(["pendulum.theta", "delayed.u", "hand.y"]), hycosim.LastValues()
+    with hycosim.open(project, runs_dir=tmp_path / "runs") as sim:
+        sim.add_observer(series)
+        sim.run_until(0.5)
+        sim.add_observer(last)
+        sim.run_until(json.loads(project.read_text())["coSimulation"]["stopTime"])
+    rows = read_rows(sim.run_dir)
+    assert series.steps == [int(r["step"]) for r in rows] and series.t == [float(r["t"]) for r in rows]
+    for port in series.ports:
+        assert series.values[port] == [float(r[port]) for r in rows], port
+    assert last.step == int(rows[-1]["step"]) and last.values["pendulum.theta"] == float(rows[-1]["pendulum.theta"])
+    with pytest.raises(hycosim.SimulationError, match="is no observer: it lacks step_complete"):
+        with hycosim.open(project, runs_dir=tmp_path / "other") as sim:
+            sim.add_observer(object())
+
+
+def test_a_users_observer_hears_the_end_and_one_that_fails_ends_the_run_named(tmp_path):
+    doc = {"projectName": "chain", "nodeNum": 2, "linkNum": 1,
+           "nodeLists": [{"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+                         {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]}],
+           "linkLists": [{"from": "clock.y", "to": "g.u"}], "coSimulation": {"stepSize": 0.1, "stopTime": 0.5}}
+    counting = _Counting()
+    with hycosim.open(doc, runs_dir=tmp_path / "runs") as sim:
+        sim.add_observer(counting)
+        sim.run_until(0.5)
+    assert counting.ended == "completed" and [k for k, _, _ in counting.points] == list(range(6))
+    assert all(u == pytest.approx(y) for _, u, y in counting.points)  # an input as routed at its point
+
+    class Broken(_Counting):
+        def step_complete(self, step, t, values):
+            if step == 2:
+                raise ValueError("cannot keep up")
+
+    broken = Broken()
+    with hycosim.open(doc, runs_dir=tmp_path / "broken") as sim:
+        sim.add_observer(broken)
+        with pytest.raises(hycosim.RunFailed, match="observer Broken: step_complete failed at step 2.*cannot keep up"):
+            sim.run_until(0.5)
+    assert broken.ended == "failed" and len(read_rows(sim.run_dir)) >= 3
+
+
+def test_a_time_series_drops_what_a_rollback_takes_again():
+    series = hycosim.TimeSeries(["a.y"])
+    for k in range(6):
+        series.step_complete(k, k * 0.1, {"a.y": float(k)})
+    series.state_restored(3, 0.3)
+    assert series.steps == [0, 1, 2] and series.values["a.y"] == [0.0, 1.0, 2.0] and len(series.t) == 3

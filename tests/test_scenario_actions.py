@@ -108,6 +108,21 @@ _ACTION = st.fixed_dictionaries({}, optional={
     "description": _JSON})
 
 
+def test_a_rollback_to_the_point_of_an_action_records_it_again_once(tmp_path):
+    """A point's checkpoint is taken before its actions are recorded: a rollback to it must
+    record them again (a kill that restored the checkpoint at an action's time lost its line)."""
+    from hycosim.server.scenario import Scenario
+
+    loaded = load_project(_chain(tmp_path, ACTIONS))
+    scenario = Scenario(loaded.project, loaded.routes, loaded.project.scenario)
+    assert [e["t_action"] for e in scenario.taking_effect(6, 0.6)] == [0.3, 0.5]
+    scenario.rewind(0.5)  # back to the checkpoint at 0.5, the ramp's point
+    assert [e["t_action"] for e in scenario.taking_effect(5, 0.5)] == [0.5]
+    scenario.rewind(0.4)
+    assert [e["t_action"] for e in scenario.taking_effect(4, 0.4)] == []
+    assert [e["t_action"] for e in scenario.taking_effect(9, 0.9)] == [0.5, 0.8]
+
+
 @given(doc=st.lists(_ACTION, max_size=4) | st.fixed_dictionaries({"scenario": st.lists(_ACTION, max_size=3)}) | _JSON)
 def test_a_scenario_file_is_taken_or_named_whatever_it_holds(tmp_path_factory, doc):
     folder = tmp_path_factory.mktemp("scen")

@@ -54,6 +54,7 @@ from hycosim.server.localisation import bisect_crossing
 from hycosim.server.interpolation import STARTUP_SPLIT, InputTrack
 from hycosim.server.recorder import Recorder, RecordError
 from hycosim.server.retakes import IterationLog, StepSizer, control_step, input_change, iterate_step
+from hycosim.server.observers import Observer, PointValues
 from hycosim.server.scenario import Scenario
 from hycosim.server.routing import OutputView, Router
 from hycosim.server.status_view import LatestPoints
@@ -211,6 +212,10 @@ class Relay:
         self.router = Router(loaded)
         # Overrides of inputs in time (the project's scenario, --scenario, a Python caller's).
         self.scenario = Scenario(self.project, loaded.routes, [*self.project.scenario, *(scenario or [])])
+        # Who sees each point recorded (observers.py); a row goes to the recorder alone until one is added.
+        self.observers: list[Observer] = []
+        self._values = PointValues(self.project)
+        self._row = recorder.row
         self._input_labels = {n.nodeName: [f"{n.nodeName}.{p.name}" for p in n.input] for n in self.project.nodeLists}
         # Iterative coupling and the error-controlled step, once the nodes said they can take part.
         self.iteration: IterationLog | None = None
@@ -353,6 +358,11 @@ class Relay:
                                 samples_received={n: h.received for n, h in self.histories.items()})
             self.transport.close()
             self.inbox.close()
+            for observer in self.observers:
+                try:
+                    observer.run_ended(status_text)
+                except Exception:  # noqa: BLE001 - the run is over and recorded; a broken observer changes nothing
+                    self._log.exception("observer failed at the run's end", observer=type(observer).__name__)
 
     def _await_departures(self, timeout: float = 3.0) -> None:
         """After STOP, give the nodes a moment to leave before this session closes: closing at
@@ -1029,7 +1039,7 @@ class Relay:
         """Point p as the loop saw it, with the inputs the step from it is taken on (an iterated
         step's last) and how the step to it went; and shown."""
         self._show(p, seen)
-        self.recorder.row(p.k, p.t, seen.mode, seen.outputs, self.router.inputs, seen.stepped)
+        self._row(p.k, p.t, seen.mode, seen.outputs, self.router.inputs, seen.stepped)
         self.recorder.timing(p.k, p.t, p.wait, seen.holder, seen.lateness, p.arrivals, seen.ages, p.takes)
 
     def _record_inside(self, k: int, times: list[float], mode: str, at_k: dict[str, list[Any]],
@@ -1047,7 +1057,7 @@ class Relay:
                 outputs[node] = values
                 came[node] = arrivals[node]
             self.router.route(mode, times[i], outputs, self.histories)
-            self.recorder.row(k + i, times[i], mode, outputs, self.router.inputs, self.coupling.due(k + i))
+            self._row(k + i, times[i], mode, outputs, self.router.inputs, self.coupling.due(k + i))
             self.recorder.timing(k + i, times[i], 0.0, holder, None, came, {})
         return outputs
 
@@ -1078,7 +1088,7 @@ class Relay:
         outputs[ended["node"]] = self.ending.values
         at = times[after] if on_grid else t_end
         self.router.route(mode, at, outputs, self.histories)
-        self.recorder.row(k + after, at, mode, outputs, self.router.inputs, None)
+        self._row(k + after, at, mode, outputs, self.router.inputs, None)
         self.recorder.timing(k + after, at, 0.0, ended["node"], None, self.ending.arrivals if on_grid else {}, {})
         ended["step"] = k + after
 
@@ -1157,6 +1167,8 @@ class Relay:
         the checkpoint's server state."""
         s, arrivals, wait = self._restore(cause)
         self.scenario.rewind(s["t"])  # its record after the checkpoint was cut with the others
+        for observer in self.observers:
+            self._tell(observer, "state_restored", s["step"], s["t"])
         if self.sizer is not None:
             self.sizer.h = s["h"]
         self._checkpoint_at = self._next_checkpoint(s["t"])
@@ -1223,6 +1235,26 @@ class Relay:
         the inputs routed there take it, so the step from k is taken on them."""
         self._manipulate(k, t)
         self.router.route(self.coordinator.mode, t, self.outputs, self.histories)  # as the point routed them
+
+    def add_observer(self, observer: Observer) -> None:
+        """Tell ``observer`` of every point recorded from now on, of rollbacks and of the end
+        (in the loop's thread: add one while the loop stands at a point, or before it runs)."""
+        self.observers.append(observer)
+        self._row = self._row_observed
+
+    def _row_observed(self, step: int, t: float, mode: str, outputs: dict[str, list[Any]],
+                      inputs: dict[str, list[Any]], stepped: list[str] | None = None) -> None:
+        self.recorder.row(step, t, mode, outputs, inputs, stepped)
+        values = self._values.at(outputs, inputs)
+        for observer in self.observers:
+            self._tell(observer, "step_complete", step, t, values)
+
+    def _tell(self, observer: Observer, what: str, *args: Any) -> None:
+        try:
+            getattr(observer, what)(*args)
+        except Exception as exc:  # a user's observer: its failure ends the run, named, records kept
+            raise RunError(f"observer {type(observer).__name__}: {what} failed at step {self._point}: "
+                           f"{type(exc).__name__}: {exc}") from exc
 
     def _switch(self, p: _Point, view: OutputView) -> None:
         """Evaluate the guards at point p; a switch of mode is recorded (with the located event

@@ -84,6 +84,8 @@ class Scenario:
         return entries
 
     def rewind(self, t: float) -> None:
-        """Back at a checkpoint at ``t``: the actions after it take effect (and are recorded) again."""
+        """Back at a checkpoint at ``t``: the actions from its point on take effect (and are
+        recorded) again. Those at the point itself too: a point's checkpoint is taken before
+        its actions are recorded, so the record the rollback kept ends before them."""
         tol = _AT * max(1.0, abs(t))
-        self._reported = sum(1 for a in self._actions if a.t <= t + tol)
+        self._reported = sum(1 for a in self._actions if a.t <= t - tol)

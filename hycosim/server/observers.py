@@ -1,0 +1,101 @@
+"""Observers: what sees a run's points as they are recorded, as libcosim's observers do.
+
+An :class:`Observer` is told of every point the run records (the values ``values.csv`` holds
+there: each output as its node stepped it, each input as routed), of a rollback to a
+checkpoint (the points after it are taken again), and of the run's end. Two come with
+hycosim: :class:`LastValues` (each port's latest value) and :class:`TimeSeries` (chosen ports
+over time). A Python caller adds its own with ``Simulation.add_observer``; any object with
+these methods will do.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from typing import Any, Protocol
+
+from hycosim.core.schema import Project
+
+
+class Observer(Protocol):
+    """What a run tells an observer (each call in the master's thread: keep it short)."""
+
+    def step_complete(self, step: int, t: float, values: Mapping[str, Any]) -> None:
+        """Point ``step`` at ``t`` was recorded with ``values`` (``node.port`` → value, arrays as
+        lists). The mapping is the master's and changes after the call: copy what you keep."""
+
+    def state_restored(self, step: int, t: float) -> None:
+        """The run went back to its checkpoint at point ``step``: the points from it on come again."""
+
+    def run_ended(self, status: str) -> None:
+        """The run is over: ``status`` as ``meta.json`` says it (completed, stopped, failed, …)."""
+
+
+class PointValues(Mapping[str, Any]):
+    """A point's values by ``node.port``, read from the master's lists without copying them."""
+
+    def __init__(self, project: Project):
+        self._where = {f"{n.nodeName}.{p.name}": ("out", n.nodeName, i)
+                       for n in project.nodeLists for i, p in enumerate(n.output)}
+        self._where.update({f"{n.nodeName}.{p.name}": ("in", n.nodeName, i)
+                            for n in project.nodeLists for i, p in enumerate(n.input)})
+        self._outputs: Mapping[str, list[Any]] = {}
+        self._inputs: Mapping[str, list[Any]] = {}
+
+    def at(self, outputs: Mapping[str, list[Any]], inputs: Mapping[str, list[Any]]) -> PointValues:
+        self._outputs, self._inputs = outputs, inputs
+        return self
+
+    def __getitem__(self, port: str) -> Any:
+        side, node, i = self._where[port]
+        value = (self._outputs if side == "out" else self._inputs)[node][i]
+        return list(value) if isinstance(value, list) else value
+
+    def __iter__(self):
+        return iter(self._where)
+
+    def __len__(self) -> int:
+        return len(self._where)
+
+
+class LastValues:
+    """Each port's value at the latest point recorded (libcosim's last-value observer)."""
+
+    def __init__(self) -> None:
+        self.step: int | None = None
+        self.t: float | None = None
+        self.values: dict[str, Any] = {}
+
+    def step_complete(self, step: int, t: float, values: Mapping[str, Any]) -> None:
+        self.step, self.t, self.values = step, t, dict(values)
+
+    def state_restored(self, step: int, t: float) -> None:
+        pass  # the restored point is recorded again next, and replaces these
+
+    def run_ended(self, status: str) -> None:
+        pass
+
+
+class TimeSeries:
+    """Chosen ports at every point recorded: ``t`` and a list per port (libcosim's time-series
+    observer). A rollback to a checkpoint drops what lies from its point on."""
+
+    def __init__(self, ports: Iterable[str]):
+        self.ports = list(ports)
+        self.steps: list[int] = []
+        self.t: list[float] = []
+        self.values: dict[str, list[Any]] = {p: [] for p in self.ports}
+
+    def step_complete(self, step: int, t: float, values: Mapping[str, Any]) -> None:
+        self.steps.append(step)
+        self.t.append(t)
+        for port in self.ports:
+            self.values[port].append(values[port])
+
+    def state_restored(self, step: int, t: float) -> None:
+        keep = next((i for i, k in enumerate(self.steps) if k >= step), len(self.steps))
+        del self.steps[keep:], self.t[keep:]
+        for series in self.values.values():
+            del series[keep:]
+
+    def run_ended(self, status: str) -> None:
+        pass
