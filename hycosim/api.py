@@ -218,11 +218,15 @@ class Simulation:
         self._raise_if_failed()
 
     def _run(self, runs_dir: Path) -> None:
+        import structlog
+
         from hycosim.inprocess import run_in_process
 
         def seen(relay: Any) -> None:
             self._relay = relay
 
+        # A run sends structlog's lines to its own log file; the caller's setup is put back after.
+        callers_logging = structlog.get_config()
         try:
             if self._distributed:
                 self._result = self._run_distributed(runs_dir, seen)
@@ -231,6 +235,7 @@ class Simulation:
         except BaseException as exc:  # told to the caller, in the caller's thread
             self._failure = exc
         finally:
+            structlog.configure(**callers_logging)
             self._over = True
             self._gate.go(-1, -math.inf)  # wakes a waiting caller
 

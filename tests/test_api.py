@@ -258,3 +258,18 @@ def test_a_time_series_drops_what_a_rollback_takes_again():
         series.step_complete(k, k * 0.1, {"a.y": float(k)})
     series.state_restored(3, 0.3)
     assert series.steps == [0, 1, 2] and series.values["a.y"] == [0.0, 1.0, 2.0] and len(series.t) == 3
+
+
+def test_the_callers_structlog_setup_is_put_back_when_the_run_ends(tmp_path):
+    import structlog
+
+    mine = [structlog.processors.KeyValueRenderer()]
+    structlog.configure(processors=mine)
+    try:
+        with hycosim.open(_catch(tmp_path), runs_dir=tmp_path / "runs") as sim:
+            assert structlog.get_config()["processors"] is not mine  # the run's, meanwhile
+            sim.step()
+        assert structlog.get_config()["processors"] is mine
+        assert "step" in (sim.run_dir / "server.log.jsonl").read_text()
+    finally:
+        structlog.reset_defaults()
