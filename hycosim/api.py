@@ -273,15 +273,17 @@ class Simulation:
     @property
     def step_count(self) -> int:
         """The macro steps taken so far (the index of the point the run stands at)."""
-        if self._gate.at is not None:
-            return self._gate.at[0]
+        at = self._gate.at  # read once: the master clears it as it steps on
+        if at is not None:
+            return at[0]
         return self._relay.progress.step if self._relay is not None else 0
 
     @property
     def time(self) -> float:
         """The simulated time of the point the run stands at."""
-        if self._gate.at is not None:
-            return self._gate.at[1]
+        at = self._gate.at
+        if at is not None:
+            return at[1]
         return self._relay.progress.t if self._relay is not None else self._cosim.startTime
 
     @property
@@ -399,8 +401,9 @@ class Simulation:
         self._check_open()
         if self.ended:
             raise TimeError(f"the run of {self._loaded.name!r} is over: no point is left to observe")
-        missing = [m for m in ("step_complete", "state_restored", "run_ended") if not callable(getattr(observer, m, None))]
-        if missing:
+        from hycosim.server.observers import missing_methods
+
+        if missing := missing_methods(observer):
             raise SimulationError(f"{type(observer).__name__} is no observer: it lacks {', '.join(missing)}")
         self._relay.add_observer(observer)
 

@@ -273,3 +273,48 @@ def test_the_callers_structlog_setup_is_put_back_when_the_run_ends(tmp_path):
         assert "step" in (sim.run_dir / "server.log.jsonl").read_text()
     finally:
         structlog.reset_defaults()
+
+
+_PEAK = """
+import json
+from pathlib import Path
+
+
+class Peak:
+    def __init__(self, port, out):
+        self.port, self.out, self.highest, self.points = port, Path(out), float("-inf"), 0
+
+    def step_complete(self, step, t, values):
+        self.highest, self.points = max(self.highest, values[self.port]), self.points + 1
+
+    def state_restored(self, step, t):
+        pass
+
+    def run_ended(self, status):
+        self.out.write_text(json.dumps({"highest": self.highest, "points": self.points, "status": status}))
+"""
+
+
+def test_an_observer_named_in_the_project_file_sees_every_run_it_is_in(tmp_path):
+    (tmp_path / "peak.py").write_text(_PEAK)
+    doc = json.loads(_catch(tmp_path).read_text())
+    for mode in ("--processes", "--in-process"):
+        doc["observers"] = [{"observer": "peak.py:Peak",
+                             "parameters": {"port": "pendulum.theta", "out": str(tmp_path / f"peak{mode}.json")}}]
+        project = tmp_path / "observed.json"
+        project.write_text(json.dumps(doc))
+        res = cli("run", str(project), mode, "--no-progress", "--runs-dir", str(tmp_path / mode))
+        assert res.returncode == 0, res.stderr
+        rows = read_rows(next((tmp_path / mode).iterdir()))
+        said = json.loads((tmp_path / f"peak{mode}.json").read_text())
+        assert said == {"highest": max(float(r["pendulum.theta"]) for r in rows), "points": len(rows),
+                        "status": "completed"}, mode
+    for entry, says in (({"observer": "peak.py:Nope"}, "has no attribute 'Nope'"),
+                        ({"observer": "peak.py:Peak"}, "missing 2 required positional arguments"),
+                        ({"observer": "json:JSONDecoder"}, "is no observer: it lacks step_complete")):
+        doc["observers"] = [entry]
+        project.write_text(json.dumps(doc))
+        for args in (("validate",), ("run", "--runs-dir", str(tmp_path / "bad"))):
+            res = cli(*args[:1], str(project), *args[1:])
+            assert res.returncode == 2 and "observers[0]" in res.stderr and says in res.stderr, (args, res.stderr)
+            assert "Traceback" not in res.stderr and not (tmp_path / "bad").exists()

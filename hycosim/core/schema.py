@@ -390,6 +390,15 @@ class ScenarioAction(_Strict):
         return self.override if self.override is not None else self.release
 
 
+class ObserverEntry(_Strict):
+    """An observer the server tells of every point it records (hycosim.server.observers):
+    ``module:Class`` or ``file.py:Class`` (relative to the project file), made with
+    ``parameters`` as keyword arguments."""
+
+    observer: str
+    parameters: dict[str, Any] = Field(default_factory=dict)
+
+
 class Tls(_Strict):
     """TLS on the server's ``tls/HOST:PORT`` endpoint; PEM files relative to the project JSON."""
 
@@ -426,6 +435,8 @@ class Project(_Strict):
     events: list[Event] = Field(default_factory=list)
     # Time-triggered manipulation of inputs (fault injection); --scenario FILE gives one too.
     scenario: list[ScenarioAction] = Field(default_factory=list)
+    # Observers of the points recorded, made in the server's process before the run starts.
+    observers: list[ObserverEntry] = Field(default_factory=list)
     security: Security | None = None
     description: str | None = None
 

@@ -21,6 +21,7 @@ from hycosim.core.schema import CoSimulation
 from hycosim.core.schema import Node as NodeSpec
 from hycosim.core.extras import extra_providing, install_hint, missing_modules
 from hycosim.core.hints import did_you_mean
+from hycosim.core.user_code import import_module
 
 from hycosim.node.interface import AsyncSource, Node, missing_state_methods
 
@@ -80,30 +81,6 @@ def _fmu_path(spec: NodeSpec, project_dir: Path) -> Path:
     return path
 
 
-def _import(module_name: str, project_dir: Path):
-    """The module a model names: a ``.py`` file relative to the project's folder, or a module
-    on the import path, with that folder last on it."""
-    if module_name.endswith(".py"):
-        path = (project_dir / module_name).resolve()
-        if not path.is_file():
-            raise ImportError(f"no file {path}")
-        name = f"hycosim_model_{path.stem}_{abs(hash(str(path))):x}"
-        if name not in sys.modules:
-            spec = importlib.util.spec_from_file_location(name, path)
-            module = importlib.util.module_from_spec(spec)
-            sys.modules[name] = module
-            try:
-                spec.loader.exec_module(module)
-            except BaseException:
-                del sys.modules[name]
-                raise
-        return sys.modules[name]
-    folder = str(project_dir.resolve())
-    if folder not in sys.path:
-        sys.path.append(folder)
-    return importlib.import_module(module_name)
-
-
 # The top-level packages hycosim installed before 0.2.0, when its modules moved under hycosim.
 _OLD_TOP_LEVEL = ("clients", "core", "server", "fmu_bridge", "dashboard")
 # Where 0.3.0 moved the packages a model could name.
@@ -140,7 +117,7 @@ def model_class(spec: NodeSpec, project_dir: Path | None = None) -> type[Node] |
                             f"({', '.join(sorted(known))}) nor 'module:Class' or 'file.py:Class'"
                             f"{did_you_mean([spec.model], known)}")
     try:
-        cls = getattr(_import(module_name, project_dir or Path.cwd()), class_name)
+        cls = getattr(import_module(module_name, project_dir or Path.cwd()), class_name)
     except Exception as exc:  # the user's module may fail to import in any way (SyntaxError, its own errors)
         detail = str(exc) if isinstance(exc, (ImportError, AttributeError)) else f"{type(exc).__name__}: {exc}"
         if isinstance(exc, ModuleNotFoundError):

@@ -26,6 +26,7 @@ from hycosim.transport.session import open_session, router_config
 from hycosim.server import checkpoints
 from hycosim.server.coordinator import GuardEvaluationError
 from hycosim.server.recorder import Recorder, RecordError
+from hycosim.server.observers import ObserverLoadError, project_observers
 from hycosim.server.relay import PointGate, Relay, RunError
 from hycosim.core.schema import ScenarioAction
 from hycosim.transport.server_side import InProcessTransport, Transport, ZenohTransport
@@ -144,6 +145,10 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
             security = router_security(loaded, endpoint)
         except SecurityError as exc:
             return done(2, None, str(exc))
+    try:  # the user's code: what cannot be made is bad input, named before a run directory is made
+        observers = project_observers(loaded)
+    except ObserverLoadError as exc:
+        return done(2, None, f"{loaded.path or 'the project'}: {exc}")
     resume_at, recorded = None, None
     if resume is not None:
         try:
@@ -207,6 +212,8 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     relay = Relay(loaded, transport, recorder, progress_every_s=0.1, on_progress=on_progress,
                   gateway_address=(gw.host, gw.port) if gw is not None else None,
                   gateway_required=gateway_required, resume=recorded, gate=gate, scenario=scenario)
+    for observer in observers:
+        relay.add_observer(observer)
     if on_relay is not None:
         on_relay(relay)
     try:

@@ -11,9 +11,14 @@ these methods will do.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
+from pathlib import Path
 from typing import Any, Protocol
 
+from hycosim.core.config import LoadedProject
 from hycosim.core.schema import Project
+from hycosim.core.user_code import import_target
+
+_METHODS = ("step_complete", "state_restored", "run_ended")
 
 
 class Observer(Protocol):
@@ -28,6 +33,31 @@ class Observer(Protocol):
 
     def run_ended(self, status: str) -> None:
         """The run is over: ``status`` as ``meta.json`` says it (completed, stopped, failed, …)."""
+
+
+class ObserverLoadError(ValueError):
+    """An observer the project file names that cannot be made (the message names the entry)."""
+
+
+def missing_methods(observer: object) -> list[str]:
+    """The methods of :class:`Observer` that ``observer`` lacks."""
+    return [m for m in _METHODS if not callable(getattr(observer, m, None))]
+
+
+def project_observers(loaded: LoadedProject) -> list[Observer]:
+    """The observers the project file names (``observers``), made; ObserverLoadError naming the
+    first that cannot be (its target not there, its constructor failing, a method missing)."""
+    base = loaded.path.parent if loaded.path is not None else Path.cwd()
+    made = []
+    for i, entry in enumerate(loaded.project.observers):
+        where = f"observers[{i}]: observer {entry.observer!r}"
+        try:
+            made.append(import_target(entry.observer, base)(**entry.parameters))
+        except Exception as exc:  # the user's code may fail in any way; named, not a traceback
+            raise ObserverLoadError(f"{where} cannot be made: {type(exc).__name__}: {exc}") from None
+        if missing := missing_methods(made[-1]):
+            raise ObserverLoadError(f"{where} is no observer: it lacks {', '.join(missing)}")
+    return made
 
 
 class PointValues(Mapping[str, Any]):

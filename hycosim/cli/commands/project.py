@@ -38,6 +38,12 @@ def validate(
                 problems.append(f"{file}: nodeLists[{i}]: {exc}")
         if problems:
             fail(f"{file}: {len(problems)} node(s) cannot be loaded", details=problems)
+        from hycosim.server.observers import ObserverLoadError, project_observers
+
+        try:
+            project_observers(loaded)
+        except ObserverLoadError as exc:
+            fail(f"{file}: {exc}")
         _check_retakes(file, loaded)
     out.print(f"OK {file}: project {p.projectName!r}, {len(p.nodeLists)} nodes, {len(p.linkLists)} links, "
               f"{len(loaded.routes)} routes, {len(p.events)} events" + ("" if models else " (models not checked)"),

@@ -128,7 +128,12 @@ def _refuse_unfit_nodes(loaded) -> None:
     shape, clocks, a parameter it lacks). Named before a run directory is made, not by the
     node's process after the launch; reads model descriptions only, imports no model."""
     from hycosim.node.loader import NodeLoadError, check_node, locate_node
+    from hycosim.server.observers import ObserverLoadError, project_observers
 
+    try:
+        project_observers(loaded)
+    except ObserverLoadError as exc:
+        fail(f"{loaded.path}: {exc}")
     for spec in loaded.project.nodeLists:
         try:
             locate_node(spec, loaded.resolve("."))
