@@ -4,7 +4,8 @@
 ``hycosim.transport`` Zenoh sessions and the in-process bus; ``hycosim.server`` the relay and
 its coordinator; ``hycosim.node`` the node interface and runtime; ``hycosim.fmi`` FMU import
 (co-simulation, Model Exchange, SSP); ``hycosim.bridge`` FMU export and the gateway;
-``hycosim.scenario`` the paper's grasp demo; ``hycosim.dashboard`` the web dashboard;
+the paper's grasp demo is a package of its own beside them, which the framework never
+imports; ``hycosim.dashboard`` the web dashboard;
 ``hycosim.cli`` the command line. ``hycosim.open(project)`` drives a run from Python
 (:mod:`hycosim.api`).
 """

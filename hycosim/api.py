@@ -114,26 +114,15 @@ def _load(project: str | Path | dict[str, Any]) -> LoadedProject:
             return parse_project(project, "<project dict>")
         path = Path(project)
         if path.suffix.lower() == ".ssp":
-            return load_project(_from_ssp(path))
+            from hycosim.fmi.ssp import SspError, imported_project
+
+            try:
+                path = imported_project(path)
+            except SspError as exc:
+                raise ProjectError(str(exc)) from None
         return load_project(path)
     except ConfigError as exc:
         raise ProjectError(f"{exc.source}: " + "; ".join(i.render() for i in exc.issues)) from None
-
-
-def _from_ssp(package: Path) -> Path:
-    """An SSP package's project (imported as ``hycosim run`` imports it, beside the package)."""
-    from hycosim.fmi.ssp import SspError, project_from_ssp
-
-    folder = package.parent / f".{package.name}.d"
-    side_file = package.with_name(package.stem + ".hycosim.json")
-    try:
-        side = json.loads(side_file.read_text()) if side_file.is_file() else None
-        folder.mkdir(exist_ok=True)
-        doc = project_from_ssp(package, folder / "project-fmus", side=side)
-        (folder / "project.json").write_text(json.dumps(doc, indent=1))
-    except (SspError, OSError, ValueError) as exc:
-        raise ProjectError(f"{package}: {exc}") from None
-    return folder / "project.json"
 
 
 def _check_nodes(loaded: LoadedProject, base: Path) -> None:

@@ -318,3 +318,19 @@ def test_an_observer_named_in_the_project_file_sees_every_run_it_is_in(tmp_path)
             res = cli(*args[:1], str(project), *args[1:])
             assert res.returncode == 2 and "observers[0]" in res.stderr and says in res.stderr, (args, res.stderr)
             assert "Traceback" not in res.stderr and not (tmp_path / "bad").exists()
+
+
+def test_an_ssp_package_runs_as_hycosim_run_runs_it_and_a_bad_one_is_named(tmp_path):
+    from benchmarks._small_fmus import write_package
+
+    _, package = write_package(tmp_path / "fmus", 30)
+    with hycosim.open(package, runs_dir=tmp_path / "api") as sim:
+        sim.run_until(0.3)
+    assert sim.outcome.status == "completed"
+    res = cli("run", str(package), "--in-process", "--no-progress", "--runs-dir", str(tmp_path / "cli"))
+    assert res.returncode == 0, res.stderr
+    assert (next((tmp_path / "cli").iterdir()) / "values.csv").read_bytes() == (sim.run_dir / "values.csv").read_bytes()
+    (tmp_path / "broken.ssp").write_bytes(b"not a zip")
+    with pytest.raises(hycosim.ProjectError, match="broken.ssp"):
+        hycosim.open(tmp_path / "broken.ssp", runs_dir=tmp_path / "bad")
+    assert not (tmp_path / "bad").exists()

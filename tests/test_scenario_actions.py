@@ -13,7 +13,9 @@ from hypothesis import strategies as st
 
 import hycosim
 from hycosim.core.config import ConfigError, load_project
-from hycosim.core.scenario_checks import load_scenario
+import msgpack
+
+from hycosim.core.scenario_checks import load_scenario, value_problem
 from hycosim.server.report import read_events, read_scenario
 from tests.helpers import hycosim as cli, meta, read_rows, run_killing, run_project, write_project
 
@@ -82,6 +84,8 @@ def test_the_same_actions_from_a_file_from_python_and_in_one_process_record_the_
     ({"t": 0.1, "override": "clock.y", "value": 1.0}, "[0].override", "no input a link feeds"),
     ({"t": 0.1, "override": "g.u", "value": "high"}, "[0].value", "g.u takes a finite number, not 'high'"),
     ({"t": 0.1, "override": "g.u", "value": True}, "[0].value", "g.u takes a finite number, not True"),
+    ({"t": 0.1, "override": "g.u", "value": 10 ** 400}, "[0].value", "g.u takes a finite number"),
+    ({"t": 0.1, "override": "g.u", "ramp": {"to": 10 ** 400, "duration": 1.0}}, "[0].ramp.to", "not a finite number"),
     ({"t": 0.1, "release": "g.u"}, "[0].release", "not overridden before"),
     ({"t": 0.1, "override": "g.u"}, "[0]", "an override gives a 'value' or a 'ramp'"),
     ({"t": 0.1, "override": "g.u", "ramp": {"to": 1.0, "duration": 0}}, "[0].ramp.duration", "greater than 0"),
@@ -98,14 +102,32 @@ def test_a_scenario_action_that_cannot_be_taken_is_named_before_anything_runs(tm
     assert res.returncode == 2 and f"scenario{where}" in res.stderr and says in res.stderr, res.stderr
 
 
-_JSON = st.recursive(st.none() | st.booleans() | st.integers(-10, 10) | st.floats(allow_nan=True) | st.text(max_size=6),
+_NUMBER = st.integers(-10, 10) | st.integers() | st.sampled_from([2 ** 31, -2 ** 31 - 1, 10 ** 400]) | st.floats()
+_JSON = st.recursive(st.none() | st.booleans() | _NUMBER | st.text(max_size=6),
                      lambda inner: st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=6), inner, max_size=3),
                      max_leaves=8)
 _ACTION = st.fixed_dictionaries({}, optional={
-    "t": st.floats(allow_nan=True, allow_infinity=True) | _JSON, "override": st.sampled_from(["g.u", "clock.y", "g"]) | _JSON,
-    "release": st.sampled_from(["g.u", "x.y"]) | _JSON, "value": _JSON,
-    "ramp": st.fixed_dictionaries({}, optional={"to": _JSON, "duration": _JSON, "from": _JSON}) | _JSON,
+    "t": st.floats(allow_nan=True, allow_infinity=True) | _JSON,
+    "override": st.sampled_from(["g.u", "clock.y", "g", "sink.n", "sink.b", "sink.a"]) | _JSON,
+    "release": st.sampled_from(["g.u", "sink.n", "x.y"]) | _JSON,
+    "value": _JSON | st.lists(_NUMBER, min_size=2, max_size=2),
+    "ramp": st.fixed_dictionaries({}, optional={"to": _NUMBER | _JSON, "duration": _NUMBER | _JSON,
+                                                "from": _NUMBER | _JSON}) | _JSON,
     "description": _JSON})
+
+
+def _typed(folder: Path) -> Path:
+    """Inputs of every kind a link feeds: Real, an Integer, a Boolean, a Real array."""
+    return write_project(folder / "typed.json", [
+        {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
+        {"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]},
+        {"nodeName": "src", "UID": 3, "model": "ramp",
+         "output": [{"name": "n", "type": "Integer"}, {"name": "b", "type": "Boolean"}, {"name": "a", "shape": [2]}]},
+        {"nodeName": "sink", "UID": 4, "model": "gain",
+         "input": [{"name": "n", "type": "Integer"}, {"name": "b", "type": "Boolean"}, {"name": "a", "shape": [2]}],
+         "output": ["y"]},
+    ], [{"from": "clock.y", "to": "g.u"}, {"from": "src", "to": "sink", "pairs": [["n", "n"], ["b", "b"], ["a", "a"]]}],
+        cosim={"stepSize": 0.1, "stopTime": 1.0}, name="typed")
 
 
 def test_a_rollback_to_the_point_of_an_action_records_it_again_once(tmp_path):
@@ -125,8 +147,10 @@ def test_a_rollback_to_the_point_of_an_action_records_it_again_once(tmp_path):
 
 @given(doc=st.lists(_ACTION, max_size=4) | st.fixed_dictionaries({"scenario": st.lists(_ACTION, max_size=3)}) | _JSON)
 def test_a_scenario_file_is_taken_or_named_whatever_it_holds(tmp_path_factory, doc):
+    from hycosim.server.scenario import Scenario, from_meta
+
     folder = tmp_path_factory.mktemp("scen")
-    loaded = load_project(_chain(folder, None))
+    loaded = load_project(_typed(folder))
     path = folder / "scen.json"
     path.write_text(json.dumps(doc))
     try:
@@ -134,7 +158,22 @@ def test_a_scenario_file_is_taken_or_named_whatever_it_holds(tmp_path_factory, d
     except ConfigError as exc:
         assert exc.issues and all(i.path and i.message for i in exc.issues)
     else:
-        assert all(0.0 <= a.t <= 1.0 and a.target == "g.u" for a in actions)
+        assert all(0.0 <= a.t <= 1.0 and a.target in ("g.u", "sink.n", "sink.b", "sink.a") for a in actions)
+        # What was taken can be run: the values at any point fit their ports and the wire.
+        scenario = Scenario(loaded.project, loaded.routes, actions)
+        for t in (0.0, 0.35, 1.0):
+            for node, pins in scenario.pins_at(t).items():
+                for i, value in pins:
+                    port = loaded.project.node(node).input[i]
+                    assert value_problem(port, value) is None, (port.name, value)
+                    msgpack.packb(value)
+        assert from_meta([a.model_dump(by_alias=True, exclude_none=True) for a in actions], loaded.project,
+                         loaded.routes) == actions  # what a resumed run reads back of it
+    # Whatever a meta.json holds where the scenario was kept: taken whole, or refused in words.
+    try:
+        from_meta(doc, loaded.project, loaded.routes)
+    except ValueError as exc:
+        assert str(exc).startswith("its scenario cannot be")
 
 
 def _slow_chain(tmp_path: Path) -> Path:

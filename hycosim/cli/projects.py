@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from hycosim.cli.output import fail
@@ -30,51 +29,30 @@ def scenario_of(path: Path | None, loaded: LoadedProject) -> list | None:
              details=[f"{exc.source}: {i.render()}" for i in exc.issues])
 
 
-# Beside a package, the parts of a project SSP has no word for (serverIP, events, asynchronous
-# nodes, coSimulation keys): `run` and `validate` of system.ssp read system.hycosim.json.
-SSP_SIDE_SUFFIX = ".hycosim.json"
-
-
 def from_ssp(package: Path, project_file: Path, side: Path | None = None, step: float | None = None,
              stop: float | None = None) -> Path:
     """Import the SSP package into ``project_file`` (its FMUs in a folder beside it); exit 2 with
     what is wrong."""
-    from hycosim.core import json_text
-    from hycosim.fmi.ssp import SspError, project_from_ssp
+    from hycosim.fmi.ssp import SspError, import_package
 
-    side = side or (package.with_name(package.stem + SSP_SIDE_SUFFIX) if
-                    package.with_name(package.stem + SSP_SIDE_SUFFIX).is_file() else None)
     try:
-        extra = json_text.loads(side.read_bytes()) if side is not None else None
-        if extra is not None and type(extra) is not dict:
-            raise ValueError("it holds no JSON object")
-    except (OSError, ValueError) as exc:
-        fail(f"{side}: cannot read the side file ({exc})")
-    try:
-        doc = project_from_ssp(package, project_file.parent / f"{project_file.stem}-fmus", side=extra, step=step,
-                               stop=stop)
+        return import_package(package, project_file, side, step, stop)
     except SspError as exc:
         fail(str(exc))
-    try:
-        project_file.write_text(json.dumps(doc, indent=1))
-    except OSError as exc:
-        fail(f"{project_file}: cannot write ({exc.strerror or exc})")
-    return project_file
 
 
 def project_file(file: Path, step: float | None = None, stop: float | None = None) -> Path:
     """The project file to use for FILE: itself, or for an SSP package the project imported from
     it (into a hidden folder beside it, remade each time), with the macro step and stop time
     ``step`` and ``stop`` where the package gives none."""
+    from hycosim.fmi.ssp import SspError, imported_project
+
     if file.suffix.lower() != ".ssp":
         if step is not None or stop is not None:
             fail(f"{file}: --step and --stop are for an SSP package; a project file says "
                  "coSimulation.stepSize and stopTime")
         return file
-    folder = file.parent / f".{file.name}.d"
     try:
-        folder.mkdir(exist_ok=True)
-    except OSError as exc:
-        fail(f"{folder}: cannot make the folder the package is imported into "
-             f"({exc.strerror or exc}); import it elsewhere with: hycosim import {file} -o DIR/project.json")
-    return from_ssp(file, folder / "project.json", step=step, stop=stop)
+        return imported_project(file, step, stop)
+    except SspError as exc:
+        fail(str(exc))

@@ -28,12 +28,22 @@ def value_problem(port: Port, value: Any) -> str | None:
     return _scalar_problem(port.type, value)
 
 
+# FMI's Integer (fmi2Integer, fmi3Int32 as hycosim maps its Integer ports) is a 32-bit int.
+_INT_RANGE = (-2 ** 31, 2 ** 31 - 1)
+
+
+def _finite(value: Any) -> bool:
+    if type(value) is float:
+        return math.isfinite(value)
+    return type(value) is int and -1.7e308 < value < 1.7e308  # an int a float can hold (10**400 cannot)
+
+
 def _scalar_problem(kind: PortType, value: Any) -> str | None:
     if kind is PortType.REAL:
-        ok = type(value) in (int, float) and math.isfinite(value)
-        return None if ok else "takes a finite number"
+        return None if _finite(value) else "takes a finite number"
     if kind is PortType.INTEGER:
-        return None if type(value) is int else "takes a whole number"
+        ok = type(value) is int and _INT_RANGE[0] <= value <= _INT_RANGE[1]
+        return None if ok else "takes a whole number of 32 bits"
     if kind is PortType.BOOLEAN:
         return None if type(value) is bool else "takes true or false"
     if kind is PortType.STRING:
@@ -81,6 +91,9 @@ def scenario_issues(project: Project, routes: list[Any], actions: list[ScenarioA
             if target.port.type is not PortType.REAL or target.port.shape is not None:
                 issues.append(Issue(f"{at}.ramp", f"{action.target} is no scalar Real port",
                                     "a ramp moves a Real value; give a 'value' instead"))
+            for key, end in (("to", action.ramp.to), ("from", action.ramp.start)):
+                if end is not None and not _finite(end):
+                    issues.append(Issue(f"{at}.ramp.{key}", f"{end!r} is not a finite number"))
             continue
         why = value_problem(target.port, action.value)
         if why is not None:

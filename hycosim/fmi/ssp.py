@@ -527,3 +527,46 @@ def _ssv_type(value: Any) -> str:
     if type(value) is str:
         return "String"
     raise SspError(f"a parameter value {value!r} that SSP cannot hold (numbers, Booleans and strings)")
+
+
+# Beside a package, the parts of a project SSP has no word for (serverIP, events, asynchronous
+# nodes, coSimulation keys): `run` and `validate` of system.ssp read system.hycosim.json.
+SSP_SIDE_SUFFIX = ".hycosim.json"
+
+
+def import_package(package: Path, project_file: Path, side: Path | None = None, step: float | None = None,
+                   stop: float | None = None) -> Path:
+    """Import the SSP package into ``project_file`` (its FMUs in a folder beside it), with the
+    side file beside the package (or ``side``); SspError saying what is wrong with any of them."""
+    import json
+
+    from hycosim.core import json_text
+
+    beside = package.with_name(package.stem + SSP_SIDE_SUFFIX)
+    side = side or (beside if beside.is_file() else None)
+    try:
+        extra = json_text.loads(side.read_bytes()) if side is not None else None
+        if extra is not None and type(extra) is not dict:
+            raise ValueError("it holds no JSON object")
+    except (OSError, ValueError, RecursionError) as exc:
+        raise SspError(f"{side}: cannot read the side file ({exc})") from None
+    doc = project_from_ssp(package, project_file.parent / f"{project_file.stem}-fmus", side=extra, step=step,
+                           stop=stop)
+    try:
+        project_file.write_text(json.dumps(doc, indent=1))
+    except OSError as exc:
+        raise SspError(f"{project_file}: cannot write ({exc.strerror or exc})") from None
+    return project_file
+
+
+def imported_project(package: Path, step: float | None = None, stop: float | None = None) -> Path:
+    """The project ``hycosim run`` and ``validate`` use for a package: imported into a hidden
+    folder beside it (remade each time); SspError saying what went wrong."""
+    folder = package.parent / f".{package.name}.d"
+    try:
+        folder.mkdir(exist_ok=True)
+    except OSError as exc:
+        raise SspError(f"{folder}: cannot make the folder the package is imported into "
+                       f"({exc.strerror or exc}); import it elsewhere with: hycosim import {package} "
+                       "-o DIR/project.json") from None
+    return import_package(package, folder / "project.json", step=step, stop=stop)

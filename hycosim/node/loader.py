@@ -84,7 +84,8 @@ def _fmu_path(spec: NodeSpec, project_dir: Path) -> Path:
 # The top-level packages hycosim installed before 0.2.0, when its modules moved under hycosim.
 _OLD_TOP_LEVEL = ("clients", "core", "server", "fmu_bridge", "dashboard")
 # Where 0.3.0 moved the packages a model could name.
-_MOVED = {"hycosim.clients.": "hycosim.node (the reference models) or hycosim.scenario (the grasp demo's)",
+_MOVED = {"hycosim.clients.": "hycosim.node (the reference models); name the grasp demo's models as registered: "
+                               "rod, robot, reference_controller, camera, policy",
           "hycosim.fmu_bridge.": "hycosim.fmi or hycosim.bridge"}
 
 

@@ -12,7 +12,6 @@ from pathlib import Path
 from typing import Any, Callable
 
 import structlog
-from pydantic import TypeAdapter, ValidationError
 
 from hycosim import __version__
 from hycosim.core import json_text, logs, signals
@@ -27,6 +26,7 @@ from hycosim.server import checkpoints
 from hycosim.server.coordinator import GuardEvaluationError
 from hycosim.server.recorder import Recorder, RecordError
 from hycosim.server.observers import ObserverLoadError, project_observers
+from hycosim.server.scenario import from_meta
 from hycosim.server.relay import PointGate, Relay, RunError
 from hycosim.core.schema import ScenarioAction
 from hycosim.transport.server_side import InProcessTransport, Transport, ZenohTransport
@@ -179,9 +179,9 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         meta = {**old_meta, "endpoint": endpoint, "versions": meta["versions"]}
         if not scenario and old_meta.get("scenario"):
             try:
-                scenario = TypeAdapter(list[ScenarioAction]).validate_python(old_meta["scenario"])
-            except ValidationError as err:
-                return done(2, None, f"--resume: {resume / 'meta.json'}: its scenario cannot be read ({err.errors()[0]['msg']})")
+                scenario = from_meta(old_meta["scenario"], loaded.project, loaded.routes)
+            except ValueError as exc:
+                return done(2, None, f"--resume: {resume / 'meta.json'}: {exc}")
     try:
         # In one process the master's thread steps every node: a process of its own writes the rows.
         recorder = Recorder(run_dir, loaded, meta, resume_at=resume_at, rows_apart=bus is not None)

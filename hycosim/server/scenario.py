@@ -20,6 +20,24 @@ from hycosim.core.schema import Port, PortType, Project, ScenarioAction
 _AT = 1e-9
 
 
+def from_meta(value: Any, project: Project, routes: list[Any]) -> list[ScenarioAction]:
+    """The ``--scenario`` actions a run kept in its ``meta.json`` (a resumed run takes them back),
+    checked as a scenario file's are: ValueError saying what is wrong with them."""
+    from pydantic import TypeAdapter, ValidationError
+
+    from hycosim.core.scenario_checks import scenario_issues
+
+    try:
+        actions = TypeAdapter(list[ScenarioAction]).validate_python(value)
+    except ValidationError as err:
+        first = err.errors()[0]
+        raise ValueError(f"its scenario cannot be read ({'.'.join(map(str, first['loc']))}: {first['msg']})") from None
+    issues = scenario_issues(project, routes, actions)
+    if issues:
+        raise ValueError(f"its scenario cannot be taken: {issues[0].render()}")
+    return actions
+
+
 class Scenario:
     """The actions of one run, and what they make of its inputs at each point."""
 
