@@ -44,7 +44,7 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(REPO))
 
-from hycosim.server import checkpoints  # noqa: E402
+from hycosim.master import checkpoints  # noqa: E402
 
 
 def project(dir_: Path, stop: float, every: float) -> Path:

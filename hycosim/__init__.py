@@ -1,7 +1,7 @@
 """hycosim: hybrid time/event co-simulation on the FMI standard, relayed over Eclipse Zenoh.
 
 ``hycosim.core`` holds what every part shares (the project file, frames, run files);
-``hycosim.transport`` Zenoh sessions and the in-process bus; ``hycosim.server`` the relay and
+``hycosim.transport`` Zenoh sessions and the in-process bus; ``hycosim.master`` the relay and
 its coordinator; ``hycosim.node`` the node interface and runtime; ``hycosim.fmi`` FMU import
 (co-simulation, Model Exchange, SSP); ``hycosim.bridge`` FMU export and the gateway;
 the paper's grasp demo is a package of its own beside them, which the framework never
@@ -24,7 +24,7 @@ def __getattr__(name: str):
 
         return getattr(api, name)
     if name in _OBSERVERS:
-        from hycosim.server import observers
+        from hycosim.master import observers
 
         return getattr(observers, name)
     # ``__version__`` is read from the installed metadata when first asked for, not at import:

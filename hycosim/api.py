@@ -236,7 +236,7 @@ class Simulation:
 
         from hycosim.core.folders import run_dir_for
         from hycosim.embedded import free_loopback_endpoint
-        from hycosim.server.main import serve
+        from hycosim.master.main import serve
 
         endpoint = free_loopback_endpoint()
         run_dir = self._run_dir or run_dir_for(runs_dir, self._loaded.name)
@@ -390,7 +390,7 @@ class Simulation:
         self._check_open()
         if self.ended:
             raise TimeError(f"the run of {self._loaded.name!r} is over: no point is left to observe")
-        from hycosim.server.observers import missing_methods
+        from hycosim.master.observers import missing_methods
 
         if missing := missing_methods(observer):
             raise SimulationError(f"{type(observer).__name__} is no observer: it lacks {', '.join(missing)}")

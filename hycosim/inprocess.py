@@ -1,6 +1,6 @@
 """``hycosim run FILE --in-process``: the server's master and every node in one process, no sockets.
 
-The same project file, the same master (:class:`hycosim.server.relay.Relay`) and the same
+The same project file, the same master (:class:`hycosim.master.relay.Relay`) and the same
 node runtime as a distributed run, with the transport replaced by calls
 (:mod:`hycosim.transport.local_bus`): each release steps every node there and then, in this
 thread. The run directory is a distributed run's, ``values.csv`` byte for byte.
@@ -26,8 +26,8 @@ from hycosim.transport.local_bus import LocalBus
 from hycosim.node.loader import NodeLoadError, load_node
 from hycosim.node.interface import NodeModelError
 from hycosim.node.runtime import NodeRunError, NodeRuntime
-from hycosim.server.main import IN_PROCESS, serve
-from hycosim.server.relay import PointGate, Relay
+from hycosim.master.main import IN_PROCESS, serve
+from hycosim.master.relay import PointGate, Relay
 
 
 class CannotHost(ValueError):
@@ -47,9 +47,9 @@ def run_in_process(loaded: LoadedProject, *, runs_dir: Path = Path("runs"),
                    gate: PointGate | None = None, on_relay: Callable[[Relay], None] | None = None,
                    scenario: list[ScenarioAction] | None = None) -> tuple[int, Path | None, str]:
     """Run the project in this process; return (exit code, run directory, message) as
-    :func:`hycosim.server.main.serve` does. Raise :class:`CannotHost` before anything is
+    :func:`hycosim.master.main.serve` does. Raise :class:`CannotHost` before anything is
     written for a node one process cannot host. ``gate`` and ``on_relay``: a caller that drives
-    the run point by point (:func:`hycosim.open`), as :func:`~hycosim.server.main.serve` takes them."""
+    the run point by point (:func:`hycosim.open`), as :func:`~hycosim.master.main.serve` takes them."""
     check_hostable(loaded)
     base = loaded.path.parent if loaded.path else Path.cwd()
     models = {}

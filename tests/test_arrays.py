@@ -18,8 +18,8 @@ from hypothesis import strategies as st
 from hycosim.core import frames
 from hycosim.core.config import load_project, parse_project
 from hycosim.core.schema import Node
-from hycosim.server.intake import Dropped, Intake
-from hycosim.server.retakes import input_change
+from hycosim.master.intake import Dropped, Intake
+from hycosim.master.retakes import input_change
 from tests.fmi3_fmus import build
 from tests.helpers import column, hycosim, meta, read_rows, run_killing, run_project, write_project
 
@@ -296,7 +296,7 @@ _ARRAY_PROJECT = {"projectName": "p", "nodeNum": 1, "linkNum": 0, "linkLists": [
 def test_a_checkpoint_holding_array_values_is_taken_exactly_when_they_fit(outputs, inputs):
     """A checkpoint's server state (a file a user may edit) is restored only with an array of its
     port's size and element type for every array port; otherwise it is passed over, naming the port."""
-    from hycosim.server.checkpoints import misfit
+    from hycosim.master.checkpoints import misfit
 
     project = parse_project(_ARRAY_PROJECT).project
     server = {"outputs": {"n": [outputs]}, "inputs": {"n": [inputs]}, "mode": "free", "disarmed": [],

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import re
 
-from hycosim.server.async_sources import SampleHistory
+from hycosim.master.async_sources import SampleHistory
 from tests.helpers import column, meta, read_rows, run_project, write_project
 
 
@@ -35,7 +35,7 @@ def test_a_sample_stamped_at_no_finite_time_is_dropped_before_it_can_freeze_its_
 
     from hycosim.core import frames
     from hycosim.core.schema import Node
-    from hycosim.server.intake import Dropped, Intake
+    from hycosim.master.intake import Dropped, Intake
 
     camera = Node.model_validate({"nodeName": "camera", "UID": 3, "async": True, "model": "ramp_source",
                                   "output": ["angle"]})

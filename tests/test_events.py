@@ -65,7 +65,7 @@ def _coordinator(*events: dict):
     from hycosim.core.schema import Event
     from hycosim.core.config import EventGuards
     from hycosim.core.guards import Guard
-    from hycosim.server.coordinator import Coordinator
+    from hycosim.master.coordinator import Coordinator
 
     parsed = [Event(**e) for e in events]
     return Coordinator(parsed, {e.name: EventGuards(Guard(e.when), Guard(e.until), Guard(e.rearm) if e.rearm else None)

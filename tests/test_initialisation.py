@@ -11,7 +11,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from hycosim.core.schema import Route
-from hycosim.server import initialisation
+from hycosim.master import initialisation
 from tests.helpers import hycosim, read_rows, run_project, write_project
 from tests.wire_strategies import values
 

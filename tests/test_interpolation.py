@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hycosim.server.interpolation import InputTrack, taylor_derivatives
+from hycosim.master.interpolation import InputTrack, taylor_derivatives
 from tests.wire_strategies import values
 
 coefficients = st.lists(st.floats(-1e3, 1e3), min_size=1, max_size=4)

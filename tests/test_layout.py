@@ -70,13 +70,13 @@ def test_the_command_line_imports_the_grasp_demo_only_to_register_its_commands()
 
 
 @pytest.mark.parametrize("package, never", [
-    ("core", ("hycosim.transport", "hycosim.server", "hycosim.node", "hycosim.fmi", "hycosim.bridge",
+    ("core", ("hycosim.transport", "hycosim.master", "hycosim.node", "hycosim.fmi", "hycosim.bridge",
               "hycosim.cli", "hycosim.dashboard", "hycosim.embedded", "hycosim.inprocess")),
-    ("transport", ("hycosim.server", "hycosim.node", "hycosim.fmi", "hycosim.bridge", "hycosim.cli",
+    ("transport", ("hycosim.master", "hycosim.node", "hycosim.fmi", "hycosim.bridge", "hycosim.cli",
                    "hycosim.dashboard")),
-    ("server", ("hycosim.node", "hycosim.cli", "hycosim.dashboard")),
-    ("node", ("hycosim.server", "hycosim.cli", "hycosim.dashboard", "hycosim.embedded", "hycosim.inprocess")),
-    ("fmi", ("hycosim.server", "hycosim.node", "hycosim.cli", "hycosim.dashboard", "hycosim.bridge")),
+    ("master", ("hycosim.node", "hycosim.cli", "hycosim.dashboard")),
+    ("node", ("hycosim.master", "hycosim.cli", "hycosim.dashboard", "hycosim.embedded", "hycosim.inprocess")),
+    ("fmi", ("hycosim.master", "hycosim.node", "hycosim.cli", "hycosim.dashboard", "hycosim.bridge")),
     ("bridge", ("hycosim.node", "hycosim.cli", "hycosim.dashboard")),
 ])
 def test_each_folder_imports_only_what_lies_below_it(package, never):
@@ -89,7 +89,7 @@ def test_the_names_before_0_3_0_import_with_a_deprecation_warning():
     """In a fresh interpreter (a module is imported once per process, and warns then)."""
     code = ("import warnings; warnings.simplefilter('error', DeprecationWarning)\n"
             "import importlib, sys\n"
-            "for name in ('hycosim.clients.node', 'hycosim.fmu_bridge.model_fmu'):\n"
+            "for name in ('hycosim.clients.node', 'hycosim.fmu_bridge.model_fmu', 'hycosim.server.report'):\n"
             "    try:\n"
             "        importlib.import_module(name)\n"
             "    except DeprecationWarning as w:\n"
@@ -99,17 +99,19 @@ def test_the_names_before_0_3_0_import_with_a_deprecation_warning():
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=120)
     assert res.returncode == 0, res.stderr
     lines = res.stdout.splitlines()
-    assert len(lines) == 2 and all(" WARNS " in line for line in lines), lines
-    assert "hycosim.node" in lines[0] and "hycosim.bridge" in lines[1], lines
+    assert len(lines) == 3 and all(" WARNS " in line for line in lines), lines
+    assert "hycosim.node" in lines[0] and "hycosim.bridge" in lines[1] and "hycosim.master" in lines[2], lines
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
         old = importlib.import_module("hycosim.clients.node")
         from hycosim.bridge.model_fmu import build_model_fmu
         from hycosim.fmu_bridge.model_fmu import build_model_fmu as old_build
+        from hycosim.server.report import read_meta as old_read_meta
+    from hycosim.master.report import read_meta
     from hycosim.node import AsyncSource, Node, pack_state
 
     assert old.Node is Node and old.AsyncSource is AsyncSource and old.pack_state is pack_state
-    assert old_build is build_model_fmu
+    assert old_build is build_model_fmu and old_read_meta is read_meta
 
 
 def test_the_grasp_demos_models_and_fmu_builders_are_found_through_entry_points(tmp_path):

@@ -1,7 +1,7 @@
-"""The master's parts through their own interfaces: the releases' ledger (hycosim.server.ledger:
+"""The master's parts through their own interfaces: the releases' ledger (hycosim.master.ledger:
 which step each node owes after a release, at which point, and what each answer is to the point
-being gathered), event localisation's bisection (hycosim.server.localisation), and the step
-strategies that take a step again (hycosim.server.retakes: iterative coupling, the
+being gathered), event localisation's bisection (hycosim.master.localisation), and the step
+strategies that take a step again (hycosim.master.retakes: iterative coupling, the
 error-controlled step)."""
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from hypothesis import given, strategies as st
 
 from hycosim.core.frames import Batch, End, Outputs
 from hycosim.core.schema import Iterate, StepControl
-from hycosim.server.ledger import ENDED, LATER, TAKE, Ledger, Refusal
-from hycosim.server.retakes import StepSizer, control_step, input_change, iterate_step, relaxed
+from hycosim.master.ledger import ENDED, LATER, TAKE, Ledger, Refusal
+from hycosim.master.retakes import StepSizer, control_step, input_change, iterate_step, relaxed
 
 NODES = ["a", "b", "c", "d"]
 
@@ -122,7 +122,7 @@ def test_a_played_source_answers_each_point_with_its_own_step_once(step):
 def test_a_crossing_is_bisected_to_within_the_tolerance_and_the_last_step_taken_ends_after_it(h, share, tol):
     """The guard starts to hold at c inside (0, h]: the window found holds c, is at most the
     tolerance wide, was found in the fewest halvings, and the nodes stand at its end."""
-    from hycosim.server.localisation import bisect_crossing
+    from hycosim.master.localisation import bisect_crossing
 
     c = h * share
     taken: list[float] = []

@@ -12,8 +12,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from hycosim.core.schema import CoSimulation, Iterate, Node, StepControl
-from hycosim.server import plans
-from hycosim.server.intake import port_mismatch
+from hycosim.master import plans
+from hycosim.master.intake import port_mismatch
 from tests.wire_strategies import values
 
 CAPABILITIES = ["rollback", "variableStep", "serialize", "interpolates"]
@@ -88,7 +88,7 @@ def test_step_control_needs_every_node_to_roll_back_and_take_steps_of_any_length
 
 def test_a_checkpoint_grid_starts_at_the_start_and_is_taken_again_after_a_restore():
     assert plans.checkpoints(_cosim(), {"a": {"serialize": True}}).words == "off (no checkpointEvery)"
-    from hycosim.server.checkpoints import next_time
+    from hycosim.master.checkpoints import next_time
     assert next_time(0.0, 0.0, 0.25) == 0.25
     assert next_time(0.25, 0.0, 0.25) == 0.5  # at a checkpoint's time: the next one
     assert next_time(0.3, 0.1, 0.25) == 0.35

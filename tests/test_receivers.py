@@ -25,9 +25,9 @@ from hycosim.core.schema import WIRE_TYPES, PortType
 from hycosim.core.config import load_project
 from hycosim.core.drops import DropLog
 from hycosim.bridge.gateway import _Connection, translate_release
-from hycosim.server.intake import Dropped, Intake
-from hycosim.server.recorder import Recorder
-from hycosim.server.relay import Relay
+from hycosim.master.intake import Dropped, Intake
+from hycosim.master.recorder import Recorder
+from hycosim.master.relay import Relay
 from hycosim.node.runtime import NodeRuntime
 from tests.helpers import write_project
 from tests.wire_strategies import frame_arrays, gateway_streams, names, payloads, values
@@ -578,7 +578,7 @@ def test_a_batched_release_is_gathered_whole_from_each_nodes_answer_whatever_els
     the relay gathers point 30 with ten steps' outputs of each node, each of its ports' types,
     or stops the run on an END (a forged one cannot be told from a node's on an open network),
     a source's among them (its samples are taken on the way)."""
-    from hycosim.server.relay import RunError, _ModelEnded
+    from hycosim.master.relay import RunError, _ModelEnded
 
     relay.ledger.expect_all(20, 0.0)
     relay.ledger.released(sorted(_UIDS), 20, 0.0, count=10, batched=True, span=10)
@@ -609,7 +609,7 @@ def test_a_source_stops_a_gathering_only_with_an_unclean_unbatched_end(relay, cl
     the run stops with the source's words and the run's step. Any other END from it (clean, with
     batch outputs or outputs where it ended, a step or time out of range) is dropped and counted,
     and the point is gathered."""
-    from hycosim.server.relay import RunError
+    from hycosim.master.relay import RunError
 
     relay.ledger.expect_all(30, 0.0)
     genuine = [(f"hycosim/recv/up/{node}", frames.encode(frames.OUTPUTS, uid, 30, 0.3, outs))
@@ -642,7 +642,7 @@ def test_the_servers_intake_a_nodes_release_check_and_a_checkpoint_name_the_same
     values exactly when every one is of its port's wire type, and otherwise names the first that
     is not."""
     from hycosim.core.schema import Node
-    from hycosim.server.checkpoints import _wrong_values
+    from hycosim.master.checkpoints import _wrong_values
 
     types, vals = given_
     wrong = next((i for i, (v, t) in enumerate(zip(vals, types)) if type(v) not in WIRE_TYPES[t]), None)

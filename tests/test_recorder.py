@@ -16,7 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hycosim.core.config import load_project
-from hycosim.server.recorder import Recorder
+from hycosim.master.recorder import Recorder
 from tests.helpers import write_project
 
 _FIXTURES = settings(suppress_health_check=[HealthCheck.function_scoped_fixture])

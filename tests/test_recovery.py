@@ -15,8 +15,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hycosim.core import frames
-from hycosim.server import checkpoints
-from hycosim.server.interpolation import MAX_DEGREE, InputTrack
+from hycosim.master import checkpoints
+from hycosim.master.interpolation import MAX_DEGREE, InputTrack
 from tests.helpers import (REPO, hycosim, kill_process, meta, reap, recorded_rows, run_killing, run_project, spawn, wait_for,
                            write_project)
 from tests.wire_strategies import deep_json
@@ -327,7 +327,7 @@ def test_a_checkpoint_folder_is_read_whole_or_refused_with_its_name(tmp_path, fo
 @given(st.text(max_size=40) | _json_values.map(json.dumps) | deep_json)
 def test_a_resume_reads_any_meta_json_without_a_traceback(tmp_path, meta_text):
     from hycosim.core.config import load_project
-    from hycosim.server.main import _resume_plan
+    from hycosim.master.main import _resume_plan
 
     cfg = _project(tmp_path)
     (tmp_path / "meta.json").write_text(meta_text)

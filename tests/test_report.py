@@ -185,7 +185,7 @@ def test_a_long_run_is_read_back_in_one_pass(tmp_path):
     extremes per pixel bucket without losing a peak."""
     from array import array
 
-    from hycosim.server.report import PLOT_BUCKETS, envelope, plot_run, summarise
+    from hycosim.master.report import PLOT_BUCKETS, envelope, plot_run, summarise
 
     run = tmp_path / "long"
     run.mkdir()
@@ -263,7 +263,7 @@ def _timing_files(draw) -> str:
 def test_a_run_directory_read_back_is_figures_or_a_named_error(tmp_path, timing, meta_text):
     """A run directory is a user's to edit: report, plot's step panels and the columns read it
     back, or say which file is wrong; never a traceback."""
-    from hycosim.server.report import RunDirError, read_columns, read_steps, summarise
+    from hycosim.master.report import RunDirError, read_columns, read_steps, summarise
 
     run = tmp_path / "run"
     run.mkdir(exist_ok=True)

@@ -12,8 +12,8 @@ import pytest
 
 from hycosim.core.config import parse_project
 from hycosim.core.coupling import algebraic_loops
-from hycosim.server.report import read_steps
-from hycosim.server.retakes import StepSizer, input_change
+from hycosim.master.report import read_steps
+from hycosim.master.retakes import StepSizer, input_change
 from tests.helpers import column, hycosim, meta, read_rows, run_project, write_project
 
 

@@ -10,8 +10,8 @@ import signal
 
 import pytest
 
-from hycosim.server.record_files import RecordError
-from hycosim.server.row_writer import LocalRows, RowWriter
+from hycosim.master.record_files import RecordError
+from hycosim.master.row_writer import LocalRows, RowWriter
 from tests.helpers import descendants, reap, recorded_rows, running, spawn, wait_for
 from tests.test_faults import _pair
 
@@ -101,7 +101,7 @@ def test_an_answer_read_while_rows_are_sent_is_kept_for_the_wait_that_asks_for_i
     import time
     from types import SimpleNamespace
 
-    from hycosim.server import row_writer
+    from hycosim.master import row_writer
 
     def late_poll(r, w, x, timeout):
         if timeout == 0.0:  # the poll after a send: the writer's answer has come by then

@@ -16,7 +16,7 @@ from hycosim.core.config import ConfigError, load_project
 import msgpack
 
 from hycosim.core.scenario_checks import load_scenario, value_problem
-from hycosim.server.report import read_events, read_scenario
+from hycosim.master.report import read_events, read_scenario
 from tests.helpers import hycosim as cli, meta, read_rows, run_killing, run_project, write_project
 
 ACTIONS = [{"t": 0.3, "override": "g.u", "value": 5.0},
@@ -133,7 +133,7 @@ def _typed(folder: Path) -> Path:
 def test_a_rollback_to_the_point_of_an_action_records_it_again_once(tmp_path):
     """A point's checkpoint is taken before its actions are recorded: a rollback to it must
     record them again (a kill that restored the checkpoint at an action's time lost its line)."""
-    from hycosim.server.scenario import Scenario
+    from hycosim.master.scenario import Scenario
 
     loaded = load_project(_chain(tmp_path, ACTIONS))
     scenario = Scenario(loaded.project, loaded.routes, loaded.project.scenario)
@@ -147,7 +147,7 @@ def test_a_rollback_to_the_point_of_an_action_records_it_again_once(tmp_path):
 
 @given(doc=st.lists(_ACTION, max_size=4) | st.fixed_dictionaries({"scenario": st.lists(_ACTION, max_size=3)}) | _JSON)
 def test_a_scenario_file_is_taken_or_named_whatever_it_holds(tmp_path_factory, doc):
-    from hycosim.server.scenario import Scenario, from_meta
+    from hycosim.master.scenario import Scenario, from_meta
 
     folder = tmp_path_factory.mktemp("scen")
     loaded = load_project(_typed(folder))

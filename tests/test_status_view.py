@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hycosim.server.status_view import STATUS_POINTS, WINDOW_SAMPLES, barrier_window, points_since
+from hycosim.master.status_view import STATUS_POINTS, WINDOW_SAMPLES, barrier_window, points_since
 
 NODES = ["a", "b", "c"]
 

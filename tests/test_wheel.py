@@ -131,7 +131,7 @@ def test_the_core_install_runs_fmus_from_the_docs_and_names_a_missing_extra(inst
     res = installed.hycosim("--version")
     assert res.returncode == 0 and res.stdout.strip() == f"hycosim {version}", res.stdout + res.stderr
     # The installed package, not this checkout, and none of the extras' packages.
-    res = installed.python("import sys, hycosim, hycosim.core.config, hycosim.server.relay, hycosim.node.runtime, "
+    res = installed.python("import sys, hycosim, hycosim.core.config, hycosim.master.relay, hycosim.node.runtime, "
                            "hycosim.fmi.fmu_open, hycosim.cli; print(hycosim.__file__); print(sorted(m for m in "
                            "('torch', 'mujoco', 'cv2', 'matplotlib', 'starlette', 'gymnasium') if m in sys.modules))")
     assert res.returncode == 0, res.stderr

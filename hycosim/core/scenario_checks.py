@@ -1,5 +1,5 @@
 """A scenario's actions checked against the project: which inputs may be overridden, and with
-what (its run is :class:`hycosim.server.scenario.Scenario`)."""
+what (its run is :class:`hycosim.master.scenario.Scenario`)."""
 
 from __future__ import annotations
 

@@ -391,7 +391,7 @@ class ScenarioAction(_Strict):
 
 
 class ObserverEntry(_Strict):
-    """An observer the server tells of every point it records (hycosim.server.observers):
+    """An observer the server tells of every point it records (hycosim.master.observers):
     ``module:Class`` or ``file.py:Class`` (relative to the project file), made with
     ``parameters`` as keyword arguments."""
 

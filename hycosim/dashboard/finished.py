@@ -26,13 +26,13 @@ from hycosim.core.guards import Guard, GuardError
 from hycosim.core.lifetime import end_with
 from hycosim.core.run_files import RunFileError, finished_lines
 from hycosim.dashboard.changes import Watchers
-from hycosim.server.report import RunDirError, envelope, read_columns, read_events, read_meta, summarise
+from hycosim.master.report import RunDirError, envelope, read_columns, read_events, read_meta, summarise
 
 
 def _column(run_dir: Path, port: str) -> tuple[array, array]:
     """``t`` and the port's values. Read by column index first, three times faster than the
     checked reader; at the first row that is not two plain numbers in a row of the header's
-    length, the checked reader (hycosim.server.report.read_columns) reads it again and names the fault."""
+    length, the checked reader (hycosim.master.report.read_columns) reads it again and names the fault."""
     t, y = array("d"), array("d")
     try:
         reader = csv.reader(finished_lines(run_dir / "values.csv"))

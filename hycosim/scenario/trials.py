@@ -221,7 +221,7 @@ def plot(results: list[TrialResult], path: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from hycosim.server.report import read_columns
+    from hycosim.master.report import read_columns
 
     table = summarise(results)
     angles = list(table)

@@ -38,7 +38,7 @@ def validate(
                 problems.append(f"{file}: nodeLists[{i}]: {exc}")
         if problems:
             fail(f"{file}: {len(problems)} node(s) cannot be loaded", details=problems)
-        from hycosim.server.observers import ObserverLoadError, project_observers
+        from hycosim.master.observers import ObserverLoadError, project_observers
 
         try:
             project_observers(loaded)

@@ -24,7 +24,7 @@ def report(
     as_json: Annotated[bool, typer.Option("--json", help="print the summary as JSON")] = False,
 ) -> None:
     """Summarise a run: rate, who held the barrier, slowest steps, lateness, mode switches."""
-    from hycosim.server.report import RunDirError, summarise
+    from hycosim.master.report import RunDirError, summarise
 
     try:
         s = summarise(run_dir)
@@ -94,7 +94,7 @@ def plot(
 ) -> None:
     """Draw recorded values over time with the mode switches marked, to a PNG."""
     require_extra("plot", "hycosim plot")
-    from hycosim.server.report import RunDirError, plot_run
+    from hycosim.master.report import RunDirError, plot_run
 
     try:
         path = plot_run(run_dir, ports or [], output or run_dir / "plot.png")
@@ -122,7 +122,7 @@ def dashboard(
     require_extra("dashboard", "hycosim dashboard")
     from hycosim.dashboard.app import bind, serve
     from hycosim.dashboard.origin import normal_origin
-    from hycosim.server.report import RunDirError
+    from hycosim.master.report import RunDirError
 
     for origin in allow_origin or []:
         if normal_origin(origin) is None:

@@ -31,7 +31,7 @@ def server(
     scenario: ScenarioFile = None,
 ) -> None:
     """Run the relay server for one co-simulation (Zenoh nodes and bridge FMUs)."""
-    from hycosim.server.main import serve
+    from hycosim.master.main import serve
 
     loaded = load(file)
     actions = scenario_of(scenario, loaded)
@@ -128,7 +128,7 @@ def _refuse_unfit_nodes(loaded) -> None:
     shape, clocks, a parameter it lacks). Named before a run directory is made, not by the
     node's process after the launch; reads model descriptions only, imports no model."""
     from hycosim.node.loader import NodeLoadError, check_node, locate_node
-    from hycosim.server.observers import ObserverLoadError, project_observers
+    from hycosim.master.observers import ObserverLoadError, project_observers
 
     try:
         project_observers(loaded)
@@ -167,7 +167,7 @@ def _run_in_process(loaded, runs_dir: Path, progress: bool, *, listen: Optional[
 def _print_summary(run_dir: Path) -> None:
     """The summary of a finished run; exit 3 naming the folder where its files cannot be read
     (moved or removed while the run wrote them)."""
-    from hycosim.server.report import RunDirError, summarise
+    from hycosim.master.report import RunDirError, summarise
 
     try:
         summary = summarise(run_dir)

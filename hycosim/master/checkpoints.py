@@ -29,7 +29,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from hycosim.core import frames, json_text
 from hycosim.core.schema import Port, Project, array_misfit, wire_types
-from hycosim.server.interpolation import MAX_DEGREE, InputTrack
+from hycosim.master.interpolation import MAX_DEGREE, InputTrack
 
 KEEP = 2
 FOLDER = "checkpoints"

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from hycosim.core.schema import CoSimulation, Iterate, StepControl
-from hycosim.server.interpolation import STARTUP_SPLIT
+from hycosim.master.interpolation import STARTUP_SPLIT
 
 Said = Mapping[str, Mapping[str, Any]]
 

@@ -43,21 +43,21 @@ from hycosim.transport.local_bus import DirectStep
 from hycosim.transport.session import FrameTooLarge
 from hycosim.core.sim_clock import RealTimeClock
 
-from hycosim.server import checkpoints, initialisation, plans
+from hycosim.master import checkpoints, initialisation, plans
 from hycosim.transport.answer_budget import AnswerBudget
-from hycosim.server.async_sources import SampleHistory
-from hycosim.server.coordinator import Coordinator, GuardEvaluationError
+from hycosim.master.async_sources import SampleHistory
+from hycosim.master.coordinator import Coordinator, GuardEvaluationError
 from hycosim.bridge.gateway import Gateway, GatewayError
-from hycosim.server.intake import Dropped, Intake, port_mismatch
-from hycosim.server.ledger import ENDED, LATER, TAKE, Ledger
-from hycosim.server.localisation import bisect_crossing
-from hycosim.server.interpolation import STARTUP_SPLIT, InputTrack
-from hycosim.server.recorder import Recorder, RecordError
-from hycosim.server.retakes import IterationLog, StepSizer, control_step, input_change, iterate_step
-from hycosim.server.observers import Observer, PointValues
-from hycosim.server.scenario import Scenario
-from hycosim.server.routing import OutputView, Router
-from hycosim.server.status_view import LatestPoints
+from hycosim.master.intake import Dropped, Intake, port_mismatch
+from hycosim.master.ledger import ENDED, LATER, TAKE, Ledger
+from hycosim.master.localisation import bisect_crossing
+from hycosim.master.interpolation import STARTUP_SPLIT, InputTrack
+from hycosim.master.recorder import Recorder, RecordError
+from hycosim.master.retakes import IterationLog, StepSizer, control_step, input_change, iterate_step
+from hycosim.master.observers import Observer, PointValues
+from hycosim.master.scenario import Scenario
+from hycosim.master.routing import OutputView, Router
+from hycosim.master.status_view import LatestPoints
 from hycosim.transport.server_side import Transport
 
 RECENT_KEPT = 4096  # the latest points kept for the status answers

@@ -25,8 +25,8 @@ from hycosim.core.schema import PortType
 
 from hycosim.core.config import LoadedProject
 from hycosim.core.recordings import SAMPLES_FILE, encode_sample
-from hycosim.server.record_files import RecordError, RecordFile, close_all, flush_all
-from hycosim.server.row_writer import LocalRows, RowWriter
+from hycosim.master.record_files import RecordError, RecordFile, close_all, flush_all
+from hycosim.master.row_writer import LocalRows, RowWriter
 
 __all__ = ["FLUSH_EVERY_S", "RESERVE_BYTES", "RESERVE_NAME", "RecordError", "Recorder"]
 

@@ -13,7 +13,7 @@ from hycosim.core.schema import PortType
 
 from hycosim.core.config import LoadedProject
 
-from hycosim.server.async_sources import SampleHistory
+from hycosim.master.async_sources import SampleHistory
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ master's thread steps every node itself, and the text of a row (a float's shorte
 about 0.45 µs; a row of a few ports costs more than a small FMU's step) would be on its
 critical path. The master packs each row's cells (msgpack, a quarter of a microsecond) and
 sends them down a pipe in batches; the writer, on another core, makes the same text
-(:func:`~hycosim.server.record_files.joined_row`, the same formats) into the same files.
+(:func:`~hycosim.master.record_files.joined_row`, the same formats) into the same files.
 A cell msgpack cannot carry (an integer beyond 64 bits) goes as its row's text.
 
 The guarantees of the records hold: what is sent is written as it arrives, and the master
@@ -33,7 +33,7 @@ from typing import Any
 
 import msgpack
 
-from hycosim.server.record_files import ROW_FILES, RecordError, RecordFile, close_all, flush_all, joined_row
+from hycosim.master.record_files import ROW_FILES, RecordError, RecordFile, close_all, flush_all, joined_row
 
 # What the master sends, each a msgpack array: [VALUES, cells], [TIMING, cells of the timing
 # format], [TEXT, file name, text], [POSITIONS], [CUT, {file name: offset}], [CLOSE].
@@ -92,7 +92,7 @@ class LocalRows:
 
 
 class RowWriter:
-    """The rows written by a process of its own (``python -m hycosim.server.row_writer``): see
+    """The rows written by a process of its own (``python -m hycosim.master.row_writer``): see
     the module's text. Same methods as :class:`LocalRows`."""
 
     def __init__(self, run_dir: Path, timing_format: str | None, resume_at: dict[str, int],
@@ -104,7 +104,7 @@ class RowWriter:
         home = str(Path(__file__).resolve().parents[2])
         env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [home, os.environ.get("PYTHONPATH")])))
         # Its own session: a Ctrl-C at the terminal reaches the master, which closes the writer in order.
-        self._proc = subprocess.Popen([sys.executable, "-m", "hycosim.server.row_writer", spec], env=env,
+        self._proc = subprocess.Popen([sys.executable, "-m", "hycosim.master.row_writer", spec], env=env,
                                       stdin=subprocess.PIPE, stdout=subprocess.PIPE, start_new_session=True)
         self._to, self._from = self._proc.stdin.fileno(), self._proc.stdout.fileno()  # type: ignore[union-attr]
         os.set_blocking(self._to, False)

@@ -22,12 +22,12 @@ from hycosim.transport.local_bus import LocalBus
 from hycosim.transport.security import SecurityError, router_security
 from hycosim.transport.session import open_session, router_config
 
-from hycosim.server import checkpoints
-from hycosim.server.coordinator import GuardEvaluationError
-from hycosim.server.recorder import Recorder, RecordError
-from hycosim.server.observers import ObserverLoadError, project_observers
-from hycosim.server.scenario import from_meta
-from hycosim.server.relay import PointGate, Relay, RunError
+from hycosim.master import checkpoints
+from hycosim.master.coordinator import GuardEvaluationError
+from hycosim.master.recorder import Recorder, RecordError
+from hycosim.master.observers import ObserverLoadError, project_observers
+from hycosim.master.scenario import from_meta
+from hycosim.master.relay import PointGate, Relay, RunError
 from hycosim.core.schema import ScenarioAction
 from hycosim.transport.server_side import InProcessTransport, Transport, ZenohTransport
 
@@ -115,7 +115,7 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     (exit code 2 if it cannot be). ``bus``: the nodes are hosted in this process and attached
     to it (an in-process run): no session, no gateway, no status queryable. ``on_progress``:
     called with the relay's Progress about ten times a second. ``gate``: when the step from
-    each point is taken (:class:`hycosim.server.relay.PointGate`; default at once); ``on_relay``
+    each point is taken (:class:`hycosim.master.relay.PointGate`; default at once); ``on_relay``
     is given the relay before it runs (a Python caller reads its points through it).
     ``scenario``: overrides in time beside the project's own (``--scenario FILE``, checked);
     kept in ``meta.json``, where a resumed run finds them.

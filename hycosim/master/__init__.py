@@ -1,0 +1,1 @@
+"""The relay server: node registry, macro-step barrier, hybrid coordinator, routing, recording."""
