@@ -21,7 +21,7 @@ BENCH = re.compile(r"<!-- bench: ([a-z_]+) -->")
 # The objects of the file, in the order a reader meets them, with the key that holds them.
 SECTIONS = [("Project", "the file itself"), ("Node", "nodeLists[]"), ("Port", "input[] and output[] of a node"),
             ("Link", "linkLists[]"), ("CoSimulation", "coSimulation"), ("Event", "events[]"),
-            ("Security", "security"), ("Tls", "security.tls")]
+            ("Recording", "recording"), ("Security", "security"), ("Tls", "security.tls")]
 
 
 def _type(spec: dict[str, Any]) -> str:

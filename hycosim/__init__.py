@@ -14,7 +14,7 @@ imports; ``hycosim.dashboard`` the web dashboard;
 # The Python API (hycosim.api), imported when first asked for: ``import hycosim`` stays as light
 # as every node process needs it.
 _API = frozenset({"open", "Simulation", "Outcome", "SimulationError", "ProjectError", "PortError", "TimeError",
-                  "ClosedError", "OverrideError", "RunFailed"})
+                  "ClosedError", "OverrideError", "ParameterError", "RunFailed"})
 _OBSERVERS = frozenset({"Observer", "LastValues", "TimeSeries"})
 
 

@@ -53,6 +53,10 @@ class OverrideError(SimulationError):
     """An override the port cannot take: no link feeds it, or the value is of another type or shape."""
 
 
+class ParameterError(SimulationError):
+    """A parameter no node declares tunable, or a value not of its type."""
+
+
 class RunFailed(SimulationError):
     """The run failed (a node's model, a record that cannot be written); its run directory
     keeps what was recorded."""
@@ -380,8 +384,42 @@ class Simulation:
         action = (ScenarioAction(t=self.time, override=port, value=value) if value is not None
                   else ScenarioAction(t=self.time, release=port))
         # The master stands at this point, its inputs routed: the step it takes next is on them.
+        self._add_action(action)
+
+    def set_parameter(self, parameter: str, value: Any) -> None:
+        """From the step the run takes next, node parameter ``parameter`` (``node.name``, one the
+        node's model declares tunable) is ``value``. Recorded (time, parameter, value) in
+        ``events.jsonl``, and held through a rollback to a checkpoint as the project's
+        ``scenario`` is."""
+        from hycosim.core.frames import fits_tunable, tunable_value
+        from hycosim.core.schema import ScenarioAction
+
+        self._check_open()
+        if self.ended:
+            raise TimeError(f"the run of {self._loaded.name!r} is over: nothing is stepped any more")
+        relay = self._relay
+        tunable = relay.tunable()
+        node, _, name = parameter.partition(".") if isinstance(parameter, str) else ("", "", "")
+        if node not in tunable:
+            raise ParameterError(f"{parameter!r} is no parameter of a stepping node of {self._loaded.name!r} "
+                                 f"(write node.name){did_you_mean([node], sorted(tunable))}")
+        if name not in tunable[node]:
+            raise ParameterError(f"node {node!r} declares no tunable parameter {name!r} (its tunable parameters: "
+                                 f"{', '.join(sorted(tunable[node])) or 'none'})")
+        if not tunable_value(value) or not fits_tunable(value, tunable[node][name]):
+            raise ParameterError(f"{parameter} is a {type(tunable[node][name]).__name__}, not {value!r}")
+        self._add_action(ScenarioAction(t=self.time, parameter=parameter, value=value))
+
+    def _add_action(self, action: Any) -> None:
+        """An action at the point the run stands at: taken by the step it takes next (the master
+        stands there, its inputs routed; a parameter is sent now), and kept in ``meta.json`` with
+        ``--scenario``'s, where a resumed run finds it."""
+        relay = self._relay
         relay.scenario.add(action)
         relay.apply_scenario(self.step_count, self.time)
+        kept = relay.recorder.meta.setdefault("scenario", [])
+        kept.append(action.model_dump(by_alias=True, exclude_none=True))
+        relay.recorder.write_meta()
 
     def add_observer(self, observer: Any) -> None:
         """Tell ``observer`` (a :class:`hycosim.Observer`: :class:`hycosim.LastValues`,

@@ -121,13 +121,15 @@ def _pump(stream, sink: queue.Queue) -> None:
 def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None = None,
                  runs_dir: Path = Path("runs"), console: Console | None = None,
                  show_progress: bool = True, restarts: int = 3, resume: Path | None = None,
-                 dashboard_port: int | None = None, scenario_file: Path | None = None) -> EmbeddedResult:
+                 dashboard_port: int | None = None, scenario_file: Path | None = None,
+                 record: str | None = None) -> EmbeddedResult:
     """Run the server and every node on loopback. A node process that dies before the run starts,
     or with checkpoints (coSimulation.checkpointEvery) during it, is started again, at most
     ``restarts`` times per node (before the start: not after two alike failures);
     ``resume``: go on with the run in that directory from its last checkpoint;
     ``dashboard_port``: serve the dashboard of the run on that port of 127.0.0.1 while it runs;
-    ``scenario_file``: the server takes its overrides in time (``--scenario``)."""
+    ``scenario_file``: the server takes its overrides in time (``--scenario``); ``record``: the
+    tables' format (``--record``)."""
     console = console or Console(stderr=True)
     endpoint = listen or free_loopback_endpoint()
     run_dir = resume if resume is not None else run_dir_for(runs_dir, loaded.name)
@@ -144,6 +146,7 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
                                   str(dashboard_port), "--retry", "0.25"], run_dir, env, console)
     server = subprocess.Popen([*cmd, "server", str(config_path), "--listen", endpoint, "--progress-jsonl",
                                *(["--scenario", str(scenario_file)] if scenario_file is not None else []),
+                               *(["--record", record] if record is not None else []),
                                *(["--resume", str(run_dir)] if resume is not None else ["--run-dir", str(run_dir)])],
                               stdout=subprocess.PIPE, stderr=open(run_dir / "server.stderr.txt", mode),
                               text=True, env=env)

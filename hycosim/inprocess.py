@@ -45,7 +45,8 @@ def check_hostable(loaded: LoadedProject) -> None:
 def run_in_process(loaded: LoadedProject, *, runs_dir: Path = Path("runs"),
                    on_progress: Callable[[dict[str, Any]], None] | None = None,
                    gate: PointGate | None = None, on_relay: Callable[[Relay], None] | None = None,
-                   scenario: list[ScenarioAction] | None = None) -> tuple[int, Path | None, str]:
+                   scenario: list[ScenarioAction] | None = None,
+                   record: str | None = None) -> tuple[int, Path | None, str]:
     """Run the project in this process; return (exit code, run directory, message) as
     :func:`hycosim.master.main.serve` does. Raise :class:`CannotHost` before anything is
     written for a node one process cannot host. ``gate`` and ``on_relay``: a caller that drives
@@ -72,7 +73,7 @@ def run_in_process(loaded: LoadedProject, *, runs_dir: Path = Path("runs"),
             hosted.append(runtime)
         progress = None if on_progress is None else (lambda p: on_progress(asdict(p)))
         return serve(loaded, run_dir=run_dir, bus=bus, on_progress=progress, gate=gate, on_relay=on_relay,
-                     scenario=scenario)
+                     scenario=scenario, record=record)
     finally:
         for runtime in hosted:
             try:

@@ -186,3 +186,31 @@ class VectorOfThree(Vector):
 
     def outputs(self) -> dict[str, Any]:
         return {"v": [1.0, 2.0, 3.0], "total": self.total}
+
+
+class Typed(Node):
+    """At step k: ``i`` the Integer k·3 − 7, ``b`` the Boolean "k is even", ``r`` the Real k / 3,
+    ``s`` the String "s<k>"; input ``u`` (Real) is read into ``r`` as r + u / 1000."""
+
+    OUTPUTS = frozenset({"i", "b", "r", "s"})
+    INPUTS = frozenset({"u"})
+
+    def setup(self, ctx: NodeContext) -> None:
+        self.k, self.u = 0, 0.0
+
+    def outputs(self) -> dict[str, Any]:
+        return {"i": self.k * 3 - 7, "b": self.k % 2 == 0, "r": self.k / 3 + self.u / 1000, "s": f"s{self.k}"}
+
+    def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
+        self.k += 1
+        self.u = float(inputs.get("u", 0.0))
+
+    def get_state(self) -> bytes:
+        import struct
+
+        return struct.pack("<qd", self.k, self.u)
+
+    def set_state(self, state: bytes) -> None:
+        import struct
+
+        self.k, self.u = struct.unpack("<qd", state)

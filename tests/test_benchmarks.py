@@ -431,3 +431,18 @@ def test_every_benchmark_make_bench_runs_writes_a_table_a_manual_page_includes()
     for name in included:
         lines = (REPO / "benchmarks" / "results" / f"{name}.md").read_text().splitlines()
         assert lines[0].startswith(f"`{name}.py") and any(line.startswith("|---") for line in lines)
+
+
+def test_recording_benchmark_measures_csv_and_parquet_against_csv_in_the_same_run(tmp_path):
+    res = subprocess.run([sys.executable, "benchmarks/recording.py", "--steps", "2000", "--repeat", "1", "--json",
+                          "--table", str(tmp_path / "recording.md")],
+                         capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
+    assert res.returncode == 0, res.stderr
+    result = json.loads(res.stdout)
+    assert result["columns"] == 53 and set(result["us_per_point"]) == {
+        "csv", "csv, rows in a process of their own", "parquet"}
+    assert result["vs_csv"]["csv"] == 1.0 and all(v > 0 for v in result["us_per_point"].values())
+    assert all(b > 2000 * 50 for b in result["bytes"].values())  # every point's 50 values are on disk
+    [rows] = manual_tables(tmp_path / "recording.md")
+    assert [r["format"] for r in rows] == ["csv", "csv, rows in a process of their own", "parquet"]
+    assert rows[2]["time × csv"] == f"{result['vs_csv']['parquet']:.2f}"

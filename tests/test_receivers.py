@@ -286,14 +286,14 @@ def test_the_intake_takes_a_nodes_own_frame_only_when_nothing_in_it_is_wrong(loa
 
 @pytest.fixture(scope="module")
 def relay(loaded, tmp_path_factory):
-    # One relay for every example: a stream of hostile frames through one server, as on the wire.
+    # One relay's barrier for every example: a stream of hostile frames through one server, as on the wire.
     _quiet()
     recorder = Recorder(tmp_path_factory.mktemp("relay"), loaded, {})
     r = Relay(loaded, None, recorder)  # nothing here touches the session: no release is sent
     for node in ("clock", "g", "h", "src"):
-        r.alive.add(node)
-        r.capabilities[node] = {"rollback": False}
-    yield r
+        r.members.alive.add(node)
+        r.members.capabilities[node] = {"rollback": False}
+    yield r.barrier
     recorder.close("done")
 
 
@@ -320,7 +320,7 @@ def test_a_node_acts_only_on_releases_that_give_it_exactly_its_inputs(loaded, no
                         | _from_the_server(node).map(lambda sent: sent[0])
                         | _from_the_server(node).map(lambda sent: sent[0]))
     try:
-        frame = runtime._accept(False, payload)
+        frame = runtime.receiver.accept(False, payload)
     except frames.FrameError:
         return
     if frame is None:
@@ -364,7 +364,7 @@ def test_a_node_acts_on_its_servers_frame_only_when_nothing_in_it_is_wrong(loade
     runtime = NodeRuntime(loaded, node, impl=None, endpoint="tcp/127.0.0.1:1")
     frame = None
     try:
-        frame = runtime._accept(False, payload)
+        frame = runtime.receiver.accept(False, payload)
     except frames.FrameError:
         got = "refused"
     else:
@@ -415,8 +415,8 @@ def test_only_this_process_can_speak_as_the_local_key(loaded):
     runtime = NodeRuntime(loaded, "g", impl=None, endpoint="tcp/127.0.0.1:1")
     live = frames.encode(frames.LIVE, "_server", False)
     with pytest.raises(frames.FrameError, match="LIVE frame is not for a node"):
-        runtime._accept(False, live)
-    assert runtime._accept(True, live) == frames.Live(node="_server", alive=False)
+        runtime.receiver.accept(False, live)
+    assert runtime.receiver.accept(True, live) == frames.Live(node="_server", alive=False)
 
 
 def _gateway_connections(loaded) -> list[_Connection]:
@@ -578,7 +578,7 @@ def test_a_batched_release_is_gathered_whole_from_each_nodes_answer_whatever_els
     the relay gathers point 30 with ten steps' outputs of each node, each of its ports' types,
     or stops the run on an END (a forged one cannot be told from a node's on an open network),
     a source's among them (its samples are taken on the way)."""
-    from hycosim.master.relay import RunError, _ModelEnded
+    from hycosim.master.run_state import ModelEnded as _ModelEnded, RunError
 
     relay.ledger.expect_all(20, 0.0)
     relay.ledger.released(sorted(_UIDS), 20, 0.0, count=10, batched=True, span=10)
@@ -623,7 +623,7 @@ def test_a_source_stops_a_gathering_only_with_an_unclean_unbatched_end(relay, cl
         arrivals = relay.gather(30, 0.0)
     except RunError as exc:
         assert valid and str(exc).startswith("node 'src'")
-        assert f"step {relay._point}" in str(exc) and sum(relay.intake.dropped.values()) == dropped
+        assert f"step {relay.point}" in str(exc) and sum(relay.intake.dropped.values()) == dropped
         return
     assert not valid and sum(relay.intake.dropped.values()) == dropped + 1
     assert set(arrivals) == set(_UIDS)

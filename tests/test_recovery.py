@@ -276,10 +276,14 @@ def _checkpoint_folders(draw):
                                    st.integers(-2, 100) | _json_values, max_size=4),
         "localised": _json_values | st.dictionaries(st.text(max_size=3), st.binary(max_size=2) | st.floats()),
         "h": st.floats() | st.integers(0, 2)}, optional={
-        # Iterative coupling's interpolated inputs: the points before the checkpoint's.
-        "track": st.none() | _json_values | st.fixed_dictionaries({"mode": st.none() | st.text(max_size=3), "points": st.lists(
-            st.lists(st.floats() | st.dictionaries(st.text(max_size=3), _json_values, max_size=2), max_size=3),
-            max_size=5)})}) | _json_values)
+        # The master algorithm's: iterative coupling's interpolated inputs (the points before
+        # the checkpoint's), a controlled step's next length, or anything of a user's algorithm.
+        "algorithm": _json_values | st.fixed_dictionaries({}, optional={
+            "track": st.none() | _json_values | st.fixed_dictionaries({"mode": st.none() | st.text(max_size=3),
+                                                                       "points": st.lists(st.lists(
+                st.floats() | st.dictionaries(st.text(max_size=3), _json_values, max_size=2), max_size=3),
+                max_size=5)}),
+            "h": st.floats() | _json_values})}) | _json_values)
     files = {"server.msgpack": draw(st.just(msgpack.packb(server, use_bin_type=True)) | st.binary(max_size=40))}
     files.update(draw(st.dictionaries(_file_names, st.binary(max_size=20), max_size=3)))
     honest = draw(st.booleans())
@@ -319,8 +323,9 @@ def test_a_checkpoint_folder_is_read_whole_or_refused_with_its_name(tmp_path, fo
         times = [t for t, values in history["samples"]]
         assert all(math.isfinite(t) for t in times) and times == sorted(set(times))
         assert all(type(values) is list for _, values in history["samples"])
-    if cp.server.get("track") is not None:  # points a run can step on again
-        InputTrack(MAX_DEGREE, []).restore(cp.server["track"])
+    json.dumps(state["algorithm"], allow_nan=False)  # the master algorithm's own (MasterAlgorithm.restore)
+    if state["algorithm"].get("track") is not None:  # points a run can step on again
+        InputTrack(MAX_DEGREE, []).restore(state["algorithm"]["track"])
 
 
 @settings(suppress_health_check=[HealthCheck.function_scoped_fixture], max_examples=40)
@@ -380,7 +385,7 @@ def _server_states(draw, wrong: str | None):
                               "received": draw(st.integers(len(times), 99))}},
         "records": {name: draw(st.integers(0, 1 << 40)) for name in sorted(checkpoints.RECORD_FILES)},
         "localised": draw(st.just({}) | st.fixed_dictionaries({"bracket": st.lists(_finite, max_size=2)})),
-        "h": draw(st.floats(1e-6, 1)), "track": None,
+        "h": draw(st.floats(1e-6, 1)), "algorithm": {},
     }
     if wrong == "step":
         state["step"] = draw(st.sampled_from([-1, 1 << 62, 1.5, True, "3", None]))
@@ -414,10 +419,11 @@ def _server_states(draw, wrong: str | None):
         else:
             state["histories"]["src"]["received"] = draw(st.sampled_from([-1, 1.0, None]))
     elif wrong == "track":
-        state["track"] = draw(st.sampled_from([{"points": [[math.nan, {}]]}, {"points": "x"}, [1], {"mode": 3, "points": []}]))
+        state["algorithm"] = {"track": draw(st.sampled_from([{"points": [[math.nan, {}]]}, {"points": "x"}, [1],
+                                                             {"mode": 3, "points": []}]))}
     elif wrong == "key":
         if draw(st.booleans()):
-            del state[draw(st.sampled_from(sorted(k for k in state if k != "track")))]
+            del state[draw(st.sampled_from(sorted(k for k in state if k != "algorithm")))]
         else:
             state["extra"] = 1
     elif wrong == "time":

@@ -119,7 +119,7 @@ def test_the_extras_table_matches_the_packaging_metadata():
     distribution of the extra is there (by its import name) and nothing else."""
     import_names = {"mujoco": "mujoco", "opencv-python-headless": "cv2", "torch": "torch", "gymnasium": "gymnasium",
                     "pythonfmu": "pythonfmu", "pythonfmu3": "pythonfmu3", "matplotlib": "matplotlib",
-                    "starlette": "starlette", "uvicorn": "uvicorn", "websockets": "websockets"}
+                    "starlette": "starlette", "uvicorn": "uvicorn", "websockets": "websockets", "pyarrow": "pyarrow"}
     extras = _pyproject()["project"]["optional-dependencies"]
     for extra, modules in EXTRAS.items():
         dists = [re.split(r"[<>=!\[ ]", req, maxsplit=1)[0] for req in extras[extra]]
@@ -165,11 +165,13 @@ def test_the_core_install_runs_fmus_from_the_docs_and_names_a_missing_extra(inst
 
     # What needs an extra says which, and how to install it.
     for args, extra in ((["trials", "--angles", "40", "--trials", "1"], "scenario"), (["camera"], "scenario"),
-                        (["dashboard", str(run)], "dashboard"), (["plot", str(run)], "plot")):
+                        (["dashboard", str(run)], "dashboard"), (["plot", str(run)], "plot"),
+                        (["run", "two.json", "--record", "parquet", "--runs-dir", "pq-runs"], "parquet")):
         res = installed.hycosim(*args)
         assert res.returncode == 2, (args, res.stdout, res.stderr)
         assert f"[{extra}] extra" in res.stderr and f"pip install 'hycosim[{extra}]'" in res.stderr, res.stderr
         assert "Traceback" not in res.stderr, res.stderr
+    assert not (installed.work / "pq-runs").exists()  # refused before a run directory is made
     # A project whose node is one of the scenario's Python models names the extra too, and
     # `run` says so at once, before it makes a run directory or starts a process.
     shipped_grasp = next(installed.venv.glob("lib/python*/site-packages/hycosim/scenario/configs")) / "grasp.json"

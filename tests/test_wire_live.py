@@ -162,16 +162,16 @@ def _replay_for_someone(payload: bytes) -> bool:
         return False
     if obj[1] == frames.REPLAY:
         return len(obj) == 4 and type(obj[3]) is bytes
-    # A RESTORE names its node too: one for another node is passed over, as a REPLAY is.
+    # A RESTORE and a TUNE name their node too: one for another node is passed over, as a REPLAY is.
     try:
-        return obj[1] == frames.RESTORE and frames.decode(payload).node not in ("g", "h")
+        return obj[1] in (frames.RESTORE, frames.TUNE) and frames.decode(payload).node not in ("g", "h")
     except frames.FrameError:
         return False
 
 
 def _passed_over(payload: bytes) -> bool:
-    """A frame on ``down`` a node passes over without counting it dropped: a REPLAY, RESTORE or
-    INIT for another node, or a CHECKPOINT of a point in range (the server sends each to every
+    """A frame on ``down`` a node passes over without counting it dropped: a REPLAY, RESTORE,
+    TUNE or INIT for another node, or a CHECKPOINT of a point in range (the server sends each to every
     node, and a node whose step does not end there leaves it, as a slower one does)."""
     try:
         frame = frames.decode(payload)

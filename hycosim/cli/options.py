@@ -6,6 +6,7 @@ import math
 from pathlib import Path
 from typing import Annotated, Optional
 
+import click
 import typer
 
 from hycosim.cli.output import fail
@@ -24,6 +25,12 @@ def finite(value: float | None) -> float | None:
 # Time-triggered overrides beside the project's own scenario (a JSON list of actions).
 ScenarioFile = Annotated[Optional[Path], typer.Option(
     "--scenario", help="a scenario file: overrides of inputs in time, beside the project's 'scenario'")]
+
+# The run's tables as CSV or Parquet, in place of the project's recording.format.
+RecordFormat = Annotated[Optional[str], typer.Option(
+    "--record", click_type=click.Choice(["csv", "parquet"]), show_default=False,
+    help="the tables as csv (values.csv, timing.csv) or parquet (values.parquet, …; the [parquet] extra); "
+         "default: the project's recording.format")]
 
 # An SSP package's macro step and stop time (SSP 1.0 has no step), for the commands that take a
 # package as they take a project file; the side file's coSimulation has the last word.

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 from hycosim.cli.output import fail
 from hycosim.core.config import ConfigError, LoadedProject, load_project
@@ -56,3 +57,21 @@ def project_file(file: Path, step: float | None = None, stop: float | None = Non
         return imported_project(file, step, stop)
     except SspError as exc:
         fail(str(exc))
+
+
+def refuse_unfit_user_code(file: Any, loaded: LoadedProject) -> None:
+    """Exit 2 naming the project's observer or master algorithm that cannot be made (the user's
+    code, made as the server will make it); the algorithms are imported only for a user's."""
+    from hycosim.master.observers import ObserverLoadError, project_observers
+
+    try:
+        project_observers(loaded)
+    except ObserverLoadError as exc:
+        fail(f"{file}: {exc}")
+    if loaded.project.coSimulation.algorithm is not None:
+        from hycosim.master.algorithms.choice import AlgorithmLoadError, user_algorithm
+
+        try:
+            user_algorithm(loaded)
+        except AlgorithmLoadError as exc:
+            fail(f"{file}: {exc}")

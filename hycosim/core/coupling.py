@@ -140,6 +140,7 @@ def batch_span(project: Project, routes: list[Route], rates: dict[str, int]) -> 
     for on, why in ((not cosim.batchReleases, "coSimulation.batchReleases is false"),
                     (cosim.coupling != "jacobi", "Gauss-Seidel"), (bool(project.events), "events"),
                     (cosim.iterate is not None, "iterative coupling"),
+                    (cosim.algorithm is not None, "a master algorithm of the user's"),
                     (cosim.stepControl is not None, "an error-controlled step"),
                     (cosim.checkpointEvery is not None, "checkpoints"),
                     # Paced runs step each node at its points' wall times, not in bursts.
@@ -188,6 +189,10 @@ def _retry_issues(project: Project, multirate: list[str]) -> list[Issue]:
     if control is not None and control.minStep > control.maxStep:
         issues.append(Issue("coSimulation.stepControl", f"minStep {control.minStep:g} s is above maxStep "
                             f"{control.maxStep:g} s", "minStep ≤ stepSize ≤ maxStep"))
+    for key in ("iterate", "stepControl"):
+        if cosim.algorithm is not None and getattr(cosim, key) is not None:
+            issues.append(Issue(f"coSimulation.{key}", f"coSimulation.algorithm {cosim.algorithm!r} takes the place "
+                                f"of {key}", f"leave out coSimulation.{key} or coSimulation.algorithm"))
     if cosim.iterate is not None and control is not None:
         issues.append(Issue("coSimulation.stepControl", "iterative coupling and an error-controlled step cannot be "
                             "combined yet", "leave out one of coSimulation.iterate and coSimulation.stepControl"))

@@ -3,7 +3,7 @@
 ``pip install hycosim`` is what coupling FMUs and Python nodes needs. The paper's scenario
 (``[scenario]``: MuJoCo, OpenCV, torch, gymnasium, pythonfmu), the dashboard's web stack
 (``[dashboard]``), figures (``[plot]``, matplotlib) and packaging Python models as FMUs
-(``[models]``: pythonfmu, pythonfmu3) are extras; a command or a node that
+(``[models]``: pythonfmu, pythonfmu3) and Parquet records (``[parquet]``: pyarrow) are extras; a command or a node that
 needs one that is missing names the extra to install instead of failing on an import.
 Keep this table in step with ``[project.optional-dependencies]`` in ``pyproject.toml``
 (a test compares them).
@@ -18,6 +18,7 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "dashboard": ("starlette", "uvicorn", "websockets"),
     "plot": ("matplotlib",),
     "models": ("pythonfmu", "pythonfmu3"),
+    "parquet": ("pyarrow",),
 }
 
 

@@ -63,12 +63,12 @@ from __future__ import annotations
 
 import math
 import reprlib
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any, NamedTuple
 
 import msgpack
 
-VERSION = 1
+VERSION = 2
 
 OUTPUTS = 1
 SAMPLE = 2
@@ -86,6 +86,7 @@ RESTORE = 13
 STEPS = 14
 BATCH = 15
 INIT = 16
+TUNE = 17
 
 # STOP reasons of a run that ended as asked; any other reason is a failure.
 STOP_COMPLETED = "completed"
@@ -95,7 +96,7 @@ CLEAN_STOPS = (STOP_COMPLETED, STOP_STOPPED)
 KIND_NAMES = {OUTPUTS: "OUTPUTS", SAMPLE: "SAMPLE", START: "START", STEP: "STEP", STOP: "STOP", LIVE: "LIVE",
               HELLO: "HELLO", ROLLBACK: "ROLLBACK", REPLAY: "REPLAY", END: "END",
               CHECKPOINT: "CHECKPOINT", STATE: "STATE", RESTORE: "RESTORE", STEPS: "STEPS", BATCH: "BATCH",
-              INIT: "INIT"}
+              INIT: "INIT", TUNE: "TUNE"}
 
 # Steps and sequence numbers stay well inside int64 (the gateway packs them as such).
 MAX_STEP = 1 << 62
@@ -151,6 +152,7 @@ _SHAPES: dict[int, tuple[int, Callable[[tuple], bool]]] = {
     BATCH: (5, lambda f: type(f[0]) is int and type(f[1]) is int and type(f[2]) in _NUM and type(f[3]) is list
             and type(f[4]) is list),
     INIT: (2, lambda f: type(f[0]) in _NUM and type(f[1]) is dict),
+    TUNE: (4, lambda f: _str(f[0]) and _int(f[1]) and _num(f[2]) and type(f[3]) is dict),
 }
 
 _SHORT = reprlib.Repr()
@@ -300,11 +302,21 @@ class Init(NamedTuple):
     inputs: dict[str, list[Any]]
 
 
+class Tune(NamedTuple):
+    """New values of a node's tunable parameters, taken before its step from point ``step`` (at ``t``)."""
+
+    kind = TUNE
+    node: str
+    step: int
+    t: float
+    values: dict[str, Any]
+
+
 TYPES: dict[int, type] = {OUTPUTS: Outputs, SAMPLE: Sample, START: Start, STEP: Step, STOP: Stop, LIVE: Live,
                           HELLO: Hello, ROLLBACK: Rollback, REPLAY: Replay, END: End, CHECKPOINT: Checkpoint,
-                          STATE: State, RESTORE: Restore, STEPS: Steps, BATCH: Batch, INIT: Init}
+                          STATE: State, RESTORE: Restore, STEPS: Steps, BATCH: Batch, INIT: Init, TUNE: Tune}
 Frame = (Outputs | Sample | Start | Step | Stop | Live | Hello | Rollback | Replay | End | Checkpoint | State
-         | Restore | Steps | Batch | Init)
+         | Restore | Steps | Batch | Init | Tune)
 
 
 _make = tuple.__new__  # a named tuple from the checked fields, without its __new__'s argument handling
@@ -416,6 +428,35 @@ def _check_slopes(k: int, node: str, mine: Any, input_types: tuple[tuple[type, .
                              f"{MAX_SLOPE_ORDER} finite numbers: {short(d)}")
         if input_types is not None and float not in input_types[i]:
             raise FrameError(f"STEP {k} gives node {node!r} derivatives for input {i}, which takes no floats")
+
+
+def tunable_value(value: Any) -> bool:
+    """Whether ``value`` can be a tunable parameter's: a bool, an int of 64 bits, a finite float or a str."""
+    t = type(value)
+    return (t is bool or t is str or (t is int and -(1 << 63) <= value < (1 << 63))
+            or (t is float and math.isfinite(value)))
+
+
+def check_tune(frame: Tune, node: str, tunable: Mapping[str, Any]) -> Tune:
+    """A TUNE frame ``node`` can act on: its step in range, its time finite, and each value one
+    of a parameter the node said is tunable (``tunable``: name → its value at the start), of
+    that value's type (an int for a float too); FrameError otherwise."""
+    k, t, values = frame.step, frame.t, frame.values
+    if not (0 <= k < MAX_STEP and math.isfinite(t)) or not values:
+        raise FrameError(f"TUNE frame at step {short(k)}, t {short(t)} with {short(values)}: out of range")
+    for name, value in values.items():
+        if type(name) is not str or name not in tunable:
+            raise FrameError(f"TUNE {k} sets {short(name)}, which is no tunable parameter of node {node!r}")
+        if not tunable_value(value) or not fits_tunable(value, tunable[name]):
+            raise FrameError(f"TUNE {k} sets {name} of node {node!r} to {short(value)}, not a value of its type")
+    return frame
+
+
+def fits_tunable(value: Any, start: Any) -> bool:
+    """Whether ``value`` may replace a tunable parameter whose start value is ``start``."""
+    if type(start) is float:
+        return type(value) in (int, float)
+    return type(value) is type(start)
 
 
 def first_misfit(values: list[Any], types: Iterable[tuple[type, ...]]) -> int | None:

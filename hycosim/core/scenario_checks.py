@@ -70,10 +70,13 @@ def scenario_issues(project: Project, routes: list[Any], actions: list[ScenarioA
     overridden: set[str] = set()
     for i, action in sorted(enumerate(actions), key=lambda ia: ia[1].t):
         at = f"{where}[{i}]"  # "scenario[2]", or "[2]" in a file of actions
-        key = "override" if action.override is not None else "release"
+        key = action.kind
         if not (math.isfinite(action.t) and cosim.startTime <= action.t <= cosim.stopTime):
             issues.append(Issue(f"{at}.t", f"t = {action.t} is outside the run",
                                 f"from startTime {cosim.startTime:g} to stopTime {cosim.stopTime:g} s"))
+            continue
+        if action.parameter is not None:
+            issues.extend(_parameter_issues(project, action, at))
             continue
         target = targets.get(action.target)
         if target is None:
@@ -99,6 +102,23 @@ def scenario_issues(project: Project, routes: list[Any], actions: list[ScenarioA
         if why is not None:
             issues.append(Issue(f"{at}.value", f"{action.target} {why}, not {action.value!r}"))
     return issues
+
+
+def _parameter_issues(project: Project, action: ScenarioAction, at: str) -> list[Issue]:
+    """A parameter action's: a stepping node's (``node.name``), with a scalar finite value. Whether
+    the model declares the name tunable is known once its node says so (its HELLO): the run
+    refuses it then, before the first step (``hycosim validate`` reads an FMU's declaration)."""
+    node_name, _, name = action.parameter.partition(".")
+    stepping = {n.nodeName: n for n in project.stepping_nodes()}
+    if node_name not in stepping or not name:
+        return [Issue(f"{at}.parameter", f"{action.parameter!r} is no parameter of a stepping node",
+                      f"node.parameter, the node one of {', '.join(stepping) or 'none'}")]
+    if not (type(action.value) in (bool, int, str) or (type(action.value) is float and _finite(action.value))):
+        return [Issue(f"{at}.value", f"{action.value!r} is no value a parameter takes",
+                      "a finite number, a bool or a string")]
+    if type(action.value) is int and not -(1 << 63) <= action.value < (1 << 63):
+        return [Issue(f"{at}.value", f"{action.value} does not fit 64 bits")]
+    return []
 
 
 def load_scenario(path: Path, project: Project, routes: list[Any]) -> list[ScenarioAction]:

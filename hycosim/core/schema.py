@@ -323,6 +323,12 @@ class CoSimulation(_Strict):
     # the links, a node after the nodes it reads from (a cycle of links must be broken here).
     coupling: Literal["jacobi", "gauss-seidel"] = "jacobi"
     order: list[str] | None = None
+    # A master algorithm of the user's (hycosim.master.algorithms.Algorithm): ``module:Class``
+    # or ``file.py:Class`` (relative to the project file), made with ``algorithmParameters`` as
+    # keyword arguments. It takes the place of iterate and stepControl; ``coupling`` is the
+    # scheme localisation (eventTolerance) retakes steps with.
+    algorithm: str | None = Field(default=None, min_length=1)
+    algorithmParameters: dict[str, Any] = Field(default_factory=dict)
     # Iterative coupling (Jacobi, every stepping node able to roll back): see Iterate.
     iterate: Iterate | None = None
     # The initialisation phase (consistent start outputs): see Initialize.
@@ -365,29 +371,41 @@ class Ramp(_Strict):
 
 class ScenarioAction(_Strict):
     """One manipulation at time ``t`` (seconds of simulated time): ``override`` an input that a
-    link feeds (with ``value``, or a ``ramp``), or ``release`` it to its links again. An
-    overridden input is what its node sees from the first macro-step point at or after ``t``."""
+    link feeds (with ``value``, or a ``ramp``), ``release`` it to its links again, or set a
+    tunable ``parameter`` to ``value``. An overridden input is what its node sees, and a
+    parameter what it steps with, from the first macro-step point at or after ``t``."""
 
     t: float
     override: str | None = None
     value: StrictBool | StrictInt | StrictFloat | str | list[Any] | None = None
     ramp: Ramp | None = None
     release: str | None = None
+    # A tunable parameter of a node (``node.name``) set to ``value`` from the point on.
+    parameter: str | None = None
     description: str | None = None
 
     @model_validator(mode="after")
     def _one_kind(self) -> "ScenarioAction":
-        if (self.override is None) == (self.release is None):
-            raise ValueError("an action either overrides a port ('override') or releases one ('release')")
+        if sum(x is not None for x in (self.override, self.release, self.parameter)) != 1:
+            raise ValueError("an action overrides a port ('override'), releases one ('release') or sets a "
+                             "tunable parameter ('parameter'), one of them")
         if self.override is not None and (self.value is None) == (self.ramp is None):
             raise ValueError("an override gives a 'value' or a 'ramp'")
         if self.release is not None and (self.value is not None or self.ramp is not None):
             raise ValueError("a release takes no 'value' or 'ramp'")
+        if self.parameter is not None and (self.value is None or self.ramp is not None
+                                           or type(self.value) is list):
+            raise ValueError("a parameter action gives a 'value' (a number, a bool or a string), no 'ramp'")
         return self
 
     @property
+    def kind(self) -> str:
+        return "override" if self.override is not None else "release" if self.release is not None else "parameter"
+
+    @property
     def target(self) -> str:
-        return self.override if self.override is not None else self.release
+        return self.override if self.override is not None else self.release if self.release is not None \
+            else self.parameter
 
 
 class ObserverEntry(_Strict):
@@ -420,6 +438,14 @@ class Security(_Strict):
     tls: Tls | None = None
 
 
+class Recording(_Strict):
+    """How the run directory's tables (values, timing) are written: ``csv`` (values.csv,
+    timing.csv) or ``parquet`` (values.parquet, timing.parquet: typed columns, in row groups;
+    the ``[parquet]`` extra). ``hycosim run --record`` chooses too."""
+
+    format: Literal["csv", "parquet"] = "csv"
+
+
 class Project(_Strict):
     # The JSON Schema an editor validates and completes the file against (hycosim schema); not read.
     schema_ref: str | None = Field(default=None, alias="$schema")
@@ -437,6 +463,7 @@ class Project(_Strict):
     scenario: list[ScenarioAction] = Field(default_factory=list)
     # Observers of the points recorded, made in the server's process before the run starts.
     observers: list[ObserverEntry] = Field(default_factory=list)
+    recording: Recording = Field(default_factory=Recording)
     security: Security | None = None
     description: str | None = None
 

@@ -24,7 +24,8 @@ from typing import Any
 from hycosim.core import json_text
 from hycosim.core.guards import Guard, GuardError
 from hycosim.core.lifetime import end_with
-from hycosim.core.run_files import RunFileError, finished_lines
+from hycosim.core.run_files import (RunFileError, finished_lines, parquet_twin, table_floats, table_header,
+                                    table_last_row)
 from hycosim.dashboard.changes import Watchers
 from hycosim.master.report import RunDirError, envelope, read_columns, read_events, read_meta, summarise
 
@@ -34,6 +35,12 @@ def _column(run_dir: Path, port: str) -> tuple[array, array]:
     checked reader; at the first row that is not two plain numbers in a row of the header's
     length, the checked reader (hycosim.master.report.read_columns) reads it again and names the fault."""
     t, y = array("d"), array("d")
+    if parquet_twin(run_dir / "values.csv") is not None:  # typed columns: read as they are
+        try:
+            data = table_floats(run_dir / "values.csv", ["t", port])
+        except RunFileError as exc:
+            raise RunDirError(str(exc)) from None
+        return array("d", data["t"]), array("d", data[port])
     try:
         reader = csv.reader(finished_lines(run_dir / "values.csv"))
         header = next(reader)
@@ -89,6 +96,8 @@ def last_row(path: Path, columns: list[str]) -> dict[str, Any]:
     and mode where it ended, and each port's value there (a number where the cell is one). Read
     from the file's end, so that a run of a million rows opens as fast as a short one; empty
     where the file has no whole row (a String cell holding a newline reads as none)."""
+    if parquet_twin(path) is not None:
+        return _row_shown(table_last_row(path), columns)
     try:
         with open(path, "rb") as f:
             size = f.seek(0, os.SEEK_END)
@@ -103,6 +112,11 @@ def last_row(path: Path, columns: list[str]) -> dict[str, Any]:
         row = next(csv.reader([lines[-1]]))
     except csv.Error:
         return {}
+    return _row_shown(row, columns)
+
+
+def _row_shown(row: list[str], columns: list[str]) -> dict[str, Any]:
+    """A last row's t, mode and port values, for the page (empty if it does not fit the header)."""
     if len(row) != len(columns) or row == columns:
         return {}
     cells = dict(zip(columns, row))
@@ -162,6 +176,11 @@ class FinishedRun:
 
     def _header(self) -> list[str]:
         path = self.run_dir / "values.csv"
+        if parquet_twin(path) is not None:
+            try:
+                return table_header(path)
+            except RunFileError as exc:
+                raise RunDirError(str(exc)) from None
         try:
             with open(path, newline="") as f:
                 header = next(csv.reader(f), [])

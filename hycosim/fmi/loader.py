@@ -736,6 +736,17 @@ class FmuInstance:
                            f"{_json_text(value)} does not have its shape")
         self._set(var, elements, len(elements))
 
+    def tunable_values(self) -> dict[str, Any]:
+        """The FMU's tunable parameters (causality parameter, variability tunable; scalars of
+        a type other than Binary), each with its value now."""
+        found = {}
+        for var in self.md.modelVariables:
+            if (var.causality == "parameter" and var.variability == "tunable" and var.type != "Binary"
+                    and not getattr(var, "dimensions", None)):
+                value = self._get(var.valueReference, var.type)
+                found[var.name] = float(value) if var.type in ("Real", "Float64", "Float32") else value
+        return found
+
     def set_driven(self, driven: bool) -> None:
         """Tell the FMU, through its ``drivenVariable`` (if any), whether an event drives it."""
         if self.driven_variable is not None:

@@ -80,7 +80,9 @@ class _ServerState(BaseModel):
     records: dict[str, _Count]  # where each record file ends
     localised: dict[str, Any]  # a located event's search, recorded with the switch it found
     h: Annotated[float, Field(gt=0, allow_inf_nan=False)]  # the macro step to try next
-    track: Any = None  # iterative coupling's interpolated inputs: server.interpolation checks them
+    # What the master algorithm keeps (MasterAlgorithm.checkpoint): JSON; iterative coupling's
+    # interpolated inputs under "track" (master.interpolation checks them), a controlled step's "h".
+    algorithm: dict[str, Any] = Field(default_factory=dict)
 
     @model_validator(mode="after")
     def _consistent(self) -> "_ServerState":
@@ -92,6 +94,10 @@ class _ServerState(BaseModel):
             json.dumps(self.localised, allow_nan=False)
         except (TypeError, ValueError):
             raise ValueError("localised: not JSON") from None
+        try:
+            json.dumps(self.algorithm, allow_nan=False)
+        except (TypeError, ValueError):
+            raise ValueError("algorithm: not JSON") from None
         return self
 
 
@@ -188,9 +194,10 @@ def read(path: Path, config_sha256: str | None = None, project: Project | None =
         server = _ServerState.model_validate(server).model_dump()
     except ValidationError as exc:
         raise CheckpointError(f"{path / SERVER_FILE} does not hold a server state ({_first_problem(exc)})") from None
-    if server.get("track") is not None:  # iterative coupling's interpolated inputs (server.interpolation)
+    track = server["algorithm"].get("track")
+    if track is not None:  # iterative coupling's interpolated inputs (master.interpolation)
         try:
-            InputTrack(MAX_DEGREE, []).restore(server["track"])
+            InputTrack(MAX_DEGREE, []).restore(track)
         except ValueError as exc:
             raise CheckpointError(f"{path / SERVER_FILE}: {exc}") from None
     problem = misfit(server, project) if project is not None else None

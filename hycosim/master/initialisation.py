@@ -9,17 +9,23 @@ at t0 (INIT) and takes their outputs again, in the order the dependencies give: 
 the nodes it reads from; a cycle of them (an algebraic loop at the start) is swept in the
 project's node order until its outputs stop changing.
 
-This module plans and judges; the relay sends and gathers.
+This module plans and judges; :func:`run` sends and gathers through the barrier.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 from typing import Any
 
+import structlog
+
+from hycosim.core import frames
+from hycosim.core.config import LoadedProject
 from hycosim.core.coupling import algebraic_loops
 from hycosim.core.schema import Route
+from hycosim.master.run_state import RunError
 
 
 @dataclass(frozen=True)
@@ -128,3 +134,49 @@ def describe_loop(group: Group, routes: list[Route], feedthrough: dict[str, dict
     loops = algebraic_loops([r for r in routes if r.src_node in inside and r.dst_node in inside],
                             {n: feedthrough.get(n, {}) for n in inside})
     return "; ".join(" → ".join(loop) for loop in loops) or ", ".join(group.nodes)
+
+
+def run(barrier: Any, loaded: LoadedProject, mode: str) -> None:
+    """The initialisation phase over ``barrier`` (a master.barrier.Barrier): each node whose
+    start outputs read linked inputs is given them at t0 and answers with its outputs again, in
+    dependency order; a loop is swept until its outputs settle, or the run fails naming it
+    (RunError). What was done goes to the metadata (``initialisation``)."""
+    project = loaded.project
+    t0, settings = project.coSimulation.startTime, project.coSimulation.initialize
+    stepping, router, outputs = barrier.stepping, barrier.router, barrier.outputs
+    capabilities = barrier.members.capabilities
+    feedthrough = {n: checked_feedthrough(capabilities.get(n, {}).get("startFeedthrough"),
+                                          project.node(n).input_names(), project.node(n).output_names())
+                   for n in stepping}
+    groups = plan(loaded.routes, mode, feedthrough, stepping)
+    done: list[dict[str, Any]] = []
+    barrier.meta["initialisation"] = done
+    if not groups:
+        return
+    router.route(mode, t0, outputs, barrier.histories)  # the sources' values at t0 too
+    names = {n: project.node(n).output_names() for n in stepping}
+    log = structlog.get_logger("server")
+    for group in groups:
+        for sweep in range(1, (settings.maxIterations if group.loop else 1) + 1):
+            before = {n: list(outputs[n]) for n in group.nodes}
+            for node in group.nodes:
+                router.route_into(node, mode, outputs)
+                barrier.release.put(frames.encode(frames.INIT, t0, {node: list(router.inputs[node])}))
+                barrier.messages["releases"] += 1
+                barrier.gather(0, time.perf_counter(), {node}, paced=False)
+            if not group.loop:
+                break
+            change = residuals(before, outputs, names)
+            if max(change.values(), default=0.0) <= settings.tolerance:
+                break
+        else:
+            worst = sorted(change.items(), key=lambda item: -item[1])[:4]
+            loop = describe_loop(group, loaded.routes, feedthrough)
+            raise RunError(
+                f"initialisation: the algebraic loop {loop} did not settle in {settings.maxIterations} "
+                "sweeps (coSimulation.initialize.maxIterations); "
+                "its last changes: " + ", ".join(f"{port} {value:.3g}" for port, value in worst)
+                + f" (tolerance {settings.tolerance:g})")
+        done.append({"nodes": list(group.nodes), "loop": group.loop, "sweeps": sweep})
+        log.info("initialised", nodes=list(group.nodes), sweeps=sweep)
+

@@ -25,6 +25,9 @@ from hycosim.transport.session import open_session, router_config
 from hycosim.master import checkpoints
 from hycosim.master.coordinator import GuardEvaluationError
 from hycosim.master.recorder import Recorder, RecordError
+from hycosim.core.extras import install_hint, missing_modules
+from hycosim.master.parquet_tables import recorded_rows
+from hycosim.master.algorithms.choice import AlgorithmLoadError, project_algorithm
 from hycosim.master.observers import ObserverLoadError, project_observers
 from hycosim.master.scenario import from_meta
 from hycosim.master.relay import PointGate, Relay, RunError
@@ -91,9 +94,8 @@ def _resume_plan(loaded: LoadedProject, run_dir: Path) -> tuple[dict[str, Any], 
         raise ValueError(f"{run_dir}: no checkpoint to resume from"
                          + (f" ({'; '.join(passed)})" if passed else " (was coSimulation.checkpointEvery set?)"))
     try:
-        with open(run_dir / "values.csv", "rb") as f:
-            recorded = max(sum(1 for _ in f) - 1, 0)
-    except OSError:
+        recorded = recorded_rows(run_dir)
+    except (OSError, ValueError):
         recorded = cp.step
     earlier = meta.get("checkpoints_passed_over")  # the relay adds what it passes over on restoring
     if earlier is not None and type(earlier) is not list:
@@ -106,7 +108,7 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
           gateway: str | None = None, resume: Path | None = None,
           bus: LocalBus | None = None, on_progress: Callable[[Any], None] | None = None,
           gate: PointGate | None = None, on_relay: Callable[[Relay], None] | None = None,
-          scenario: list[ScenarioAction] | None = None) -> tuple[int, Path | None, str]:
+          scenario: list[ScenarioAction] | None = None, record: str | None = None) -> tuple[int, Path | None, str]:
     """Run one co-simulation as its server; return (exit code, run directory, message).
 
     Addresses and the credentials and certificate files are checked before anything is
@@ -118,7 +120,8 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     each point is taken (:class:`hycosim.master.relay.PointGate`; default at once); ``on_relay``
     is given the relay before it runs (a Python caller reads its points through it).
     ``scenario``: overrides in time beside the project's own (``--scenario FILE``, checked);
-    kept in ``meta.json``, where a resumed run finds them.
+    kept in ``meta.json``, where a resumed run finds them. ``record``: the tables' format
+    (``csv`` or ``parquet``; default the project's ``recording.format``; a resumed run keeps its own).
     """
     def done(code: int, run_dir: Path | None, message: str) -> tuple[int, Path | None, str]:
         # A launcher reading --progress-jsonl learns the outcome from this line, on every path.
@@ -145,9 +148,13 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
             security = router_security(loaded, endpoint)
         except SecurityError as exc:
             return done(2, None, str(exc))
+    record = record or loaded.project.recording.format
+    if record == "parquet" and missing_modules("parquet"):
+        return done(2, None, f"recording as Parquet needs pyarrow: {install_hint('parquet')}")
     try:  # the user's code: what cannot be made is bad input, named before a run directory is made
         observers = project_observers(loaded)
-    except ObserverLoadError as exc:
+        algorithm = project_algorithm(loaded)
+    except (ObserverLoadError, AlgorithmLoadError) as exc:
         return done(2, None, f"{loaded.path or 'the project'}: {exc}")
     resume_at, recorded = None, None
     if resume is not None:
@@ -175,8 +182,10 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     }
     if scenario:
         meta["scenario"] = [a.model_dump(by_alias=True, exclude_none=True) for a in scenario]
+    meta["recording"] = record
     if resume_at is not None:
         meta = {**old_meta, "endpoint": endpoint, "versions": meta["versions"]}
+        record = meta.get("recording", "csv") if meta.get("recording") in ("csv", "parquet") else "csv"
         if not scenario and old_meta.get("scenario"):
             try:
                 scenario = from_meta(old_meta["scenario"], loaded.project, loaded.routes)
@@ -184,7 +193,8 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
                 return done(2, None, f"--resume: {resume / 'meta.json'}: {exc}")
     try:
         # In one process the master's thread steps every node: a process of its own writes the rows.
-        recorder = Recorder(run_dir, loaded, meta, resume_at=resume_at, rows_apart=bus is not None)
+        recorder = Recorder(run_dir, loaded, meta, resume_at=resume_at, rows_apart=bus is not None,
+                            record_format=record)
         if resume_at is None and loaded.path is not None:
             # What the project was, for a resume to compare with (the hash alone cannot say where it differs).
             (run_dir / PROJECT_COPY).write_bytes(loaded.path.read_bytes())
@@ -211,7 +221,8 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         transport = ZenohTransport(session)
     relay = Relay(loaded, transport, recorder, progress_every_s=0.1, on_progress=on_progress,
                   gateway_address=(gw.host, gw.port) if gw is not None else None,
-                  gateway_required=gateway_required, resume=recorded, gate=gate, scenario=scenario)
+                  gateway_required=gateway_required, resume=recorded, gate=gate, scenario=scenario,
+                  algorithm=algorithm)
     for observer in observers:
         relay.add_observer(observer)
     if on_relay is not None:
@@ -219,8 +230,8 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     try:
         relay.run()
         code, message = 0, f"{'stopped after' if relay.stopped else 'completed'} {recorder.meta['steps']} macro steps"
-        if relay.ending.by is not None:
-            e = relay.ending.by
+        if relay.barrier.ending.by is not None:
+            e = relay.barrier.ending.by
             message += f"; node {e['node']!r} ended the simulation at t={e['t']:g} s: {e['message']}"
     except (RunError, RecordError, GuardEvaluationError) as exc:
         log.error("run failed", error=str(exc))

@@ -102,16 +102,17 @@ def step_control(sc: StepControl, step_size: float, said: Said) -> Plan:
 
 
 def direct_steps(stepping: list[str], direct: Mapping[str, Any], *, multirate: bool, played: bool,
-                 checkpoints: bool, interpolated: bool) -> Plan:
+                 checkpoints: bool, algorithm: str) -> Plan:
     """Macro steps as calls (a node hosted in process steps when the master calls it, and returns
     its outputs) rather than STEP and OUTPUTS frames: for a run whose every stepping node is hosted
     so, and whose steps need nothing a call does not carry (each node's own rate, a played
-    source's samples, a checkpoint's states, input slopes)."""
+    source's samples, a checkpoint's states, or what the master algorithm says needs frames:
+    ``algorithm``, its words, e.g. "interpolated inputs" for input slopes)."""
     if not stepping:
         return Plan(False, "frames (no stepping node)")
     why = [w for on, w in ((any(n not in direct for n in stepping), "nodes in processes of their own"),
                            (multirate, "multi-rate"), (played, "played sources"), (checkpoints, "checkpoints"),
-                           (interpolated, "interpolated inputs")) if on]
+                           (bool(algorithm), algorithm)) if on]
     if why:
         return Plan(False, f"frames ({', '.join(why)})", why=", ".join(why))
     return Plan(True, "calls (in process)")

@@ -26,7 +26,8 @@ from hycosim.core.schema import PortType
 from hycosim.core.config import LoadedProject
 from hycosim.core.recordings import SAMPLES_FILE, encode_sample
 from hycosim.master.record_files import RecordError, RecordFile, close_all, flush_all
-from hycosim.master.row_writer import LocalRows, RowWriter
+from hycosim.master.parquet_tables import ParquetTables
+from hycosim.master.row_writer import LocalRows, RowWriter, Tables
 
 __all__ = ["FLUSH_EVERY_S", "RESERVE_BYTES", "RESERVE_NAME", "RecordError", "Recorder"]
 
@@ -47,7 +48,7 @@ def _cell(value: Any) -> Any:
 
 
 def _cells(values: list[Any], arrays: list[bool]) -> Iterator[Any]:
-    """A node's values as cells: an array's elements one to a cell."""
+    """A node's values as CSV cells: an array's elements one to a cell."""
     for value, array in zip(values, arrays):
         if array:
             yield from map(_cell, value)
@@ -55,16 +56,27 @@ def _cells(values: list[Any], arrays: list[bool]) -> Iterator[Any]:
             yield _cell(value)
 
 
+def _typed_cells(values: list[Any], arrays: list[bool]) -> Iterator[Any]:
+    """A node's values as typed cells (Parquet): an array's elements one to a cell."""
+    for value, array in zip(values, arrays):
+        if array:
+            yield from value
+        else:
+            yield value
+
+
 class Recorder:
-    """Writes ``values.csv``, ``timing.csv``, ``events.jsonl`` and ``meta.json`` in ``run_dir``."""
+    """Writes ``values.csv``, ``timing.csv`` (or their Parquet tables), ``events.jsonl``, ``samples.jsonl``
+    and ``meta.json`` in ``run_dir``."""
 
     def __init__(self, run_dir: Path, loaded: LoadedProject, meta: dict[str, Any],
-                 resume_at: dict[str, int] | None = None, rows_apart: bool = False):
+                 resume_at: dict[str, int] | None = None, rows_apart: bool = False, record_format: str = "csv"):
         """Open the run's files in ``run_dir`` (made by the caller); RecordError if they cannot be
         written (no space even for the reserve). ``resume_at``: go on with the files a run left
         there, each cut back to its offset (a checkpoint's), under the meta it wrote.
         ``rows_apart``: a process of its own writes the rows (:class:`RowWriter`: for a run in
-        one process, where formatting them would hold up the master's thread)."""
+        one process, where formatting them would hold up the master's thread). ``record_format``:
+        the tables as ``csv`` or ``parquet`` (master.parquet_tables; typed, no text to make)."""
         self.run_dir = run_dir
         try:
             with open(run_dir / RESERVE_NAME, "wb") as reserve:
@@ -77,7 +89,11 @@ class Recorder:
         project = loaded.project
         self._nodes = [n.nodeName for n in project.nodeLists]
         # Numbers go to the CSV as they are; only nodes with boolean or byte ports need _cell.
-        plain = (PortType.REAL, PortType.INTEGER, PortType.STRING)
+        # Parquet takes every type as it is: only arrays are spread over their columns.
+        self.format = record_format
+        parquet = record_format == "parquet"
+        plain = tuple(PortType) if parquet else (PortType.REAL, PortType.INTEGER, PortType.STRING)
+        self._spread = _typed_cells if parquet else _cells
         self._plain_out = {n.nodeName: all(p.type in plain and p.shape is None for p in n.output)
                            for n in project.nodeLists}
         self._plain_in = {n.nodeName: all(p.type in plain and p.shape is None for p in n.input)
@@ -95,7 +111,8 @@ class Recorder:
         # The rows are joined as text where no cell can need a CSV quote (names are identifiers,
         # numbers' text has no comma, only String ports hold free text): csv.writer's per-cell
         # work is a quarter of a row. The text is the same: csv.writer writes str(), repr for floats.
-        self._joined = not any(p.type is PortType.STRING for n in project.nodeLists for p in (*n.output, *n.input))
+        self._joined = parquet or not any(p.type is PortType.STRING for n in project.nodeLists
+                                          for p in (*n.output, *n.input))
         self._plain_nodes = [(n, self._plain_out[n], self._plain_in[n]) for n in self._nodes]
         # A timing row of one release's arrivals, every stepping node's and no other's, in one format.
         self._timing_format = None if self._async_labels or self._counts_takes else \
@@ -107,17 +124,22 @@ class Recorder:
             self._samples_file = RecordFile(run_dir / SAMPLES_FILE, at.get(SAMPLES_FILE))
         except OSError as exc:
             raise RecordError(f"cannot open the run's records in {run_dir}: {exc.strerror or exc}") from None
-        self._rows = (RowWriter if rows_apart else LocalRows)(run_dir, self._timing_format, at)
+        timing_header = ["step", "t", "wait_s", "holder", "lateness_s",
+                         *(f"arrival_s:{n}" for n in self._stepping),
+                         *(f"age_s:{label}" for label in self._async_labels),
+                         *(["takes"] if self._counts_takes else [])]
+        self._rows: Tables
+        if parquet:
+            self._rows = ParquetTables(run_dir, project, self._marks_steps, at, timing_header)
+        else:
+            self._rows = (RowWriter if rows_apart else LocalRows)(run_dir, self._timing_format, at)
         self._values_row, self._timing_cells = self._rows.values, self._rows.timing
         if resume_at is None:
             out_cols = [c for n in project.nodeLists for p in n.output for c in p.columns(n.nodeName)]
             in_cols = [c for n in project.nodeLists for p in n.input for c in p.columns(n.nodeName)]
             self._rows.csv_row("values.csv", ["step", "t", "mode", *(["stepped"] if self._marks_steps else []),
                                               *out_cols, *in_cols])
-            self._rows.csv_row("timing.csv", ["step", "t", "wait_s", "holder", "lateness_s",
-                                              *(f"arrival_s:{n}" for n in self._stepping),
-                                              *(f"age_s:{label}" for label in self._async_labels),
-                                              *(["takes"] if self._counts_takes else [])])
+            self._rows.csv_row("timing.csv", timing_header)
         self._flushed = time.monotonic()
         self.meta = dict(meta)
         if resume_at is None:
@@ -133,9 +155,9 @@ class Recorder:
         if self._marks_steps:
             cells.append(" ".join(stepped or ()))
         for n, plain_out, _ in self._plain_nodes:
-            cells.extend(outputs[n] if plain_out else _cells(outputs[n], self._arrays_out[n]))
+            cells.extend(outputs[n] if plain_out else self._spread(outputs[n], self._arrays_out[n]))
         for n, _, plain_in in self._plain_nodes:
-            cells.extend(inputs[n] if plain_in else _cells(inputs[n], self._arrays_in[n]))
+            cells.extend(inputs[n] if plain_in else self._spread(inputs[n], self._arrays_in[n]))
         self.meta["steps"] = step + 1  # the row is taken even where its sending tells of a refused write
         if self._joined:
             self._values_row(cells)

@@ -148,7 +148,7 @@ class ScenarioRecord(BaseModel):
     """A line of ``events.jsonl`` saying a scenario's action took effect (server.scenario)."""
 
     model_config = ConfigDict(extra="allow")
-    scenario: Literal["override", "release"]
+    scenario: Literal["override", "release", "parameter"]
     target: str
     t_action: float
     t: float

@@ -29,7 +29,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import msgpack
 
@@ -42,6 +42,34 @@ VALUES, TIMING, TEXT, POSITIONS, CUT, CLOSE = range(6)
 # row), large enough that a write is rare.
 BATCH_ROWS = 256
 ANSWER_TIMEOUT_S = 30.0
+
+
+class Tables(Protocol):
+    """Where the recorder's rows of ``values`` and ``timing`` go: CSV formatted here
+    (:class:`LocalRows`), CSV formatted by a process of its own (:class:`RowWriter`), or
+    Parquet (:class:`hycosim.master.parquet_tables.ParquetTables`). A position is what a
+    checkpoint keeps of each table (a CSV file's byte offset, a Parquet table's row count)."""
+
+    def values(self, cells: list[Any]) -> None:
+        """A ``values`` row: step, t, mode, (stepped,) then every port's cell."""
+
+    def timing(self, cells: tuple[Any, ...]) -> None:
+        """A ``timing`` row of the fast format's cells."""
+
+    def csv_row(self, name: str, cells: list[Any]) -> None:
+        """A header, or a row whose cells may need quoting, of table ``name`` (by its CSV name)."""
+
+    def flush(self, step: int | None = None) -> None:
+        """Write what waits, as the format's rhythm has it; RecordError naming the file."""
+
+    def positions(self) -> dict[str, int]:
+        """Each table's position once everything taken is written."""
+
+    def cut(self, positions: dict[str, int]) -> None:
+        """Each table back to its position in ``positions`` (a checkpoint's)."""
+
+    def close(self) -> list[str]:
+        """Write the rest; the tables that could not be written, with why."""
 
 
 class LocalRows:

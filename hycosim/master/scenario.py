@@ -18,6 +18,7 @@ from hycosim.core.schema import Port, PortType, Project, ScenarioAction
 
 # A point "at" an action's time: the grid's own rounding, as the guards allow it.
 _AT = 1e-9
+_UNSET = object()
 
 
 def from_meta(value: Any, project: Project, routes: list[Any]) -> list[ScenarioAction]:
@@ -45,6 +46,9 @@ class Scenario:
         self._targets = fed_inputs(project, routes)
         self._actions = sorted(actions, key=lambda a: a.t)  # stable: two at one time keep their order
         self._reported = 0  # the actions whose taking effect is recorded
+        # The tunable parameters any action sets, (node, name): each is sent to its node again,
+        # as in force there, after a rollback to a checkpoint.
+        self.tuned = {tuple(a.parameter.split(".", 1)) for a in self._actions if a.parameter is not None}
 
     def __bool__(self) -> bool:
         return bool(self._actions)
@@ -59,6 +63,8 @@ class Scenario:
         it, before the project's later ones."""
         at = next((i for i, a in enumerate(self._actions) if a.t > action.t), len(self._actions))
         self._actions.insert(at, action)
+        if action.parameter is not None:
+            self.tuned.add(tuple(action.parameter.split(".", 1)))
 
     def pins_at(self, t: float) -> dict[str, list[tuple[int, Any]]]:
         """The overridden inputs at time ``t``: node → [(input index, value)]."""
@@ -67,6 +73,8 @@ class Scenario:
         for action in self._actions:
             if action.t > t + tol:
                 break
+            if action.parameter is not None:
+                continue
             target = self._targets[action.target]
             if action.release is not None:
                 held.pop(action.target, None)
@@ -91,8 +99,8 @@ class Scenario:
         entries = []
         while self._reported < len(self._actions) and self._actions[self._reported].t <= t + tol:
             action = self._actions[self._reported]
-            entry: dict[str, Any] = {"scenario": "override" if action.override is not None else "release",
-                                     "target": action.target, "t_action": action.t, "t": t, "step": step}
+            entry: dict[str, Any] = {"scenario": action.kind, "target": action.target, "t_action": action.t,
+                                     "t": t, "step": step}
             if action.value is not None:
                 entry["value"] = action.value
             if action.ramp is not None:
@@ -100,6 +108,46 @@ class Scenario:
             entries.append(entry)
             self._reported += 1
         return entries
+
+    def parameters_at(self, t: float) -> dict[tuple[str, str], Any]:
+        """The parameters the actions at or before ``t`` set, (node, name) → the latest value."""
+        tol = _AT * max(1.0, abs(t))
+        return {tuple(a.parameter.split(".", 1)): a.value for a in self._actions
+                if a.parameter is not None and a.t <= t + tol}
+
+    def tunes(self, t: float, start: dict[str, dict[str, Any]],
+              holding: dict[tuple[str, str], Any] | None) -> tuple[dict[str, dict[str, Any]], dict[tuple[str, str], Any]]:
+        """The tuned parameters to send at ``t``, by node, and what the nodes hold then: the value
+        in force (the latest action's, else the start value, ``start``) of each whose value the
+        node does not hold (``holding``; None: the start values, as at the run's start)."""
+        if holding is None:
+            holding = {(node, name): start.get(node, {}).get(name) for node, name in self.tuned}
+        now = {key: start.get(key[0], {}).get(key[1]) for key in self.tuned}
+        now.update(self.parameters_at(t))
+        changed: dict[str, dict[str, Any]] = {}
+        for (node, name), value in now.items():
+            held = holding.get((node, name), _UNSET)
+            if value is not None and (held != value or type(held) is not type(value)):
+                changed.setdefault(node, {})[name] = value
+        return changed, {**holding, **{(n, name): v for n, vs in changed.items() for name, v in vs.items()}}
+
+    def parameter_problem(self, tunable: dict[str, dict[str, Any]]) -> str | None:
+        """The first parameter action its node cannot take, given each node's tunable parameters
+        and their start values (``tunable``, from the nodes' HELLOs), or None."""
+        from hycosim.core.frames import fits_tunable
+
+        for a in self._actions:
+            if a.parameter is None:
+                continue
+            node, name = a.parameter.split(".", 1)
+            theirs = tunable.get(node, {})
+            if name not in theirs:
+                return (f"the scenario's action at t = {a.t:g} sets {a.parameter}, which node {node!r} does not "
+                        f"declare tunable (its tunable parameters: {', '.join(sorted(theirs)) or 'none'})")
+            if not fits_tunable(a.value, theirs[name]):
+                return (f"the scenario's action at t = {a.t:g} sets {a.parameter} to {a.value!r}, and it is a "
+                        f"{type(theirs[name]).__name__}")
+        return None
 
     def rewind(self, t: float) -> None:
         """Back at a checkpoint at ``t``: the actions from its point on take effect (and are

@@ -53,6 +53,16 @@ class FmuNode(Node):
             self.fmu = open_fmu(self.path, self.spec, dict(ctx.parameters), ctx.stop_time)
             self.fmu.initialize(ctx.start_time)
 
+    def tunable_values(self) -> dict[str, Any]:
+        with _node_errors():
+            return self.fmu.tunable_values() if self.fmu is not None else {}
+
+    def set_parameters(self, values: dict[str, Any]) -> None:
+        # Between doSteps: FMI lets a tunable parameter be set in step mode.
+        with _node_errors():
+            for name, value in values.items():
+                self.fmu.set_variable(name, value)
+
     @property
     def can_rollback(self) -> bool:
         return bool(self.fmu and self.fmu.can_rollback)

@@ -135,6 +135,18 @@ class Node(ABC):
     def teardown(self) -> None:
         """Release resources; called once at the end, also after a failure."""
 
+    # Tunable parameters, changed during a run (a scenario's 'parameter' action,
+    # sim.set_parameter): a model that has some gives their values now (a bool, int, float or
+    # str each) and takes new ones in set_parameters, from its next step on.
+    def tunable_values(self) -> dict[str, Any]:
+        """Each tunable parameter's current value, by name (none: nothing may be tuned)."""
+        return {}
+
+    def set_parameters(self, values: dict[str, Any]) -> None:
+        """Take new values of tunable parameters (names from :meth:`tunable_values`, values of
+        their types, checked by the runtime) for the steps from now on."""
+        raise NodeModelError(f"{type(self).__name__} has no tunable parameters")
+
     # Rollback, for event localisation, iterative coupling and the controlled step: a node that
     # can save and restore its state lets the coordinator retry a macro step. A model that
     # overrides get_state and set_state can; one that must not be retried all the same says False.

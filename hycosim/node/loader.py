@@ -221,6 +221,24 @@ def check_node(spec: NodeSpec, project_dir: Path, cosim: CoSimulation | None = N
         model_class(spec, project_dir)  # refused: an asynchronous node needs a model
 
 
+def untunable(spec: NodeSpec, project_dir: Path, name: str) -> str | None:
+    """Why parameter ``name`` of an FMU node cannot be set during a run (the FMU does not have it,
+    or not as a tunable parameter), or None. Other nodes say what is tunable once set up (their
+    HELLO), and the run refuses an action on anything else then. The node must load."""
+    if not spec.fmu or spec.replay:
+        return None
+    from hycosim.fmi.loader import check_fmu
+
+    md = check_fmu(_fmu_path(spec, project_dir), spec).md
+    var = next((v for v in md.modelVariables if v.name == name), None)
+    if var is None:
+        return f"{Path(spec.fmu).name} has no variable {name!r}"
+    if var.causality != "parameter" or var.variability != "tunable":
+        return (f"{name!r} of {Path(spec.fmu).name} is {var.causality or 'local'}, {var.variability or 'continuous'}: "
+                "only a parameter of variability 'tunable' can be set during a run")
+    return None
+
+
 def why_no_checkpoint(spec: NodeSpec, project_dir: Path) -> str | None:
     """Why the node cannot take part in checkpoints (its state cannot outlive its process), or
     None if it can. The node must load (:func:`check_node`)."""

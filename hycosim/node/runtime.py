@@ -9,70 +9,28 @@ asynchronous source samples on its own clock and runs over Zenoh only.
 
 from __future__ import annotations
 
-import math
-import signal
-import socket
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import structlog
 
-from hycosim.core import frames, signals
-from hycosim.core.schema import WIRE_TYPES, Port, PortType, wire_types
+from hycosim.core import frames
 from hycosim.core.config import LoadedProject
 from hycosim.core.drops import DropLog
-from hycosim.transport.inbox import LOCAL
 from hycosim.transport.local_bus import LocalBus
 from hycosim.transport.node_side import LocalNodeLink, NodeLink, ZenohNodeLink
-from hycosim.transport.session import FrameTooLarge
-from hycosim.core.sim_clock import RealTimeClock
 
 from hycosim.node.interface import AsyncSource, Node, NodeContext, NodeModelError, SimulationEnded
+from hycosim.node.receiving import NodeRunError, Receiver
 from hycosim.node.replay import SamplePlayer
+from hycosim.node.sending import Outbox, start_feedthrough
+from hycosim.node.sources import Played, run_source, source_start
 
-_COERCE = {
-    PortType.REAL: float,
-    PortType.INTEGER: int,
-    PortType.BOOLEAN: bool,
-    PortType.STRING: str,
-    PortType.BINARY: bytes,
-}
-
-
-def _coerce(port: Port) -> Callable[[Any], Any]:
-    """How a model's value for ``port`` becomes its wire value: an array's, element by element,
-    into a list of its shape's size (ValueError otherwise)."""
-    one = _COERCE[port.type]
-    if port.shape is None:
-        return one
-    import numpy  # only for array ports: a scalar Python node starts without it (a tenth of a second)
-
-    size = port.size
-
-    def array(value: Any) -> list[Any]:
-        if isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
-            raise ValueError(f"{type(value).__name__} {str(value)[:40]!r} for array port {port.name!r} "
-                             f"of shape {list(port.shape)}")
-        # numpy flattens row-major whatever the model gives: a numpy array, a list, nested lists.
-        flat = numpy.asarray(value).ravel().tolist()
-        if len(flat) != size:
-            raise ValueError(f"{len(flat)} values for array port {port.name!r} of shape {list(port.shape)} "
-                             f"({size} elements)")
-        return [one(x) for x in flat]
-    return array
-
-
-# How long a node a supervisor stops (SIGTERM, SIGHUP) waits for the server to read its END:
-# well inside the 10 s a supervisor (docker, systemd) gives before it kills.
-_STOPPED_WAIT = 2.0
+__all__ = ["NodeRunError", "NodeRuntime", "RunFailedElsewhere"]
 
 # The releases of a step, the frames a stepping node acts on at every point.
 _STEP_KINDS = frozenset((frames.STEP, frames.STEPS))
-
-
-class NodeRunError(RuntimeError):
-    """The node cannot go on; the message names the node and the step."""
 
 
 class RunFailedElsewhere(NodeRunError):
@@ -80,6 +38,8 @@ class RunFailedElsewhere(NodeRunError):
 
 
 class NodeRuntime:
+    """One node in a run: its model set up, every frame of the master's acted on by phase."""
+
     def __init__(self, loaded: LoadedProject, node_name: str, impl: Node | AsyncSource, endpoint: str,
                  password: str | None = None):
         self.loaded = loaded
@@ -89,36 +49,40 @@ class NodeRuntime:
         self.endpoint = endpoint
         self.password = password
         self.cosim = loaded.project.coSimulation
-        self._out_ports = [(p.name, _coerce(p)) for p in self.spec.output]
         self._in_names = self.spec.input_names()
-        self._in_types = tuple(wire_types(p) for p in self.spec.input)
-        self._in_arrays = tuple((i, p.size, WIRE_TYPES[p.type]) for i, p in enumerate(self.spec.input)
-                                if p.shape is not None)
-        # Releases carry inputs for the stepping nodes; an asynchronous source only reads their time.
-        self._release_for = None if self.spec.asynchronous else node_name
         # Multi-rate: this node steps over this many base steps, at every such base point.
         self._rate = loaded.coupling.rates.get(node_name, 1)
         self._log = structlog.get_logger("node").bind(node=node_name)
         self.drops = DropLog(self._log)
-        self.steps = 0
-        self.samples = 0  # an asynchronous source's samples sent
-        self._server_lost: float | None = None
-        self._server_seen = False  # its liveliness token, which tells this node when it goes
-        # Where frames go and come from (run: Zenoh; host: the in-process bus). Over Zenoh
+        # Where frames come from and go to (run: Zenoh; host: the in-process bus). Over Zenoh
         # the handler's acknowledgements (a STOP after an END) are waited for; in process the
         # master reads what a node sent as soon as its call returns.
-        self.link: NodeLink | None = None
-        self._pulls = False
+        self.receiver = Receiver(self.spec, self.cosim, endpoint, self.drops, self._log, lambda: self.outbox.steps)
+        self.outbox = Outbox(self.spec, self.cosim, self.receiver, self._log)
+        self.samples = 0  # an asynchronous source's samples sent
         self._phase = _START  # what the next frame is taken as (see handle)
         self._returning = False  # a START again after a link cut, or the run's, to a restarted process
         self._restoring: _Restoring | None = None
         self._restart_deadline = 0.0
         self._restoring_step = -1  # the step the run was at when a restarted process attached
         self._stepping: _Stepping | None = None
-        self._interpolating = self._is_player = False  # set once the model is set up
-        self._played: _Played | None = None
+        self._is_player = False  # set once the model is set up
+        self._played: Played | None = None
         self.failure: str | None = None  # in process: why this node ended the run, if it failed
         self._listed: Callable[[float, float, list[Any]], list[Any]] | None = None  # in process: Node.listed_step
+
+    @property
+    def steps(self) -> int:
+        """The last step whose outputs this node sent."""
+        return self.outbox.steps
+
+    @steps.setter
+    def steps(self, step: int) -> None:
+        self.outbox.steps = step
+
+    @property
+    def link(self) -> NodeLink | None:
+        return self.receiver.link
 
     def context(self) -> NodeContext:
         params = dict(self.spec.parameters)
@@ -129,22 +93,14 @@ class NodeRuntime:
                            self.cosim.stepSize, self.cosim.startTime, **({"project_dir": project_dir} if project_dir else {}),
                            real_time=self.cosim.real_time_factor(), stop_time=self.cosim.stopTime)
 
-    def _pack_outputs(self, values: dict[str, Any]) -> list[Any]:
-        packed = []
-        for port, coerce in self._out_ports:
-            if port not in values:
-                raise NodeRunError(f"node {self.name!r}: its model returned no value for output {port!r}")
-            try:
-                packed.append(coerce(values[port]))
-            except (TypeError, ValueError, OverflowError) as exc:
-                raise NodeRunError(f"node {self.name!r}: output {port!r}: {exc}") from None
-        return packed
-
     def _setup(self) -> None:
         try:
             self.impl.setup(self.context())
             # Asked of every release a node checks: what it is does not change once set up.
-            self._interpolating = isinstance(self.impl, Node) and self.impl.can_interpolate
+            self.receiver.interpolating = isinstance(self.impl, Node) and self.impl.can_interpolate
+            if isinstance(self.impl, Node) and not isinstance(self.impl, SamplePlayer):
+                self.receiver.tunable = {name: value for name, value in self.impl.tunable_values().items()
+                                         if type(name) is str and frames.tunable_value(value)}
             self._is_player = isinstance(self.impl, SamplePlayer)
         except Exception as exc:
             if isinstance(exc, NodeRunError):
@@ -158,19 +114,21 @@ class NodeRuntime:
         self._setup()
         try:
             link = ZenohNodeLink.open(self.loaded, self.name, self.endpoint, self.password)
-            self.link, self._pulls = link, True
+            self.receiver.link, self.receiver.pulls = link, True
             try:
                 if isinstance(self.impl, AsyncSource) and not isinstance(self.impl, SamplePlayer):
-                    start = self._source_start()
+                    start, self._returning = source_start(self.receiver, self.cosim)
                     if start.kind == frames.STOP:
                         self._on_stop(start)
                     else:
-                        self._run_async(start, self._returning)
+                        self.outbox.send(self.outbox.hello(self.impl, False, restart=self._returning))
+                        self.samples = run_source(self.impl, self.spec, self.cosim, start, self.outbox,
+                                                  self.receiver, self._on_stop, self._log)
                     return
                 while not self.handle(self._pull()):
                     pass
             except KeyboardInterrupt as exc:
-                self._say_stopped(exc)
+                self.outbox.say_stopped(exc, isinstance(self.impl, AsyncSource))
                 raise
             finally:
                 link.close()
@@ -187,11 +145,11 @@ class NodeRuntime:
             # The server times out the attach; outwait it so that its STOP, naming who is
             # missing, reaches this node rather than a timeout of our own.
             try:
-                return self._wait(self.cosim.attachTimeout + self.cosim.stepTimeout, "START")
+                return self.receiver.wait(self.cosim.attachTimeout + self.cosim.stepTimeout, "START")
             except NodeRunError as exc:
                 raise NodeRunError(f"{exc}{self.link.other_projects()}") from None
         if self._phase == _RESTART:
-            frame = self._next_frame(max(0.0, self._restart_deadline - time.monotonic()))
+            frame = self.receiver.next_frame(max(0.0, self._restart_deadline - time.monotonic()))
             if frame is None:
                 wait = self.cosim.attachTimeout + self.cosim.stepTimeout
                 raise NodeRunError(f"node {self.name!r}: the run on {self.endpoint} was already under way "
@@ -200,24 +158,13 @@ class NodeRuntime:
                                    "(coSimulation.checkpointEvery)")
             return frame
         if self._phase == _RESTORING:
-            frame = self._next_frame(self.cosim.stepTimeout)
+            frame = self.receiver.next_frame(self.cosim.stepTimeout)
             if frame is None:
                 return self._restore_cut_short()
             return frame
         # The server enforces step timeouts; a node only needs to notice the server is gone,
         # which liveliness tells; this bound is the last resort for a frozen server.
-        return self._wait(self.cosim.stepTimeout + 30.0, "release")
-
-    def _source_start(self) -> frames.Frame:
-        """An asynchronous source's START (a restarted one's too: a source has no state to restore)."""
-        start = self._wait(self.cosim.attachTimeout + self.cosim.stepTimeout, "START")
-        if start.kind == frames.REPLAY:
-            self._returning, start = True, start.release
-        if start.kind not in (frames.START, frames.STOP):
-            at = f" (step {start.step})" if start.kind in (frames.STEP, frames.STEPS) else ""
-            raise NodeRunError(f"node {self.name!r}: the run on {self.endpoint} was already under way{at} "
-                               "when it attached; a node joins before the run starts")
-        return start
+        return self.receiver.wait(self.cosim.stepTimeout + 30.0, "release")
 
     def handle(self, frame: frames.Frame) -> bool:
         """Act on one frame the master released to this node, accepted already (checked as every
@@ -226,7 +173,11 @@ class NodeRuntime:
         if self._phase == _STEPPING:
             return self._on_release(frame)
         if self._phase == _PLAYED:
-            return self._on_played(frame)
+            if frame.kind == frames.STOP:
+                self._on_stop(frame)
+                return True
+            self._played.on_frame(frame)
+            return False
         if self._phase == _START:
             return self._on_start(frame)
         if frame.kind == frames.STOP:  # restarting or restoring: the run ended instead
@@ -248,14 +199,18 @@ class NodeRuntime:
             self._on_stop(frame)
             return True
         if isinstance(self.impl, SamplePlayer):
-            self._begin_played(frame, self._returning)
+            self.outbox.send(self.outbox.hello(self.impl, False, restart=self._returning))
+            # The last point whose samples are sent: by the process this one replaces, if any.
+            self._played = Played(self.impl, self.spec.UID, self.outbox,
+                                  self.outbox.pack({p.name: p.start_value() for p in self.spec.output}),
+                                  frame.step if self._returning and frame.kind == frames.STEP else -1)
             self._phase = _PLAYED
-            return self._on_played(frame)
+            return self.handle(frame)
         if frame.kind in _STEP_KINDS:
             # The run is under way: this process is a restart. Say so at once (a node process
             # says HELLO once per run); a server that takes checkpoints restores the run, and
             # this node with it; one that does not stops the run.
-            self._send(self._hello(False, restart=True))
+            self.outbox.send(self.outbox.hello(self.impl, False, restart=True))
             self._log.info("restarted: waiting for the run to be restored", step=frame.step)
             self._restoring_step = frame.step
             self._restart_deadline = time.monotonic() + self.cosim.attachTimeout + self.cosim.stepTimeout
@@ -269,171 +224,6 @@ class NodeRuntime:
         self._phase = _STEPPING
         return not self._begin_stepping(bool(frame.options.get("checkpoint")))
 
-    def _send(self, payload: bytes) -> None:
-        """Publish one frame; one too large for the link stops the node, naming its largest outputs."""
-        try:
-            self.link.send(payload)
-        except FrameTooLarge as exc:
-            frame = frames.decode(payload)
-            values = frame.values if frame.kind in (frames.OUTPUTS, frames.SAMPLE, frames.BATCH) else []
-            largest = frames.largest_values(zip((port for port, _ in self._out_ports), values))
-            raise NodeRunError(f"node {self.name!r}: its outputs at step {self.steps} are {exc}; "
-                               f"largest: {largest}") from None
-
-    def _send_outputs(self, payload: bytes, step: int) -> None:
-        """Send outputs and count them as this node's last ``step`` with no stop signal between:
-        a SIGTERM that came after the send and before the count had the node's END name the
-        step before the one the server had (once, in a loaded make test)."""
-        signals.hold_stops()
-        try:
-            self._send(payload)
-            self.steps = step
-        finally:
-            signals.release_stops()
-
-    def _wait(self, timeout: float, what: str) -> frames.Frame:
-        """The next frame from the server (skipping ones not for us); STOP ends the wait too."""
-        frame = self._next_frame(timeout)
-        if frame is None:
-            raise NodeRunError(f"node {self.name!r}: no {what} from the server at {self.endpoint} "
-                               f"within {timeout:g} s (after step {self.steps})")
-        return frame
-
-    def _next_frame(self, timeout: float) -> frames.Frame | None:
-        """The next frame from the server within ``timeout`` seconds, or None.
-
-        Liveliness is handled here: if the server's token goes (a link cut), wait up to
-        linkGrace for it to come back, then stop. Malformed frames are dropped.
-        """
-        if not self._pulls:
-            return None  # in process the master pushes its frames: nothing comes by waiting
-        deadline = time.monotonic() + timeout
-        grace = self.cosim.linkGrace
-        while True:
-            now = time.monotonic()
-            wait = deadline - now
-            if self._server_lost is not None:
-                if now - self._server_lost > grace:
-                    raise NodeRunError(f"node {self.name!r}: the server went away after step {self.steps} and did not "
-                                       f"come back within the link grace of {grace:g} s")
-                wait = min(wait, self._server_lost + grace - now + 0.01)
-            msg = self.link.receive(max(wait, 0.0))
-            if msg is None:
-                if time.monotonic() < deadline:
-                    continue  # woken for the grace check above
-                return None
-            try:
-                frame = self._accept(msg[0] == LOCAL, msg[1])
-            except frames.FrameError as exc:
-                self.drops.drop("not a release", str(exc), self.steps)
-                continue
-            if frame is None:
-                continue
-            if frame.kind == frames.LIVE:
-                if frame.alive:
-                    self._log.info("server back" if self._server_seen else "server seen", step=self.steps)
-                    self._server_lost, self._server_seen = None, True
-                elif grace > 0:
-                    self._server_lost = time.monotonic()
-                    self._log.warning("server lost, waiting for it", step=self.steps, grace_s=grace)
-                else:
-                    raise NodeRunError(f"node {self.name!r}: the server went away after step {self.steps}")
-                continue
-            return frame
-
-    def _accept(self, local: bool, payload: bytes) -> frames.Frame | None:
-        """A frame from ``down`` (or this process's own liveliness news) that this node can act
-        on; None for one meant for another node; FrameError for anything else."""
-        return self._accept_frame(local, frames.decode(payload))
-
-    def _accept_frame(self, local: bool, frame: frames.Frame) -> frames.Frame | None:
-        """:meth:`_accept` of a frame decoded already."""
-        kind = frame.kind
-        if local:
-            return frame  # liveliness news from this process's own subscriber
-        if kind in (frames.STEP, frames.STEPS) and self._release_for is not None and \
-                self._release_for not in frame.inputs:
-            return None  # a release of other nodes (this one is not due, or not yet in Gauss-Seidel order)
-        if kind in (frames.START, frames.STEP, frames.STEPS):
-            return frames.check_release(frame, self._release_for, self._in_types, self._interpolating,
-                                        self._in_arrays)
-        if kind == frames.INIT:
-            if self.name not in frame.inputs:
-                return None  # the initialisation of other nodes
-            return frames.check_release(frame, self.name, self._in_types, input_arrays=self._in_arrays)
-        if kind == frames.REPLAY:
-            if frame.node != self.name:
-                return None
-            inner = frames.decode(frame.release)
-            if inner.kind not in (frames.START, frames.STEP, frames.STEPS):
-                raise frames.FrameError(f"a replay of a {frames.KIND_NAMES[inner.kind]} frame")
-            return frames.Replay(self.name, frames.check_release(inner, self._release_for, self._in_types,
-                                                              self._interpolating, self._in_arrays))
-        if kind == frames.ROLLBACK:
-            k, t = frame.step, frame.t
-            if not (0 <= k < frames.MAX_STEP and math.isfinite(t)):
-                raise frames.FrameError(f"ROLLBACK frame to step {k}, t {t}: out of range")
-            return frame
-        if kind == frames.STOP:
-            return frame
-        if kind == frames.CHECKPOINT:
-            if not 0 <= frame.step < frames.MAX_STEP:
-                raise frames.FrameError(f"CHECKPOINT frame at step {frame.step}: out of range")
-            return frame
-        if kind == frames.RESTORE:
-            if frame.node != self.name:
-                return None
-            frames.check_chunk(frame.step, frame.index, frame.count, frame.chunk)
-            if not math.isfinite(frame.t):
-                raise frames.FrameError(f"RESTORE frame to t {frame.t}: not finite")
-            return frame
-        raise frames.FrameError(f"a {frames.KIND_NAMES[kind]} frame is not for a node")
-
-    def _say_stopped(self, exc: BaseException) -> None:
-        """A node stopped by SIGTERM or SIGHUP (its supervisor) tells the server, which then names it
-        rather than a lost token. Not on Ctrl-C: a terminal's reaches the server too, which
-        reports its own interruption."""
-        if signals.signal_of(exc) == signal.SIGINT:
-            return
-        # A source knows no step (the server adds the run's).
-        said = (f"node {self.name!r} (an asynchronous source) {signals.describe(exc)}"
-                if isinstance(self.impl, AsyncSource) else
-                f"node {self.name!r} {signals.describe(exc)} after step {self.steps}")
-        try:
-            self._send(frames.encode(frames.END, self.spec.UID, self.steps + 1, 0.0, False, said, [], None))
-            # The token goes as this process leaves, and the server can learn that before it
-            # reads the END (it did on a loaded machine, and named a lost token): wait for its
-            # STOP, which says it has read it. A second signal ends the wait.
-            deadline = time.monotonic() + _STOPPED_WAIT
-            while (left := deadline - time.monotonic()) > 0:
-                frame = self._next_frame(left)
-                if frame is None or frame.kind == frames.STOP:
-                    break
-        except Exception:  # on its way out: the token's loss still tells the server
-            pass
-
-    def _end(self, step: int, t: float, clean: bool, message: str, earlier: list[list[Any]] | None = None,
-             last: list[Any] | None = None) -> None:
-        """Tell the server this node's model ended the run (``clean``) or failed, in place of its
-        outputs for ``step`` (``earlier``: those of its steps inside a batch before that;
-        ``last``: its outputs at ``t``, where the model ended, if it could give them), and
-        wait for the server's STOP (so that it hears this first, not that the node's token
-        went). A failure is raised as this node's own."""
-        message = message[:2000]
-        try:
-            self._send(frames.encode(frames.END, self.spec.UID, step, t, clean, message, earlier or [], last))
-            # In process the master reads the END once this call returns: there is nothing to wait for.
-            deadline = time.monotonic() + (min(10.0, self.cosim.stepTimeout) if self._pulls else 0.0)
-            while (left := deadline - time.monotonic()) > 0:
-                frame = self._next_frame(left)
-                if frame is None or frame.kind == frames.STOP:
-                    break
-        except NodeRunError:
-            pass  # the server is gone: the node's own message says enough
-        if not clean:
-            raise NodeRunError(message)
-        self._log.info("ended the simulation", step=step, t=t, message=message)
-
     def _step_model(self, impl: Node, k: int, t: float, h: float | None, inputs: dict[str, Any]) -> bytes | None:
         """Step the model from t by h (h None: only read its outputs at t, k = -1), send its
         outputs at step k + 1 and return them as sent; None if it ended the simulation. A model
@@ -442,8 +232,8 @@ class NodeRuntime:
             if h is not None:
                 impl.step(t, h, inputs)
             frame = frames.encode(frames.OUTPUTS, self.spec.UID, k + 1, t + (h or 0.0),
-                                  self._pack_outputs(impl.outputs()))
-            self._send_outputs(frame, k + 1)
+                                  self.outbox.pack(impl.outputs()))
+            self.outbox.send_outputs(frame, k + 1)
             return frame
         except Exception as exc:
             self._step_failed(exc, k, t, impl=impl)
@@ -456,14 +246,14 @@ class NodeRuntime:
         outputs of its steps before inside a batch, and its outputs where it ended); a failure
         is raised."""
         if isinstance(exc, SimulationEnded):
-            self._end(k + 1, exc.t, True, f"{exc}", earlier, self._outputs_at_end(impl))
+            self.outbox.end(k + 1, exc.t, True, f"{exc}", earlier, self._outputs_at_end(impl))
         elif isinstance(exc, NodeRunError):
-            self._end(k + 1, t, False, str(exc))
+            self.outbox.end(k + 1, t, False, str(exc))
         elif isinstance(exc, NodeModelError):
-            self._end(k + 1, t, False, f"{exc} (step {k})")
+            self.outbox.end(k + 1, t, False, f"{exc} (step {k})")
         else:
             self._log.exception("model failed", step=k)
-            self._end(k + 1, t, False, f"node {self.name!r}: its model failed at step {k} (t={t:g} s): "
+            self.outbox.end(k + 1, t, False, f"node {self.name!r}: its model failed at step {k} (t={t:g} s): "
                                        f"{type(exc).__name__}: {exc}")
 
     def _outputs_at_end(self, impl: Node | None) -> list[Any] | None:
@@ -473,7 +263,7 @@ class NodeRuntime:
         if impl is None:
             return None
         try:
-            return self._pack_outputs(impl.outputs())
+            return self.outbox.pack(impl.outputs())
         except Exception as exc:  # noqa: BLE001 - a model that ended may refuse; the END still goes
             self._log.info("no outputs where the model ended", error=f"{type(exc).__name__}: {exc}")
             return None
@@ -492,9 +282,9 @@ class NodeRuntime:
                 end = times[i + 1] if self._rate == 1 else t + min(self._rate * self.cosim.stepSize,
                                                                     self.cosim.stopTime - t)
                 impl.step(t, end - t, inputs)
-                outs.append(self._pack_outputs(impl.outputs()))
+                outs.append(self.outbox.pack(impl.outputs()))
             frame = frames.encode(frames.BATCH, self.spec.UID, k + 1, end, outs[-1], outs[:-1])
-            self._send_outputs(frame, k + len(times) - 1)
+            self.outbox.send_outputs(frame, k + len(times) - 1)
             return frame
         except Exception as exc:
             self._step_failed(exc, k, t, outs, impl=impl)
@@ -527,7 +317,7 @@ class NodeRuntime:
             return self._restore_failed()
         self._log.info("restored", step=at.step, t=at.t)
         self._restoring, self._phase = None, _STEPPING
-        self._send(self._hello(impl.can_rollback))
+        self.outbox.send(self.outbox.hello(self.impl, impl.can_rollback))
         out = self._step_model(impl, at.step - 1, at.t, None, {})
         if out is None:
             return True
@@ -558,7 +348,7 @@ class NodeRuntime:
         impl = self.impl
         assert isinstance(impl, Node)
         at = self._stepping = _Stepping(checkpoint and impl.can_rollback)
-        self._send(self._hello(impl.can_rollback))
+        self.outbox.send(self.outbox.hello(self.impl, impl.can_rollback))
         out = self._step_model(impl, -1, self.cosim.startTime, None, {})
         if out is None:
             return False
@@ -594,7 +384,7 @@ class NodeRuntime:
         self.steps, at.done, at.last_out = k + 1, k, out
         if at.pending_state is not None and at.pending_state[0] == k:
             for i, chunk in enumerate(chunks := frames.state_chunks(at.pending_state[1])):
-                self._send(frames.encode(frames.STATE, self.spec.UID, k, i, len(chunks), chunk))
+                self.outbox.send(frames.encode(frames.STATE, self.spec.UID, k, i, len(chunks), chunk))
             at.pending_state = None
         return False
 
@@ -612,12 +402,12 @@ class NodeRuntime:
             inner = frame.release
             if inner.kind in _STEP_KINDS and inner.step > at.done:
                 return False, inner
-            self._send(at.last_out)
+            self.outbox.send(at.last_out)
             self._log.info("outputs re-sent", step=at.done + 1)
             return False, None
         if frame.kind == frames.CHECKPOINT:
             if frame.step == at.done + self._rate:  # at the end of this node's last step
-                at.pending_state = self._checkpoint_state(impl, frame.step)
+                at.pending_state = _checkpoint_state(impl, frame.step, self._log)
             return False, None
         if frame.kind == frames.RESTORE:
             self._restoring, self._phase = _Restoring(first_of_run=False), _RESTORING
@@ -634,6 +424,14 @@ class NodeRuntime:
             return False, None
         if frame.kind == frames.INIT:
             return self._on_init(impl, at, frame), None
+        if frame.kind == frames.TUNE:
+            try:
+                impl.set_parameters(dict(frame.values))
+            except Exception as exc:  # as a step that failed: the server stops the run with its words
+                self._step_failed(exc, frame.step, frame.t)
+                return True, None
+            self._log.info("parameters", step=frame.step, values=frame.values)
+            return False, None
         # A START: this run has started already.
         self.drops.drop("not a release", "a START while the run is under way", self.steps)
         return False, None
@@ -652,7 +450,7 @@ class NodeRuntime:
         """The initialisation phase's inputs at t0: take them and answer with the outputs at step
         0 they make. True if the model failed or ended the simulation there."""
         t0, inputs = frame.t0, frame.inputs
-        if at.done != -1 or not self._start_feedthrough():
+        if at.done != -1 or not start_feedthrough(self.impl, self.spec):
             self.drops.drop("not a release", "an INIT " + ("after the run's first step" if at.done != -1 else
                             "for a node whose start outputs depend on no input"), self.steps)
             return False
@@ -667,37 +465,6 @@ class NodeRuntime:
         at.last_out = out
         return False
 
-    def _checkpoint_state(self, impl: Node, step: int) -> tuple[int, bytes] | None:
-        """This node's state at point ``step`` for a checkpoint, or None if it cannot give one (the
-        server then keeps its previous checkpoint)."""
-        if not impl.can_serialize:
-            return None
-        try:
-            return step, impl.serialize_state()
-        except Exception as exc:
-            self._log.warning("cannot serialise its state for a checkpoint", step=step,
-                              error=f"{type(exc).__name__}: {exc}")
-            return None
-
-    def _interpolates(self) -> bool:
-        return self._interpolating
-
-    def _hello(self, rollback: bool, restart: bool = False) -> bytes:
-        stepping = isinstance(self.impl, Node)
-        return frames.encode(frames.HELLO, self.spec.UID, {
-            "rollback": rollback, "serialize": stepping and self.impl.can_serialize,
-            "variableStep": stepping and self.impl.can_vary_step, "restart": restart, "batches": stepping,
-            "interpolates": self._interpolating, "startFeedthrough": self._start_feedthrough(),
-            "ports": self.spec.wire_ports(), "host": socket.gethostname()[:64]})
-
-    def _start_feedthrough(self) -> dict[str, list[str]]:
-        """The model's start_feedthrough within this node's ports, for the server's initialisation."""
-        if not isinstance(self.impl, Node):
-            return {}
-        ins, outs = set(self._in_names), set(self.spec.output_names())
-        return {out: [i for i in reads if i in ins] for out, reads in self.impl.start_feedthrough.items()
-                if out in outs and any(i in ins for i in reads)}
-
     def _on_stop(self, frame: frames.Frame) -> None:
         """The server's STOP: the end of the run, or of a failed one, which is this node's failure too."""
         reason = frame.reason
@@ -705,87 +472,6 @@ class NodeRuntime:
                        dropped=dict(self.drops.counts))
         if reason not in frames.CLEAN_STOPS:  # the reason names the step where it matters
             raise RunFailedElsewhere(f"node {self.name!r}: the server stopped the run: {reason}")
-
-    def _run_async(self, start: frames.Frame, restart: bool) -> None:
-        impl = self.impl
-        assert isinstance(impl, AsyncSource)
-        self._send(self._hello(False, restart=restart))
-        t0, wall0, rt = start.t0, start.wall_t0, start.real_time_factor
-        clock = RealTimeClock(t0, wall0, rt) if rt else None
-        sim_now, seq = t0, 0
-        period = 1.0 / float(self.spec.rate or 30.0)
-        while True:
-            try:
-                for ts, values in impl.samples_until(sim_now):
-                    self._send(frames.encode(frames.SAMPLE, self.spec.UID, seq, ts, self._pack_outputs(values)))
-                    seq += 1
-                    self.samples = seq
-            except Exception as exc:
-                self._source_failed(exc, sim_now)
-            if clock is not None:
-                # Real time: sample by the clock, and look for STOP in between. While the
-                # server is away (within linkGrace) samples go nowhere; sampling goes on.
-                frame = self._next_frame(period)
-                sim_now = clock.now()
-            else:
-                # As fast as possible: the server's releases are the clock.
-                frame = self._wait(self.cosim.stepTimeout + 30.0, "release")
-                if frame.kind == frames.REPLAY:
-                    frame = frame.release
-                if frame.kind == frames.STEP:
-                    sim_now = frame.t + frame.h
-                    self.steps = frame.step + 1
-            if frame is not None and frame.kind == frames.STOP:
-                self._on_stop(frame)
-                return
-
-    def _source_failed(self, exc: Exception, sim_now: float) -> None:
-        """Tell the server how an asynchronous source failed (it would otherwise learn only that
-        its token went, and with a link grace wait that long to say so), then raise it."""
-        if isinstance(exc, NodeRunError):
-            message = str(exc)
-        elif isinstance(exc, NodeModelError):
-            message = f"{exc} (at t={sim_now:g} s)"
-        else:
-            self._log.exception("source failed", t=sim_now)
-            message = (f"node {self.name!r} (an asynchronous source): its model failed at t={sim_now:g} s: "
-                       f"{type(exc).__name__}: {exc}")
-        self._end(self.steps + 1, sim_now, False, message)
-
-    def _begin_played(self, frame: frames.Frame, restart: bool) -> None:
-        self._send(self._hello(False, restart=restart))
-        # The outputs it sends are held start values (the server ignores them); the last point
-        # whose samples are sent: by the process this one replaces, if any.
-        self._played = _Played(self._pack_outputs({p.name: p.start_value() for p in self.spec.output}),
-                               frame.step if restart and frame.kind == frames.STEP else -1)
-
-    def _on_played(self, frame: frames.Frame) -> bool:
-        """Send the samples due by the point a release reaches, then the word that they are
-        sent; True at the run's STOP."""
-        impl, at = self.impl, self._played
-        assert isinstance(impl, SamplePlayer) and at is not None
-        if frame.kind == frames.STOP:
-            self._on_stop(frame)
-            return True
-        if frame.kind == frames.REPLAY:
-            frame = frame.release
-        point: int | None = None
-        if frame.kind == frames.START and at.sent < 0:
-            point, t = 0, frame.t0
-        elif frame.kind == frames.STEP:
-            point, t = frame.step + 1, frame.t + frame.h
-        elif frame.kind == frames.RESTORE:
-            point, t = frame.step, frame.t
-            at.sent = point  # the server's restored histories hold what came before
-        if point is not None:  # not a CHECKPOINT, ROLLBACK or the START a resume sends again
-            for sample in impl.due(at.sent, point):
-                self._send(frames.encode(frames.SAMPLE, self.spec.UID, at.seq, sample.t,
-                                         self._pack_outputs(impl.values(sample))))
-                at.seq += 1
-            at.sent = max(at.sent, point)
-            self._send(frames.encode(frames.OUTPUTS, self.spec.UID, point, t, at.held))
-            self.steps = point
-        return False
 
     # --- in process -----------------------------------------------------------------
 
@@ -799,7 +485,7 @@ class NodeRuntime:
                                "run, which one process stepping every node cannot give it; run it without "
                                "--in-process")
         self._setup()
-        self.link = LocalNodeLink(bus, self.name)
+        self.receiver.link = LocalNodeLink(bus, self.name)
         if not self._is_player:
             # An FMU steps on the master's lists as they are (no dicts between, no conversions).
             self._listed = self.impl.listed_step(list(self._in_names), list(self.spec.output))
@@ -811,17 +497,19 @@ class NodeRuntime:
         Return the outputs at t + h, checked as those sent are; None when the model ended the
         run or failed instead, its END sent to the master as over the network."""
         impl, at = self.impl, self._stepping  # a Node (host attaches no player this way), started
+        if self.failure is not None:
+            return None  # it failed taking a frame (a TUNE): its END is with the master
         try:
             self._enter_step(impl, at, k, mode, driven)
             if self._listed is not None:  # the values go into the FMU's own buffers
                 out = self._listed(t, h, inputs)
             else:
                 values = dict(zip(self._in_names, inputs))
-                for i, _, _ in self._in_arrays:  # the master's lists stay its own, whatever the model does
+                for i, _, _ in self.receiver.in_arrays:  # the master's lists stay its own, whatever the model does
                     name = self._in_names[i]
                     values[name] = list(values[name])
                 impl.step(t, h, values)
-                out = self._pack_outputs(impl.outputs())
+                out = self.outbox.pack(impl.outputs())
         except Exception as exc:
             try:
                 self._step_failed(exc, k, t, impl=impl)
@@ -837,7 +525,7 @@ class NodeRuntime:
         A node that fails sends its END (the master stops the run with its words), keeps the
         message in :attr:`failure` and takes no more frames."""
         try:
-            frame = self._accept_frame(False, frame)
+            frame = self.receiver.accept_frame(False, frame)
         except frames.FrameError as exc:
             self.drops.drop("not a release", str(exc), self.steps)
             return
@@ -853,6 +541,18 @@ class NodeRuntime:
     def close(self) -> None:
         """An in-process node's end: its model's teardown (a Zenoh node's run does its own)."""
         self.impl.teardown()
+
+
+def _checkpoint_state(impl: Node, step: int, log: Any) -> tuple[int, bytes] | None:
+    """A node's state at point ``step`` for a checkpoint, or None if it cannot give one (the
+    server then keeps its previous checkpoint)."""
+    if not impl.can_serialize:
+        return None
+    try:
+        return step, impl.serialize_state()
+    except Exception as exc:
+        log.warning("cannot serialise its state for a checkpoint", step=step, error=f"{type(exc).__name__}: {exc}")
+        return None
 
 
 # What a node takes its next frame as: the run's first; after a restarted process's HELLO, a
@@ -885,13 +585,3 @@ class _Stepping:
     pending_state: tuple[int, bytes] | None = None
     mode: str | None = None
     driven: bool = False
-
-
-@dataclass
-class _Played:
-    """A played recording's state between frames: the held outputs it sends, the last point
-    whose samples are sent, and the next sample's sequence number."""
-
-    held: list[Any]
-    sent: int
-    seq: int = 0

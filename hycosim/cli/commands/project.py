@@ -38,12 +38,10 @@ def validate(
                 problems.append(f"{file}: nodeLists[{i}]: {exc}")
         if problems:
             fail(f"{file}: {len(problems)} node(s) cannot be loaded", details=problems)
-        from hycosim.master.observers import ObserverLoadError, project_observers
+        _refuse_untunable(file, loaded)
+        from hycosim.cli.projects import refuse_unfit_user_code
 
-        try:
-            project_observers(loaded)
-        except ObserverLoadError as exc:
-            fail(f"{file}: {exc}")
+        refuse_unfit_user_code(file, loaded)
         _check_retakes(file, loaded)
     out.print(f"OK {file}: project {p.projectName!r}, {len(p.nodeLists)} nodes, {len(p.linkLists)} links, "
               f"{len(loaded.routes)} routes, {len(p.events)} events" + ("" if models else " (models not checked)"),
@@ -59,6 +57,19 @@ def validate(
     if bridged:
         out.print(f"{len(bridged)} node(s) wait for a bridge FMU in some tool: {', '.join(bridged)} "
                   f"(build them with: hycosim fmu build {file} -o fmus)", highlight=False)
+
+
+def _refuse_untunable(file: Any, loaded: Any) -> None:
+    """Exit 2 naming the scenario's action that sets a parameter an FMU does not declare tunable."""
+    from hycosim.node.loader import untunable
+
+    for i, action in enumerate(loaded.project.scenario):
+        if action.parameter is None:
+            continue
+        node, _, name = action.parameter.partition(".")
+        why = untunable(loaded.project.node(node), loaded.resolve("."), name)
+        if why is not None:
+            fail(f"{file}: scenario[{i}].parameter: {why}")
 
 
 def _say_what_nodes_take_part_in(loaded: Any) -> None:

@@ -10,7 +10,7 @@ import typer
 from hycosim.cli.extras import require_extra
 from hycosim.cli.options import SspStep, SspStop, checked_endpoint, finite, monitor_credentials
 from hycosim.cli.output import end_process, err, fail, out, print_summary, say_outcome, warn
-from hycosim.cli.options import ScenarioFile
+from hycosim.cli.options import RecordFormat, ScenarioFile
 from hycosim.cli.projects import load, project_file, scenario_of
 from hycosim.core.signals import ignore_stops
 
@@ -29,6 +29,7 @@ def server(
     resume: Annotated[Optional[Path], typer.Option(help="go on with the run in this directory (its server died) "
                                                        "from its last checkpoint")] = None,
     scenario: ScenarioFile = None,
+    record: RecordFormat = None,
 ) -> None:
     """Run the relay server for one co-simulation (Zenoh nodes and bridge FMUs)."""
     from hycosim.master.main import serve
@@ -36,7 +37,8 @@ def server(
     loaded = load(file)
     actions = scenario_of(scenario, loaded)
     code, rdir, message = serve(loaded, listen=listen, runs_dir=runs_dir, run_dir=run_dir,
-                                progress_jsonl=progress_jsonl, gateway=gateway, resume=resume, scenario=actions)
+                                progress_jsonl=progress_jsonl, gateway=gateway, resume=resume, scenario=actions,
+                                record=record)
     if code:
         say_outcome(err, message + (f"\n  results so far: {rdir}" if rdir else ""), error=True)
     elif not progress_jsonl:
@@ -79,6 +81,7 @@ def run(
     step: SspStep = None,
     stop: SspStop = None,
     scenario: ScenarioFile = None,
+    record: RecordFormat = None,
 ) -> None:
     """Run the server and every node as local processes on loopback, or all in this process
     (FILE: a project JSON or an SSP package)."""
@@ -88,12 +91,14 @@ def run(
     file = project_file(file, step, stop)
     loaded = load(file)
     actions = scenario_of(scenario, loaded)
+    if (record or loaded.project.recording.format) == "parquet":
+        require_extra("parquet", "recording as Parquet")
     _refuse_unfit_nodes(loaded)
     if in_process is None:
         in_process = loaded.project.coSimulation.transport == "inprocess"
     if in_process:
         _run_in_process(loaded, runs_dir, progress, listen=listen, resume=resume, dashboard=dashboard,
-                        scenario=actions)
+                        scenario=actions, record=record)
         return
     listen = checked_endpoint("--listen", listen) if listen else None
     if resume is not None and not (resume / "meta.json").is_file():
@@ -110,7 +115,7 @@ def run(
         fail(str(exc))
     result = run_embedded(loaded, file, listen=listen, runs_dir=runs_dir, console=err, show_progress=progress,
                           restarts=restarts, resume=resume, dashboard_port=dashboard_port if dashboard else None,
-                          scenario_file=scenario)
+                          scenario_file=scenario, record=record)
     if result.code >= 128:
         ignore_stops()  # a Ctrl-C pressed twice: the run is over, say so
     for line in result.warnings:
@@ -127,13 +132,10 @@ def _refuse_unfit_nodes(loaded) -> None:
     whose model description already shows that it cannot run (a port on an array of another
     shape, clocks, a parameter it lacks). Named before a run directory is made, not by the
     node's process after the launch; reads model descriptions only, imports no model."""
+    from hycosim.cli.projects import refuse_unfit_user_code
     from hycosim.node.loader import NodeLoadError, check_node, locate_node
-    from hycosim.master.observers import ObserverLoadError, project_observers
 
-    try:
-        project_observers(loaded)
-    except ObserverLoadError as exc:
-        fail(f"{loaded.path}: {exc}")
+    refuse_unfit_user_code(loaded.path, loaded)
     for spec in loaded.project.nodeLists:
         try:
             locate_node(spec, loaded.resolve("."))
@@ -141,10 +143,14 @@ def _refuse_unfit_nodes(loaded) -> None:
                 check_node(spec, loaded.resolve("."), loaded.project.coSimulation)
         except NodeLoadError as exc:
             fail(f"{loaded.path}: {exc}")
+    if any(action.parameter is not None for action in loaded.project.scenario):
+        from hycosim.cli.commands.project import _refuse_untunable
+
+        _refuse_untunable(loaded.path, loaded)
 
 
 def _run_in_process(loaded, runs_dir: Path, progress: bool, *, listen: Optional[str], resume: Optional[Path],
-                    dashboard: bool, scenario: list | None = None) -> None:
+                    dashboard: bool, scenario: list | None = None, record: str | None = None) -> None:
     from hycosim.embedded import run_progress
     from hycosim.inprocess import CannotHost, check_hostable, run_in_process
 
@@ -158,7 +164,8 @@ def _run_in_process(loaded, runs_dir: Path, progress: bool, *, listen: Optional[
         fail(str(exc))
     bar, show = run_progress(loaded, err, progress)
     with bar:
-        code, run_dir, message = run_in_process(loaded, runs_dir=runs_dir, on_progress=show, scenario=scenario)
+        code, run_dir, message = run_in_process(loaded, runs_dir=runs_dir, on_progress=show, scenario=scenario,
+                                                record=record)
     if code:
         fail(message, code, [f"results so far: {run_dir}"] if run_dir else [])
     _print_summary(run_dir)

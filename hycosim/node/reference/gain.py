@@ -10,7 +10,7 @@ from hycosim.node.interface import Node, NodeContext, pack_state, unpack_state
 
 
 class Gain(Node):
-    """Parameters ``k`` (1.0) and ``b`` (0.0); input ``u``, output ``y``. ``work_s`` (0.0)
+    """Parameters ``k`` (1.0) and ``b`` (0.0), both tunable during a run; input ``u``, output ``y``. ``work_s`` (0.0)
     spends that much wall time per step, standing in for an expensive model (benchmarks,
     and the report's "who held the barrier").
 
@@ -37,6 +37,13 @@ class Gain(Node):
 
     def outputs(self) -> dict[str, Any]:
         return {"y": self.y}
+
+    def tunable_values(self) -> dict[str, Any]:
+        return {"k": self.k, "b": self.b}
+
+    def set_parameters(self, values: dict[str, Any]) -> None:
+        self.k = float(values.get("k", self.k))
+        self.b = float(values.get("b", self.b))
 
     def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
         if self.work_s > 0:
