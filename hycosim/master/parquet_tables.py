@@ -78,17 +78,12 @@ def timing_type(column: str) -> Any:
     return pa.string() if column == "holder" else pa.float64()
 
 
-def _typed(value: Any, kind: Any) -> Any:
-    """A timing cell (a number, or the CSV's text of one; "" for none) as its column's type."""
+def _converter(kind: Any) -> Any:
+    """How a timing cell (a number, or the CSV's text of one; "" for none) becomes its column's type."""
     import pyarrow as pa
 
-    if value is None or value == "":
-        return None
-    if pa.types.is_integer(kind):
-        return int(value)
-    if pa.types.is_string(kind):
-        return str(value)
-    return float(value)
+    convert = int if pa.types.is_integer(kind) else str if pa.types.is_string(kind) else float
+    return lambda value: None if value is None or value == "" else convert(value)
 
 
 class _Table:
@@ -97,6 +92,7 @@ class _Table:
     def __init__(self, folder: Path, types: dict[str, Any], resume_rows: int | None):
         self.folder, self.types = folder, types
         self.columns = list(types)
+        self.converters = [_converter(types[c]) for c in self.columns]  # made once: a timing row is per point
         self.rows: list[list[Any]] = []
         self.written = 0
         self.last_part = time.monotonic()
@@ -184,8 +180,7 @@ class ParquetTables:
         table = self._tables[name]
         if table is self._values or cells == table.columns:
             return  # a header (the values' rows come through values)
-        kinds = table.types
-        table.rows.append([_typed(v, kinds[c]) for v, c in zip(cells, table.columns)])
+        table.rows.append([convert(v) for convert, v in zip(table.converters, cells)])
 
     def flush(self, step: int | None = None) -> None:
         """A part of each table whose rows waited long enough or are many."""

@@ -84,18 +84,9 @@ class NodeRuntime:
     def link(self) -> NodeLink | None:
         return self.receiver.link
 
-    def context(self) -> NodeContext:
-        params = dict(self.spec.parameters)
-        if self.spec.rate is not None:
-            params.setdefault("rate", self.spec.rate)
-        project_dir = self.loaded.path.parent if self.loaded.path else None
-        return NodeContext(self.name, self.spec.UID, list(self.spec.input), list(self.spec.output), params,
-                           self.cosim.stepSize, self.cosim.startTime, **({"project_dir": project_dir} if project_dir else {}),
-                           real_time=self.cosim.real_time_factor(), stop_time=self.cosim.stopTime)
-
     def _setup(self) -> None:
         try:
-            self.impl.setup(self.context())
+            self.impl.setup(node_context(self.loaded, self.spec))
             # Asked of every release a node checks: what it is does not change once set up.
             self.receiver.interpolating = isinstance(self.impl, Node) and self.impl.can_interpolate
             if isinstance(self.impl, Node) and not isinstance(self.impl, SamplePlayer):
@@ -553,6 +544,18 @@ def _checkpoint_state(impl: Node, step: int, log: Any) -> tuple[int, bytes] | No
     except Exception as exc:
         log.warning("cannot serialise its state for a checkpoint", step=step, error=f"{type(exc).__name__}: {exc}")
         return None
+
+
+def node_context(loaded: LoadedProject, spec: Any) -> NodeContext:
+    """What a node's model is set up with: its entry's ports and parameters, the run's clock."""
+    cosim = loaded.project.coSimulation
+    params = dict(spec.parameters)
+    if spec.rate is not None:
+        params.setdefault("rate", spec.rate)
+    project_dir = loaded.path.parent if loaded.path else None
+    return NodeContext(spec.nodeName, spec.UID, list(spec.input), list(spec.output), params,
+                       cosim.stepSize, cosim.startTime, **({"project_dir": project_dir} if project_dir else {}),
+                       real_time=cosim.real_time_factor(), stop_time=cosim.stopTime)
 
 
 # What a node takes its next frame as: the run's first; after a restarted process's HELLO, a
