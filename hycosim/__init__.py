@@ -15,7 +15,7 @@ imports; ``hycosim.dashboard`` the web dashboard;
 # as every node process needs it.
 _API = frozenset({"open", "Simulation", "Outcome", "SimulationError", "ProjectError", "PortError", "TimeError",
                   "ClosedError", "OverrideError", "ParameterError", "RunFailed"})
-_OBSERVERS = frozenset({"Observer", "LastValues", "TimeSeries"})
+_OBSERVERS = frozenset({"Observer", "RecordedPoint", "LastValues", "TimeSeries"})
 
 
 def __getattr__(name: str):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import subprocess
 import sys
@@ -250,6 +251,49 @@ def test_a_users_observer_hears_the_end_and_one_that_fails_ends_the_run_named(tm
         with pytest.raises(hycosim.RunFailed, match="observer Broken: step_complete failed at step 2.*cannot keep up"):
             sim.run_until(0.5)
     assert broken.ended == "failed" and len(read_rows(sim.run_dir)) >= 3
+
+
+class _OwnRecorder:
+    """A recorder of a user's own, written against the observer protocol as hycosim's recorder
+    is: the point whole (mode, each node's lists, how the step went), not port by port."""
+
+    def __init__(self):
+        self.rows, self.timing, self.ended = [], [], None
+
+    def step_complete(self, step, t, point):
+        cells = [step, t, point.mode]
+        for side in (point.outputs, point.inputs):
+            for values in side.values():
+                for value in values:
+                    cells.extend(value if isinstance(value, list) else [value])
+        self.rows.append(cells)
+        self.timing.append((step, point.holder, sorted(point.arrivals), point.takes))
+
+    def state_restored(self, step, t):
+        raise AssertionError("nothing is restored in this run")
+
+    def run_ended(self, status):
+        self.ended = status
+
+
+def test_a_users_recorder_sees_each_point_whole_as_the_recorder_writes_it(tmp_path):
+    project = _catch(tmp_path)
+    own = _OwnRecorder()
+    with hycosim.open(project, runs_dir=tmp_path / "runs") as sim:
+        sim.add_observer(own)
+        sim.run_until(json.loads(project.read_text())["coSimulation"]["stopTime"])
+    assert own.ended == "completed"
+    with open(sim.run_dir / "values.csv", newline="") as f:
+        table = list(csv.reader(f))[1:]
+    assert len(own.rows) == len(table) > 10
+    for mine, row in zip(own.rows, table):
+        assert [mine[0], mine[1], mine[2]] == [int(row[0]), float(row[1]), row[2]]
+        assert [float(v) for v in mine[3:]] == [float(c) for c in row[3:]], row[0]
+    with open(sim.run_dir / "timing.csv", newline="") as f:
+        timing = list(csv.DictReader(f))
+    assert [(k, holder) for k, holder, _, _ in own.timing] == [(int(r["step"]), r["holder"]) for r in timing]
+    stepping = sorted(c.split(":", 1)[1] for c in timing[0] if c.startswith("arrival_s:"))
+    assert all(arrived == stepping for _, _, arrived, _ in own.timing[1:])  # every release's answers
 
 
 def test_a_time_series_drops_what_a_rollback_takes_again():

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import math
 from pathlib import Path
 
@@ -117,3 +118,28 @@ def test_a_non_finite_time_or_value_is_written_as_python_writes_it(tmp_path, apa
     recorder.close("completed")
     assert (tmp_path / "run" / "values.csv").read_text().splitlines()[1] == "0,inf,free,nan,18446744073709551616,1," \
         "-0.0,1e+16,-inf,5e-324"
+
+
+def test_the_recorder_goes_back_only_to_a_checkpoint_whose_positions_it_was_given(loaded, tmp_path):
+    from hycosim.master.observers import RecordedPoint
+    from hycosim.master.record_files import RecordError
+
+    recorder = Recorder(tmp_path, loaded, {})
+    point = RecordedPoint(loaded.project)
+    a = [0.5, 1, True, [0.0, 1.0]] + (["x"] if any(p.name == "s" for p in loaded.project.node("a").output) else [])
+    point.mode, point.outputs, point.inputs = "free", {"a": a, "b-2": [1.0]}, {"a": [], "b-2": [0.5]}
+    point.arrivals = {"a": 0.001, "b-2": 0.002}
+    for k in range(2):
+        recorder.step_complete(k, 0.1 * k, point)
+    at = recorder.positions(2)  # a checkpoint at point 2 is taken as the loop reaches it, before its row
+    for k in range(2, 6):
+        recorder.step_complete(k, 0.1 * k, point)
+    with pytest.raises(RecordError, match="back to step 2: no checkpoint's positions"):
+        recorder.state_restored(2, 0.2)
+    recorder.going_back(2, at)
+    recorder.state_restored(2, 0.2)
+    recorder.run_ended("completed")
+    rows = list(csv.reader(open(tmp_path / "values.csv", newline="")))[1:]
+    timing = list(csv.reader(open(tmp_path / "timing.csv", newline="")))[1:]
+    assert [r[0] for r in rows] == [r[0] for r in timing] == ["0", "1"]
+    assert json.loads((tmp_path / "meta.json").read_text())["status"] == "completed"

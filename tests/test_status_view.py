@@ -137,3 +137,33 @@ def test_an_asker_within_the_budget_is_never_refused():
     assert budget.refused == 0
     # then a loop at once: what is left of the burst (one went to the last steady question), no more
     assert sum(budget.take() for _ in range(100)) == 19 and budget.refused == 81
+
+
+def _point(project, released):
+    from hycosim.master.observers import RecordedPoint
+
+    point = RecordedPoint(project)
+    point.mode, point.outputs, point.inputs = "free", {"a": [1.0]}, {"b": [1.0]}
+    point.released, point.holder, point.wait_s, point.arrivals = released, "a", 0.001, {"a": 0.001}
+    return point
+
+
+def test_the_status_answer_follows_the_points_as_an_observer_and_a_rollback():
+    from hycosim.core.schema import Project
+    from hycosim.master.status_view import LatestPoints
+
+    project = Project.model_validate({
+        "projectName": "p", "nodeNum": 2, "linkNum": 1,
+        "nodeLists": [{"nodeName": "a", "UID": 1, "model": "ramp", "output": ["y"]},
+                      {"nodeName": "b", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]}],
+        "linkLists": [{"from": "a.y", "to": "b.u"}], "coSimulation": {"stepSize": 0.1, "stopTime": 1.0}})
+    latest = LatestPoints(0.0, 100, "free")
+    for k in range(8):
+        # Points 3 and 4 lie inside a batched release: no release of their own.
+        latest.step_complete(k, 0.1 * k, _point(project, None if k in (3, 4) else float(k)))
+    assert [step for step, *_ in latest.history] == list(range(8)) and len(latest.recent) == 6
+    latest.state_restored(5, 0.5)
+    answer = latest.answer(8.0, since=-1)
+    assert [p[0] for p in answer["points"]] == [0, 1, 2, 3, 4] and answer["step"] == 7
+    latest.step_complete(5, 0.5, _point(project, 9.0))
+    assert latest.answer(9.5, since=4)["points"][0][0] == 5

@@ -2,8 +2,11 @@
 
 An :class:`Observer` is told of every point the run records (the values ``values.csv`` holds
 there: each output as its node stepped it, each input as routed), of a rollback to a
-checkpoint (the points after it are taken again), and of the run's end. Two come with
-hycosim: :class:`LastValues` (each port's latest value) and :class:`TimeSeries` (chosen ports
+checkpoint (the points after it are taken again), and of the run's end. The master's own
+parts that follow the points are observers too, told first: the recorder (master.recorder,
+CSV or Parquet tables) and, where anyone can ask for it, the status answer that ``hycosim
+status`` and the dashboard's feed read (master.status_view). Two more come with hycosim for
+users: :class:`LastValues` (each port's latest value) and :class:`TimeSeries` (chosen ports
 over time). A Python caller adds its own with ``Simulation.add_observer``; any object with
 these methods will do.
 """
@@ -26,7 +29,8 @@ class Observer(Protocol):
 
     def step_complete(self, step: int, t: float, values: Mapping[str, Any]) -> None:
         """Point ``step`` at ``t`` was recorded with ``values`` (``node.port`` → value, arrays as
-        lists). The mapping is the master's and changes after the call: copy what you keep."""
+        lists; a :class:`RecordedPoint`). The mapping is the master's and changes after the
+        call: copy what you keep."""
 
     def state_restored(self, step: int, t: float) -> None:
         """The run went back to its checkpoint at point ``step``: the points from it on come again."""
@@ -60,24 +64,39 @@ def project_observers(loaded: LoadedProject) -> list[Observer]:
     return made
 
 
-class PointValues(Mapping[str, Any]):
-    """A point's values by ``node.port``, read from the master's lists without copying them."""
+class RecordedPoint(Mapping[str, Any]):
+    """A recorded point as observers see it: its values by ``node.port``, read from the master's
+    lists without copying them, and beside the mapping the point whole, for observers that keep
+    it as the master holds it (the recorders, the status answer): ``mode``, ``outputs`` and
+    ``inputs`` (per node, its ports' values in the project's order), ``stepped`` (a multi-rate
+    run's nodes that started a step there), and how the step to it went: ``wait_s`` (from its
+    release to the last answer), ``holder`` (the node answering last), ``lateness_s`` (a paced
+    run's), ``arrivals`` (each node's answer, seconds after the release), ``ages`` (each
+    asynchronous value's), ``takes`` and ``released`` (perf_counter at the release of the step
+    from it; None for a point inside a batched release, which had no release of its own).
+    One object, its fields replaced at each point: nothing of it outlives the call."""
+
+    __slots__ = ("_where", "mode", "outputs", "inputs", "stepped", "wait_s", "holder", "lateness_s",
+                 "arrivals", "ages", "takes", "released")
 
     def __init__(self, project: Project):
         self._where = {f"{n.nodeName}.{p.name}": ("out", n.nodeName, i)
                        for n in project.nodeLists for i, p in enumerate(n.output)}
         self._where.update({f"{n.nodeName}.{p.name}": ("in", n.nodeName, i)
                             for n in project.nodeLists for i, p in enumerate(n.input)})
-        self._outputs: Mapping[str, list[Any]] = {}
-        self._inputs: Mapping[str, list[Any]] = {}
-
-    def at(self, outputs: Mapping[str, list[Any]], inputs: Mapping[str, list[Any]]) -> PointValues:
-        self._outputs, self._inputs = outputs, inputs
-        return self
+        self.mode = ""
+        self.outputs: Mapping[str, list[Any]] = {}
+        self.inputs: Mapping[str, list[Any]] = {}
+        self.stepped: list[str] | None = None
+        self.wait_s, self.holder, self.lateness_s = 0.0, "", None
+        self.arrivals: dict[str, float] = {}
+        self.ages: dict[str, float | None] = {}
+        self.takes = 1
+        self.released: float | None = None
 
     def __getitem__(self, port: str) -> Any:
         side, node, i = self._where[port]
-        value = (self._outputs if side == "out" else self._inputs)[node][i]
+        value = (self.outputs if side == "out" else self.inputs)[node][i]
         return list(value) if isinstance(value, list) else value
 
     def __iter__(self):

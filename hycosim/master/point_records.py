@@ -1,5 +1,6 @@
-"""Each macro-step point into the records and to the observers: the point the loop is at, the
-base points inside a batched release, and the point where a node's model ended the run."""
+"""Each macro-step point to the observers (the recorder among them): the point the loop is at,
+the base points inside a batched release, and the point where a node's model ended the run;
+rollbacks and the run's end to the same observers."""
 
 from __future__ import annotations
 
@@ -8,45 +9,73 @@ from typing import Any
 
 from hycosim.core.schema import Project
 from hycosim.master.barrier import Barrier
-from hycosim.master.observers import Observer, PointValues
-from hycosim.master.recorder import Recorder
+from hycosim.master.observers import Observer, RecordedPoint
+from hycosim.master.record_files import RecordError
 from hycosim.master.run_state import Point, RunError, Seen
 
 
 class PointRecords:
-    """Rows and timings for the recorder; every row to the observers too, once one is added."""
+    """Every point to the observers: the master's own first (the recorder, the status answer),
+    then the ones a user added. Each is told through the same three calls."""
 
-    def __init__(self, project: Project, recorder: Recorder, barrier: Barrier):
-        self.project, self.recorder, self.barrier = project, recorder, barrier
-        self.observers: list[Observer] = []
-        self._values = PointValues(project)
-        # A row goes to the recorder alone until an observer is added.
-        self.row = recorder.row
+    def __init__(self, project: Project, barrier: Barrier, own: list[Observer]):
+        self.project, self.barrier = project, barrier
+        self.observers: list[Observer] = list(own)
+        self._told = [(o, o.step_complete) for o in self.observers]
+        self._point = RecordedPoint(project)
 
     def add_observer(self, observer: Observer) -> None:
         self.observers.append(observer)
-        self.row = self._row_observed
+        self._told.append((observer, observer.step_complete))
 
-    def _row_observed(self, step: int, t: float, mode: str, outputs: dict[str, list[Any]],
-                      inputs: dict[str, list[Any]], stepped: list[str] | None = None) -> None:
-        self.recorder.row(step, t, mode, outputs, inputs, stepped)
-        values = self._values.at(outputs, inputs)
+    def _record(self, step: int, t: float, mode: str, outputs: dict[str, list[Any]],
+                inputs: dict[str, list[Any]], stepped: list[str] | None, wait_s: float, holder: str,
+                lateness_s: float | None, arrivals: dict[str, float], ages: dict[str, float | None],
+                takes: int = 1, released: float | None = None) -> None:
+        """Point ``step`` to every observer: its values, and how the step to it went."""
+        point = self._point
+        point.mode, point.outputs, point.inputs, point.stepped = mode, outputs, inputs, stepped
+        point.wait_s, point.holder, point.lateness_s = wait_s, holder, lateness_s
+        point.arrivals, point.ages, point.takes, point.released = arrivals, ages, takes, released
+        for observer, step_complete in self._told:
+            try:
+                step_complete(step, t, point)
+            except (RecordError, RunError):
+                raise
+            except Exception as exc:  # a user's observer: anything may go wrong in it
+                raise self._failed(observer, "step_complete", step, exc) from exc
+
+    def restored(self, step: int, t: float) -> None:
+        """The run went back to its checkpoint at point ``step``: every observer told (the
+        recorder cuts its files back to it first)."""
         for observer in self.observers:
-            self.tell(observer, "step_complete", step, t, values)
+            try:
+                observer.state_restored(step, t)
+            except (RecordError, RunError):
+                raise
+            except Exception as exc:  # a user's observer
+                raise self._failed(observer, "state_restored", step, exc) from exc
 
-    def tell(self, observer: Observer, what: str, *args: Any) -> None:
-        """Call an observer; its failure ends the run, named, records kept."""
-        try:
-            getattr(observer, what)(*args)
-        except Exception as exc:  # a user's observer: anything may go wrong in it
-            raise RunError(f"observer {type(observer).__name__}: {what} failed at step {self.barrier.point}: "
-                           f"{type(exc).__name__}: {exc}") from exc
+    def ended(self, status: str, log: Any) -> None:
+        """The run is over: every observer told, the recorder first (it closes the records and
+        never raises); one that fails is logged, for the run is over and recorded."""
+        for observer in self.observers:
+            try:
+                observer.run_ended(status)
+            except Exception:  # noqa: BLE001 - a broken observer changes nothing now
+                log.exception("observer failed at the run's end", observer=type(observer).__name__)
 
-    def point(self, p: Point, seen: Seen) -> None:
+    @staticmethod
+    def _failed(observer: Observer, what: str, step: int, exc: Exception) -> RunError:
+        """A user's observer that failed: the run ends, named, records kept."""
+        return RunError(f"observer {type(observer).__name__}: {what} failed at step {step}: "
+                        f"{type(exc).__name__}: {exc}")
+
+    def point(self, p: Point, seen: Seen, released: float) -> None:
         """Point p as the loop saw it, with the inputs the step from it is taken on (an iterated
-        step's last) and how the step to it went."""
-        self.row(p.k, p.t, seen.mode, seen.outputs, self.barrier.router.inputs, seen.stepped)
-        self.recorder.timing(p.k, p.t, p.wait, seen.holder, seen.lateness, p.arrivals, seen.ages, p.takes)
+        step's last) and how the step to it went; ``released``: when the step from it was."""
+        self._record(p.k, p.t, seen.mode, seen.outputs, self.barrier.router.inputs, seen.stepped,
+                     p.wait, seen.holder, seen.lateness, p.arrivals, seen.ages, p.takes, released)
 
     def inside(self, k: int, times: list[float], mode: str, at_k: dict[str, list[Any]],
                arrivals: dict[str, float]) -> dict[str, list[Any]]:
@@ -64,8 +93,8 @@ class PointRecords:
                 outputs[node] = values
                 came[node] = arrivals[node]
             b.router.route(mode, times[i], outputs, b.histories)
-            self.row(k + i, times[i], mode, outputs, b.router.inputs, b.coupling.due(k + i))
-            self.recorder.timing(k + i, times[i], 0.0, holder, None, came, {})
+            self._record(k + i, times[i], mode, outputs, b.router.inputs, b.coupling.due(k + i),
+                         0.0, holder, None, came, {})
         return outputs
 
     def end(self, k: int, mode: str, at_k: dict[str, list[Any]], times: list[float]) -> None:
@@ -97,8 +126,8 @@ class PointRecords:
         outputs[ended["node"]] = ending.values
         at = times[after] if on_grid else t_end
         b.router.route(mode, at, outputs, b.histories)
-        self.row(k + after, at, mode, outputs, b.router.inputs, None)
-        self.recorder.timing(k + after, at, 0.0, ended["node"], None, ending.arrivals if on_grid else {}, {})
+        self._record(k + after, at, mode, outputs, b.router.inputs, None,
+                     0.0, ended["node"], None, ending.arrivals if on_grid else {}, {})
         ended["step"] = k + after
 
     def _outputs_inside(self, i: int, times: list[float], held: dict[str, list[Any]]) -> dict[str, list[Any]]:

@@ -25,6 +25,7 @@ from hycosim.core.schema import PortType
 
 from hycosim.core.config import LoadedProject
 from hycosim.core.recordings import SAMPLES_FILE, encode_sample
+from hycosim.master.observers import RecordedPoint
 from hycosim.master.record_files import RecordError, RecordFile, close_all, flush_all
 from hycosim.master.parquet_tables import ParquetTables
 from hycosim.master.row_writer import LocalRows, RowWriter, Tables
@@ -67,7 +68,8 @@ def _typed_cells(values: list[Any], arrays: list[bool]) -> Iterator[Any]:
 
 class Recorder:
     """Writes ``values.csv``, ``timing.csv`` (or their Parquet tables), ``events.jsonl``, ``samples.jsonl``
-    and ``meta.json`` in ``run_dir``."""
+    and ``meta.json`` in ``run_dir``. The points come to it as to any observer of the run
+    (master.observers): it is the first the master tells."""
 
     def __init__(self, run_dir: Path, loaded: LoadedProject, meta: dict[str, Any],
                  resume_at: dict[str, int] | None = None, rows_apart: bool = False, record_format: str = "csv"):
@@ -148,6 +150,32 @@ class Recorder:
             self.meta.update(status="running")
         self.write_meta()
         self._files = {"events.jsonl": self._events_file, SAMPLES_FILE: self._samples_file}
+        # Where the records stood at the checkpoint the run is going back to (its step, the positions).
+        self._going_back: tuple[int, dict[str, int]] | None = None
+
+    # --- an observer of the run's points (master.observers) --------------------------
+
+    def step_complete(self, step: int, t: float, point: RecordedPoint) -> None:
+        """Point ``step``: its row of values and its row of timing."""
+        self.row(step, t, point.mode, point.outputs, point.inputs, point.stepped)
+        self.timing(step, t, point.wait_s, point.holder, point.lateness_s, point.arrivals, point.ages, point.takes)
+
+    def going_back(self, step: int, positions: dict[str, int]) -> None:
+        """The run is going back to its checkpoint at point ``step``, where the record files
+        ended at ``positions`` (the checkpoint's: it may come from another process's run)."""
+        self._going_back = (step, positions)
+
+    def state_restored(self, step: int, t: float) -> None:
+        """Back at the checkpoint at point ``step``: every file cut to where it stood there."""
+        if self._going_back is None or self._going_back[0] != step:
+            raise RecordError(f"cannot cut the records in {self.run_dir} back to step {step}: "
+                              "no checkpoint's positions were given for it")
+        self.cut(self._going_back[1], steps=step)
+        self._going_back = None
+
+    def run_ended(self, status: str) -> None:
+        """The run is over: the rest written, and the outcome (what the run put in ``meta`` with it)."""
+        self.close(status)
 
     def row(self, step: int, t: float, mode: str, outputs: dict[str, list[Any]], inputs: dict[str, list[Any]],
             stepped: list[str] | None = None) -> None:

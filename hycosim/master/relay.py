@@ -82,14 +82,17 @@ class Relay:
         self.checkpointing = Checkpointing(loaded, recorder, stepping, self._log)
         self.barrier = Barrier(loaded, self.router, self.coordinator, recorder, self.members, self.checkpointing,
                                self.progress, self._log)
-        self.records = PointRecords(self.project, recorder, self.barrier)
+        self.latest = LatestPoints(self.cosim.startTime, RECENT_KEPT, FREE_MODE)  # for the status answers
+        # The master's own observers of the points: the recorder, and the status answer where
+        # anyone can ask for it (in process nobody does: a fifth of a step's work saved).
+        self.records = PointRecords(self.project, self.barrier,
+                                    [recorder, self.latest] if transport.serves_status else [recorder])
         # How each step is taken; made where the project is loaded, planned once the nodes said what they can.
         self.algorithm: MasterAlgorithm = algorithm if algorithm is not None else project_algorithm(loaded)
         self._short_steps = 0  # steps of H / STARTUP_SPLIT that open the run (interpolated inputs)
         # The tunable parameters' values as the nodes hold them (None: their start values; {}:
         # unknown, after a restore: every tuned one is sent again).
         self._tuned: dict[tuple[str, str], Any] | None = None
-        self.latest = LatestPoints(self.cosim.startTime, RECENT_KEPT, FREE_MODE)  # for the status answers
         self.answers = AnswerBudget()  # status answers a second: anyone may ask
         # Go on from the run directory's last checkpoint (its server died after recording this many steps).
         self._resume = resume
@@ -186,18 +189,14 @@ class Relay:
             if self.gateway is not None:
                 self.gateway.close(reason or status_text)
             b.intake.drops.flush(self.progress.step)
-            self.recorder.close(status_text, reason=reason, dropped_frames=self._dropped(),
-                                non_finite=b.intake.non_finite,
-                                reattached=dict(self.members.reattached), server_waits=b.inbox.waits,
-                                messages=dict(b.messages), checkpoints_taken=self.checkpointing.taken,
-                                samples_received={n: h.received for n, h in b.histories.items()})
+            self.recorder.meta.update(reason=reason, dropped_frames=self._dropped(),
+                                      non_finite=b.intake.non_finite,
+                                      reattached=dict(self.members.reattached), server_waits=b.inbox.waits,
+                                      messages=dict(b.messages), checkpoints_taken=self.checkpointing.taken,
+                                      samples_received={n: h.received for n, h in b.histories.items()})
+            self.records.ended(status_text, self._log)  # the recorder first: it writes the outcome
             self.transport.close()
             b.inbox.close()
-            for observer in self.records.observers:
-                try:
-                    observer.run_ended(status_text)
-                except Exception:  # noqa: BLE001 - the run is over and recorded; a broken observer changes nothing
-                    self._log.exception("observer failed at the run's end", observer=type(observer).__name__)
 
     def _start_gateway(self) -> None:
         if self._gateway_address is None:
@@ -371,7 +370,8 @@ class Relay:
         for node in b.outputs:
             b.outputs[node] = list(s["outputs"][node])
             self.router.inputs[node][:] = s["inputs"][node]
-        self.recorder.cut(s["records"], steps=s["step"])
+        self.recorder.going_back(s["step"], s["records"])
+        self.records.restored(s["step"], s["t"])  # the recorder's files cut back first, then the others told
         for node, history in b.histories.items():
             newer = [(t, v) for t, v in history.snapshot()["samples"]]
             history.restore(s["histories"].get(node, {"samples": [], "received": 0}))
@@ -386,8 +386,6 @@ class Relay:
         s, arrivals, wait = self._restore(cause)
         self.scenario.rewind(s["t"])  # its record after the checkpoint was cut with the others
         self._tuned = {}  # what the nodes hold now is not known: every tuned parameter is sent again
-        for observer in self.records.observers:
-            self.records.tell(observer, "state_restored", s["step"], s["t"])
         self.checkpointing.go_on_from(s["t"])
         rt = self.cosim.real_time_factor()
         self._clock = RealTimeClock(s["t"], time.time(), rt) if rt is not None else None
@@ -474,11 +472,8 @@ class Relay:
         self.progress.step, self.progress.t, self.progress.mode = p.k, p.t, seen.mode
         self.progress.lateness_s = seen.lateness
         now = time.perf_counter()
-        if self.transport.serves_status:  # in process nobody asks: a fifth of a step's work saved
-            self.latest.point((now, seen.holder, p.wait, p.arrivals), p.k, p.t, seen.mode, seen.outputs,
-                              self.router.inputs, seen.ages)
         self._rate.point(self.progress, p.k, now)
-        self.records.point(p, seen)
+        self.records.point(p, seen, now)
 
     def _next_point(self, p: Point, short: bool) -> tuple[float, list[float] | None]:
         """The time the step from point p ends, and for a batched release the base points it spans."""

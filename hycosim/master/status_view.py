@@ -18,6 +18,8 @@ from collections import deque
 from collections.abc import Sequence
 from typing import Any
 
+from hycosim.master.observers import RecordedPoint
+
 # At most this many points an answer (at five answers a second, 320 a second: more than a plot
 # a thousand pixels wide keeps of a run past its first seconds).
 STATUS_POINTS = 64
@@ -66,9 +68,9 @@ def points_since(history: Sequence[tuple], since: int) -> list[list[Any]]:
 
 
 class LatestPoints:
-    """The run's latest points as the status answer shows them: the loop adds each point (and
-    each mode switch) as it reaches it; Zenoh's thread reads them for an answer, each a copy
-    taken at once under the GIL."""
+    """The run's latest points as the status answer shows them (``hycosim status``, the
+    dashboard's feed): an observer of the run's points, to which the loop adds each mode switch
+    too; Zenoh's thread reads them for an answer, each a copy taken at once under the GIL."""
 
     def __init__(self, start_time: float, kept: int, free_mode: str):
         self.kept = kept
@@ -79,13 +81,25 @@ class LatestPoints:
         self.ages: dict[str, float | None] = {}  # each asynchronous value's age at the latest point
         self.switches: deque[dict[str, Any]] = deque(maxlen=200)  # the latest mode switches
 
-    def point(self, released: Recent, k: int, t: float, mode: str, outputs: dict[str, list[Any]],
-              inputs: dict[str, list[Any]], ages: dict[str, float | None]) -> None:
-        """Point k as the loop reached it: its values whole (copies: the loop goes on changing them)."""
-        self.recent.append(released)
-        self.shown = (k, t, mode, dict(outputs), {n: list(v) for n, v in inputs.items()}, time.time())
+    # --- an observer of the run's points (master.observers) --------------------------
+
+    def step_complete(self, step: int, t: float, point: RecordedPoint) -> None:
+        """Point ``step`` as recorded: its values whole (copies: the loop goes on changing them),
+        and where a release left from it, how the barrier held it."""
+        if point.released is not None:
+            self.recent.append((point.released, point.holder, point.wait_s, point.arrivals))
+            self.ages = point.ages
+        self.shown = (step, t, point.mode, dict(point.outputs), {n: list(v) for n, v in point.inputs.items()},
+                      time.time())
         self.history.append(self.shown)
-        self.ages = ages
+
+    def state_restored(self, step: int, t: float) -> None:
+        """Back at point ``step``: the points from it on come again, and are shown again."""
+        while self.history and self.history[-1][0] >= step:
+            self.history.pop()
+
+    def run_ended(self, status: str) -> None:
+        """Nothing to do: the latest point stays the answer's, for whoever asks while the run closes."""
 
     def answer(self, now: float, since: int | None) -> dict[str, Any]:
         """The status answer's part on the latest points (``since``: also the points after that step)."""
