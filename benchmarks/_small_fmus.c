@@ -11,6 +11,10 @@
  *                         step is located exactly (a state event: v = -e v there, bounces + 1) and
  *                         the ball rests once it leaves the floor slower than 1 mm/s. Outputs h, v
  *                         (Real), bounces (Integer), falling (Boolean, v < 0).
+ *   MODEL 6, Constant:    y = 3;
+ *   MODEL 7, LateFeedthrough: y = u, computed only when the FMU leaves initialisation mode and in
+ *                         its steps, never in a getter (as pythonfmu FMUs commonly do): an importer
+ *                         that sets its start input after exitInitializationMode starts it late.
  *
  * Value references (see benchmarks/_small_fmus.py): Reals 0..N_REAL-1, Integers from 100,
  * Booleans from 200. The state can be saved and restored (fmi2Get/SetFMUstate) but not
@@ -54,8 +58,19 @@ static const int START_B[] = {0, 1};
 static const double START_R[] = {1.0, 0.0, 9.81, 0.8};
 static const int START_I[] = {0};
 static const int START_B[] = {0};
+#elif MODEL == 6
+#define N_REAL 1 /* y */
+#define N_INT 0
+#define N_BOOL 0
+static const double START_R[] = {3.0};
+#elif MODEL == 7
+#define N_REAL 2 /* u, y */
+#define N_INT 0
+#define N_BOOL 0
+static const double START_R[] = {0.0, 0.0};
+#define NO_SETTLE_ON_GET
 #else
-#error "MODEL must be 1 to 5"
+#error "MODEL must be 1 to 7"
 #endif
 
 typedef struct {
@@ -121,6 +136,17 @@ static void step(Instance *s, double left) {
     }
 }
 static void settle(Instance *s) { s->b[0] = s->r[1] < 0.0; }
+#elif MODEL == 6
+static void step(Instance *s, double h) { (void)s; (void)h; }
+static void settle(Instance *s) { (void)s; }
+#elif MODEL == 7
+static void step(Instance *s, double h) { (void)h; s->r[1] = s->r[0]; }
+static void settle(Instance *s) { s->r[1] = s->r[0]; }
+#endif
+#ifdef NO_SETTLE_ON_GET
+static void on_get(Instance *s) { (void)s; }
+#else
+static void on_get(Instance *s) { settle(s); }
 #endif
 
 FMI2_Export const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
@@ -156,7 +182,7 @@ FMI2_Export fmi2Status fmi2Reset(fmi2Component c) {
     FMI2_Export fmi2Status fmi2Get##Type(fmi2Component c, const fmi2ValueReference vr[], size_t n,        \
                                          ctype value[]) {                                                  \
         Instance *inst = c;                                                                                \
-        settle(inst);                                                                                      \
+        on_get(inst);                                                                                      \
         for (size_t k = 0; k < n; k++) {                                                                   \
             if (vr[k] < (first) || vr[k] >= (first) + (count)) return fmi2Error;                           \
             value[k] = inst->array[vr[k] - (first)];                                                       \

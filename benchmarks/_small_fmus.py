@@ -36,7 +36,12 @@ MODELS = {
     "Ball": (5, [("h", "output", "Real", 1.0, []), ("v", "output", "Real", 0.0, []),
                  ("g", "parameter", "Real", 9.81, None), ("e", "parameter", "Real", 0.8, None),
                  ("bounces", "output", "Integer", 0, []), ("falling", "output", "Boolean", None, [])]),
+    "Constant": (6, [("y", "output", "Real", 3.0, [])]),
+    "LateFeedthrough": (7, [("u", "input", "Real", 0.0, None), ("y", "output", "Real", None, ["u"])]),
 }
+# Models whose outputs change only when they leave initialisation mode and in their steps,
+# never when an input is set: an engine reads y(t) = u(t - H), as hycosim records any output.
+LATE = {"LateFeedthrough"}
 # Value references: each type's variables in order from its first (benchmarks/_small_fmus.c).
 _FIRST_VR = {"Real": 0, "Integer": 100, "Boolean": 200}
 

@@ -58,11 +58,41 @@ def test_a_feedthrough_chain_starts_consistent_in_processes_and_in_one_process(t
     assert (apart / "values.csv").read_bytes() == (together / "values.csv").read_bytes()
     meta = json.loads((apart / "meta.json").read_text())
     assert meta["initialisation"] == [{"nodes": ["ft"], "loop": False, "sweeps": 1},
-                                      {"nodes": ["ft2"], "loop": False, "sweeps": 1}]
+                                      {"nodes": ["ft2"], "loop": False, "sweeps": 1},
+                                      {"nodes": ["dahlquist", "ft", "ft2"], "left": "initialization mode"}]
     # Without the phase the nodes start from what their setup made (y = 0), a step late per link.
     off = _chain(tmp_path / "off.json", small, initialize={"enabled": False})
     row = read_rows(_run(off, tmp_path / "off"))[0]
     assert (float(row["ft.u"]), float(row["ft.y"]), float(row["ft2.y"])) == (3.0, 0.0, 0.0)
+
+
+def _late(path: Path, fmus: dict[str, Path], **cosim) -> Path:
+    """Constant.y (3) --(2x + 1)--> ft1 --> ft2, feedthroughs that compute y = u only when they
+    leave initialisation mode and in their steps (as pythonfmu FMUs commonly do)."""
+    return write_project(path, [
+        {"nodeName": "source", "UID": 1, "fmu": str(fmus["Constant"]), "input": [], "output": ["y"]},
+        {"nodeName": "ft1", "UID": 2, "fmu": str(fmus["LateFeedthrough"]), "input": ["u"], "output": ["y"]},
+        {"nodeName": "ft2", "UID": 3, "fmu": str(fmus["LateFeedthrough"]), "input": ["u"], "output": ["y"]},
+    ], [{"from": "source.y", "to": "ft1.u", "factor": 2.0, "offset": 1.0}, {"from": "ft1.y", "to": "ft2.u"}],
+        cosim={"stepSize": 0.01, "stopTime": 0.03, **cosim}, name="late")
+
+
+def test_fmus_that_compute_on_leaving_initialisation_mode_start_from_their_linked_inputs(tmp_path, small):
+    # The start inputs are set inside initialisation mode, then every FMU leaves it: ft1 leaves
+    # it on u = 7 (y = 7 at t = 0); ft2 on ft1's y as read inside the mode (0), and its first
+    # step takes ft1's 7 (y = 7 from t = 0.01). ECOS gives the same (benchmarks/crosscheck.py).
+    cfg = _late(tmp_path / "late.json", small)
+    apart, together = _run(cfg, tmp_path / "apart"), _run(cfg, tmp_path / "together", "--in-process")
+    rows = read_rows(apart)
+    assert [(float(r["ft1.y"]), float(r["ft2.u"]), float(r["ft2.y"])) for r in rows[:3]] == [
+        (7.0, 7.0, 0.0), (7.0, 7.0, 7.0), (7.0, 7.0, 7.0)]
+    assert (apart / "values.csv").read_bytes() == (together / "values.csv").read_bytes()
+    done = json.loads((apart / "meta.json").read_text())["initialisation"]
+    assert done[-1] == {"nodes": ["source", "ft1", "ft2"], "left": "initialization mode"}
+    # Without the phase every FMU leaves the mode at its first step, on its inputs' start values:
+    # ft1 gives 0 at t = 0, as an importer that sets the inputs after leaving it would.
+    off = read_rows(_run(_late(tmp_path / "off.json", small, initialize={"enabled": False}), tmp_path / "off"))
+    assert [float(r["ft1.y"]) for r in off[:2]] == [0.0, 7.0]
 
 
 def test_the_chain_agrees_with_ecos_at_every_point_where_the_schemes_agree(tmp_path, small):

@@ -28,6 +28,7 @@ from hycosim.bridge.gateway import _Connection, translate_release
 from hycosim.master.intake import Dropped, Intake
 from hycosim.master.recorder import Recorder
 from hycosim.master.relay import Relay
+from hycosim.transport.server_side import ZenohTransport
 from hycosim.node.runtime import NodeRuntime
 from tests.helpers import write_project
 from tests.wire_strategies import frame_arrays, gateway_streams, names, payloads, values
@@ -183,7 +184,7 @@ def _from_the_server(draw, node: str, wrong: str | None = "any") -> tuple[bytes,
                 at = draw(st.integers(1, 4))
                 fields[at] = draw(bad_t | st.sampled_from([0.0, -0.1]) if at in (2, 4) else bad_t)
         elif inner == frames.INIT:  # the initialisation's inputs at t0
-            fields = [draw(bad_t) if wrong == "t" else t, inputs]
+            fields = [draw(bad_t) if wrong == "t" else t, inputs, draw(st.booleans())]
         elif inner == frames.STEP:
             others = {n: [draw(st.floats(-1, 1))] for n in draw(st.sets(st.sampled_from(["clock", "src"])))}
             fields = [k, t, h, mode, inputs, driven, others]  # slopes only for nodes that interpolate
@@ -289,7 +290,8 @@ def relay(loaded, tmp_path_factory):
     # One relay's barrier for every example: a stream of hostile frames through one server, as on the wire.
     _quiet()
     recorder = Recorder(tmp_path_factory.mktemp("relay"), loaded, {})
-    r = Relay(loaded, None, recorder)  # nothing here touches the session: no release is sent
+    # A transport never opened: nothing here touches the session, no release is sent.
+    r = Relay(loaded, ZenohTransport(None), recorder)
     for node in ("clock", "g", "h", "src"):
         r.members.alive.add(node)
         r.members.capabilities[node] = {"rollback": False}

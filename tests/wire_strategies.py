@@ -66,7 +66,7 @@ _PLAUSIBLE: dict[int, tuple[st.SearchStrategy, ...]] = {
                    names, st.dictionaries(names, port_values, max_size=3), st.lists(names, max_size=3)),
     frames.BATCH: (uids, steps, times, port_values, st.lists(port_values | scalars, max_size=3)
                    | st.just([[0.0]] * frames.MAX_BATCH)),
-    frames.INIT: (times, st.dictionaries(names, port_values, max_size=3)),
+    frames.INIT: (times, st.dictionaries(names, port_values, max_size=3), st.booleans()),
     frames.TUNE: (names, steps, times, st.dictionaries(st.sampled_from(["k", "b", "i", "nope"]) | st.text(max_size=4),
                                                        scalars, max_size=3)),
 }

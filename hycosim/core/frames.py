@@ -49,9 +49,10 @@ Kinds and layouts (after version and kind):
   as OUTPUTS are); ``values`` at the end of the node's last step, ``earlier`` the outputs at
   the end of each of its steps before that, in order
 * ``INIT``     server → nodes, between the START's answers and the first release: ``t0, inputs
-  {node: [values]}``: the initialisation phase gives each node named in ``inputs`` its inputs at
-  t0 as the links carry its peers' start outputs; it takes them without stepping and answers
-  with its OUTPUTS at step 0 again (their values now on those inputs)
+  {node: [values]}, leave``: the initialisation phase gives each node named in ``inputs`` its
+  inputs at t0 as the links carry its peers' start outputs; it takes them without stepping
+  (``leave``: and leaves its model's initialisation mode) and answers with its OUTPUTS at step
+  0 again (their values now on those inputs)
 
 :func:`decode` checks every field's type (exactly as msgpack yields them: a bool is no
 number, a float no step), so that no receiver meets a list where it reads a name or an
@@ -151,7 +152,7 @@ _SHAPES: dict[int, tuple[int, Callable[[tuple], bool]]] = {
             and type(f[4]) is list),
     BATCH: (5, lambda f: type(f[0]) is int and type(f[1]) is int and type(f[2]) in _NUM and type(f[3]) is list
             and type(f[4]) is list),
-    INIT: (2, lambda f: type(f[0]) in _NUM and type(f[1]) is dict),
+    INIT: (3, lambda f: type(f[0]) in _NUM and type(f[1]) is dict and type(f[2]) is bool),
     TUNE: (4, lambda f: _str(f[0]) and _int(f[1]) and _num(f[2]) and type(f[3]) is dict),
 }
 
@@ -300,6 +301,7 @@ class Init(NamedTuple):
     kind = INIT
     t0: float
     inputs: dict[str, list[Any]]
+    leave: bool
 
 
 class Tune(NamedTuple):

@@ -631,6 +631,7 @@ class FmuInstance:
         # Its clocks, each an input clock of a constant interval (check_fmu refuses any other).
         self.clocks = mapping.clocks
         self._t0 = 0.0
+        self.initializing = False  # in initialisation mode (enter_initialization to exit_initialization)
         # FMI 2 only: FMI 3 co-simulation has no input derivatives.
         self.can_interpolate = not self.fmi3 and bool(getattr(cs, "canInterpolateInputs", False))
         self._variables = {v.name: v for v in self.md.modelVariables}
@@ -834,8 +835,8 @@ class FmuInstance:
 
     # --- lifecycle ------------------------------------------------------------------
 
-    def _initialize(self, start_time: float) -> None:
-        """Set parameters and input start values, then through initialisation mode (both interfaces)."""
+    def _enter_initialization(self, start_time: float) -> None:
+        """Set parameters and input start values, then into initialisation mode (both interfaces)."""
         self.time = self._t0 = start_time
         if not self.fmi3:
             self.fmu.setupExperiment(startTime=start_time)
@@ -847,16 +848,36 @@ class FmuInstance:
             self.fmu.enterInitializationMode(startTime=start_time)
         else:
             self.fmu.enterInitializationMode()
-        self.fmu.exitInitializationMode()
 
-    def initialize(self, start_time: float) -> None:
-        """Initialise the FMU at ``start_time`` (FMI 3 with event mode: settle its first event)."""
+    def _after_initialization(self) -> None:
+        """What follows exitInitializationMode (FMI 3 with event mode: settle its first event)."""
+        if self.event_mode:
+            self._handle_events()
+
+    def enter_initialization(self, start_time: float) -> None:
+        """Set parameters and start values and enter initialisation mode at ``start_time``, where
+        the start inputs are set and the outputs read (``set_inputs``, ``get_outputs``) before
+        every FMU of the system leaves it (:meth:`exit_initialization`), as FMI lays out."""
         try:
-            self._initialize(start_time)
-            if self.event_mode:
-                self._handle_events()
+            self._enter_initialization(start_time)
         except FMICallException as exc:
             raise FmuError(f"node {self.node!r}: initialising {self.path.name} failed ({exc})") from None
+        self.initializing = True
+
+    def exit_initialization(self) -> None:
+        """Leave initialisation mode: the FMU computes from the start inputs set in it."""
+        try:
+            self.fmu.exitInitializationMode()
+            self._after_initialization()
+        except FMICallException as exc:
+            raise FmuError(f"node {self.node!r}: initialising {self.path.name} failed ({exc})") from None
+        finally:
+            self.initializing = False
+
+    def initialize(self, start_time: float) -> None:
+        """Initialise the FMU at ``start_time`` in one call: into initialisation mode and out."""
+        self.enter_initialization(start_time)
+        self.exit_initialization()
 
     def _handle_events(self, t: float | None = None) -> None:
         """FMI 3 event mode (at ``t``, None: after initialisation): iterate the discrete states

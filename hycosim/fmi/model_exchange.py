@@ -74,14 +74,10 @@ class MeInstance(FmuInstance):
 
     # --- lifecycle ------------------------------------------------------------------
 
-    def initialize(self, start_time: float) -> None:
-        """Set parameters and start values, initialise, settle the initial event, make the solver."""
-        try:
-            self._initialize(start_time)
-            self._iterate_events(start_time)
-            self.solver = self._make_solver(start_time)
-        except FMICallException as exc:
-            raise FmuError(f"node {self.node!r}: initialising {self.path.name} failed ({exc})") from None
+    def _after_initialization(self) -> None:
+        """After exitInitializationMode: settle the initial event, make the solver."""
+        self._iterate_events(self._t0)
+        self.solver = self._make_solver(self._t0)
 
     def _make_solver(self, start_time: float) -> Any:
         fmu = self.fmu

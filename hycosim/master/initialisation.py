@@ -7,7 +7,11 @@ start from outputs that disagree with the inputs the links give it, and a chain 
 would start one macro step late per link. Here the server gives such nodes their linked inputs
 at t0 (INIT) and takes their outputs again, in the order the dependencies give: a node after
 the nodes it reads from; a cycle of them (an algebraic loop at the start) is swept in the
-project's node order until its outputs stop changing.
+project's node order until its outputs stop changing. An FMU is inside its initialisation mode
+all the while, as FMI lays out (ECOS and libcosim do the same): once every node has its start
+inputs, the nodes still in that mode get their inputs once more, leave it together, and
+answer with the outputs the first point records (an FMU that computes its outputs only when it
+leaves that mode, as pythonfmu's commonly do, starts from its linked inputs).
 
 This module plans and judges; :func:`run` sends and gathers through the barrier.
 """
@@ -151,7 +155,8 @@ def run(barrier: Any, loaded: LoadedProject, mode: str) -> None:
     groups = plan(loaded.routes, mode, feedthrough, stepping)
     done: list[dict[str, Any]] = []
     barrier.meta["initialisation"] = done
-    if not groups:
+    holding = [n for n in stepping if capabilities.get(n, {}).get("initializationMode") is True]
+    if not groups and not holding:
         return
     router.route(mode, t0, outputs, barrier.histories)  # the sources' values at t0 too
     names = {n: project.node(n).output_names() for n in stepping}
@@ -161,7 +166,7 @@ def run(barrier: Any, loaded: LoadedProject, mode: str) -> None:
             before = {n: list(outputs[n]) for n in group.nodes}
             for node in group.nodes:
                 router.route_into(node, mode, outputs)
-                barrier.release.put(frames.encode(frames.INIT, t0, {node: list(router.inputs[node])}))
+                barrier.release.put(frames.encode(frames.INIT, t0, {node: list(router.inputs[node])}, False))
                 barrier.messages["releases"] += 1
                 barrier.gather(0, time.perf_counter(), {node}, paced=False)
             if not group.loop:
@@ -179,4 +184,18 @@ def run(barrier: Any, loaded: LoadedProject, mode: str) -> None:
                 + f" (tolerance {settings.tolerance:g})")
         done.append({"nodes": list(group.nodes), "loop": group.loop, "sweeps": sweep})
         log.info("initialised", nodes=list(group.nodes), sweeps=sweep)
+    if holding:
+        leave(barrier, holding, t0, mode)
+        done.append({"nodes": holding, "left": "initialization mode"})
 
+
+def leave(barrier: Any, nodes: list[str], t0: float, mode: str) -> None:
+    """The nodes that are still in their models' initialisation mode (FMUs) get their inputs at
+    t0 as the links carry the start outputs now, all at once, and leave it; their answers are
+    the outputs the run's first point records."""
+    router, outputs = barrier.router, barrier.outputs
+    for node in nodes:
+        router.route_into(node, mode, outputs)
+    barrier.release.put(frames.encode(frames.INIT, t0, {n: list(router.inputs[n]) for n in nodes}, True))
+    barrier.messages["releases"] += 1
+    barrier.gather(0, time.perf_counter(), set(nodes), paced=False)

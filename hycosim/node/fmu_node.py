@@ -51,7 +51,11 @@ class FmuNode(Node):
     def setup(self, ctx: NodeContext) -> None:
         with _node_errors():
             self.fmu = open_fmu(self.path, self.spec, dict(ctx.parameters), ctx.stop_time)
-            self.fmu.initialize(ctx.start_time)
+            # It stays in initialisation mode until the master has given every node its start
+            # inputs (finish_initialization), as FMI lays out and ECOS and libcosim do: an FMU
+            # that computes its outputs only when it leaves that mode (pythonfmu's commonly do)
+            # then starts from its linked inputs, not from their start values.
+            self.fmu.enter_initialization(ctx.start_time)
 
     def tunable_values(self) -> dict[str, Any]:
         with _node_errors():
@@ -85,10 +89,25 @@ class FmuNode(Node):
         return {out: sorted(ins) for out, ins in self.fmu.start_feedthrough().items() if ins} if self.fmu else {}
 
     def start_inputs(self, inputs: dict[str, Any]) -> None:
-        # After exitInitializationMode, before the first doStep: inputs may be set and outputs
-        # read at the start time (FMI 2 slaveInitialized, FMI 3 Step Mode).
+        # In initialisation mode: inputs may be set and outputs read there.
         with _node_errors():
             self.fmu.set_inputs(inputs)
+
+    @property
+    def holds_initialization(self) -> bool:
+        return bool(self.fmu and self.fmu.initializing)
+
+    def finish_initialization(self, inputs: dict[str, Any]) -> None:
+        with _node_errors():
+            if inputs:
+                self.fmu.set_inputs(inputs)
+            self.fmu.exit_initialization()
+
+    def _ready(self) -> None:
+        """Out of initialisation mode before anything that needs it (a step, a state): where the
+        master gave no finish_initialization (a process started again to restore a checkpoint)."""
+        if self.fmu is not None and self.fmu.initializing:
+            self.finish_initialization({})
 
     def outputs(self) -> dict[str, Any]:
         try:  # _node_errors written out: a context manager costs a tenth of this call
@@ -97,6 +116,8 @@ class FmuNode(Node):
             raise _model_error(exc) from None
 
     def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
+        if self.fmu.initializing:
+            self._ready()
         try:  # _node_errors written out, as in outputs
             self.fmu.set_inputs(inputs)
             if self._derivatives:
@@ -117,7 +138,11 @@ class FmuNode(Node):
         if stepped is None:
             return None
 
+        fmu = self.fmu
+
         def step(t: float, h: float, values: list[Any]) -> list[Any]:
+            if fmu.initializing:
+                self._ready()
             try:  # _node_errors written out, as in outputs
                 return stepped(t, h, values)
             except FmuError as exc:
@@ -129,6 +154,7 @@ class FmuNode(Node):
             self.fmu.set_driven(driven)
 
     def get_state(self) -> Any:
+        self._ready()
         with _node_errors():
             state = self.fmu.get_state()
             if self._checkpoint is not None:
@@ -137,6 +163,7 @@ class FmuNode(Node):
         return state
 
     def set_state(self, state: Any) -> None:
+        self._ready()
         with _node_errors():
             self.fmu.set_state(state)
 
@@ -145,10 +172,12 @@ class FmuNode(Node):
         return bool(self.fmu and self.fmu.can_serialize)
 
     def serialize_state(self) -> bytes:
+        self._ready()
         with _node_errors():
             return self.fmu.serialize_state()
 
     def deserialize_state(self, data: bytes) -> None:
+        self._ready()
         with _node_errors():
             self.fmu.deserialize_state(data)
 

@@ -132,6 +132,20 @@ class Node(ABC):
         then gives the start outputs they make. Called only for a node whose start_feedthrough
         names an output, possibly several times (a loop iterated to its fixed point)."""
 
+    # A model with an initialisation mode of its own (an FMU) stays in it after setup while the
+    # master gives the nodes their start inputs, and leaves it when every node has them: the
+    # master then gives it its inputs at the start once more (finish_initialization) and takes
+    # its outputs, which the run's first point records. A Python model has none.
+    @property
+    def holds_initialization(self) -> bool:
+        """Whether the model is still in an initialisation mode after setup (said in the HELLO)."""
+        return False
+
+    def finish_initialization(self, inputs: dict[str, Any]) -> None:
+        """Take the inputs at the start (every input port, by name) and leave the initialisation
+        mode; outputs() then gives the outputs the run's first point records. Called once, for a
+        node whose holds_initialization was true, before its first step."""
+
     def teardown(self) -> None:
         """Release resources; called once at the end, also after a failure."""
 

@@ -438,15 +438,20 @@ class NodeRuntime:
             self._log.info("mode", step=k, mode=mode, driven=driven)
 
     def _on_init(self, impl: Node, at: _Stepping, frame: frames.Frame) -> bool:
-        """The initialisation phase's inputs at t0: take them and answer with the outputs at step
-        0 they make. True if the model failed or ended the simulation there."""
-        t0, inputs = frame.t0, frame.inputs
-        if at.done != -1 or not start_feedthrough(self.impl, self.spec):
+        """The initialisation phase's inputs at t0: take them (``leave``: and leave the model's
+        initialisation mode) and answer with the outputs at step 0 they make. True if the model
+        failed or ended the simulation there."""
+        t0, inputs, leave = frame.t0, frame.inputs, frame.leave
+        if at.done != -1 or not (leave or start_feedthrough(self.impl, self.spec)):
             self.drops.drop("not a release", "an INIT " + ("after the run's first step" if at.done != -1 else
                             "for a node whose start outputs depend on no input"), self.steps)
             return False
+        values = dict(zip(self._in_names, inputs[self.name]))
         try:
-            impl.start_inputs(dict(zip(self._in_names, inputs[self.name])))
+            if leave:
+                impl.finish_initialization(values)
+            else:
+                impl.start_inputs(values)
         except Exception as exc:
             self._step_failed(exc, -1, t0)
             return True

@@ -78,6 +78,7 @@ class Outbox:
             "variableStep": stepping and impl.can_vary_step, "restart": restart, "batches": stepping,
             "interpolates": self.receiver.interpolating, "startFeedthrough": start_feedthrough(impl, self.spec),
             "tunable": self.receiver.tunable,
+            "initializationMode": stepping and impl.holds_initialization,
             "ports": self.spec.wire_ports(), "host": socket.gethostname()[:64]})
 
     def pack(self, values: dict[str, Any]) -> list[Any]:
