@@ -1,4 +1,5 @@
-"""Build the small FMI 2.0 co-simulation FMUs of benchmarks/_small_fmus.c (the in-process
+"""Build the small FMI 2.0 co-simulation FMUs of benchmarks/_small_fmus.c (and their FMI 1.0
+builds, benchmarks/_small_fmus1.c) (the in-process
 benchmark's three, and the cross-check's typed feedthrough and bouncing ball) and the SSP
 package the in-process benchmark runs:
 
@@ -20,6 +21,7 @@ from _fmu_build import native_fmu  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE / "_small_fmus.c"
+SOURCE1 = HERE / "_small_fmus1.c"  # the same models as FMI 1.0 co-simulation FMUs
 
 # name → (model number in the C source, [(variable, causality, type, start, dependencies)]):
 # an output's dependencies are the inputs it reads at once (None: not an output). A start of
@@ -91,6 +93,50 @@ def model_description(name: str) -> str:
 {initial_block}  </ModelStructure>
 </fmiModelDescription>
 """
+
+
+def model_description1(name: str) -> str:
+    """The FMI 1.0 co-simulation model description of one model (benchmarks/_small_fmus1.c)."""
+    number, variables = MODELS[name]
+    rows = []
+    counts = dict.fromkeys(_FIRST_VR, 0)
+    for var, causality, type_, start, _ in variables:
+        vr = _FIRST_VR[type_] + counts[type_]
+        counts[type_] += 1
+        discrete = ' variability="discrete"' if type_ != "Real" else ""
+        if causality == "parameter":
+            attrs, fixed = 'variability="parameter" causality="internal"', ' fixed="true"'
+        else:
+            attrs, fixed = f'causality="{causality}"{discrete}', ""
+        rows.append(f'    <ScalarVariable name="{var}" valueReference="{vr}" {attrs}>'
+                    f'<{type_}{_start(type_, start)}{fixed if start is not None else ""}/></ScalarVariable>')
+    nl = "\n"
+    return f"""<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="1.0" modelName="{name}" modelIdentifier="{name}" guid="{{hycosim-small1-{number}}}"
+  generationTool="hycosim benchmarks" variableNamingConvention="flat" numberOfContinuousStates="0"
+  numberOfEventIndicators="0">
+  <DefaultExperiment startTime="0" stopTime="4"/>
+  <ModelVariables>
+{nl.join(rows)}
+  </ModelVariables>
+  <Implementation>
+    <CoSimulation_StandAlone>
+      <Capabilities canHandleVariableCommunicationStepSize="true" canHandleEvents="true"
+        canRejectSteps="false" canInterpolateInputs="false" maxOutputDerivativeOrder="0"
+        canRunAsynchronuously="false" canSignalEvents="false" canBeInstantiatedOnlyOncePerProcess="false"
+        canNotUseMemoryManagementFunctions="true"/>
+    </CoSimulation_StandAlone>
+  </Implementation>
+</fmiModelDescription>
+"""
+
+
+def build1(out_dir: Path) -> dict[str, Path]:
+    """Compile each model as an FMI 1.0 co-simulation FMU, ``out_dir/<Name>.fmu``."""
+    return {name: native_fmu(SOURCE1, name, model_description1(name), out_dir / f"{name}.fmu",
+                             ["-Wall", "-Wno-unused-parameter", "-Werror", f"-DMODEL={number}",
+                              f"-DMODEL_IDENTIFIER={name}"])
+            for name, (number, _) in MODELS.items()}
 
 
 def build(out_dir: Path) -> dict[str, Path]:

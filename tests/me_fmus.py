@@ -1,5 +1,5 @@
 """Model Exchange test FMUs built from tests/c: a bouncing ball (FMI 2.0 ME, FMI 2.0 with both
-interfaces, FMI 3.0 ME) and a stiff Van der Pol oscillator (FMI 2.0 ME). For the tests and the
+interfaces, FMI 3.0 ME, FMI 1.0 ME) and a stiff Van der Pol oscillator (FMI 2.0 ME). For the tests and the
 FMU overhead benchmark; gcc compiles them."""
 
 from __future__ import annotations
@@ -100,6 +100,28 @@ _VDP = """<?xml version="1.0" encoding="UTF-8"?>
 """
 
 
+_FMI1 = """<?xml version="1.0" encoding="UTF-8"?>
+<fmiModelDescription fmiVersion="1.0" modelName="Ball" modelIdentifier="ball1" guid="{{{token}}}"
+  numberOfContinuousStates="2" numberOfEventIndicators="1">
+  <ModelVariables>
+    <ScalarVariable name="h" valueReference="0" causality="output"><Real start="1" fixed="true"/></ScalarVariable>
+    <ScalarVariable name="v" valueReference="2" causality="output"><Real start="0" fixed="true"/></ScalarVariable>
+    <ScalarVariable name="g" valueReference="4" variability="parameter" causality="internal">
+      <Real start="9.81" fixed="true"/></ScalarVariable>
+    <ScalarVariable name="e" valueReference="5" variability="parameter" causality="internal">
+      <Real start="0.7" fixed="true"/></ScalarVariable>
+    <ScalarVariable name="a" valueReference="6" causality="input"><Real start="0"/></ScalarVariable>
+    <ScalarVariable name="kick_at" valueReference="7" variability="parameter" causality="internal">
+      <Real start="-1" fixed="true"/></ScalarVariable>
+    <ScalarVariable name="kick" valueReference="8" variability="parameter" causality="internal">
+      <Real start="0" fixed="true"/></ScalarVariable>
+    <ScalarVariable name="bounces" valueReference="0" variability="discrete" causality="output">
+      <Integer start="0" fixed="true"/></ScalarVariable>
+  </ModelVariables>
+</fmiModelDescription>
+"""
+
+
 def _fmu(out: Path, so: Path, name: str, interfaces: str) -> Path:
     xml = (f'<?xml version="1.0" encoding="UTF-8"?>\n<fmiModelDescription fmiVersion="2.0" modelName="Ball" '
            f'guid="{{{uuid.uuid4()}}}" numberOfEventIndicators="1">\n  {interfaces}\n{_VARIABLES}'
@@ -120,11 +142,13 @@ def _zip(path: Path, xml: str, so: Path, platform: str) -> Path:
 
 
 def build_me_fmus(out: Path) -> dict[str, Path]:
-    """Compile and package the test FMUs into ``out``: me, both, me3 (balls), vdp."""
+    """Compile and package the test FMUs into ``out``: me, both, me3, me1 (balls), vdp."""
     _compile("ball_me2.c", out / "ball.so", f"-I{FMI_HEADERS}")
     _compile("ball_me3.c", out / "ball3.so", "-fvisibility=hidden")
     _compile("vdp_me2.c", out / "vdp.so", f"-I{FMI_HEADERS}")
+    _compile("ball_me1.c", out / "ball1.so", f"-I{FMI_HEADERS}", "-fvisibility=hidden")
     return {"me": _fmu(out, out / "ball.so", "BallME", _ME),
             "both": _fmu(out, out / "ball.so", "BallBoth", _ME + "\n  " + _CS),
             "me3": _zip(out / "BallME3.fmu", _FMI3.format(token=uuid.uuid4()), out / "ball3.so", "x86_64-linux"),
-            "vdp": _zip(out / "VanDerPol.fmu", _VDP.format(token=uuid.uuid4()), out / "vdp.so", "linux64")}
+            "vdp": _zip(out / "VanDerPol.fmu", _VDP.format(token=uuid.uuid4()), out / "vdp.so", "linux64"),
+            "me1": _zip(out / "BallME1.fmu", _FMI1.format(token=uuid.uuid4()), out / "ball1.so", "linux64")}

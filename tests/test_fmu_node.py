@@ -143,8 +143,8 @@ def test_fmu_for_another_platform(tmp_path, fmus):
         _instance(tmp_path, win, _gain_node(win))
 
 
-def test_an_fmi_1_fmu_is_refused_before_its_binary_loads(tmp_path, fmus):
-    # A valid FMI 1.0 co-simulation description; its binary (never loaded) has fmiDoStep, not fmi2DoStep.
+def test_an_fmi_1_fmu_whose_binary_cannot_load_is_named(tmp_path, fmus):
+    # A valid FMI 1.0 co-simulation description over a binary that is no library.
     old = tmp_path / "old.fmu"
     with zipfile.ZipFile(old, "w") as z:
         z.writestr("modelDescription.xml", (
@@ -155,8 +155,8 @@ def test_an_fmi_1_fmu_is_refused_before_its_binary_loads(tmp_path, fmus):
             '</ModelVariables><Implementation><CoSimulation_StandAlone><Capabilities/>'
             '</CoSimulation_StandAlone></Implementation></fmiModelDescription>'))
         z.writestr("binaries/linux64/m.so", b"\x7fELF")
-    with pytest.raises(FmuError, match="node 'g': old.fmu is an FMI 1.0 FMU; hycosim runs FMI 2.0 and 3.0"):
-        _instance(tmp_path, old, _gain_node(old))
+    with pytest.raises(FmuError, match="node 'g': old.fmu: its binary cannot be loaded as CoSimulation"):
+        _instance(tmp_path, old, _gain_node(old, parameters={}, output=["y"]))
 
 
 def test_a_pythonfmu_step_that_returns_false_ends_the_run_where_the_fmu_says(tmp_path, fmus):

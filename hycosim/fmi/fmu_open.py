@@ -1,6 +1,7 @@
 """Opening an FMU as a node's entry says: the one place that knows both kinds of instance.
 
-A co-simulation FMU steps itself (:class:`~hycosim.fmi.loader.FmuInstance`); a Model
+A co-simulation FMU steps itself (:class:`~hycosim.fmi.loader.FmuInstance`, FMI 1.0's
+:class:`~hycosim.fmi.fmi1.Fmi1Instance`); a Model
 Exchange FMU is integrated by the node (:class:`~hycosim.fmi.model_exchange.MeInstance`, built on
 the former). Kept apart from both so that neither module imports the other in a circle.
 """
@@ -11,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from hycosim.core.schema import Node
+from hycosim.fmi.fmi1 import Fmi1Instance, Fmi1MeInstance
 from hycosim.fmi.loader import MODEL_EXCHANGE, FmuInstance, check_fmu
 from hycosim.fmi.model_exchange import MeInstance
 
@@ -20,5 +22,8 @@ def open_fmu(path: Path, node: Node, parameters: dict[str, Any], stop_time: floa
     model with its integrator (``stop_time``: the run's, for the default largest step)."""
     mapping = check_fmu(path, node, parameters)
     if mapping.interface == MODEL_EXCHANGE:
-        return MeInstance(path, node, parameters, mapping, stop_time)
+        kind = Fmi1MeInstance if mapping.md.fmiVersion == "1.0" else MeInstance
+        return kind(path, node, parameters, mapping, stop_time)
+    if mapping.md.fmiVersion == "1.0":
+        return Fmi1Instance(path, node, parameters, mapping)
     return FmuInstance(path, node, parameters, mapping)

@@ -112,12 +112,10 @@ def interface_of(md: ModelDescription, node: Node, path: Path) -> str:
 
 
 def check_platform(path: Path, md: ModelDescription, node: str) -> None:
-    """Raise FmuError unless the FMU is FMI 2.0 or 3.0 with a binary for this platform."""
-    if not md.fmiVersion.startswith(("2", "3")):
-        # FMI 1.0 names every C function differently (fmiDoStep, no fmi2 prefix): refused here
-        # rather than failing on a missing symbol when the binary loads.
-        raise FmuError(f"node {node!r}: {path.name} is an FMI {md.fmiVersion} FMU; hycosim runs FMI 2.0 and 3.0 "
-                       "FMUs (export it again as FMI 2.0 or 3.0)")
+    """Raise FmuError unless the FMU is FMI 1.0, 2.0 or 3.0 with a binary for this platform."""
+    if not md.fmiVersion.startswith(("1.0", "2", "3")):
+        raise FmuError(f"node {node!r}: {path.name} is an FMI {md.fmiVersion} FMU; hycosim runs FMI 1.0, 2.0 "
+                       "and 3.0 FMUs")
     platforms = fmpy.supported_platforms(str(path))
     want = fmpy.platform_tuple if md.fmiVersion.startswith("3") else fmpy.platform
     if want not in platforms and not (md.fmiVersion.startswith("3") and fmpy.platform in platforms):
@@ -594,7 +592,7 @@ class FmuMapping:
 
 
 def check_fmu(path: Path, node: Node, parameters: dict[str, Any] | None = None) -> FmuMapping:
-    """Everything checked before an FMU's binary loads: the FMU is readable, FMI 2.0 or 3.0
+    """Everything checked before an FMU's binary loads: the FMU is readable, FMI 1.0, 2.0 or 3.0
     with the interface the node uses (:func:`interface_of`) and a binary for this platform,
     and the node's ports, drivenVariable and parameters (``parameters``, default the node's)
     map onto its variables. Nothing is extracted or instantiated."""
@@ -622,6 +620,7 @@ class FmuInstance:
             mapping.md, mapping.inputs, mapping.outputs, mapping.driven)
         self.start_feedthrough = mapping.start_feedthrough
         self.fmi3 = self.md.fmiVersion.startswith("3")
+        self.fmi1 = self.md.fmiVersion.startswith("1")  # fmpy's FMI 1.0 classes take FMI 2's calls
         cs = mapping.capabilities
         self.can_rollback = bool(getattr(cs, "canGetAndSetFMUstate", False))
         self.can_serialize = self.can_rollback and bool(getattr(cs, "canSerializeFMUstate", False))
@@ -648,13 +647,16 @@ class FmuInstance:
                            f"({type(exc).__name__}: {exc})") from None
         self.time = 0.0
         # The ports a step reads and writes, one C call per type (None: through fmpy's calls one by one).
-        self._reader = port_access(self.fmu, [Port(m.vr, m.type, m.size) for m in self.outputs], self.fmi3, False)
+        # FMI 1.0's C functions carry the model identifier in their names: through fmpy's calls.
+        self._reader = None if self.fmi1 else port_access(
+            self.fmu, [Port(m.vr, m.type, m.size) for m in self.outputs], self.fmi3, False)
         self._output_ports = [m.port for m in self.outputs]
-        self._writer = port_access(self.fmu, [Port(m.vr, m.type, m.size) for m in self.inputs], self.fmi3, True)
+        self._writer = None if self.fmi1 else port_access(
+            self.fmu, [Port(m.vr, m.type, m.size) for m in self.inputs], self.fmi3, True)
         # fmi2DoStep called straight (a step's call less), on arguments converted here or per
         # call (value_access.bare_function); None where fmpy's call is used.
         self._do_step_c = (bare_function(self.fmu.dll, "fmi2DoStep") if mapping.interface == CO_SIMULATION
-                           and not self.fmi3 and getattr(self.fmu, "fmiCallLogger", None) is None else None)
+                           and not self.fmi3 and not self.fmi1 and getattr(self.fmu, "fmiCallLogger", None) is None else None)
         self._component = ctypes.c_void_p(self.fmu.component)
 
     def _instantiate(self, kwargs: dict[str, Any]) -> Any:

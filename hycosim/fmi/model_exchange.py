@@ -79,6 +79,10 @@ class MeInstance(FmuInstance):
         self._iterate_events(self._t0)
         self.solver = self._make_solver(self._t0)
 
+    def _nominals(self) -> Any:
+        """The FMU's call for its continuous states' nominal values (the solver's scaling)."""
+        return self.fmu.getNominalsOfContinuousStates
+
     def _make_solver(self, start_time: float) -> Any:
         fmu = self.fmu
         args = dict(nx=self.nx, nz=self.nz, get_x=fmu.getContinuousStates, set_x=fmu.setContinuousStates,
@@ -92,7 +96,7 @@ class MeInstance(FmuInstance):
 
         span = (self._stop_time - start_time) if self._stop_time is not None else math.inf
         max_step = self._max_step or (span / 50.0 if math.isfinite(span) and span > 0 else math.inf)
-        return CVodeSolver(get_nominals=fmu.getNominalsOfContinuousStates, set_time=fmu.setTime,
+        return CVodeSolver(get_nominals=self._nominals(), set_time=fmu.setTime,
                            startTime=start_time, maxStep=max_step, relativeTolerance=self.relative_tolerance,
                            **args)
 
@@ -106,11 +110,19 @@ class MeInstance(FmuInstance):
         needed, terminate = True, False
         while needed and not terminate:
             needed, terminate, _, _, defined, next_time = update()
+        self._settled(t, terminate, next_time if defined else None)
+        self.fmu.enterContinuousTimeMode()
+
+    def _settled(self, t: float, terminate: bool, next_event: float | None) -> None:
+        """The discrete states settled at t: the FMU's next time event, or its end."""
         if terminate:
             raise FmuTerminated(f"{self.path.name} asked to terminate the simulation at t={t:g} s "
                                 "(terminateSimulation)", t)
-        self._next_event = next_time if defined else None
-        self.fmu.enterContinuousTimeMode()
+        self._next_event = next_event
+
+    def _completed_step(self) -> tuple[bool, bool]:
+        """completedIntegratorStep: whether an event follows, and whether the FMU ends the run."""
+        return self.fmu.completedIntegratorStep()[:2]
 
     # --- a macro step -----------------------------------------------------------------
 
@@ -151,7 +163,7 @@ class MeInstance(FmuInstance):
                 self.fmu.setTime(now)
                 step_event = False
                 if self.needs_completed_step:
-                    step_event, terminate = self.fmu.completedIntegratorStep()
+                    step_event, terminate = self._completed_step()
                     if terminate:
                         raise FmuTerminated(f"{self.path.name} asked to terminate the simulation at t={now:g} s "
                                             "(completedIntegratorStep)", now)

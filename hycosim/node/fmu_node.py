@@ -1,4 +1,4 @@
-"""A node played by any FMI 2.0 or 3.0 FMU, through fmpy: co-simulation, or Model Exchange
+"""A node played by any FMI 1.0, 2.0 or 3.0 FMU, through fmpy: co-simulation, or Model Exchange
 integrated by the node (fmi.model_exchange)."""
 
 from __future__ import annotations

@@ -239,6 +239,9 @@ def untunable(spec: NodeSpec, project_dir: Path, name: str) -> str | None:
     return None
 
 
+_FMI1_NO_STATE = "its FMU is FMI 1.0, which has no state to get or set"
+
+
 def why_no_checkpoint(spec: NodeSpec, project_dir: Path) -> str | None:
     """Why the node cannot take part in checkpoints (its state cannot outlive its process), or
     None if it can. The node must load (:func:`check_node`)."""
@@ -247,7 +250,10 @@ def why_no_checkpoint(spec: NodeSpec, project_dir: Path) -> str | None:
     if spec.fmu:
         from hycosim.fmi.loader import check_fmu
 
-        cs = check_fmu(_fmu_path(spec, project_dir), spec).capabilities
+        mapping = check_fmu(_fmu_path(spec, project_dir), spec)
+        if mapping.md.fmiVersion == "1.0":
+            return _FMI1_NO_STATE
+        cs = mapping.capabilities
         if not (getattr(cs, "canGetAndSetFMUstate", False) and getattr(cs, "canSerializeFMUstate", False)):
             return "its FMU does not declare canGetAndSetFMUstate and canSerializeFMUstate"
         return None
@@ -269,6 +275,8 @@ def why_no_retake(spec: NodeSpec, project_dir: Path, variable: bool) -> str | No
         from hycosim.fmi.loader import check_fmu
 
         mapping = check_fmu(_fmu_path(spec, project_dir), spec)
+        if mapping.md.fmiVersion == "1.0":
+            return _FMI1_NO_STATE
         if not getattr(mapping.capabilities, "canGetAndSetFMUstate", False):
             return "its FMU does not declare canGetAndSetFMUstate"
         if variable and not mapping.variable_step:

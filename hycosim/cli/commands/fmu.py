@@ -84,6 +84,10 @@ def fmu_inspect(
         for attr in attrs:
             if hasattr(element, attr):
                 caps.add_row(f"{label}: {attr}", str(bool(getattr(element, attr))))
+    if md.fmiVersion == "1.0":
+        caps.add_row("FMI 1.0", "runs as a node (co-simulation, or Model Exchange integrated by the node), "
+                     "initialised whole in its setup (FMI 1.0 has no initialisation mode); no state to get or "
+                     "set: no checkpoints, retakes, iteration or event localisation")
     if me is not None:
         caps.add_row("continuous states, event indicators",
                      f"{md.numberOfContinuousStates or 0}, {md.numberOfEventIndicators or 0}")

@@ -164,8 +164,12 @@ def _warn_unstated_start_dependencies(file: Path, loaded: Any) -> None:
     fed = {r.dst_node for r in loaded.routes}
     for n in p.stepping_nodes():
         if n.fmu and n.nodeName in fed and p.coSimulation.initialize.enabled:
-            ports = fmu_mapping(n, loaded.path.parent).unstated_start_dependencies()
-            if ports:
+            mapping = fmu_mapping(n, loaded.path.parent)
+            ports = mapping.unstated_start_dependencies()
+            if ports and mapping.md.fmiVersion == "1.0":
+                warn(f"{file}: node {n.nodeName!r}: its FMU is FMI 1.0, which says nothing of which inputs an "
+                     "output reads: the initialisation takes every input as read")
+            elif ports:
                 warn(f"{file}: node {n.nodeName!r}: its FMU's model structure does not say which inputs "
                      f"{', '.join(ports)} depend{'s' if len(ports) == 1 else ''} on at the start (no dependencies in "
                      "InitialUnknowns or Outputs): the initialisation takes every input as read")
