@@ -173,3 +173,64 @@ def write_package(out_dir: Path, steps: int) -> tuple[Path, Path]:
 
 if __name__ == "__main__":
     print(*write_package(Path(sys.argv[1] if len(sys.argv) > 1 else "."), 400))
+
+
+def osp_structure(fmus: dict[str, Path], folder: Path, steps: int, h: float) -> Path:
+    """An OSP system structure of the small FMUs (copied into ``folder`` beside it), for the
+    cross-check against libcosim: initial values of each type an FMU here has (Real, Integer,
+    Boolean), a multi-rate simulator (the ball, every second step), a linear transformation and
+    an algebraic loop of two feedthroughs (one through a transformation), a sum of one signal.
+    Return the path of ``folder/OspSystemStructure.xml``."""
+    import shutil
+
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in ("Dahlquist", "Feedthrough", "Types", "Ball"):
+        shutil.copy(fmus[name], folder / f"{name}.fmu")
+    stop = round(steps * h, 12)
+    xml = f"""<?xml version="1.0" encoding="UTF-8"?>
+<OspSystemStructure xmlns="http://opensimulationplatform.com/MSMI/OSPSystemStructure" version="0.1">
+  <StartTime>0.0</StartTime>
+  <EndTime>{stop!r}</EndTime>
+  <BaseStepSize>{h!r}</BaseStepSize>
+  <Algorithm>fixedStep</Algorithm>
+  <Simulators>
+    <Simulator name="dahlquist" source="Dahlquist.fmu">
+      <InitialValues><InitialValue variable="k"><Real value="2.0"/></InitialValue></InitialValues>
+    </Simulator>
+    <Simulator name="ft" source="Feedthrough.fmu"/>
+    <Simulator name="loopA" source="Feedthrough.fmu"/>
+    <Simulator name="loopB" source="Feedthrough.fmu"/>
+    <Simulator name="height" source="Feedthrough.fmu"/>
+    <Simulator name="types" source="Types.fmu">
+      <InitialValues>
+        <InitialValue variable="gain"><Real value="3.0"/></InitialValue>
+        <InitialValue variable="offset"><Integer value="5"/></InitialValue>
+        <InitialValue variable="bu"><Boolean value="true"/></InitialValue>
+      </InitialValues>
+    </Simulator>
+    <Simulator name="ball" source="Ball.fmu" stepSize="{2 * h!r}">
+      <InitialValues><InitialValue variable="e"><Real value="0.7"/></InitialValue></InitialValues>
+    </Simulator>
+  </Simulators>
+  <Functions>
+    <LinearTransformation name="twice" factor="2.0" offset="1.0"/>
+    <LinearTransformation name="half" factor="0.5" offset="1.0"/>
+    <Sum name="one" inputCount="1"/>
+  </Functions>
+  <Connections>
+    <SignalConnection><Variable simulator="dahlquist" name="x"/><Signal function="twice" name="in"/></SignalConnection>
+    <SignalConnection><Variable simulator="ft" name="u"/><Signal function="twice" name="out"/></SignalConnection>
+    <VariableConnection><Variable simulator="ft" name="y"/><Variable simulator="types" name="ru"/></VariableConnection>
+    <VariableConnection><Variable simulator="types" name="iu"/><Variable simulator="ball" name="bounces"/></VariableConnection>
+    <VariableConnection><Variable simulator="loopA" name="y"/><Variable simulator="loopB" name="u"/></VariableConnection>
+    <SignalConnection><Variable simulator="loopB" name="y"/><Signal function="half" name="in"/></SignalConnection>
+    <SignalConnection><Variable simulator="loopA" name="u"/><Signal function="half" name="out"/></SignalConnection>
+    <VariableConnection><Variable simulator="ball" name="falling"/><Variable simulator="types" name="bu"/></VariableConnection>
+    <SignalConnection><Variable simulator="ball" name="h"/><Signal function="one" name="in[0]"/></SignalConnection>
+    <SignalConnection><Variable simulator="height" name="u"/><Signal function="one" name="out"/></SignalConnection>
+  </Connections>
+</OspSystemStructure>
+"""
+    path = folder / "OspSystemStructure.xml"
+    path.write_text(xml)
+    return path

@@ -11,6 +11,12 @@ export: parameters bound inline, linear transformations on links):
   when they leave initialisation mode and in their steps (as pythonfmu FMUs commonly do): the
   start inputs count only if they are set inside initialisation mode, as FMI lays out;
 * **vdp** and **bounce**: a Van der Pol oscillator, and the ball, on their own;
+* **osp**: an OSP system structure (benchmarks/_small_fmus.osp_structure): initial values of
+  Real, Integer and Boolean variables, a multi-rate simulator (the ball, every second step), a
+  linear transformation, a sum of one signal and an algebraic loop of two feedthroughs, run
+  from the XML by hycosim and by libcosim (``CosimExecution.from_osp_config_file``). libcosim
+  initialises the loop by a fixed number of passes over its connections, hycosim to its fixed
+  point: the loop's values part by 1/16 at t0, and the difference halves every second step;
 * **chain1**, **ball1**, **vdp1**: the chain, the ball and the oscillator of FMI 1.0 builds of
   the same models (benchmarks/_small_fmus1.c), which hycosim runs through fmpy's FMI 1.0
   classes, ECOS through fmi4c and libcosim through FMI Library;
@@ -96,7 +102,8 @@ from libcosimpy.CosimObserver import CosimObserver
 from libcosimpy.CosimManipulator import CosimManipulator
 folder, steps, h = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
 actions, names = json.loads(sys.argv[4]), [a.split(":") for a in sys.argv[5:]]  # actions: [point, variable, value/None]
-ex = CosimExecution.from_ssp_file(folder, step_size=round(h * 1e9))
+ex = (CosimExecution.from_osp_config_file(folder) if folder.endswith(".xml")
+      else CosimExecution.from_ssp_file(folder, step_size=round(h * 1e9)))
 override = CosimManipulator.create_override()
 ex.add_manipulator(override)
 last, series = CosimObserver.create_last_value(), CosimObserver.create_time_series(steps + 2)
@@ -122,7 +129,11 @@ for k in range(1, steps + 1):
 # t0 from the time series (libcosimpy's sample reader drops what follows a step number 0, so one
 # sample past it is asked for)
 first = {"Real": series.time_series_real_samples, "Integer": series.time_series_integer_samples}
-rows.insert(0, [first[t](*refs[n], 0, 2)[2][0] if t in first else None for n, t in names])
+def at_t0(n, t):
+    # A simulator with a step of its own (a multi-rate one) may hold no sample at step 0.
+    samples = first[t](*refs[n], 0, 2) if t in first else None
+    return samples[2][0] if samples and samples[1] and samples[1][0] == 0 else None
+rows.insert(0, [at_t0(n, t) for n, t in names])
 print("ROWS " + json.dumps(rows))
 """
 
@@ -195,7 +206,7 @@ def hycosim(cfg: Path, runs: Path, in_process: bool, timeout: float) -> dict[str
     run_dir = max(runs.iterdir(), key=lambda p: p.stat().st_mtime)
     with open(run_dir / "values.csv", newline="") as f:
         rows = list(csv.DictReader(f))
-    return {c: [float(r[c]) for r in rows] for c in rows[0] if c not in ("step", "mode")}
+    return {c: [float(r[c]) for r in rows] for c in rows[0] if c not in ("step", "mode", "stepped")}
 
 
 def actions(doc: dict, h: float) -> list[list]:
@@ -241,6 +252,17 @@ def libcosim(ssp: Path, steps: int, h: float, variables: dict[str, tuple[str, st
     return _engine(_LIBCOSIM, "libcosim", folder, steps, h, variables, timeout, acts)
 
 
+def libcosim_osp(xml: Path, steps: int, h: float, variables: dict[str, tuple[str, str]],
+                 timeout: float) -> dict[str, list[float | None]] | None:
+    """libcosim's value of each variable at every point of the OSP system structure ``xml``
+    (``CosimExecution.from_osp_config_file``), or None where libcosimpy is missing."""
+    try:
+        import libcosimpy  # noqa: F401
+    except ImportError:
+        return None
+    return _engine(_LIBCOSIM, "libcosim", xml, steps, h, variables, timeout, [])
+
+
 def fmpy_single(node: dict, steps: int, h: float, names: list[str]) -> dict[str, list[float]]:
     """``fmpy.simulate_fmu`` of one FMU with the node's parameters, its outputs at every point."""
     import fmpy
@@ -276,7 +298,7 @@ def compare(ours: dict[str, list[float]], theirs: dict[str, list[float | None]],
                                                if 0 <= k + d < len(values) and (k, k + d) != (0, 0)]
         diffs = [(k, abs(mine[k] - values[j]), abs(values[j])) for k, j in pairs if values[j] is not None]
         worst = max(diffs, key=lambda p: p[1])
-        out[name] = {"max_abs_diff": worst[1], "at_t": t[worst[0]], "points": len(diffs),
+        out[name] = {"max_abs_diff": worst[1], "at_t": t[worst[0]], "points": len(diffs), "last_diff": diffs[-1][1],
                      "max_rel_diff": max(a / max(1.0, b) for _, a, b in diffs),
                      "t0_diff": None if values[0] is None or not at_t0 else abs(mine[0] - values[0]),
                      "compared": _SAID[d]}
@@ -320,6 +342,18 @@ def main() -> None:
             result[name] = {engine: compare(ours, {n: v for n, v in values.items() if n in roles},
                                             SHIFTS.get(engine, {}), roles)
                             for engine, values in engines.items()}
+        # An OSP system structure (benchmarks/_small_fmus.osp_structure) in hycosim and libcosim.
+        from hycosim.fmi.osp import project_from_osp
+
+        xml = _small_fmus.osp_structure(fmus, root / "osp", args.steps, args.h)
+        roles = kinds(project_from_osp(xml, root).project)
+        ours = hycosim(xml, root / "runs-osp", False, args.timeout)
+        engines = {"hycosim in process": hycosim(xml, root / "inproc-osp", True, args.timeout)}
+        theirs = libcosim_osp(xml, args.steps, args.h, roles, args.timeout)
+        if theirs is not None:
+            engines["libcosim"] = theirs
+        result["osp"] = {engine: compare(ours, {n: v for n, v in values.items() if n in roles},
+                                         SHIFTS.get(engine, {}), roles) for engine, values in engines.items()}
     _table.write(args.table, _manual_table(args, result))
     if args.json:
         print(json.dumps(result, indent=1))

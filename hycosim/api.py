@@ -117,7 +117,14 @@ def _load(project: str | Path | dict[str, Any]) -> LoadedProject:
         if isinstance(project, dict):
             return parse_project(project, "<project dict>")
         path = Path(project)
-        if path.suffix.lower() == ".ssp":
+        from hycosim.fmi.osp import OspError, imported_structure, is_structure
+
+        if is_structure(path):
+            try:
+                path, _ = imported_structure(path)
+            except OspError as exc:
+                raise ProjectError(str(exc)) from None
+        elif path.suffix.lower() == ".ssp":
             from hycosim.fmi.ssp import SspError, imported_project
 
             try:
@@ -158,7 +165,8 @@ def _absolute_paths(doc: dict[str, Any], base: Path) -> dict[str, Any]:
 
 def open(project: str | Path | dict[str, Any], *, runs_dir: str | Path = "runs",  # noqa: A001
          distributed: bool = False) -> Simulation:
-    """Start a run of ``project`` (a project file, an SSP package, or a project as a dict) and
+    """Start a run of ``project`` (a project file, an SSP package, an OSP system structure, or a
+    project as a dict) and
     stop at its first point, t = startTime, with the initialisation done. Its run directory is
     made under ``runs_dir`` as ``hycosim run`` makes it. In this process by default; with
     ``distributed`` the master stays here and each node is a process of its own, attached over

@@ -220,12 +220,17 @@ def import_ssp(
     stop: Annotated[Optional[float], typer.Option(callback=finite,
                                                   help="the stop time, when the package gives none")] = None,
 ) -> None:
-    """Turn an SSP package into a project JSON to edit and keep: components become nodes,
-    connections links, parameter bindings parameters, the default experiment coSimulation."""
+    """Turn an SSP package or an OSP system structure (OspSystemStructure.xml, or its folder)
+    into a project JSON to edit and keep: components or simulators become nodes, connections
+    links, parameter bindings or initial values parameters, the experiment coSimulation."""
+    from hycosim.fmi.osp import is_structure
+
     written = from_ssp(package, output, side=side, step=step, stop=stop)
     loaded = load(written)
+    where = ("FMUs where the structure has them" if is_structure(package)
+             else f"FMUs in {written.parent / (written.stem + '-fmus')}")
     out.print(f"{written}: project {loaded.project.projectName!r}, {len(loaded.project.nodeLists)} nodes, "
-              f"{len(loaded.routes)} routes (FMUs in {written.parent / (written.stem + '-fmus')})", highlight=False)
+              f"{len(loaded.routes)} routes ({where})", highlight=False)
 
 
 @app.command("export")
