@@ -74,6 +74,10 @@ def _edit(system: Path, tmp_path: Path, old: str, new: str) -> Path:
     ('<Integer value="5"/>', '<Real value="5.5"/>',
      "Simulators/Simulator[6] (types)/InitialValues/InitialValue[2]: 'offset' of Types.fmu is Integer; the value "
      "given is Real"),
+    ('<Real value="0.7"/>', '<String value="bouncy"/>',
+     "Simulators/Simulator[7] (ball)/InitialValues/InitialValue[1]: 'e' of Ball.fmu is Real; the value given is "
+     "String"),
+    ('<Boolean value="true"/>', '<Boolean value="yes"/>', "'yes' is no Boolean (true, false, 1 or 0)"),
     ('source="Ball.fmu" stepSize="0.02"', 'source="Ball.fmu" stepSize="0.015"',
      "Simulators/Simulator[7] (ball)/@stepSize: 0.015 s is no whole multiple of the base step 0.01 s"),
     ('source="Ball.fmu"', 'source="proxy-fmu://host/Ball.fmu"',
