@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip setuptools wheel
 	$(PY) -m pip install --quiet -c constraints.txt "torch==2.13.0"
-	$(PY) -m pip install --quiet -c constraints.txt -e ".[scenario,dashboard,models,parquet,test,docs]"
+	$(PY) -m pip install --quiet -c constraints.txt -e ".[scenario,dashboard,models,parquet,ensemble,test,docs]"
 	touch $(STAMP)
 
 # Refresh constraints.txt from what .venv holds now (after `make test` passed on it). torch's
@@ -70,7 +70,7 @@ test-long: $(STAMP) bytecode
 	$(PY) -m pytest -q -p no:cacheprovider -m long
 
 bench: $(STAMP) bytecode chromium tbb
-	$(PY) -m pip install --quiet -c constraints.txt -e ".[scenario,dashboard,models,parquet,test,docs,bench]"
+	$(PY) -m pip install --quiet -c constraints.txt -e ".[scenario,dashboard,models,parquet,ensemble,test,docs,bench]"
 	$(PY) benchmarks/barrier.py --cpu --table benchmarks/results/barrier.md
 	$(PY) benchmarks/inprocess.py --table benchmarks/results/inprocess.md
 	$(PY) benchmarks/crosscheck.py --table benchmarks/results/crosscheck.md
@@ -78,6 +78,8 @@ bench: $(STAMP) bytecode chromium tbb
 	$(PY) benchmarks/scene_fmus.py --table benchmarks/results/scene_fmus.md
 	$(PY) benchmarks/memory.py --table benchmarks/results/memory.md
 	$(PY) benchmarks/recording.py --table benchmarks/results/recording.md
+	$(PY) benchmarks/decode.py --table benchmarks/results/decode.md
+	$(PY) benchmarks/sweep.py --table benchmarks/results/sweep.md
 	$(PY) benchmarks/fuzz.py --table benchmarks/results/fuzz.md
 	$(PY) benchmarks/status_flood.py --table benchmarks/results/status_flood.md
 	$(PY) benchmarks/recovery.py --table benchmarks/results/recovery.md

@@ -16,6 +16,7 @@ imports; ``hycosim.dashboard`` the web dashboard;
 _API = frozenset({"open", "Simulation", "Outcome", "SimulationError", "ProjectError", "PortError", "TimeError",
                   "ClosedError", "OverrideError", "ParameterError", "RunFailed"})
 _OBSERVERS = frozenset({"Observer", "RecordedPoint", "LastValues", "TimeSeries"})
+_ENSEMBLE = {"sweep": "hycosim.ensemble.sweep", "SweepError": "hycosim.ensemble.variants"}
 
 
 def __getattr__(name: str):
@@ -27,6 +28,10 @@ def __getattr__(name: str):
         from hycosim.master import observers
 
         return getattr(observers, name)
+    if name in _ENSEMBLE:
+        import importlib
+
+        return getattr(importlib.import_module(_ENSEMBLE[name]), name)
     # ``__version__`` is read from the installed metadata when first asked for, not at import:
     # importlib.metadata takes about 30 ms to import, and every node process imports hycosim.
     if name != "__version__":

@@ -147,7 +147,7 @@ def _check_nodes(loaded: LoadedProject, base: Path) -> None:
             raise ProjectError(str(exc)) from None
 
 
-def _absolute_paths(doc: dict[str, Any], base: Path) -> dict[str, Any]:
+def absolute_paths(doc: dict[str, Any], base: Path) -> dict[str, Any]:
     """The project with its nodes' FMU, recording and ``file.py`` model paths made absolute."""
     nodes = []
     for node in doc.get("nodeLists", []):
@@ -178,7 +178,7 @@ def open(project: str | Path | dict[str, Any], *, runs_dir: str | Path = "runs",
 
         _check_nodes(_load(project), Path.cwd())
         folder = run_dir_for(Path(runs_dir), _load(project).name)
-        (folder / "project.json").write_text(json.dumps(_absolute_paths(project, Path.cwd()), indent=1))
+        (folder / "project.json").write_text(json.dumps(absolute_paths(project, Path.cwd()), indent=1))
         return Simulation(_load(folder / "project.json"), Path(runs_dir), distributed=True, run_dir=folder)
     return Simulation(_load(project), Path(runs_dir), distributed=distributed)
 
@@ -441,6 +441,14 @@ class Simulation:
         if missing := missing_methods(observer):
             raise SimulationError(f"{type(observer).__name__} is no observer: it lacks {', '.join(missing)}")
         self._relay.add_observer(observer)
+
+    def stop(self) -> None:
+        """Ask the run to stop at the next point it reaches (thread-safe: from another thread, a
+        deadline's timer); a ``run_until`` under way returns there, and the run ends as stopped,
+        every row recorded so far kept."""
+        if self._relay is not None:
+            self._relay.request_stop()
+        self._gate.open_wide()
 
     def close(self) -> None:
         """End the run: one before its stop time is stopped at the point it stands at, every row

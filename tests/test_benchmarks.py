@@ -472,3 +472,29 @@ def test_recording_benchmark_measures_csv_and_parquet_against_csv_in_the_same_ru
     [rows] = manual_tables(tmp_path / "recording.md")
     assert [r["format"] for r in rows] == ["csv", "csv, rows in a process of their own", "parquet"]
     assert rows[2]["time × csv"] == f"{result['vs_csv']['parquet']:.2f}"
+
+
+def test_decode_benchmark_measures_msgspec_and_the_floor_against_todays_decode_per_kind(tmp_path):
+    res = subprocess.run([sys.executable, "benchmarks/decode.py", "--n", "2", "8", "--repeat", "1", "--count", "300",
+                          "--json", "--table", str(tmp_path / "decode.md")],
+                         capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
+    assert res.returncode == 0, res.stderr
+    rows = [json.loads(line) for line in res.stdout.splitlines()]
+    assert {(r["kind"], r["n"], r["system"]) for r in rows} == {
+        (k, n, s) for k in ("OUTPUTS", "STEP", "BATCH") for n in (2, 8)
+        for s in ("frames.decode", "msgspec", "msgpack floor")}
+    assert all(r["ns"] > 0 for r in rows) and all(r["ratio"] == 1.0 for r in rows if r["system"] == "frames.decode")
+    [table] = manual_tables(tmp_path / "decode.md")
+    assert len(table) == len(rows)
+
+
+def test_sweep_benchmark_runs_the_same_variants_in_a_loop_and_on_one_and_two_workers(tmp_path):
+    res = subprocess.run([sys.executable, "benchmarks/sweep.py", "--runs", "4", "--steps", "20", "--json",
+                          "--table", str(tmp_path / "sweep.md")],
+                         capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
+    assert res.returncode == 0, res.stderr
+    result = json.loads(res.stdout.splitlines()[-1])
+    assert set(result["seconds"]) == {"plain loop of hycosim.open", "sweep, 1 worker", "sweep, 2 workers"}
+    assert all(s > 0 for s in result["seconds"].values()) and result["two_vs_one"] > 0
+    [rows] = manual_tables(tmp_path / "sweep.md")
+    assert [r["way"] for r in rows] == list(result["seconds"]) and rows[0]["× plain loop"] == "1.00"

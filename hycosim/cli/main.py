@@ -11,7 +11,7 @@ from typing import Annotated
 import click
 import typer
 
-from hycosim.cli.commands import examples, fmu, project, results, run
+from hycosim.cli.commands import ensemble, examples, fmu, project, results, run
 from hycosim.cli.output import err, out, say_error
 from hycosim.core import signals
 from hycosim.scenario.commands import krl, policy, scene
@@ -37,7 +37,7 @@ def _options(version: Annotated[bool, typer.Option("--version", callback=_show_v
 
 # The commands in the order `hycosim --help` lists them: a project, a run, its results, FMUs,
 # then the paper's scenario (its scene, camera, trials, policy and controller).
-for commands in (project.app, run.app, results.app, examples.app, scene.app, policy.app):
+for commands in (project.app, run.app, results.app, ensemble.app, examples.app, scene.app, policy.app):
     app.add_typer(commands)
 app.add_typer(fmu.app, name="fmu")
 app.add_typer(scene.scene_app, name="scene")

@@ -220,9 +220,11 @@ def import_ssp(
     stop: Annotated[Optional[float], typer.Option(callback=finite,
                                                   help="the stop time, when the package gives none")] = None,
 ) -> None:
-    """Turn an SSP package or an OSP system structure (OspSystemStructure.xml, or its folder)
-    into a project JSON to edit and keep: components or simulators become nodes, connections
-    links, parameter bindings or initial values parameters, the experiment coSimulation."""
+    """Turn an SSP package or an OSP system structure into a project JSON to edit and keep.
+
+    Components or simulators become nodes, connections links, parameter bindings or initial
+    values parameters, the experiment coSimulation. An OSP structure is its
+    OspSystemStructure.xml or the folder holding it."""
     from hycosim.fmi.osp import is_structure
 
     written = from_ssp(package, output, side=side, step=step, stop=stop)
