@@ -179,8 +179,8 @@ def osp_structure(fmus: dict[str, Path], folder: Path, steps: int, h: float) -> 
     """An OSP system structure of the small FMUs (copied into ``folder`` beside it), for the
     cross-check against libcosim: initial values of each type an FMU here has (Real, Integer,
     Boolean), a multi-rate simulator (the ball, every second step), a linear transformation and
-    an algebraic loop of two feedthroughs (one through a transformation, the other a power
-    bond's connection), a sum of one signal.
+    an algebraic loop of two feedthroughs (one through a transformation), a power bond (two
+    feedthroughs feeding each other), a sum of one signal.
     Return the path of ``folder/OspSystemStructure.xml``."""
     import shutil
 
@@ -202,6 +202,8 @@ def osp_structure(fmus: dict[str, Path], folder: Path, steps: int, h: float) -> 
     <Simulator name="loopA" source="Feedthrough.fmu"/>
     <Simulator name="loopB" source="Feedthrough.fmu"/>
     <Simulator name="height" source="Feedthrough.fmu"/>
+    <Simulator name="bondA" source="Feedthrough.fmu"/>
+    <Simulator name="bondB" source="Feedthrough.fmu"/>
     <Simulator name="types" source="Types.fmu">
       <InitialValues>
         <InitialValue variable="gain"><Real value="3.0"/></InitialValue>
@@ -223,7 +225,11 @@ def osp_structure(fmus: dict[str, Path], folder: Path, steps: int, h: float) -> 
     <SignalConnection><Variable simulator="ft" name="u"/><Signal function="twice" name="out"/></SignalConnection>
     <VariableConnection><Variable simulator="ft" name="y"/><Variable simulator="types" name="ru"/></VariableConnection>
     <VariableConnection><Variable simulator="types" name="iu"/><Variable simulator="ball" name="bounces"/></VariableConnection>
-    <VariableConnection powerBond="loop"><Variable simulator="loopA" name="y"/><Variable simulator="loopB" name="u"/></VariableConnection>
+    <VariableConnection><Variable simulator="loopA" name="y"/><Variable simulator="loopB" name="u"/></VariableConnection>
+    <VariableConnection powerBond="bond"><Variable simulator="bondA" name="y" causality="output"/>
+      <Variable simulator="bondB" name="u" causality="input"/></VariableConnection>
+    <VariableConnection powerBond="bond"><Variable simulator="bondB" name="y" causality="output"/>
+      <Variable simulator="bondA" name="u" causality="input"/></VariableConnection>
     <SignalConnection><Variable simulator="loopB" name="y"/><Signal function="half" name="in"/></SignalConnection>
     <SignalConnection><Variable simulator="loopA" name="u"/><Signal function="half" name="out"/></SignalConnection>
     <VariableConnection><Variable simulator="ball" name="falling"/><Variable simulator="types" name="bu"/></VariableConnection>

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import json
 import math
 import re
@@ -155,8 +157,10 @@ def test_an_fmi_1_fmu_whose_binary_cannot_load_is_named(tmp_path, fmus):
             '</ModelVariables><Implementation><CoSimulation_StandAlone><Capabilities/>'
             '</CoSimulation_StandAlone></Implementation></fmiModelDescription>'))
         z.writestr("binaries/linux64/m.so", b"\x7fELF")
+    here = os.getcwd()
     with pytest.raises(FmuError, match="node 'g': old.fmu: its binary cannot be loaded as CoSimulation"):
         _instance(tmp_path, old, _gain_node(old, parameters={}, output=["y"]))
+    assert os.getcwd() == here  # fmpy leaves a failed load's folder as the cwd; the node goes back
 
 
 def test_a_pythonfmu_step_that_returns_false_ends_the_run_where_the_fmu_says(tmp_path, fmus):

@@ -53,7 +53,7 @@ def test_a_structure_imports_as_a_project_and_runs_from_its_xml_or_folder(system
         runs.append((next(out.iterdir()) / "values.csv").read_bytes())
     assert runs[0] == runs[1] == runs[2]
     res = hycosim("validate", str(system))
-    assert res.returncode == 0 and "project 'system', 7 nodes" in res.stdout, res.stdout + res.stderr
+    assert res.returncode == 0 and "project 'system', 9 nodes" in res.stdout, res.stdout + res.stderr
 
 
 def _edit(system: Path, tmp_path: Path, old: str, new: str) -> Path:
@@ -72,21 +72,23 @@ def _edit(system: Path, tmp_path: Path, old: str, new: str) -> Path:
     ('<Variable simulator="ft" name="y"/>', '<Variable simulator="ft" name="nope"/>',
      "Connections/VariableConnection[1]/Variable[1]: Feedthrough.fmu (simulator ft) has no variable 'nope'"),
     ('<Integer value="5"/>', '<Real value="5.5"/>',
-     "Simulators/Simulator[6] (types)/InitialValues/InitialValue[2]: 'offset' of Types.fmu is Integer; the value "
+     "Simulators/Simulator[8] (types)/InitialValues/InitialValue[2]: 'offset' of Types.fmu is Integer; the value "
      "given is Real"),
     ('<Real value="0.7"/>', '<String value="bouncy"/>',
-     "Simulators/Simulator[7] (ball)/InitialValues/InitialValue[1]: 'e' of Ball.fmu is Real; the value given is "
+     "Simulators/Simulator[9] (ball)/InitialValues/InitialValue[1]: 'e' of Ball.fmu is Real; the value given is "
      "String"),
     ('<Boolean value="true"/>', '<Boolean value="yes"/>', "'yes' is no Boolean (true, false, 1 or 0)"),
     ('source="Ball.fmu" stepSize="0.02"', 'source="Ball.fmu" stepSize="0.015"',
-     "Simulators/Simulator[7] (ball)/@stepSize: 0.015 s is no whole multiple of the base step 0.01 s"),
+     "Simulators/Simulator[9] (ball)/@stepSize: 0.015 s is no whole multiple of the base step 0.01 s"),
     ('source="Ball.fmu"', 'source="proxy-fmu://host/Ball.fmu"',
-     "Simulators/Simulator[7] (ball): source 'proxy-fmu://host/Ball.fmu' is a proxy-fmu: URI"),
+     "Simulators/Simulator[9] (ball): source 'proxy-fmu://host/Ball.fmu' is a proxy-fmu: URI"),
     ("<Algorithm>fixedStep</Algorithm>", "<Algorithm>magic</Algorithm>", "Algorithm: 'magic'"),
     ('<Signal function="twice" name="out"/>', '<Signal function="twice" name="outt"/>',
      "Functions/LinearTransformation[1] (twice): no SignalConnection to its signal 'out'"),
     (f'xmlns="{NS}"', 'xmlns="http://example.com/other"', "not OspSystemStructure in the namespace"),
     ("<BaseStepSize>0.01</BaseStepSize>", "", "BaseStepSize: missing; give --step"),
+    ('<VariableConnection powerBond="bond"><Variable simulator="bondB"', '<VariableConnection><Variable simulator="bondB"',
+     "the power bond 'bond' has 1 connection; a power bond is two"),
 ])
 def test_what_hycosim_cannot_take_is_named_with_its_place_exit_2(system, tmp_path, old, new, says):
     xml = _edit(system, tmp_path, old, new)
@@ -97,7 +99,7 @@ def test_what_hycosim_cannot_take_is_named_with_its_place_exit_2(system, tmp_pat
 
 def test_ecco_runs_as_the_error_controlled_step_with_a_warning(system, tmp_path):
     xml = _edit(system, tmp_path, "<Algorithm>fixedStep</Algorithm>", "<Algorithm>ecco</Algorithm>")
-    with pytest.raises(OspError, match=r"Simulator\[7\] \(ball\)/@stepSize: a step of its own under Algorithm ecco"):
+    with pytest.raises(OspError, match=r"Simulator\[9\] \(ball\)/@stepSize: a step of its own under Algorithm ecco"):
         project_from_osp(xml, tmp_path)
     xml.write_text(xml.read_text().replace(' stepSize="0.02"', ""))
     made = project_from_osp(xml, tmp_path)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import ctypes
 import json
 import math
+import os
 import shutil
 import struct
 import tempfile
@@ -638,10 +639,15 @@ class FmuInstance:
         self._parameters = parameters
         self._unzipdir = tempfile.mkdtemp(prefix=f"hycosim-{self.node}-")
         fmpy.extract(str(path), self._unzipdir)
+        # fmpy changes into the binary's folder to load it and does not change back when the
+        # load fails: the folder is removed below, which would leave this process (a Python
+        # caller's, in process) in a folder that is gone.
+        cwd = os.getcwd()
         try:
             self.fmu = self._instantiate(dict(guid=self.md.guid, unzipDirectory=self._unzipdir,
                                               modelIdentifier=cs.modelIdentifier, instanceName=self.node))
         except Exception as exc:  # a binary without the interface's functions, or one that fails to load
+            os.chdir(cwd)
             shutil.rmtree(self._unzipdir, ignore_errors=True)
             raise FmuError(f"node {self.node!r}: {path.name}: its binary cannot be loaded as {mapping.interface} "
                            f"({type(exc).__name__}: {exc})") from None

@@ -384,6 +384,15 @@ def project_from_osp(path: Path, project_dir: Path, step: float | None = None,
     end = end if stop is None else stop
     sims = _simulators(root, xml.parent, problems)
     links = _links(root, sims, problems)
+    bonds: dict[str, int] = {}
+    connections = root.find(_q("Connections"))
+    for element in connections.findall(_q("VariableConnection")) if connections is not None else []:
+        if element.get("powerBond") is not None:
+            bonds[element.get("powerBond")] = bonds.get(element.get("powerBond"), 0) + 1
+    for bond, count in bonds.items():
+        if count != 2:
+            problems.append(f"Connections: the power bond {bond!r} has {count} connection{'s' * (count != 1)}; a "
+                            "power bond is two (effort one way, flow the other)")
     fed: dict[tuple[str, str], str] = {}
     for src, dst, _, where in links:
         if dst in fed:
