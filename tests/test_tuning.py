@@ -82,7 +82,9 @@ def test_a_tuned_parameter_is_in_force_again_after_a_node_is_killed_and_the_run_
     code, err = run_killing(cfg, tmp_path / "runs", [("node g", 230)], "--restarts", "2")
     assert code == 0, err
     run = next((tmp_path / "runs").iterdir())
-    assert [r["node"] for r in meta(run)["recoveries"]] == ["g"] and 100 < meta(run)["recoveries"][0]["restored"] < 230
+    # Restored between the two changes (k = 3 from step 100, k = 0.5 from step 300), wherever the
+    # kill landed after step 230 on a loaded machine: the run must send k = 3 again.
+    assert [r["node"] for r in meta(run)["recoveries"]] == ["g"] and 100 < meta(run)["recoveries"][0]["restored"] < 300
     assert (run / "values.csv").read_bytes() == (reference / "values.csv").read_bytes()
     _gain_follows(read_rows(run), lambda t: 1.0 if t < 1.0 - 1e-9 else 3.0 if t < 3.0 - 1e-9 else 0.5)
 
