@@ -16,6 +16,8 @@ import time
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import hycosim
 from tests.helpers import hycosim as cli, spawn
@@ -195,3 +197,31 @@ def test_what_is_malformed_is_named_before_any_run_starts(small, tmp_path, args,
     res = cli("sweep", str(small), *args, "-o", str(out))
     assert res.returncode == 2 and says in res.stderr, res.stderr
     assert "Traceback" not in res.stderr and not (out / "runs.parquet").exists()
+
+
+@settings(suppress_health_check=[HealthCheck.function_scoped_fixture], max_examples=60)
+@given(rows=st.lists(st.dictionaries(st.sampled_from(["run", "outcome", "run_dir", "x"]),
+                                     st.none() | st.integers(-5, 5) | st.sampled_from(["completed", "failed", ""])
+                                     | st.floats(allow_nan=True)), max_size=6),
+       damaged=st.booleans())
+def test_the_table_resumed_from_gives_completed_runs_by_number_or_one_named_error(tmp_path, rows, damaged):
+    import pyarrow as pa
+
+    from hycosim.ensemble.sweep import RUNS_TABLE, SweepError, _finished
+
+    out = tmp_path / "t"
+    out.mkdir(exist_ok=True)
+    if damaged:
+        (out / RUNS_TABLE).write_bytes(b"PAR1" + json.dumps(rows).encode())
+    else:
+        try:
+            table = pa.Table.from_pylist(rows)
+        except (pa.ArrowInvalid, pa.ArrowTypeError):
+            return  # no table of these rows can be written
+        pq.write_table(table, out / RUNS_TABLE)
+    try:
+        kept = _finished(out)
+    except SweepError as exc:
+        assert RUNS_TABLE in str(exc)
+        return
+    assert all(type(r["run"]) is int and r["outcome"] == "completed" for r in kept)

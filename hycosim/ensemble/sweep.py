@@ -134,7 +134,8 @@ def _finished(out: Path) -> list[dict[str, Any]]:
         rows = pq.read_table(path).to_pylist()
     except Exception as exc:  # noqa: BLE001 - a damaged table: named, the sweep does not start
         raise SweepError(f"{path}: cannot read the table to resume from ({type(exc).__name__}: {exc})") from None
-    return [r for r in rows if r.get("outcome") == "completed"]
+    # A table is a file a user may have edited: only rows naming a run by number count.
+    return [r for r in rows if r.get("outcome") == "completed" and type(r.get("run")) is int]
 
 
 def _client(workers: int | None, scheduler: str | None) -> tuple[Any, Any]:
