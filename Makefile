@@ -37,10 +37,13 @@ bytecode: $(STAMP)
 run: $(STAMP) bytecode
 	$(VENV)/bin/hycosim trials --angles 40 --trials 1 -o runs/demo
 
-# The paper's 80 trials, with and without camera correction (about 20 minutes).
+# The paper's 80 trials, with and without camera correction (about 20 minutes one after the
+# other); `make trials WORKERS=2` runs them on a local Dask cluster of two worker processes.
+WORKERS ?=
+TRIAL_FLAGS := --angles 30 40 50 60 --trials 20 $(if $(WORKERS),--workers $(WORKERS))
 trials: $(STAMP) bytecode
-	$(VENV)/bin/hycosim trials --angles 30 40 50 60 --trials 20 -o runs/trials
-	$(VENV)/bin/hycosim trials --angles 30 40 50 60 --trials 20 --no-correction -o runs/trials-no-correction
+	$(VENV)/bin/hycosim trials $(TRIAL_FLAGS) -o runs/trials
+	$(VENV)/bin/hycosim trials $(TRIAL_FLAGS) --no-correction -o runs/trials-no-correction
 
 # Train the policy from scratch (demonstrations, behaviour cloning, DDPG).
 train: $(STAMP) bytecode
@@ -80,6 +83,7 @@ bench: $(STAMP) bytecode chromium tbb
 	$(PY) benchmarks/recording.py --table benchmarks/results/recording.md
 	$(PY) benchmarks/decode.py --table benchmarks/results/decode.md
 	$(PY) benchmarks/sweep.py --table benchmarks/results/sweep.md
+	$(PY) benchmarks/trials.py --table benchmarks/results/trials.md
 	$(PY) benchmarks/fuzz.py --table benchmarks/results/fuzz.md
 	$(PY) benchmarks/status_flood.py --table benchmarks/results/status_flood.md
 	$(PY) benchmarks/recovery.py --table benchmarks/results/recovery.md

@@ -498,3 +498,17 @@ def test_sweep_benchmark_runs_the_same_variants_in_a_loop_and_on_one_and_two_wor
     assert all(s > 0 for s in result["seconds"].values()) and result["two_vs_one"] > 0
     [rows] = manual_tables(tmp_path / "sweep.md")
     assert [r["way"] for r in rows] == list(result["seconds"]) and rows[0]["× plain loop"] == "1.00"
+
+
+def test_trials_benchmark_runs_the_same_trials_one_after_another_and_on_dask_workers(tmp_path):
+    res = subprocess.run([sys.executable, "benchmarks/trials.py", "--angles", "40", "--trials", "1", "--workers", "1",
+                          "--json", "--table", str(tmp_path / "trials.md")],
+                         capture_output=True, text=True, timeout=300, cwd=REPO, env=env())
+    assert res.returncode == 0, res.stderr[-2000:]
+    ways = json.loads(res.stdout.splitlines()[-1])
+    assert list(ways) == ["one after another", "1 Dask worker"]
+    assert all(w["trials"] == 1 and w["seconds"] > 0 and w["success_pct"] == 100 for w in ways.values())
+    [rows] = manual_tables(tmp_path / "trials.md")
+    assert [r["way"] for r in rows] == list(ways) and rows[0]["× serial"] == "1.00"
+    ratio = ways["1 Dask worker"]["seconds"] / ways["one after another"]["seconds"]
+    assert rows[1]["× serial"] == f"{ratio:.2f}"

@@ -276,6 +276,64 @@ def test_ctrl_c_stops_the_trials_and_tabulates_the_finished_ones(tmp_path):
         reap(proc)
 
 
+def _trial_rows(out) -> list[dict]:
+    with open(out / "trials.csv", newline="") as f:
+        return [{k: v for k, v in row.items() if k != "run_dir"} for row in csv.DictReader(f)]
+
+
+def test_trials_on_dask_workers_equal_the_serial_ones_in_the_trials_order(tmp_path):
+    """Without the camera a trial is deterministic: each run on a worker of a local cluster gives
+    the row the same trial gives run alone; the table keeps the trials' order whichever ends
+    first, and the workers' logs go to the trials' log, not to the terminal."""
+    quick = ("--no-correction", "--driver", "reference", "--nodes", "python")
+    res = hycosim("trials", "--angles", "30", "40", "--trials", "1", *quick, "--workers", "2",
+                  "-o", str(tmp_path / "dask"), timeout=300)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "│ 40°" in res.stdout and "program ended" not in res.stderr
+    assert "program ended" in (tmp_path / "dask" / "trials.log.jsonl").read_text()
+    alone = hycosim("trials", "--angles", "40", "--trials", "1", *quick, "-o", str(tmp_path / "alone"), timeout=300)
+    assert alone.returncode == 0, alone.stderr[-2000:]
+    rows = _trial_rows(tmp_path / "dask")
+    assert [(r["angle"], r["trial"]) for r in rows] == [("30.0", "0"), ("40.0", "0")]
+    assert rows[1] == _trial_rows(tmp_path / "alone")[0] and rows[1]["success"] == "True"
+    both = hycosim("trials", "--angles", "40", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1",
+                   "-o", str(tmp_path / "no"))
+    assert both.returncode == 2 and "not both" in both.stderr
+
+
+def test_ctrl_c_stops_the_trials_running_on_the_workers(tmp_path):
+    """Ctrl-C to the trials alone (not to the workers, as a terminal would): the trials running
+    on the workers are stopped as a serial one is (their servers record an interrupted run), no
+    further trial starts, and the finished ones are in the table."""
+    import os
+    import signal
+
+    from tests.helpers import reap, spawn, wait_for
+
+    out = tmp_path / "trials"
+    proc = spawn("trials", "--angles", "40", "--trials", "6", "--driver", "reference", "--nodes", "python",
+                 "--workers", "2", "-o", str(out))
+    try:
+        wait_for(lambda: (out / "trials.csv").exists(), 120, "the first trial")
+        # A trial past the first two whose co-simulation is under way (its server's records open).
+        wait_for(lambda: any('"status": "running"' in m.read_text()
+                             for m in out.glob("40deg-0[2-5]/runs/*/meta.json")), 60, "a later trial to run")
+        time.sleep(0.5)
+        os.kill(proc.pid, signal.SIGINT)
+        stdout, err = proc.communicate(timeout=60)
+        assert proc.returncode == 130, err
+        assert "interrupted by Ctrl-C after" in err and "Traceback" not in err
+        finished = _trial_rows(out)
+        assert 1 <= len(finished) < 6 and all(r["error"] == "" for r in finished)
+        statuses = {}
+        for meta in out.glob("40deg-*/runs/*/meta.json"):
+            wait_for(lambda: '"status": "running"' not in meta.read_text(), 30, f"{meta} to be closed")
+            statuses[meta.parts[-4]] = json.loads(meta.read_text())["status"]
+        assert "interrupted" in statuses.values(), statuses
+    finally:
+        reap(proc)
+
+
 # Frame streams as a PC sends them, each frame right or with one thing wrong, the whole
 # stream ended by the empty-A1 frame or by the connection closing.
 _FRAME_WRONGS = ["axis", "time", "element", "root", "xml", "bytes", "entity", "markup"]

@@ -13,21 +13,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from hycosim.ensemble.cluster import dask_client, each_ended, require_ensemble
 from hycosim.ensemble.runs import Metric, parse_metric, run_variant, with_parameters
 from hycosim.ensemble.variants import Setting, SweepError, parse_setting, variants
 
 RUNS_TABLE = "runs.parquet"
 VALUES_TABLE = "values.parquet"
-
-
-def require_ensemble() -> None:
-    """SweepError naming the extra where Dask or pyarrow is missing."""
-    try:
-        import dask.distributed  # noqa: F401
-        import pyarrow  # noqa: F401
-    except ImportError as exc:
-        raise SweepError(f"a sweep needs the ensemble extra ({exc.name} is missing): "
-                         "pip install 'hycosim[ensemble]'") from None
 
 
 @dataclass
@@ -138,19 +129,6 @@ def _finished(out: Path) -> list[dict[str, Any]]:
     return [r for r in rows if r.get("outcome") == "completed" and type(r.get("run")) is int]
 
 
-def _client(workers: int | None, scheduler: str | None) -> tuple[Any, Any]:
-    from dask.distributed import Client, LocalCluster
-
-    if scheduler is not None:
-        try:
-            return Client(scheduler, timeout="20s"), None
-        except OSError as exc:
-            raise SweepError(f"--scheduler {scheduler}: cannot reach it ({exc})") from None
-    cluster = LocalCluster(n_workers=workers or 1, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=50)
-    return Client(cluster), cluster
-
-
 def sweep(project: str | Path | dict[str, Any], parameters: dict[str, Any] | list[str], *, zipped: bool = False,
           samples: int | None = None, seed: int = 0, workers: int | None = None, scheduler: str | None = None,
           metrics: list[str] = (), out: str | Path = "sweep", timeout: float | None = None, values: bool = False,
@@ -194,40 +172,25 @@ def _run_all(doc: dict[str, Any], todo: list[tuple[int, dict[str, Any]]], out: P
              metrics: list[Metric], workers: int | None, scheduler: str | None, rows: list[dict[str, Any]],
              tally: Tally, on_progress: Callable[[Tally], None] | None) -> None:
     """Hand the runs to Dask; a row for each as it ends, the table written each time."""
-    from dask.distributed import as_completed
-
-    client, cluster = _client(workers, scheduler)
-    futures = {}
+    jobs = [((i, v), (doc, i, v, str(out.resolve()), timeout, metrics)) for i, v in todo]
     try:
-        for i, v in todo:
-            future = client.submit(run_variant, doc, i, v, str(out.resolve()), timeout, metrics, pure=False,
-                                   key=f"hycosim-run-{i}-{id(futures)}")
-            futures[future] = (i, v)
-        for future in as_completed(futures):
-            i, v = futures[future]
-            try:
-                row = future.result()
-            except Exception as exc:  # noqa: BLE001 - a worker that died, or a run that raised past its row
-                row = {"run": i, **v, "outcome": "failed", "message": f"{type(exc).__name__}: {exc}",
-                       "steps_per_s": math.nan, "wall_s": math.nan, "run_dir": ""}
-                row.update({m.column: math.nan for m in metrics})
-            rows.append(row)
-            if row["outcome"] == "completed":
-                tally.done += 1
-            else:
-                tally.failed += 1
-            _write(out, rows)
-            if on_progress:
-                on_progress(tally)
-    except KeyboardInterrupt:
-        client.cancel(list(futures))
-        raise
+        with dask_client(workers, scheduler) as client:
+            for (i, v), row, error in each_ended(client, run_variant, jobs):
+                if error is not None:  # a worker that died, or a run that raised past its row
+                    row = {"run": i, **v, "outcome": "failed", "message": f"{type(error).__name__}: {error}",
+                           "steps_per_s": math.nan, "wall_s": math.nan, "run_dir": ""}
+                    row.update({m.column: math.nan for m in metrics})
+                rows.append(row)
+                if row["outcome"] == "completed":
+                    tally.done += 1
+                else:
+                    tally.failed += 1
+                _write(out, rows)
+                if on_progress:
+                    on_progress(tally)
     finally:
         if rows:
             _write(out, rows)
-        client.close()
-        if cluster is not None:
-            cluster.close()
 
 
 def _values(out: Path, rows: list[dict[str, Any]]) -> None:

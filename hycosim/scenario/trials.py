@@ -278,36 +278,118 @@ class TrialsInterrupted(Exception):
         self.stop = stop
 
 
+def _trial_or_failure(angle: float, trial: int, out: Path, correction: bool, driver: str, nodes: str,
+                      fmu_dir: Path) -> TrialResult:
+    """One trial; one that fails to run is its result too: not grasped, with its error."""
+    try:
+        return run_trial(angle, trial, out, correction, driver, nodes=nodes, fmu_dir=fmu_dir)
+    except (RuntimeError, OSError, ValueError) as exc:
+        return _not_run(angle, trial, out, correction, nodes, str(exc))
+
+
+def _not_run(angle: float, trial: int, out: Path, correction: bool, nodes: str, error: str) -> TrialResult:
+    physical = physical_rod(angle, trial_seed(angle, trial))
+    return TrialResult(angle, trial, correction, False, None, None, False, str(out / f"{angle:g}deg-{trial:02d}"),
+                       physical.length, math.degrees(physical.initial_angle), physical.damping, nodes, error=error)
+
+
+def _trial_on_worker(angle: float, trial: int, out: Path, correction: bool, driver: str, nodes: str,
+                     fmu_dir: Path) -> TrialResult:
+    """One trial as a Dask worker runs it: a trial stopped by Ctrl-C is a result too (a worker
+    is not the place for KeyboardInterrupt). Its logs go where the serial trials' go."""
+    from hycosim.core import logs
+
+    logs.configure(out / "trials.log.jsonl")
+    try:
+        return _trial_or_failure(angle, trial, out, correction, driver, nodes, fmu_dir)
+    except KeyboardInterrupt as stop:
+        return _not_run(angle, trial, out, correction, nodes, signals.describe(stop))
+
+
+def _stop_trials_here() -> int:
+    """On a worker: Ctrl-C to the hycosim processes the worker started (a trial's server and
+    nodes), as a serial trial takes it: the server writes its records and the nodes follow."""
+    import os
+    import signal
+
+    import psutil
+
+    stopped = 0
+    for child in psutil.Process(os.getpid()).children():
+        try:
+            if "hycosim" in child.cmdline():
+                child.send_signal(signal.SIGINT)
+                stopped += 1
+        except psutil.Error:  # ended meanwhile, or not ours to signal
+            pass
+    return stopped
+
+
 def run_trials(angles: list[float], trials: int, out: Path, correction: bool = True, driver: str = "policy",
                progress: Callable[[TrialResult], None] | None = None, nodes: str = "fmu",
-               fmu_dir: Path = FMU_DIR) -> list[TrialResult]:
-    """Every trial, in order; one that fails to run is recorded as not grasped, with its error,
-    and the others go on. The scene FMUs (``nodes='fmu'``) are built into ``fmu_dir`` when missing
-    or older than their sources; ScenarioMissing if the shipped scenario is not there. ``trials.csv`` is rewritten after each trial. Ctrl-C stops them:
-    TrialsInterrupted carries the finished ones (the interrupted trial is not counted)."""
+               fmu_dir: Path = FMU_DIR, workers: int | None = None, scheduler: str | None = None) -> list[TrialResult]:
+    """Every trial; one that fails to run is recorded as not grasped, with its error, and the
+    others go on. In order, one after the other, or, with ``workers`` (a local Dask cluster of
+    that many processes) or ``scheduler`` (a Dask scheduler's address, whose workers see the same
+    files), as many at a time as there are workers, in the order they end. The scene FMUs
+    (``nodes='fmu'``) are built into ``fmu_dir`` when missing or older than their sources;
+    ScenarioMissing if the shipped scenario is not there; SweepError where Dask is missing or
+    the scheduler cannot be reached. ``trials.csv`` is rewritten after each trial, in the trials'
+    order. Ctrl-C stops them: TrialsInterrupted carries the finished ones (the interrupted
+    trials are not counted)."""
     from hycosim.core import logs
 
     scenario_file(nodes, driver)  # a damaged install is named before anything runs
+    distributed = workers is not None or scheduler is not None
+    if distributed:
+        from hycosim.ensemble.cluster import require_ensemble
+
+        require_ensemble("hycosim trials --workers")
     make_folder(out)
     logs.configure(out / "trials.log.jsonl")
     if nodes == "fmu":
         from hycosim.scenario.scene_fmus import ensure_scene_fmus
 
         ensure_scene_fmus(fmu_dir)
-    results = []
-    for angle in angles:
-        for i in range(trials):
-            try:
-                r = run_trial(angle, i, out, correction, driver, nodes=nodes, fmu_dir=fmu_dir)
-            except KeyboardInterrupt as stop:
-                raise TrialsInterrupted(results, stop) from None
-            except (RuntimeError, OSError, ValueError) as exc:
-                physical = physical_rod(angle, trial_seed(angle, i))
-                r = TrialResult(angle, i, correction, False, None, None, False, str(out / f"{angle:g}deg-{i:02d}"),
-                                physical.length, math.degrees(physical.initial_angle), physical.damping,
-                                nodes, error=str(exc))
-            results.append(r)
-            write_csv(results, out)
-            if progress:
-                progress(r)
+    order = {(angle, i): n for n, (angle, i) in enumerate((a, i) for a in angles for i in range(trials))}
+    results: list[TrialResult] = []
+
+    def finished(r: TrialResult) -> None:
+        results.append(r)
+        results.sort(key=lambda x: order[x.angle, x.trial])
+        write_csv(results, out)
+        if progress:
+            progress(r)
+
+    try:
+        if distributed:
+            _run_on_dask(list(order), out, correction, driver, nodes, fmu_dir, workers, scheduler, finished)
+        else:
+            for angle, i in order:
+                finished(_trial_or_failure(angle, i, out, correction, driver, nodes, fmu_dir))
+    except KeyboardInterrupt as stop:
+        raise TrialsInterrupted(results, stop) from None
     return results
+
+
+def _run_on_dask(todo: list[tuple[float, int]], out: Path, correction: bool, driver: str, nodes: str,
+                 fmu_dir: Path, workers: int | None, scheduler: str | None,
+                 finished: Callable[[TrialResult], None]) -> None:
+    """Each trial a job on a Dask worker; a worker that dies is its trial's error. Ctrl-C on a
+    local cluster stops the trials running on it as it stops a serial one."""
+    from hycosim.ensemble.cluster import dask_client, each_ended
+
+    out, fmu_dir = out.resolve(), fmu_dir.resolve()  # a worker's working folder need not be ours
+    jobs = [((angle, i), (angle, i, out, correction, driver, nodes, fmu_dir)) for angle, i in todo]
+    with dask_client(workers, scheduler) as client:
+        try:
+            for (angle, i), result, error in each_ended(client, _trial_on_worker, jobs):
+                finished(result if error is None else
+                         _not_run(angle, i, out, correction, nodes, f"{type(error).__name__}: {error}"))
+        except KeyboardInterrupt:
+            if scheduler is None:  # a shared cluster's workers run others' processes too: left alone
+                try:
+                    client.run(_stop_trials_here)
+                except Exception:  # noqa: BLE001 - workers already ending (Ctrl-C reached them too)
+                    pass
+            raise

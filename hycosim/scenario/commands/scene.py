@@ -142,14 +142,22 @@ def trials(
     output: Annotated[Path, typer.Option("-o", "--output")] = Path("runs/trials"),
     fmus: Annotated[Path, typer.Option(help="where the rod and robot-scene FMUs are, built there when missing "
                                             "or older than hycosim's sources")] = Path("build/fmus"),
+    workers: Annotated[Optional[int], typer.Option(min=1, help="run the trials on a local Dask cluster of this "
+                                                                "many worker processes (the ensemble extra)")] = None,
+    scheduler: Annotated[Optional[str], typer.Option(help="run them on a running Dask scheduler's workers, "
+                                                           "tcp://host:8786 (they must see the same files)")] = None,
 ) -> None:
     """Rerun the paper's trials: co-simulation, EthernetKRL export, emulated controller, Table 2."""
     require_extra("scenario", "hycosim trials")
     from hycosim.scenario.trials import (NODE_KINDS, ScenarioMissing, TrialsInterrupted, figure_text, paper_figures,
                                 run_trials, summarise, write_outputs)
 
+    from hycosim.ensemble.variants import SweepError
+
     if driver not in ("policy", "reference"):
         fail("--driver is 'policy' or 'reference'")
+    if workers is not None and scheduler is not None:
+        fail("--workers and --scheduler: a local cluster or one by address, not both")
     if nodes not in NODE_KINDS:
         fail(f"--nodes is {' or '.join(map(repr, NODE_KINDS))}")
     try:
@@ -170,8 +178,8 @@ def trials(
 
     interrupted = None
     try:
-        results = run_trials(angle_list, n, output, correction, driver, progress, nodes, fmus)
-    except ScenarioMissing as exc:
+        results = run_trials(angle_list, n, output, correction, driver, progress, nodes, fmus, workers, scheduler)
+    except (ScenarioMissing, SweepError) as exc:
         fail(str(exc))
     except TrialsInterrupted as exc:
         # Ctrl-C again must not cut short the table and files of the finished trials (a second or two).
