@@ -32,6 +32,11 @@ node's values are the same, and whether batching left every recorded value as it
 
     python benchmarks/accuracy.py [--stop 2] [--h 0.01 0.005 0.002] [--problems two three] [--mr-stop 2]
                                   [--transient-stop 5] [--tolerances 1e-4 3e-5 1e-5] [--plot PNG] [--json]
+                                  [--in-process]
+
+With ``--in-process`` every run is ``hycosim run --in-process`` (the master and every node in
+one process): the same values, takes and frames, in a fraction of the time; its wall times
+are in-process ones.
 """
 
 from __future__ import annotations
@@ -66,10 +71,10 @@ def build_mass_fmu(dir_: Path) -> Path:
     return _mass_fmu.build(dir_ / "fmu")
 
 
-def _run(cfg: Path, runs: Path, timeout: float = 600) -> tuple[Path, float]:
+def _run(cfg: Path, runs: Path, in_process: bool = False, timeout: float = 600) -> tuple[Path, float]:
     began = time.perf_counter()
-    res = run([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", str(runs), "--no-progress"],
-              timeout, cwd=REPO)
+    res = run([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", str(runs), "--no-progress",
+               *(["--in-process"] if in_process else [])], timeout, cwd=REPO)
     wall = time.perf_counter() - began
     if res.returncode:
         raise SystemExit(f"{cfg}: run failed ({res.returncode}): {res.stderr.strip()[-800:]}")
@@ -236,13 +241,14 @@ def _takes(run_dir: Path) -> int:
     return sum(int(r.get("takes") or 1) for r in rows)
 
 
-def accuracy(dir_: Path, fmu: Path, steps: list[float], stop: float, problems: list[str]) -> list[dict]:
+def accuracy(dir_: Path, fmu: Path, steps: list[float], stop: float, problems: list[str],
+             in_process: bool = False) -> list[dict]:
     rows = []
     for problem in problems:
         for h in steps:
             for scheme in SCHEMES:
                 run_dir, wall = _run(oscillator(dir_, fmu, scheme, h, stop, problem),
-                                     dir_ / f"runs-{problem}-{scheme}-{h:g}")
+                                     dir_ / f"runs-{problem}-{scheme}-{h:g}", in_process)
                 c = _columns(run_dir)
                 ref = reference(c["t"], problem)
                 e = energy(c, problem)
@@ -258,7 +264,8 @@ def accuracy(dir_: Path, fmu: Path, steps: list[float], stop: float, problems: l
 DAMPING, PULSE = 20.0, {"pulse_at": 1.0, "pulse_width": 0.02, "pulse": 50.0}
 
 
-def transient(dir_: Path, fmu: Path, stop: float, tolerances: list[float], fixed: float = 0.001) -> list[dict]:
+def transient(dir_: Path, fmu: Path, stop: float, tolerances: list[float], fixed: float = 0.001,
+              in_process: bool = False) -> list[dict]:
     """Jacobi at a fixed H = ``fixed`` against the error-controlled step at each tolerance."""
     at_rest = {"m1": {"x": 0.0, "c": DAMPING, **PULSE}, "m2": {"xl": 0.0, "c": DAMPING}}
     cases = [("fixed", fixed, {})] + [
@@ -266,7 +273,7 @@ def transient(dir_: Path, fmu: Path, stop: float, tolerances: list[float], fixed
     rows = []
     for kind, value, cosim in cases:
         cfg = oscillator(dir_, fmu, "jacobi", fixed if kind == "fixed" else 0.01, stop, **at_rest, cosim=cosim)
-        run_dir, wall = _run(cfg, dir_ / f"runs-transient-{kind}-{value:g}")
+        run_dir, wall = _run(cfg, dir_ / f"runs-transient-{kind}-{value:g}", in_process)
         c = _columns(run_dir)
         ref = pulse_reference(c["t"], DAMPING, PULSE["pulse_at"], PULSE["pulse_width"], PULSE["pulse"])
         meta = json.loads((run_dir / "meta.json").read_text())
@@ -292,13 +299,13 @@ def rates_chain(dir_: Path, stop: float, rates: bool, batch: bool = True) -> Pat
     return path
 
 
-def multirate(dir_: Path, stop: float) -> dict:
+def multirate(dir_: Path, stop: float, in_process: bool = False) -> dict:
     out = {}
     fast = {}
     values = {}
     for key, rates, batch in (("single_rate", False, True), ("multi_rate", True, True),
                               ("multi_rate_unbatched", True, False)):
-        run_dir, wall = _run(rates_chain(dir_, stop, rates, batch), dir_ / f"runs-chain-{key}")
+        run_dir, wall = _run(rates_chain(dir_, stop, rates, batch), dir_ / f"runs-chain-{key}", in_process)
         meta = json.loads((run_dir / "meta.json").read_text())
         c = _columns(run_dir)
         # Releases (STEP or STEPS; the START and STOP are the same in both) and the nodes' frames taken in.
@@ -372,15 +379,19 @@ def main() -> None:
     ap.add_argument("--tolerances", type=float, nargs="+", default=[1e-4, 3e-5, 1e-5])
     ap.add_argument("--fixed-h", type=float, default=0.001, help="the fixed step the controlled one is set against")
     ap.add_argument("--plot", type=Path, help="write the error-against-cost figure here (PNG)")
+    ap.add_argument("--in-process", action="store_true",
+                    help="every run in one process (hycosim run --in-process): the same values, no start-up of "
+                         "processes; the wall times are then in-process ones")
     ap.add_argument("--json", action="store_true")
     _table.add_argument(ap)
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         dir_ = Path(tmp)
         fmu = build_mass_fmu(dir_)
-        rows = accuracy(dir_, fmu, args.h, args.stop, args.problems)
-        rates = multirate(dir_, args.mr_stop)
-        sharp = transient(dir_, fmu, args.transient_stop, args.tolerances, args.fixed_h) if args.transient_stop > 0 else []
+        rows = accuracy(dir_, fmu, args.h, args.stop, args.problems, args.in_process)
+        rates = multirate(dir_, args.mr_stop, args.in_process)
+        sharp = (transient(dir_, fmu, args.transient_stop, args.tolerances, args.fixed_h, args.in_process)
+                 if args.transient_stop > 0 else [])
     by = {(r["problem"], r["coupling"], r["H"]): r for r in rows}
     ratios = {problem: {f"{h:g}": by[(problem, "gauss-seidel", h)]["error_x1"] / by[(problem, "jacobi", h)]["error_x1"]
                         for h in args.h} for problem in args.problems}
