@@ -302,9 +302,10 @@ def test_trials_on_dask_workers_equal_the_serial_ones_in_the_trials_order(tmp_pa
 
 
 def test_ctrl_c_stops_the_trials_running_on_the_workers(tmp_path):
-    """Ctrl-C to the trials alone (not to the workers, as a terminal would): the trials running
-    on the workers are stopped as a serial one is (their servers record an interrupted run), no
-    further trial starts, and the finished ones are in the table."""
+    """A terminal's Ctrl-C (the whole process group) during trials on two workers: the trials
+    running there are stopped as a serial one is (their servers record an interrupted run), no
+    further trial starts, the finished ones are in the table, and no worker prints a traceback
+    (the workers leave the terminal's group: the trials' command alone answers Ctrl-C)."""
     import os
     import signal
 
@@ -312,14 +313,14 @@ def test_ctrl_c_stops_the_trials_running_on_the_workers(tmp_path):
 
     out = tmp_path / "trials"
     proc = spawn("trials", "--angles", "40", "--trials", "6", "--driver", "reference", "--nodes", "python",
-                 "--workers", "2", "-o", str(out))
+                 "--workers", "2", "-o", str(out), start_new_session=True)
     try:
         wait_for(lambda: (out / "trials.csv").exists(), 120, "the first trial")
         # A trial past the first two whose co-simulation is under way (its server's records open).
         wait_for(lambda: any('"status": "running"' in m.read_text()
                              for m in out.glob("40deg-0[2-5]/runs/*/meta.json")), 60, "a later trial to run")
         time.sleep(0.5)
-        os.kill(proc.pid, signal.SIGINT)
+        os.killpg(proc.pid, signal.SIGINT)
         stdout, err = proc.communicate(timeout=60)
         assert proc.returncode == 130, err
         assert "interrupted by Ctrl-C after" in err and "Traceback" not in err

@@ -5,6 +5,7 @@ it raised; Ctrl-C (or leaving the loop early) cancels the rest."""
 
 from __future__ import annotations
 
+import os
 import uuid
 from collections.abc import Callable, Hashable, Iterator
 from contextlib import contextmanager
@@ -46,6 +47,10 @@ def dask_client(workers: int | None, scheduler: str | None) -> Iterator[Any]:
                            silence_logs=50)
     client = Client(cluster)
     try:
+        # Out of the terminal's process group: its Ctrl-C is the caller's to handle (it cancels
+        # the jobs, or stops what they started); a worker it reached would only print its own
+        # tracebacks over the caller's message.
+        client.run(os.setsid)
         yield client
     finally:
         client.close()
