@@ -50,7 +50,10 @@ def dask_client(workers: int | None, scheduler: str | None) -> Iterator[Any]:
         # Out of the terminal's process group: its Ctrl-C is the caller's to handle (it cancels
         # the jobs, or stops what they started); a worker it reached would only print its own
         # tracebacks over the caller's message.
-        client.run(os.setsid)
+        try:
+            client.run(os.setsid)
+        except OSError:  # a worker that leads its group already: only the tracebacks are at stake
+            pass
         yield client
     finally:
         client.close()

@@ -390,6 +390,6 @@ def _run_on_dask(todo: list[tuple[float, int]], out: Path, correction: bool, dri
             if scheduler is None:  # a shared cluster's workers run others' processes too: left alone
                 try:
                     client.run(_stop_trials_here)
-                except Exception:  # noqa: BLE001 - workers already ending (Ctrl-C reached them too)
+                except Exception:  # noqa: BLE001 - a worker that died meanwhile: nothing of its to stop
                     pass
             raise
