@@ -192,6 +192,7 @@ def test_export_and_controller_cli_errors(tmp_path):
     (["--angles", "30", "--trials", "0"], "'--trials'"),
     (["--angles", "thirty"], "give numbers in degrees"),
     (["--angles", "30", "--nodes", "modelica"], "--nodes is 'fmu' or 'python'"),
+    (["--angles", "40", "50", "40.0"], "40° given twice"),
 ])
 def test_trials_refuse_bad_angles_and_counts_before_running(tmp_path, args, message):
     res = hycosim("trials", *args, "-o", str(tmp_path / "out"))

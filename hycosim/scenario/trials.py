@@ -333,13 +333,15 @@ def run_trials(angles: list[float], trials: int, out: Path, correction: bool = T
     that many processes) or ``scheduler`` (a Dask scheduler's address, whose workers see the same
     files), as many at a time as there are workers, in the order they end. The scene FMUs
     (``nodes='fmu'``) are built into ``fmu_dir`` when missing or older than their sources;
-    ScenarioMissing if the shipped scenario is not there; SweepError where Dask is missing or
-    the scheduler cannot be reached. ``trials.csv`` is rewritten after each trial, in the trials'
+    ScenarioMissing if the shipped scenario is not there; ValueError for an angle given twice;
+    SweepError where Dask is missing or the scheduler cannot be reached. ``trials.csv`` is rewritten after each trial, in the trials'
     order. Ctrl-C stops them: TrialsInterrupted carries the finished ones (the interrupted
     trials are not counted)."""
     from hycosim.core import logs
 
     scenario_file(nodes, driver)  # a damaged install is named before anything runs
+    if len(set(angles)) != len(angles):
+        raise ValueError(f"angles {angles}: an angle given twice (a trial is its angle and number)")
     distributed = workers is not None or scheduler is not None
     if distributed:
         from hycosim.ensemble.cluster import require_ensemble

@@ -169,6 +169,10 @@ def trials(
         # The rod is released from rest on one side, below the horizontal (the paper: 30° to 60°).
         fail(f"--angles {angles!r}: "
              + (f"{', '.join(f'{a:g}°' for a in outside)} outside (0°, 90°)" if outside else "no angle given"))
+    twice = sorted({a for a in angle_list if angle_list.count(a) > 1})
+    if twice:  # a trial is its angle and number: its folder and its row would be the other's
+        fail(f"--angles {angles!r}: {', '.join(f'{a:g}°' for a in twice)} given twice; give each angle once "
+             "(--trials sets how many of each)")
     def progress(r) -> None:
         if r.error:
             err.print(Text.assemble(f"{r.angle:g}° #{r.trial}: ", ("not run", "red"), f": {r.error}"), highlight=False)
