@@ -26,26 +26,13 @@ from tests.helpers import hycosim as cli, spawn
 pq = pytest.importorskip("pyarrow.parquet", reason="pyarrow is in the [ensemble] extra")
 pytest.importorskip("dask.distributed", reason="dask is in the [ensemble] extra")
 
-_FAILS = '''
-from hycosim.node import Node
-
-
-class FailsAt(Node):
-    """y = t, until t passes its ``at`` parameter, where it raises as a model's bug would."""
-
-    OUTPUTS = frozenset({"y"})
-
-    def setup(self, ctx):
-        self.at, self.t = float(ctx.parameters.get("at", 1e9)), ctx.start_time
-
-    def outputs(self):
-        return {"y": self.t}
-
-    def step(self, t, h, inputs):
-        if t + h > self.at + 1e-9:
-            raise ZeroDivisionError("the model divided by zero")
-        self.t = t + h
-'''
+def _failing_project(path: Path, co_simulation: dict) -> Path:
+    """One node, tests.nodes.FailsAt (y = t; raises once t passes its ``at`` parameter)."""
+    path.write_text(json.dumps({
+        "projectName": path.stem, "nodeNum": 1, "linkNum": 0, "linkLists": [],
+        "nodeLists": [{"nodeName": "f", "UID": 1, "model": "tests.nodes:FailsAt", "output": ["y"]}],
+        "coSimulation": co_simulation}))
+    return path
 
 
 @pytest.fixture(scope="module")
@@ -91,12 +78,7 @@ def test_a_grid_on_two_local_workers_records_what_each_variant_records_alone(sma
 
 
 def test_a_failing_run_is_a_row_and_the_others_go_on_and_resume_skips_what_completed(tmp_path):
-    (tmp_path / "fails.py").write_text(_FAILS)
-    project = tmp_path / "p.json"
-    project.write_text(json.dumps({
-        "projectName": "fails", "nodeNum": 1, "linkNum": 0, "linkLists": [],
-        "nodeLists": [{"nodeName": "f", "UID": 1, "model": "fails.py:FailsAt", "output": ["y"]}],
-        "coSimulation": {"stepSize": 0.01, "stopTime": 0.5}}))
+    project = _failing_project(tmp_path / "fails.json", {"stepSize": 0.01, "stopTime": 0.5})
     out = tmp_path / "sweep"
     res = cli("sweep", str(project), "--set", "f.at=0.05,5,0.2", "--workers", "2", "-o", str(out), timeout=300)
     assert res.returncode == 1, res.stderr  # a run did not complete
@@ -121,12 +103,8 @@ def test_a_failing_run_is_a_row_and_the_others_go_on_and_resume_skips_what_compl
 
 
 def test_ctrl_c_cancels_the_sweep_and_keeps_the_runs_that_ended(tmp_path):
-    (tmp_path / "fails.py").write_text(_FAILS)
-    project = tmp_path / "paced.json"
-    project.write_text(json.dumps({
-        "projectName": "paced", "nodeNum": 1, "linkNum": 0, "linkLists": [],
-        "nodeLists": [{"nodeName": "f", "UID": 1, "model": "fails.py:FailsAt", "output": ["y"]}],
-        "coSimulation": {"stepSize": 0.05, "stopTime": 1.0, "realTime": True}}))  # a second a run
+    project = _failing_project(tmp_path / "paced.json",
+                               {"stepSize": 0.05, "stopTime": 1.0, "realTime": True})  # a second a run
     out = tmp_path / "out"
     proc = spawn("sweep", str(project), "--set", "f.at=1e3,1e4,1e5,1e6,1e7,1e8", "--workers", "1", "-o", str(out),
                  start_new_session=True)
@@ -228,3 +206,64 @@ def test_the_table_resumed_from_gives_completed_runs_by_number_or_one_named_erro
         assert RUNS_TABLE in str(exc)
         return
     assert all(type(r["run"]) is int and r["outcome"] == "completed" for r in kept)
+
+
+# What a --set holds, piece by piece: mostly the right shape, with each part now and then wrong.
+_NODES = st.sampled_from(["dahlquist", "vdp", "f", "a-b_2", "", "1x", "no de", "é"])
+_NAMES = st.sampled_from(["k", "mu", "at", "x.y", "", "a b", "=", "k[0]"])
+_VALUES = st.sampled_from(["1", "-2.5e3", "1e400", "NaN", "true", "null", '"txt"', '"', "abc", "", " ", "[1]",
+                           "{}", "[" * 3000 + "]" * 3000, "1" * 5000, "inf", "0x10"])
+_DRAWS = st.sampled_from(["uniform", "normal", "choice", "lognormal", "uniform "])
+
+
+@st.composite
+def _setting_texts(draw) -> str:
+    value = st.lists(_VALUES, min_size=0, max_size=4).map(",".join)
+    if draw(st.booleans()):
+        value = st.tuples(_DRAWS, value, st.sampled_from([")", "", "))"])).map(lambda p: f"{p[0]}({p[1]}{p[2]}")
+    separator = draw(st.sampled_from(["=", "=", "=", "", "==", " = "]))
+    return f"{draw(_NODES)}.{draw(_NAMES)}{separator}{draw(value)}"
+
+
+@given(texts=st.lists(_setting_texts() | st.text(max_size=20), max_size=4), zipped=st.booleans(),
+       samples=st.none() | st.integers(-1, 3), seed=st.integers())
+def test_sets_give_their_runs_or_one_sweep_error(texts, zipped, samples, seed):
+    """Whatever a --set holds (or a Python caller's parameters turned into one), parsing it and
+    laying out the runs gives the runs or one SweepError naming the fault: no other exception."""
+    from hycosim.ensemble.variants import SweepError, parse_setting, variants
+
+    try:
+        runs = variants([parse_setting(t) for t in texts], zipped=zipped, samples=samples, seed=seed)
+    except SweepError as exc:
+        assert str(exc)
+        return
+    assert runs and all(set(r) == set(runs[0]) and len(r) == len(texts) for r in runs)
+    assert samples is None or len(runs) == samples
+
+
+_CELLS = st.sampled_from(["1.5", "nan", "x", "", '"', "1e999", "a" * 200_000, "\u00e9", ",", "\r\n"])
+
+
+@settings(suppress_health_check=[HealthCheck.function_scoped_fixture], max_examples=60)
+@given(rows=st.lists(st.lists(_CELLS, max_size=4), max_size=4), header=st.sampled_from(["t,f.y", "f.y", "", "t"]),
+       meta=st.sampled_from([b"", b"[]", b"{}", b'{"steps_per_s": "fast"}', b'{"steps_per_s": 1e999}',
+                             b'{"steps_per_s": 250.0}', b"[" * 5000, b"\xff\xfe"]),
+       binary=st.binary(max_size=64) | st.none())
+def test_a_run_directorys_values_and_meta_give_metrics_and_a_rate_whatever_they_hold(tmp_path, rows, header,
+                                                                                      meta, binary):
+    """A run's row reads its run directory, which a user may edit or break: every metric is a
+    number (NaN where nothing is read) and the rate a number, never an exception."""
+    import math
+
+    from hycosim.ensemble.runs import _rate, metrics_of, parse_metric
+
+    run = tmp_path / "run"
+    run.mkdir(exist_ok=True)
+    values = binary if binary is not None else "\n".join([header, *(",".join(r) for r in rows)]).encode()
+    (run / "values.csv").write_bytes(values)
+    (run / "meta.json").write_bytes(meta)
+    got = metrics_of(run, [parse_metric("f.y:final"), parse_metric("f.y:mean")])
+    assert set(got) == {"f.y:final", "f.y:mean"} and all(type(v) is float for v in got.values())
+    rate = _rate(run, 100, 2.0)
+    assert type(rate) is float and (rate == 250.0 if meta == b'{"steps_per_s": 250.0}' else rate == 50.0)
+    assert not math.isnan(rate)

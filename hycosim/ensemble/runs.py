@@ -5,7 +5,6 @@ parameters, how it ended, its rate, the metrics asked for. Only what a run needs
 from __future__ import annotations
 
 import csv
-import json
 import math
 import threading
 import time
@@ -13,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from hycosim.core import json_text
 from hycosim.ensemble.variants import SweepError
 
 REDUCTIONS = ("final", "min", "max", "mean")
@@ -63,22 +63,26 @@ def metrics_of(run_dir: Path, metrics: list[Metric]) -> dict[str, float]:
     columns: dict[str, list[float]] = {m.port: [] for m in metrics}
     path = run_dir / "values.csv"
     if path.is_file() and metrics:
-        with open(path, newline="") as f:
-            for row in csv.DictReader(f):
-                for port, column in columns.items():
-                    try:
-                        column.append(float(row[port]))
-                    except (KeyError, TypeError, ValueError):
-                        pass
+        try:
+            with open(path, newline="") as f:
+                for row in csv.DictReader(f):
+                    for port, column in columns.items():
+                        try:
+                            column.append(float(row[port]))
+                        except (KeyError, TypeError, ValueError):
+                            pass
+        except (OSError, UnicodeDecodeError, csv.Error):  # a row past the csv module's field limit: what was read
+            pass
     return {m.column: _reduce(columns[m.port], m.how) for m in metrics}
 
 
 def _rate(run_dir: Path, steps: int, wall_s: float) -> float:
     """The run's own steps a second (its loop's, as meta.json says), else over the whole call."""
     try:
-        rate = json.loads((run_dir / "meta.json").read_text()).get("steps_per_s")
+        meta = json_text.loads((run_dir / "meta.json").read_bytes())
     except (OSError, ValueError):
-        rate = None
+        meta = None
+    rate = meta.get("steps_per_s") if type(meta) is dict else None
     if type(rate) in (int, float) and math.isfinite(rate):
         return float(rate)
     return steps / wall_s if wall_s > 0 else math.nan

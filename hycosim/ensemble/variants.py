@@ -5,12 +5,13 @@ times from a seeded generator. What is malformed is a SweepError naming the sett
 from __future__ import annotations
 
 import itertools
-import json
 import math
 import random
 import re
 from dataclasses import dataclass
 from typing import Any
+
+from hycosim.core import json_text
 
 _SET = re.compile(r"^(?P<node>[A-Za-z][A-Za-z0-9_\-]*)\.(?P<name>[^=\s]+)=(?P<value>.*)$", re.S)
 _DRAW = re.compile(r"^(?P<kind>uniform|normal|choice)\((?P<args>.*)\)$", re.S)
@@ -40,8 +41,8 @@ def _scalar(text: str, where: str) -> Any:
     if not text:
         raise SweepError(f"{where}: an empty value")
     try:
-        value = json.loads(text)
-    except ValueError:
+        value = json_text.loads(text)
+    except ValueError:  # not JSON (nested too deeply included): the text itself
         return text
     if isinstance(value, (dict, list)) or value is None:
         raise SweepError(f"{where}: {text!r} is no scalar value")
