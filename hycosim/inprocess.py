@@ -25,7 +25,8 @@ from hycosim.transport.local_bus import LocalBus
 
 from hycosim.node.loader import NodeLoadError, load_node
 from hycosim.node.interface import NodeModelError
-from hycosim.node.runtime import NodeRunError, NodeRuntime
+from hycosim.node.in_process import HostedNode
+from hycosim.node.runtime import NodeRunError
 from hycosim.master.main import IN_PROCESS, serve
 from hycosim.master.relay import PointGate, Relay
 
@@ -62,10 +63,10 @@ def run_in_process(loaded: LoadedProject, *, runs_dir: Path = Path("runs"),
     run_dir = run_dir_for(runs_dir, loaded.name)
     logs.configure(run_dir / "server.log.jsonl")  # the nodes' log lines go there too
     bus = LocalBus(loaded.project.projectName)
-    hosted: list[NodeRuntime] = []
+    hosted: list[HostedNode] = []
     try:
         for name, model in models.items():
-            runtime = NodeRuntime(loaded, name, model, IN_PROCESS)
+            runtime = HostedNode(loaded, name, model, IN_PROCESS)
             try:
                 runtime.host(bus)
             except (NodeRunError, NodeModelError) as exc:

@@ -191,10 +191,10 @@ def test_a_model_that_ends_the_run_inside_a_step_ends_it_at_the_same_point_in_pr
 @given(st.lists(payloads, min_size=1, max_size=4))
 def test_a_hosted_node_takes_anything_released_without_raising_into_the_master(gain_project, released):
     from hycosim.node.loader import load_node
-    from hycosim.node.runtime import NodeRuntime
+    from hycosim.node.in_process import HostedNode
 
     bus = LocalBus(gain_project.project.projectName)
-    runtime = NodeRuntime(gain_project, "g", load_node(gain_project.project.node("g"), REPO,
+    runtime = HostedNode(gain_project, "g", load_node(gain_project.project.node("g"), REPO,
                                                        gain_project.project.coSimulation), "inprocess")
     runtime.host(bus)
     try:

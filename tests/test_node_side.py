@@ -13,7 +13,7 @@ from hycosim.core import frames
 from hycosim.core.config import load_project
 from hycosim.node.interface import pack_state
 from hycosim.node.loader import load_node
-from hycosim.node.runtime import NodeRuntime
+from hycosim.node.in_process import HostedNode
 from hycosim.transport.local_bus import LocalBus
 from hycosim.transport.node_side import LocalNodeLink, NodeLink, ZenohNodeLink
 from tests.helpers import write_project
@@ -34,7 +34,7 @@ def hosted(tmp_path):
     ], [{"from": "clock.y", "to": "g.u"}], cosim={"stepSize": 0.1, "stopTime": 1.0})
     loaded = load_project(cfg)
     spec = loaded.project.node("g")
-    runtime = NodeRuntime(loaded, "g", load_node(spec, tmp_path, loaded.project.coSimulation), endpoint="")
+    runtime = HostedNode(loaded, "g", load_node(spec, tmp_path, loaded.project.coSimulation), endpoint="")
     bus = LocalBus(loaded.project.projectName)
     runtime.host(bus)
     yield runtime, bus

@@ -717,3 +717,51 @@ def test_an_in_process_nodes_outputs_are_taken_and_noted_as_a_frames_are(given_)
     noted = {f"g.p{i}" for i, v in enumerate(vals) if type(v) is float and not math.isfinite(v) and
              (wrong is None or i < wrong)}
     assert set(verdicts[1][1]) == noted
+
+
+def _same(a, b) -> bool:
+    """Equal as the wire carries them (NaN equal to NaN; a named tuple as its fields)."""
+    return frames.msgpack.packb(a) == frames.msgpack.packb(b)
+
+
+@given(st.one_of(st.tuples(st.sampled_from(["clock", "g", "h", "src", "nobody"]) | names, payloads),
+                 _from_a_node(), _from_a_node(None)), st.integers(-1, 41))
+def test_the_flat_outputs_path_takes_exactly_what_the_intake_takes(loaded, sent, owed):
+    """The barrier tries each answer on Intake.plain_outputs first: it must take the values of
+    exactly the frames decode + accept take as a stepping node's OUTPUTS of the step it owes,
+    noting the same non-finite values, and leave everything else to accept."""
+    node, payload = sent[:2]
+    _quiet()
+    flat, whole = Intake(loaded.project.nodeLists), Intake(loaded.project.nodeLists)
+    got = flat.plain_outputs(node, payload, owed)
+    try:
+        frame = whole.accept(node, payload)
+    except Dropped:
+        frame = None
+    spec = loaded.project.node(node) if node in _SENDERS else None
+    expected = (frame.values if frame is not None and frame.kind == frames.OUTPUTS and not spec.asynchronous
+                and frame.step == owed else None)
+    assert (got is None) == (expected is None) and _same(got, expected)
+    if got is not None:
+        assert flat.non_finite == whole.non_finite and flat.dropped == {}
+
+
+@pytest.mark.parametrize("node", ["g", "h"])
+@given(data=st.data())
+def test_the_flat_release_path_passes_exactly_what_a_node_accepts(loaded, node, data):
+    """A node tries each release on frames.plain_step first: it must pass exactly the STEPs that
+    decode + check_release pass for this node (equal to what they give), and nothing else."""
+    _quiet()
+    receiver = NodeRuntime(loaded, node, impl=None, endpoint="tcp/127.0.0.1:1").receiver
+    payload = data.draw(payloads | frame_arrays([frames.STEP]).map(frames.msgpack.packb)
+                        | _from_the_server(node).map(lambda sent: sent[0])
+                        | _from_the_server(node, None).map(lambda sent: sent[0]))
+    got = frames.plain_step(payload, node, receiver.in_types)
+    try:
+        frame = receiver.accept(False, payload)
+    except frames.FrameError:
+        frame = None
+    expected = frame if frame is not None and frame.kind == frames.STEP else None
+    assert (got is None) == (expected is None) and _same(got, expected)
+    if got is not None:
+        assert got.kind == frames.STEP and type(got) is frames.Step

@@ -414,6 +414,35 @@ def check_release(frame: Frame, node: str | None = None, input_types: tuple[tupl
     return frame
 
 
+def plain_step(payload: bytes, node: str, input_types: tuple[tuple[type, ...], ...]) -> Step | None:
+    """The STEP in ``payload`` if it is one that :func:`decode` and :func:`check_release` pass
+    for ``node`` (whose inputs are all scalars of ``input_types``) with inputs for it and no
+    input slopes; None for anything else, which the caller hands to those two (the judges of
+    what it is and of why it is refused).
+
+    A node's every release comes here first: one function instead of the two and the layers
+    around them, for the release that is most of a run's frames."""
+    try:
+        obj = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+    except Exception:  # any garbage: decode() says what it is
+        return None
+    if not (type(obj) is list and len(obj) == 9):
+        return None
+    version, kind, k, t, h, mode, inputs, driven, slopes = obj
+    if not (type(version) is int and version == VERSION and type(kind) is int and kind == STEP
+            and type(k) is int and 0 <= k < MAX_STEP and type(t) in _NUM and math.isfinite(t)
+            and type(h) in _NUM and math.isfinite(h) and h > 0 and type(mode) is str and type(inputs) is dict
+            and type(driven) is list and type(slopes) is dict and node not in slopes):
+        return None
+    mine = inputs.get(node)
+    if type(mine) is not list or len(mine) != len(input_types):
+        return None
+    for value, allowed in zip(mine, input_types):
+        if type(value) not in allowed:
+            return None
+    return _make(Step, (k, t, h, mode, inputs, driven, slopes))
+
+
 def _check_slopes(k: int, node: str, mine: Any, input_types: tuple[tuple[type, ...], ...] | None,
                   interpolates: bool) -> None:
     if not interpolates:

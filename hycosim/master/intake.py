@@ -16,6 +16,7 @@ import math
 from collections import Counter
 from typing import Any
 
+import msgpack
 import structlog
 
 from hycosim.core import frames
@@ -41,6 +42,9 @@ def port_mismatch(spec: Node, theirs: Any) -> str | None:
     return "; ".join(differ) or None  # other keys beside the two lists are no concern
 
 
+_NUM = (int, float)
+
+
 class Dropped(Exception):
     """A frame that is not accepted: a short reason (counted) and a detail (logged)."""
 
@@ -61,6 +65,10 @@ class Intake:
         # by the node's runtime in process, are all finite (check_direct).
         self._summable = {n.nodeName for n in nodes if all(
             p.shape is None and p.type in (PortType.REAL, PortType.INTEGER, PortType.BOOLEAN) for p in n.output)}
+        self._uids = {n.nodeName: n.UID for n in nodes if not n.asynchronous}
+        # Stepping nodes whose outputs are all scalar numbers: their types, checked in one pass,
+        # and one sum for whether all are finite (plain_outputs).
+        self._scalar_types = {n.nodeName: self._types[n.nodeName] for n in nodes if n.nodeName in self._summable}
         self.non_finite: dict[str, dict[str, float]] = {}  # "node.port" → first {"step", "t"} (or "t")
         self._log = structlog.get_logger("server.intake")
         self.drops = DropLog(self._log)
@@ -121,6 +129,43 @@ class Intake:
             raise Dropped("wrong kind", f"{node} is {'' if spec.asynchronous else 'not '}asynchronous")
         self.check_values(node, None if frame.kind == frames.SAMPLE else frame.step, t, frame.values)
         return frame
+
+    def plain_outputs(self, node: str, payload: bytes, step: int) -> list[Any] | None:
+        """The values of ``payload`` if it is an OUTPUTS frame that :meth:`accept` takes from
+        stepping ``node`` and that carries ``step``; None for anything else, which the caller
+        hands to :meth:`accept` (the one judge of what it is, and of why it is dropped).
+
+        The answer of every node in every macro step comes here first: the same checks as
+        decode + accept, in one function, without the named tuple (a tenth of the server's
+        CPU a step went to the layers this replaces)."""
+        uid = self._uids.get(node)
+        try:
+            obj = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+        except Exception:  # any garbage: accept() says what it is
+            return None
+        if not (type(obj) is list and len(obj) == 6):
+            return None
+        version, kind, sender, k, t, values = obj
+        if not (type(version) is int and version == frames.VERSION and type(kind) is int and kind == frames.OUTPUTS
+                and type(sender) is int and sender == uid and type(k) is int and k == step
+                and type(t) in _NUM and math.isfinite(t) and type(values) is list):
+            return None
+        types = self._scalar_types.get(node)
+        if types is not None and len(values) == len(types):
+            for value, allowed in zip(values, types):
+                if type(value) not in allowed:
+                    return None
+            try:
+                if math.isfinite(sum(values)):
+                    return values
+            except (TypeError, OverflowError):
+                pass
+        # An array, a string, a non-finite value to note: the whole check.
+        try:
+            self.check_values(node, step, t, values)
+        except Dropped:
+            return None
+        return values
 
     def _check_batch(self, node: str, step: int, t: float, earlier: list[Any], last: object) -> None:
         """Dropped unless a batch's outputs (``earlier`` steps', then the ``last`` step's unless

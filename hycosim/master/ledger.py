@@ -46,6 +46,9 @@ class Ledger:
         self._early: dict[str, frames.Frame] = {}
         self._paced = frozenset(paced)
         self._rates = rates
+        # Each stepping node that owes one OUTPUTS (not a BATCH): (the step it carries, the
+        # perf_counter of its release). Read by the barrier for every answer, so kept as it changes.
+        self.owes_outputs: dict[str, tuple[int, float]] = {}
         # Each node's outputs after its steps before the last of the batched release being
         # gathered (its BATCH's or END's ``earlier``).
         self.earlier: dict[str, list[list[Any]]] = {}
@@ -57,6 +60,7 @@ class Ledger:
         for node in self._label:
             self._label[node] = self._due_at[node] = step
             self._released_at[node] = released_at
+            self.owes_outputs[node] = (step, released_at)
         self._early.clear()
 
     def released(self, nodes: list[str], k: int, released_at: float, *, count: int = 1,
@@ -66,15 +70,19 @@ class Ledger:
         batched release (``batched``, of up to ``span`` base steps) a node as fast as the batch
         or faster owes one BATCH at its end, with its outputs after each of its steps before."""
         self.earlier.clear()
+        label, due_at, batch, rates, owes = self._label, self._due_at, self._batch, self._rates, self.owes_outputs
         for n in nodes:
-            self._label[n] = k + 1
-            m = self._rates[n]
+            label[n] = k + 1
+            m = rates[n]
             if not batched:
-                self._batch.pop(n, None)
-                self._due_at[n] = k + 1 if m == 1 else min(k + m, last_point)
+                if batch:
+                    batch.pop(n, None)
+                due_at[n] = k + 1 if m == 1 else min(k + m, last_point)
+                owes[n] = (k + 1, released_at)
             else:
-                self._batch[n] = len(range(0, count, m)) - 1
-                self._due_at[n] = k + count if m <= span else min(k + m, last_point)
+                batch[n] = len(range(0, count, m)) - 1
+                due_at[n] = k + count if m <= span else min(k + m, last_point)
+                owes.pop(n, None)
             self._released_at[n] = released_at
 
     def due(self, step: int) -> set[str]:

@@ -14,7 +14,8 @@ from hycosim.core.signals import FAILED_ELSEWHERE, NODE_UNLOADABLE
 
 from hycosim.node.loader import NodeLoadError, load_node
 from hycosim.node.interface import NodeModelError
-from hycosim.node.runtime import NodeRunError, NodeRuntime, RunFailedElsewhere
+from hycosim.node.over_zenoh import ZenohNode
+from hycosim.node.runtime import NodeRunError, RunFailedElsewhere
 
 
 def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
@@ -35,7 +36,7 @@ def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
     try:
         password = node_password(loaded, name, password_file)
         impl = load_node(spec, loaded.path.parent if loaded.path else Path.cwd(), loaded.project.coSimulation)
-        runtime = NodeRuntime(loaded, name, impl, endpoint, password=password)
+        runtime = ZenohNode(loaded, name, impl, endpoint, password=password)
         runtime.run()
     except RunFailedElsewhere as exc:
         return FAILED_ELSEWHERE, str(exc)

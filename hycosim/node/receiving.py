@@ -34,6 +34,9 @@ class Receiver:
         self.in_arrays = tuple((i, p.size, WIRE_TYPES[p.type]) for i, p in enumerate(spec.input)
                                if p.shape is not None)
         self.interpolating = False
+        # A stepping node whose inputs are all scalars tries each release on frames.plain_step
+        # first (its input types; None: every release goes the whole way).
+        self.plain = None if self.release_for is None or self.in_arrays else self.in_types
         self.tunable: dict[str, Any] = {}  # the model's tunable parameters and their start values
         self.link: NodeLink | None = None
         self.pulls = False  # over Zenoh frames are pulled; in process the master pushes them
@@ -44,9 +47,13 @@ class Receiver:
         """The next frame from the server (skipping ones not for us); STOP ends the wait too."""
         frame = self.next_frame(timeout)
         if frame is None:
-            raise NodeRunError(f"node {self.name!r}: no {what} from the server at {self.endpoint} "
-                               f"within {timeout:g} s (after step {self.steps()})")
+            raise self.silence(timeout, what)
         return frame
+
+    def silence(self, timeout: float, what: str) -> NodeRunError:
+        """The error for no ``what`` from the server within ``timeout`` seconds."""
+        return NodeRunError(f"node {self.name!r}: no {what} from the server at {self.endpoint} "
+                            f"within {timeout:g} s (after step {self.steps()})")
 
     def next_frame(self, timeout: float) -> frames.Frame | None:
         """The next frame from the server within ``timeout`` seconds, or None.
@@ -71,24 +78,34 @@ class Receiver:
                 if time.monotonic() < deadline:
                     continue  # woken for the grace check above
                 return None
-            try:
-                frame = self.accept(msg[0] == LOCAL, msg[1])
-            except frames.FrameError as exc:
-                self.drops.drop("not a release", str(exc), self.steps())
-                continue
-            if frame is None:
-                continue
-            if frame.kind == frames.LIVE:
-                if frame.alive:
-                    self.log.info("server back" if self.server_seen else "server seen", step=self.steps())
-                    self.server_lost, self.server_seen = None, True
-                elif grace > 0:
-                    self.server_lost = time.monotonic()
-                    self.log.warning("server lost, waiting for it", step=self.steps(), grace_s=grace)
-                else:
-                    raise NodeRunError(f"node {self.name!r}: the server went away after step {self.steps()}")
-                continue
+            if self.plain is not None and msg[0] != LOCAL:
+                frame = frames.plain_step(msg[1], self.release_for, self.plain)
+                if frame is not None:
+                    return frame
+            frame = self.take(msg)
+            if frame is not None:
+                return frame
+
+    def take(self, msg: tuple[str, bytes]) -> frames.Frame | None:
+        """One message of the link: a frame to act on, or None for one dropped (counted), one
+        for another node, or the server's liveliness news (taken in here: a link cut is waited
+        out by :meth:`next_frame` within linkGrace; without a grace it ends the node)."""
+        try:
+            frame = self.accept(msg[0] == LOCAL, msg[1])
+        except frames.FrameError as exc:
+            self.drops.drop("not a release", str(exc), self.steps())
+            return None
+        if frame is None or frame.kind != frames.LIVE:
             return frame
+        if frame.alive:
+            self.log.info("server back" if self.server_seen else "server seen", step=self.steps())
+            self.server_lost, self.server_seen = None, True
+        elif self.cosim.linkGrace > 0:
+            self.server_lost = time.monotonic()
+            self.log.warning("server lost, waiting for it", step=self.steps(), grace_s=self.cosim.linkGrace)
+        else:
+            raise NodeRunError(f"node {self.name!r}: the server went away after step {self.steps()}")
+        return None
 
     def accept(self, local: bool, payload: bytes) -> frames.Frame | None:
         """A frame from ``down`` (or this process's own liveliness news) that this node can act

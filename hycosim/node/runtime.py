@@ -1,31 +1,31 @@
-"""The node runtime: attach one node to a run and step it until STOP.
+"""The node runtime: one node in a run, stepped until STOP.
 
 Every frame the master releases goes through one handler, :meth:`NodeRuntime.handle`,
-whatever transport carried it (``hycosim.transport.node_side``): over Zenoh :meth:`run`
-pulls the frames from its link and feeds them to it, with the link grace and every wait
-bounded; in process (:meth:`host`) the master pushes them by calling :meth:`deliver`. An
-asynchronous source samples on its own clock and runs over Zenoh only.
+whatever transport carried it (``hycosim.transport.node_side``). How the frames come is the
+driver's: over Zenoh (``over_zenoh.ZenohNode.run``) they are pulled from the node's link, with
+the link grace and every wait bounded; in process (``in_process.HostedNode.host``) the master
+pushes them by calling ``deliver``. An asynchronous source samples on its own clock and runs
+over Zenoh only.
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import structlog
 
 from hycosim.core import frames
 from hycosim.core.config import LoadedProject
 from hycosim.core.drops import DropLog
-from hycosim.transport.local_bus import LocalBus
-from hycosim.transport.node_side import LocalNodeLink, NodeLink, ZenohNodeLink
+from hycosim.transport.node_side import NodeLink
 
 from hycosim.node.interface import AsyncSource, Node, NodeContext, NodeModelError, SimulationEnded
 from hycosim.node.receiving import NodeRunError, Receiver
 from hycosim.node.replay import SamplePlayer
 from hycosim.node.sending import Outbox, start_feedthrough
-from hycosim.node.sources import Played, run_source, source_start
+from hycosim.node.sources import Played
 
 __all__ = ["NodeRunError", "NodeRuntime", "RunFailedElsewhere"]
 
@@ -69,7 +69,6 @@ class NodeRuntime:
         self._is_player = False  # set once the model is set up
         self._played: Played | None = None
         self.failure: str | None = None  # in process: why this node ended the run, if it failed
-        self._listed: Callable[[float, float, list[Any]], list[Any]] | None = None  # in process: Node.listed_step
 
     @property
     def steps(self) -> int:
@@ -99,63 +98,6 @@ class NodeRuntime:
             if isinstance(exc, NodeModelError):  # a clear message of its own
                 raise NodeRunError(str(exc)) from None
             raise NodeRunError(f"node {self.name!r}: its model failed to set up: {type(exc).__name__}: {exc}") from exc
-
-    def run(self) -> None:
-        """Attach to the server over Zenoh and take part in the run until its STOP."""
-        self._setup()
-        try:
-            link = ZenohNodeLink.open(self.loaded, self.name, self.endpoint, self.password)
-            self.receiver.link, self.receiver.pulls = link, True
-            try:
-                if isinstance(self.impl, AsyncSource) and not isinstance(self.impl, SamplePlayer):
-                    start, self._returning = source_start(self.receiver, self.cosim)
-                    if start.kind == frames.STOP:
-                        self._on_stop(start)
-                    else:
-                        self.outbox.send(self.outbox.hello(self.impl, False, restart=self._returning))
-                        self.samples = run_source(self.impl, self.spec, self.cosim, start, self.outbox,
-                                                  self.receiver, self._on_stop, self._log)
-                    return
-                while not self.handle(self._pull()):
-                    pass
-            except KeyboardInterrupt as exc:
-                self.outbox.say_stopped(exc, isinstance(self.impl, AsyncSource))
-                raise
-            finally:
-                link.close()
-        finally:
-            try:
-                self.impl.teardown()
-            finally:
-                if self.link is not None:
-                    self.link.session.close()
-
-    def _pull(self) -> frames.Frame:
-        """The next frame over Zenoh, within what the phase the node is in allows."""
-        if self._phase == _START:
-            # The server times out the attach; outwait it so that its STOP, naming who is
-            # missing, reaches this node rather than a timeout of our own.
-            try:
-                return self.receiver.wait(self.cosim.attachTimeout + self.cosim.stepTimeout, "START")
-            except NodeRunError as exc:
-                raise NodeRunError(f"{exc}{self.link.other_projects()}") from None
-        if self._phase == _RESTART:
-            frame = self.receiver.next_frame(max(0.0, self._restart_deadline - time.monotonic()))
-            if frame is None:
-                wait = self.cosim.attachTimeout + self.cosim.stepTimeout
-                raise NodeRunError(f"node {self.name!r}: the run on {self.endpoint} was already under way "
-                                   f"(step {self._restoring_step}) when it attached, and the server did not restore "
-                                   f"it within {wait:g} s: a node restarted mid-run goes on only from a checkpoint "
-                                   "(coSimulation.checkpointEvery)")
-            return frame
-        if self._phase == _RESTORING:
-            frame = self.receiver.next_frame(self.cosim.stepTimeout)
-            if frame is None:
-                return self._restore_cut_short()
-            return frame
-        # The server enforces step timeouts; a node only needs to notice the server is gone,
-        # which liveliness tells; this bound is the last resort for a frozen server.
-        return self.receiver.wait(self.cosim.stepTimeout + 30.0, "release")
 
     def handle(self, frame: frames.Frame) -> bool:
         """Act on one frame the master released to this node, accepted already (checked as every
@@ -327,13 +269,6 @@ class NodeRuntime:
                                f"(see {self.name}'s log)")
         return False
 
-    def _restore_cut_short(self) -> frames.Frame:
-        """No next piece of a state within the step timeout: as a piece that is not one."""
-        self.drops.drop("not a release", f"the state to restore at step {self._restoring.step} came in part",
-                        self.steps)
-        self._restore_failed()
-        return self._pull()
-
     def _begin_stepping(self, checkpoint: bool) -> bool:
         """Answer the START: HELLO and the outputs at t0; False if the model ended the simulation there."""
         impl = self.impl
@@ -354,8 +289,9 @@ class NodeRuntime:
             if frame is None:
                 return done
         impl, at = self.impl, self._stepping  # a Node: only a stepping node has _stepping
-        k = frame.step
-        self._enter_step(impl, at, k, frame.mode, self.name in frame.driven)
+        k, mode, driven = frame.step, frame.mode, self.name in frame.driven
+        if at.checkpoint or mode != at.mode or driven != at.driven:  # else _enter_step has nothing to do
+            self._enter_step(impl, at, k, mode, driven)
         values = dict(zip(self._in_names, frame.inputs[self.name]))
         if frame.kind == frames.STEPS:
             times = frame.times
@@ -468,75 +404,6 @@ class NodeRuntime:
                        dropped=dict(self.drops.counts))
         if reason not in frames.CLEAN_STOPS:  # the reason names the step where it matters
             raise RunFailedElsewhere(f"node {self.name!r}: the server stopped the run: {reason}")
-
-    # --- in process -----------------------------------------------------------------
-
-    def host(self, bus: LocalBus) -> None:
-        """Set the model up and attach this node to an in-process run (its master in this
-        process): from now on :meth:`deliver` acts on each frame the master releases, in the
-        master's thread. A stepping node or a played recording; an asynchronous source keeps
-        its own clock and is run distributed."""
-        if isinstance(self.impl, AsyncSource) and not isinstance(self.impl, SamplePlayer):
-            raise NodeRunError(f"node {self.name!r}: an asynchronous source samples on its own clock beside the "
-                               "run, which one process stepping every node cannot give it; run it without "
-                               "--in-process")
-        self._setup()
-        self.receiver.link = LocalNodeLink(bus, self.name)
-        if not self._is_player:
-            # An FMU steps on the master's lists as they are (no dicts between, no conversions).
-            self._listed = self.impl.listed_step(list(self._in_names), list(self.spec.output))
-        bus.attach(self.name, self.deliver, None if self._is_player else self.step_direct)
-
-    def step_direct(self, k: int, t: float, h: float, mode: str, driven: bool, inputs: list[Any]) -> list[Any] | None:
-        """The release of step k (t → t + h) to this node in process, as a call: what a STEP frame
-        does, on ``inputs`` (the master's routing of outputs it checked; no network between).
-        Return the outputs at t + h, checked as those sent are; None when the model ended the
-        run or failed instead, its END sent to the master as over the network."""
-        impl, at = self.impl, self._stepping  # a Node (host attaches no player this way), started
-        if self.failure is not None:
-            return None  # it failed taking a frame (a TUNE): its END is with the master
-        try:
-            self._enter_step(impl, at, k, mode, driven)
-            if self._listed is not None:  # the values go into the FMU's own buffers
-                out = self._listed(t, h, inputs)
-            else:
-                values = dict(zip(self._in_names, inputs))
-                for i, _, _ in self.receiver.in_arrays:  # the master's lists stay its own, whatever the model does
-                    name = self._in_names[i]
-                    values[name] = list(values[name])
-                impl.step(t, h, values)
-                out = self.outbox.pack(impl.outputs())
-        except Exception as exc:
-            try:
-                self._step_failed(exc, k, t, impl=impl)
-            except NodeRunError as failure:
-                self.failure = str(failure)
-            self.link.close()
-            return None
-        self.steps, at.done = k + 1, k
-        return out
-
-    def deliver(self, frame: frames.Frame) -> None:
-        """Act on one frame the in-process master released, checked as one from the network is.
-        A node that fails sends its END (the master stops the run with its words), keeps the
-        message in :attr:`failure` and takes no more frames."""
-        try:
-            frame = self.receiver.accept_frame(False, frame)
-        except frames.FrameError as exc:
-            self.drops.drop("not a release", str(exc), self.steps)
-            return
-        if frame is None:
-            return
-        try:
-            done = self.handle(frame)
-        except NodeRunError as exc:
-            self.failure, done = str(exc), True
-        if done:
-            self.link.close()
-
-    def close(self) -> None:
-        """An in-process node's end: its model's teardown (a Zenoh node's run does its own)."""
-        self.impl.teardown()
 
 
 def _checkpoint_state(impl: Node, step: int, log: Any) -> tuple[int, bytes] | None:

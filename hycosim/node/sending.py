@@ -98,11 +98,14 @@ class Outbox:
         try:
             self.receiver.link.send(payload)
         except FrameTooLarge as exc:
-            frame = frames.decode(payload)
-            values = frame.values if frame.kind in (frames.OUTPUTS, frames.SAMPLE, frames.BATCH) else []
-            largest = frames.largest_values(zip((port for port, _ in self.ports), values))
-            raise NodeRunError(f"node {self.name!r}: its outputs at step {self.steps} are {exc}; "
-                               f"largest: {largest}") from None
+            raise self._too_large(payload, exc) from None
+
+    def _too_large(self, payload: bytes, exc: FrameTooLarge) -> NodeRunError:
+        """The error for a frame the link cannot carry, naming the node's largest outputs."""
+        frame = frames.decode(payload)
+        values = frame.values if frame.kind in (frames.OUTPUTS, frames.SAMPLE, frames.BATCH) else []
+        largest = frames.largest_values(zip((port for port, _ in self.ports), values))
+        return NodeRunError(f"node {self.name!r}: its outputs at step {self.steps} are {exc}; largest: {largest}")
 
     def send_outputs(self, payload: bytes, step: int) -> None:
         """Send outputs and count them as this node's last ``step`` with no stop signal between:
@@ -110,7 +113,10 @@ class Outbox:
         step before the one the server had (once, in a loaded make test)."""
         signals.hold_stops()
         try:
-            self.send(payload)
+            try:  # send()'s body: this runs at every step
+                self.receiver.link.send(payload)
+            except FrameTooLarge as exc:
+                raise self._too_large(payload, exc) from None
             self.steps = step
         finally:
             signals.release_stops()
