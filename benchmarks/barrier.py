@@ -72,6 +72,27 @@ def run_hycosim(n: int, steps: int, wait_strategy: str, timeout: float) -> float
         return float(meta["steps_per_s"])
 
 
+def run_hycosim_processes(n: int, steps: int, wait_strategy: str, timeout: float) -> float:
+    """The ring as its processes alone, started as the floor's and HELICS's are: ``hycosim
+    server`` and a ``hycosim node`` each, without the ``hycosim run`` launcher, whose progress
+    bar and closing report (it reads the run's timing back) are no part of a macro step."""
+    with tempfile.TemporaryDirectory() as tmp:
+        cfg = ring_config(n, steps, Path(tmp) / "ring.json", wait_strategy)
+        py = [sys.executable, "-P", "-m", "hycosim"]
+        server = start([*py, "server", str(cfg), "--runs-dir", tmp], cwd=REPO, stdout=subprocess.PIPE,
+                       stderr=subprocess.PIPE, text=True)
+        nodes = [start([*py, "node", f"n{i}", str(cfg)], cwd=REPO, stdout=subprocess.DEVNULL,
+                       stderr=subprocess.DEVNULL) for i in range(n)]
+        try:
+            out, err = wait_all(server, nodes, timeout)
+        except subprocess.TimeoutExpired:
+            raise RuntimeError(f"timed out after {timeout:g} s (--timeout): hycosim with {n} nodes") from None
+        if server.returncode:
+            raise RuntimeError(f"hycosim server exited {server.returncode}: {err[-800:]}")
+        meta = json.loads(next(Path(tmp).glob("ring*/meta.json")).read_text())
+        return float(meta["steps_per_s"])
+
+
 def run_zenoh_floor(n: int, steps: int, wait_strategy: str, timeout: float) -> float:
     res = run([sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{free_port()}",
                str(n), str(steps), wait_strategy], timeout)
@@ -131,6 +152,8 @@ RUNNERS = {
     "helics-zmq": lambda n, s, w, timeout: run_helics("zmq", n, s, timeout),
     "mosaik": lambda n, s, w, timeout: run_mosaik(n, s, timeout),
 }
+# The CPU of a system's own processes: hycosim's server and nodes as the others' are started.
+CPU_RUNNERS = {**RUNNERS, "hycosim": run_hycosim_processes}
 
 
 CPU_LENGTHS = 4  # the longer of the two runs --cpu compares, in --steps
@@ -177,7 +200,7 @@ def cpu_seconds(system: str, n: int, steps: int, timeout: float) -> float:
     reap()  # what an earlier run left is not this one's
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     try:
-        RUNNERS[system](n, steps, "block", timeout)
+        CPU_RUNNERS[system](n, steps, "block", timeout)
     finally:
         reap()
     after = resource.getrusage(resource.RUSAGE_CHILDREN)

@@ -11,7 +11,7 @@ from hycosim.core import frames
 from hycosim.node.interface import AsyncSource
 from hycosim.node.receiving import NodeRunError
 from hycosim.node.replay import SamplePlayer
-from hycosim.node.runtime import NodeRuntime, _RESTART, _RESTORING, _START, _STEPPING
+from hycosim.node.runtime import NodeRuntime, PHASE_RESTART, PHASE_RESTORING, PHASE_START, PHASE_STEPPING
 from hycosim.node.sources import run_source, source_start
 from hycosim.transport.inbox import LOCAL
 from hycosim.transport.node_side import ZenohNodeLink
@@ -38,7 +38,7 @@ class ZenohNode(NodeRuntime):
                     return
                 done = False
                 while not done:
-                    if self._phase == _STEPPING and self.receiver.plain is not None \
+                    if self._phase == PHASE_STEPPING and self.receiver.plain is not None \
                             and self.receiver.server_lost is None:
                         done = self._releases_plainly()
                     else:
@@ -57,14 +57,14 @@ class ZenohNode(NodeRuntime):
 
     def _pull(self) -> frames.Frame:
         """The next frame over Zenoh, within what the phase the node is in allows."""
-        if self._phase == _START:
+        if self._phase == PHASE_START:
             # The server times out the attach; outwait it so that its STOP, naming who is
             # missing, reaches this node rather than a timeout of our own.
             try:
                 return self.receiver.wait(self.cosim.attachTimeout + self.cosim.stepTimeout, "START")
             except NodeRunError as exc:
                 raise NodeRunError(f"{exc}{self.link.other_projects()}") from None
-        if self._phase == _RESTART:
+        if self._phase == PHASE_RESTART:
             frame = self.receiver.next_frame(max(0.0, self._restart_deadline - time.monotonic()))
             if frame is None:
                 wait = self.cosim.attachTimeout + self.cosim.stepTimeout
@@ -73,7 +73,7 @@ class ZenohNode(NodeRuntime):
                                    f"it within {wait:g} s: a node restarted mid-run goes on only from a checkpoint "
                                    "(coSimulation.checkpointEvery)")
             return frame
-        if self._phase == _RESTORING:
+        if self._phase == PHASE_RESTORING:
             frame = self.receiver.next_frame(self.cosim.stepTimeout)
             if frame is None:
                 return self._restore_cut_short()
@@ -104,7 +104,7 @@ class ZenohNode(NodeRuntime):
                 frame = frame or receiver.take(msg)
                 if frame is not None and self.handle(frame):
                     return True
-                if self._phase != _STEPPING or receiver.server_lost is not None:
+                if self._phase != PHASE_STEPPING or receiver.server_lost is not None:
                     return False
                 continue
             k, t, h, mode, driven = frame.step, frame.t, frame.h, frame.mode, name in frame.driven

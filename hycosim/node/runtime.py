@@ -60,7 +60,7 @@ class NodeRuntime:
         self.receiver = Receiver(self.spec, self.cosim, endpoint, self.drops, self._log, lambda: self.outbox.steps)
         self.outbox = Outbox(self.spec, self.cosim, self.receiver, self._log)
         self.samples = 0  # an asynchronous source's samples sent
-        self._phase = _START  # what the next frame is taken as (see handle)
+        self._phase = PHASE_START  # what the next frame is taken as (see handle)
         self._returning = False  # a START again after a link cut, or the run's, to a restarted process
         self._restoring: _Restoring | None = None
         self._restart_deadline = 0.0
@@ -103,20 +103,20 @@ class NodeRuntime:
         """Act on one frame the master released to this node, accepted already (checked as every
         receiver checks, and meant for it); True once the node is done: the run's STOP, or its
         model ended the simulation. Every transport's frames come here."""
-        if self._phase == _STEPPING:
+        if self._phase == PHASE_STEPPING:
             return self._on_release(frame)
-        if self._phase == _PLAYED:
+        if self._phase == PHASE_PLAYED:
             if frame.kind == frames.STOP:
                 self._on_stop(frame)
                 return True
             self._played.on_frame(frame)
             return False
-        if self._phase == _START:
+        if self._phase == PHASE_START:
             return self._on_start(frame)
         if frame.kind == frames.STOP:  # restarting or restoring: the run ended instead
             self._on_stop(frame)
             return True
-        if self._phase == _RESTART:
+        if self._phase == PHASE_RESTART:
             return self._begin_restore(frame) if frame.kind == frames.RESTORE else False
         return self._on_restore_piece(frame)
 
@@ -137,7 +137,7 @@ class NodeRuntime:
             self._played = Played(self.impl, self.spec.UID, self.outbox,
                                   self.outbox.pack({p.name: p.start_value() for p in self.spec.output}),
                                   frame.step if self._returning and frame.kind == frames.STEP else -1)
-            self._phase = _PLAYED
+            self._phase = PHASE_PLAYED
             return self.handle(frame)
         if frame.kind in _STEP_KINDS:
             # The run is under way: this process is a restart. Say so at once (a node process
@@ -147,14 +147,14 @@ class NodeRuntime:
             self._log.info("restarted: waiting for the run to be restored", step=frame.step)
             self._restoring_step = frame.step
             self._restart_deadline = time.monotonic() + self.cosim.attachTimeout + self.cosim.stepTimeout
-            self._phase = _RESTART
+            self._phase = PHASE_RESTART
             return False
         if frame.kind == frames.RESTORE:
             return self._begin_restore(frame)
         if frame.kind != frames.START:
             raise NodeRunError(f"node {self.name!r}: the run on {self.endpoint} was already under way "
                                "when it attached; a node joins before the run starts")
-        self._phase = _STEPPING
+        self._phase = PHASE_STEPPING
         return not self._begin_stepping(bool(frame.options.get("checkpoint")))
 
     def _step_model(self, impl: Node, k: int, t: float, h: float | None, inputs: dict[str, Any]) -> bytes | None:
@@ -227,7 +227,7 @@ class NodeRuntime:
         """The first piece of a state to restore, to a process that joins a run under way or to
         one the run's server resumes: the node steps once it is set (see :meth:`_on_restore_piece`)."""
         self._stepping = _Stepping(bool(frame.options.get("checkpoint")) and self.impl.can_rollback)
-        self._restoring, self._phase = _Restoring(first_of_run=True), _RESTORING
+        self._restoring, self._phase = _Restoring(first_of_run=True), PHASE_RESTORING
         return self._on_restore_piece(frame)
 
     def _on_restore_piece(self, frame: frames.Frame) -> bool:
@@ -249,7 +249,7 @@ class NodeRuntime:
                             f"{type(exc).__name__}: {exc}", self.steps)
             return self._restore_failed()
         self._log.info("restored", step=at.step, t=at.t)
-        self._restoring, self._phase = None, _STEPPING
+        self._restoring, self._phase = None, PHASE_STEPPING
         self.outbox.send(self.outbox.hello(self.impl, impl.can_rollback))
         out = self._step_model(impl, at.step - 1, at.t, None, {})
         if out is None:
@@ -263,7 +263,7 @@ class NodeRuntime:
     def _restore_failed(self) -> bool:
         """A state to restore that came in part or does not fit (the frame is dropped): a node
         that has nothing else to step from stops; one under way goes on as it was."""
-        first, self._restoring, self._phase = self._restoring.first_of_run, None, _STEPPING
+        first, self._restoring, self._phase = self._restoring.first_of_run, None, PHASE_STEPPING
         if first:
             raise NodeRunError(f"node {self.name!r}: the state the server sent to restore could not be set "
                                f"(see {self.name}'s log)")
@@ -337,7 +337,7 @@ class NodeRuntime:
                 at.pending_state = _checkpoint_state(impl, frame.step, self._log)
             return False, None
         if frame.kind == frames.RESTORE:
-            self._restoring, self._phase = _Restoring(first_of_run=False), _RESTORING
+            self._restoring, self._phase = _Restoring(first_of_run=False), PHASE_RESTORING
             return self._on_restore_piece(frame), None
         if frame.kind == frames.ROLLBACK:
             k, t = frame.step, frame.t
@@ -432,7 +432,8 @@ def node_context(loaded: LoadedProject, spec: Any) -> NodeContext:
 
 # What a node takes its next frame as: the run's first; after a restarted process's HELLO, a
 # state to restore; the pieces of one; a release (a stepping node, or a played recording).
-_START, _RESTART, _RESTORING, _STEPPING, _PLAYED = "start", "restart", "restoring", "stepping", "played"
+PHASE_START, PHASE_RESTART, PHASE_RESTORING = "start", "restart", "restoring"
+PHASE_STEPPING, PHASE_PLAYED = "stepping", "played"
 
 
 @dataclass
