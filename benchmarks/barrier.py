@@ -68,8 +68,12 @@ def run_hycosim(n: int, steps: int, wait_strategy: str, timeout: float) -> float
         if res.returncode:
             logs = "".join(f"--- {p.name}\n{p.read_text()[-800:]}" for p in Path(tmp).glob("ring*/*.stderr.txt"))
             raise RuntimeError(res.stderr + logs)
-        meta = json.loads(next(Path(tmp).glob("ring*/meta.json")).read_text())
-        return float(meta["steps_per_s"])
+        return _rate_of(Path(tmp))
+
+
+def _rate_of(runs: Path) -> float:
+    """The steps/s a ring's run recorded in its meta.json under ``runs``."""
+    return float(json.loads(next(runs.glob("ring*/meta.json")).read_text())["steps_per_s"])
 
 
 def run_hycosim_processes(n: int, steps: int, wait_strategy: str, timeout: float) -> float:
@@ -89,8 +93,7 @@ def run_hycosim_processes(n: int, steps: int, wait_strategy: str, timeout: float
             raise RuntimeError(f"timed out after {timeout:g} s (--timeout): hycosim with {n} nodes") from None
         if server.returncode:
             raise RuntimeError(f"hycosim server exited {server.returncode}: {err[-800:]}")
-        meta = json.loads(next(Path(tmp).glob("ring*/meta.json")).read_text())
-        return float(meta["steps_per_s"])
+        return _rate_of(Path(tmp))
 
 
 def run_zenoh_floor(n: int, steps: int, wait_strategy: str, timeout: float) -> float:

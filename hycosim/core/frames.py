@@ -435,11 +435,8 @@ def plain_step(payload: bytes, node: str, input_types: tuple[tuple[type, ...], .
             and type(driven) is list and type(slopes) is dict and node not in slopes):
         return None
     mine = inputs.get(node)
-    if type(mine) is not list or len(mine) != len(input_types):
+    if type(mine) is not list or len(mine) != len(input_types) or first_misfit(mine, input_types) is not None:
         return None
-    for value, allowed in zip(mine, input_types):
-        if type(value) not in allowed:
-            return None
     return _make(Step, (k, t, h, mode, inputs, driven, slopes))
 
 

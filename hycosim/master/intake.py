@@ -152,9 +152,8 @@ class Intake:
             return None
         types = self._scalar_types.get(node)
         if types is not None and len(values) == len(types):
-            for value, allowed in zip(values, types):
-                if type(value) not in allowed:
-                    return None
+            if frames.first_misfit(values, types) is not None:
+                return None
             try:
                 if math.isfinite(sum(values)):
                     return values

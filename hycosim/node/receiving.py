@@ -34,8 +34,8 @@ class Receiver:
         self.in_arrays = tuple((i, p.size, WIRE_TYPES[p.type]) for i, p in enumerate(spec.input)
                                if p.shape is not None)
         self.interpolating = False
-        # A stepping node whose inputs are all scalars tries each release on frames.plain_step
-        # first (its input types; None: every release goes the whole way).
+        # A stepping node whose inputs are all scalars: their types, for the flat path of its
+        # releases over Zenoh (frames.plain_step in ZenohNode); None: every release goes the whole way.
         self.plain = None if self.release_for is None or self.in_arrays else self.in_types
         self.tunable: dict[str, Any] = {}  # the model's tunable parameters and their start values
         self.link: NodeLink | None = None
@@ -78,10 +78,6 @@ class Receiver:
                 if time.monotonic() < deadline:
                     continue  # woken for the grace check above
                 return None
-            if self.plain is not None and msg[0] != LOCAL:
-                frame = frames.plain_step(msg[1], self.release_for, self.plain)
-                if frame is not None:
-                    return frame
             frame = self.take(msg)
             if frame is not None:
                 return frame
