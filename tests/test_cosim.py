@@ -61,6 +61,35 @@ def test_gain_ring_matches_closed_form(tmp_path):
             assert math.isclose(float(row[f"n{i}.y"]), 2 - 0.5 ** k, rel_tol=0, abs_tol=1e-12)
 
 
+def test_a_plain_run_records_in_its_flat_loop_what_the_general_loop_records(tmp_path):
+    """A run with nothing at its points but routing and releases takes them in the relay's flat
+    loop (master/plain_loop.py); the same run paced in real time (far faster than the clock)
+    goes through the general loop, and the two record the same values, byte for byte, and
+    the same timing rows, each node's arrival in each."""
+    nodes = [{"nodeName": "clock", "UID": 1, "model": "ramp", "parameters": {"a": 0.3, "b": 0.1},
+              "output": ["y", "v"]}]
+    nodes += [{"nodeName": f"g{i}", "UID": 2 + i, "model": "gain", "parameters": {"k": 0.7, "b": 0.2},
+               "input": ["u"], "output": ["y"]} for i in range(3)]
+    links = [{"from": "clock.y", "to": "g0.u"}, {"from": "g0.y", "to": "g1.u", "factor": 3.0, "offset": -1.0},
+             {"from": "g1.y", "to": "g2.u"}]
+    runs = {}
+    for how, cosim in (("plain", {}), ("general", {"realTime": 0.001})):
+        cfg = write_project(tmp_path / f"{how}.json", nodes, links,
+                            cosim={"stepSize": H, "stopTime": 0.7, **cosim}, name="same")
+        runs[how] = run_project(cfg, tmp_path / how)
+    assert meta(runs["plain"])["points"].startswith("plain")
+    assert meta(runs["general"])["points"] == "each point through the algorithm (real time)"
+    values = {how: (run / "values.csv").read_bytes() for how, run in runs.items()}
+    assert values["plain"] == values["general"] and values["plain"].count(b"\n") == 72
+    timing = {how: read_rows(run, "timing.csv") for how, run in runs.items()}
+    assert list(timing["plain"][0]) == list(timing["general"][0])
+    assert [(r["step"], r["t"]) for r in timing["plain"]] == [(r["step"], r["t"]) for r in timing["general"]]
+    for row in timing["plain"][1:]:
+        assert row["lateness_s"] == "" and row["holder"] in ("clock", "g0", "g1", "g2")
+        assert all(float(row[f"arrival_s:{n}"]) > 0 for n in ("clock", "g0", "g1", "g2"))
+    assert all(row["lateness_s"] != "" for row in timing["general"])
+
+
 def test_modules_in_the_working_folder_do_not_replace_the_libraries_of_the_nodes(tmp_path):
     """``hycosim run`` in a folder holding a zenoh.py or grp.py (a stdlib module that torch and
     shutil import): the nodes it starts import the installed libraries, not the user's files."""

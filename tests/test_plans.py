@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from hycosim.core.schema import CoSimulation, Iterate, Node, StepControl
 from hycosim.master import plans
 from hycosim.master.intake import port_mismatch
+from hycosim.master.plain_loop import plain_plan
 from tests.wire_strategies import values
 
 CAPABILITIES = ["rollback", "variableStep", "serialize", "interpolates"]
@@ -120,3 +121,20 @@ def test_a_nodes_port_list_is_accepted_only_as_the_servers_and_any_other_is_name
             if wrong:
                 assert f"the server's {', '.join(ours[kind])}" in differ
         assert len(differ) < 2 * (32 * 66 + 200)  # 32 names of at most 64 characters a kind, shown
+
+
+_PLAIN_ASKS = {"scheme": "GaussSeidel", "events": True, "scenario": True, "sources": True, "checkpoints": True,
+               "multirate": True, "span": 4, "calls": True, "paced": True, "held": True}
+
+
+@given(st.sets(st.sampled_from(sorted(_PLAIN_ASKS))))
+def test_the_flat_loop_is_planned_only_where_a_point_is_a_route_and_a_release(asks):
+    """plain_plan takes a run's points flat only where none of the things that happen at a
+    point besides routing and releasing is asked for, and names each that is."""
+    plan = plain_plan(**{key: (value if key in asks else {"scheme": "", "span": 1}.get(key, False))
+                         for key, value in _PLAIN_ASKS.items()})
+    assert plan.on == (not asks)
+    words = {"scheme": "GaussSeidel", "events": "events", "scenario": "a scenario", "sources": "asynchronous sources",
+             "checkpoints": "checkpoints", "multirate": "multi-rate", "span": "batched releases",
+             "calls": "steps as calls", "paced": "real time", "held": "points held by a caller"}
+    assert sorted(w for w in plan.why.split(", ") if w) == sorted(words[a] for a in asks)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import math
 import socket
+import threading
 from pathlib import Path
 
 import pytest
@@ -765,3 +766,36 @@ def test_the_flat_release_path_passes_exactly_what_a_node_accepts(loaded, node, 
     assert (got is None) == (expected is None) and _same(got, expected)
     if got is not None:
         assert got.kind == frames.STEP and type(got) is frames.Step
+
+
+@given(st.lists(frame_arrays(), min_size=1, max_size=8))
+def test_frames_packed_by_threads_at_once_are_each_what_msgpack_packs(arrays):
+    """frames.encode packs with a Packer of each thread's own (Zenoh's threads pack frames too):
+    whatever several threads pack at once, among frames a Packer refuses (an integer beyond 64
+    bits, an object), each frame is the bytes msgpack.packb gives it, and a refused one raises."""
+    fields = [(a[1], a[2:]) for a in arrays] + [(frames.OUTPUTS, [1, 2 ** 64]), (frames.STEP, [object()])]
+    expected = []
+    for kind, rest in fields:
+        try:
+            expected.append(frames.msgpack.packb([frames.VERSION, kind, *rest], use_bin_type=True))
+        except (TypeError, OverflowError, ValueError):
+            expected.append(None)
+    wrong: list[str] = []
+
+    def pack_all() -> None:
+        for _ in range(20):
+            for (kind, rest), want in zip(fields, expected):
+                try:
+                    got = frames.encode(kind, *rest)
+                except (TypeError, OverflowError, ValueError):
+                    got = None
+                if got != want:
+                    wrong.append(f"{kind!r}: {frames.short(rest)}")
+
+    threads = [threading.Thread(target=pack_all) for _ in range(3)]
+    for thread in threads:
+        thread.start()
+    pack_all()
+    for thread in threads:
+        thread.join(timeout=30)
+    assert not wrong and expected[-2:] == [None, None]

@@ -64,6 +64,7 @@ from __future__ import annotations
 
 import math
 import reprlib
+import threading
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any, NamedTuple
 
@@ -324,9 +325,19 @@ Frame = (Outputs | Sample | Start | Step | Stop | Live | Hello | Rollback | Repl
 _make = tuple.__new__  # a named tuple from the checked fields, without its __new__'s argument handling
 
 
+# Each thread's own packer: msgpack.packb makes a Packer (and its buffer) at every call, which
+# cost a small frame three times its packing (benchmarks/FINDINGS.md, 2026-12-04); a Packer is
+# not for two threads at once, and frames are packed in Zenoh's threads too.
+_packers = threading.local()
+
+
 def encode(kind: int, *fields: Any) -> bytes:
     """Pack one frame of the given kind."""
-    return msgpack.packb([VERSION, kind, *fields], use_bin_type=True)
+    try:
+        pack = _packers.pack
+    except AttributeError:
+        pack = _packers.pack = msgpack.Packer(use_bin_type=True).pack
+    return pack([VERSION, kind, *fields])
 
 
 def decode(payload: bytes) -> Frame:

@@ -37,6 +37,10 @@ class PointRecords:
         point.mode, point.outputs, point.inputs, point.stepped = mode, outputs, inputs, stepped
         point.wait_s, point.holder, point.lateness_s = wait_s, holder, lateness_s
         point.arrivals, point.ages, point.takes, point.released = arrivals, ages, takes, released
+        self.tell(step, t, point)
+
+    def tell(self, step: int, t: float, point: RecordedPoint) -> None:
+        """Point ``step``, filled in, to every observer (a user's that fails ends the run, named)."""
         for observer, step_complete in self._told:
             try:
                 step_complete(step, t, point)

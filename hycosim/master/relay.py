@@ -38,12 +38,14 @@ from hycosim.core.sim_clock import RealTimeClock
 from hycosim.master import initialisation, plans
 from hycosim.master.algorithms.choice import project_algorithm
 from hycosim.master.algorithms.interface import AlgorithmError, MasterAlgorithm, StepRequest
+from hycosim.master.algorithms.jacobi import Jacobi
 from hycosim.master.barrier import Barrier
 from hycosim.master.checkpointing import Checkpointing
 from hycosim.master.coordinator import Coordinator, GuardEvaluationError
 from hycosim.master.interpolation import STARTUP_SPLIT
 from hycosim.master.membership import Membership
 from hycosim.master.observers import Observer
+from hycosim.master.plain_loop import PlainLoop, plain_plan
 from hycosim.master.point_records import PointRecords
 from hycosim.master.recorder import Recorder, RecordError
 from hycosim.master.routing import OutputView, Router
@@ -90,6 +92,7 @@ class Relay:
         # How each step is taken; made where the project is loaded, planned once the nodes said what they can.
         self.algorithm: MasterAlgorithm = algorithm if algorithm is not None else project_algorithm(loaded)
         self._short_steps = 0  # steps of H / STARTUP_SPLIT that open the run (interpolated inputs)
+        self._plain: PlainLoop | None = None  # the points of a plain run, flat (planned in _plan)
         # The tunable parameters' values as the nodes hold them (None: their start values; {}:
         # unknown, after a restore: every tuned one is sent again).
         self._tuned: dict[tuple[str, str], Any] | None = None
@@ -220,6 +223,21 @@ class Relay:
         self._plan(resumed)
         end = self.cosim.stopTime - 1e-9 * self.cosim.stepSize
         self._rate.begin(p.k)
+        points = self._plain.run if self._plain is not None else self._points
+        while True:
+            try:
+                points(p, end)
+                break
+            except ModelEnded:
+                break
+            except Recover as cause:  # back to the last checkpoint: its point is taken again, as it was
+                p, _ = self._restored(cause)
+        # The last point recorded: where the run ended (stopTime, a stop, a node's model's end).
+        self.recorder.meta["steps_per_s"] = self._rate.end(self.progress, self.progress.step)
+
+    def _points(self, p: Point, end: float) -> Point:
+        """From point p on, each point arrived at and the step from it taken by the algorithm,
+        until the point at ``end`` (stopTime) or a stop: return that point, recorded."""
         while True:
             self.barrier.point = p.k
             seen = self._arrive(p, p.t >= end)
@@ -227,14 +245,8 @@ class Relay:
                 self._gate.hold(p.k, p.t)  # the step from p waits for a caller's word; a stop may come meanwhile
             if p.t >= end or self._stop_requested.is_set():
                 self._record_point(p, seen)
-                break
-            try:
-                p = self._step_from(p, seen)
-            except ModelEnded:
-                break
-            except Recover as cause:  # back to the last checkpoint: its point is taken again, as it was
-                p, _ = self._restored(cause)
-        self.recorder.meta["steps_per_s"] = self._rate.end(self.progress, p.k)
+                return p
+            p = self._step_from(p, seen)
 
     # --- the start and the plan -----------------------------------------------------
 
@@ -301,6 +313,14 @@ class Relay:
                                     algorithm=self.algorithm.frames_only())
         self.recorder.meta["releases"] = direct.words
         b.direct = self.transport.direct if direct.on else None
+        plain = plain_plan(
+            scheme="" if type(self.algorithm) is Jacobi else type(self.algorithm).__name__,
+            events=bool(self.project.events), scenario=bool(self.scenario), sources=bool(b.histories or b.paced),
+            checkpoints=self.checkpointing.on, multirate=coupling.multirate, span=b.span, calls=direct.on,
+            paced=self.cosim.real_time_factor() is not None, held=self._gate is not OPEN)
+        self.recorder.meta["points"] = plain.words
+        self._plain = PlainLoop(b, self.records, self.progress, self._rate, self._stop_requested,
+                                self.coordinator.mode) if plain.on else None
 
     def _restore_algorithm(self, s: dict[str, Any], what: str) -> None:
         try:
