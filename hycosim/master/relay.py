@@ -6,12 +6,14 @@ Read top to bottom, :meth:`Relay.run` and :meth:`Relay._loop` are the whole algo
 2. :meth:`_begin`: START, every stepping node reports its outputs at t0 (then the
    initialisation phase), or, resuming, every node gets its state at the last checkpoint;
    :meth:`_plan`: what the nodes said they can take part in (the algorithm that runs,
-   batches, checkpoints);
-3. at each macro-step point, :meth:`_arrive`: a checkpoint if one is due, the guards (maybe a
-   mode switch), the outputs routed along the links active in the mode, pacing; then
-   :meth:`_step_from`: the master algorithm (master.algorithms: Jacobi, Gauss-Seidel,
-   iterated, step-controlled, localised, or a user's) takes the step T_k → T_k+H over the
-   barrier (master.barrier: releases out, answers in), point k recorded while the nodes step;
+   batches, checkpoints, and whether the run is plain);
+3. at each macro-step point (:meth:`_points`), :meth:`_arrive`: a checkpoint if one is due,
+   the guards (maybe a mode switch), the outputs routed along the links active in the mode,
+   pacing; then :meth:`_step_from`: the master algorithm (master.algorithms: Jacobi,
+   Gauss-Seidel, iterated, step-controlled, localised, or a user's) takes the step
+   T_k → T_k+H over the barrier (master.barrier: releases out, answers in), point k recorded
+   while the nodes step. A plain run (routing and releases only) takes its points the same
+   way in one flat loop (plain_loop.py);
 4. STOP at stopTime, on Ctrl-C, or on a fault, with everything recorded so far on disk.
 
 The parts beside it: who is attached (membership.py), checkpoints (checkpointing.py), the
