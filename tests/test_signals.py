@@ -312,6 +312,11 @@ _INTERRUPTED_IMPORT = '''
 import os, signal, sys, time
 from importlib.abc import MetaPathFinder
 
+# Ctrl-C as at a terminal: Python's own handler, whatever the suite was started with (a shell
+# without job control starts a background job, and so this suite, with SIGINT ignored, which
+# Python then keeps: the interrupt never came, and the command ran to exit 0).
+signal.signal(signal.SIGINT, signal.default_int_handler)
+
 class At(MetaPathFinder):
     def __init__(self, module, as_import_error):
         self.module, self.as_import_error = module, as_import_error
