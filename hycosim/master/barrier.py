@@ -30,6 +30,12 @@ from hycosim.transport.local_bus import DirectStep
 from hycosim.transport.session import FrameTooLarge
 
 
+def too_large(k: int, t: float, inputs: Mapping[str, list[Any]], exc: FrameTooLarge) -> RunError:
+    """The run's end when the release of step k cannot be carried, naming the largest inputs."""
+    return RunError(f"the release of step {k} (t={t:g} s) is {exc}; largest inputs, by node: "
+                    f"{frames.largest_values(inputs.items())}")
+
+
 class Sent:
     """The releases a node that comes back needs again: the run's START (an asynchronous source's
     clock), the last release, and the last that named each node."""
@@ -156,8 +162,7 @@ class Barrier:
         try:
             self.release.put(frame)
         except FrameTooLarge as exc:
-            raise RunError(f"the release of step {k} (t={t:g} s) is {exc}; largest inputs, by node: "
-                           f"{frames.largest_values(inputs.items())}") from None
+            raise too_large(k, t, inputs, exc) from None
         self.messages["releases"] += 1
         self.ledger.released(nodes, k, released_at, count=1 if times is None else len(times) - 1,
                              batched=times is not None, span=self.span, last_point=self.last_point)

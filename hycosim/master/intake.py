@@ -160,15 +160,11 @@ class Intake:
                     and 0 <= k < frames.MAX_STEP and math.isfinite(t) and len(values) == reals):
                 return None
             try:
-                if math.isfinite(sum(values)):
+                if math.isfinite(sum(values)):  # the answer of every step: no call more than this
                     return values
-            except OverflowError:  # an int beyond a float's range: the whole check
+            except OverflowError:  # an int beyond a float's range
                 pass
-            try:
-                self.check_values(node, step, t, values)
-            except Dropped:
-                return None
-            return values
+            return self._checked(node, step, t, values)
         try:
             obj = msgpack.unpackb(payload, raw=False, strict_map_key=False)
         except Exception:  # any garbage: accept() says what it is
@@ -189,7 +185,11 @@ class Intake:
                     return values
             except (TypeError, OverflowError):
                 pass
-        # An array, a string, a non-finite value to note: the whole check.
+        return self._checked(node, step, t, values)
+
+    def _checked(self, node: str, step: int, t: float, values: list[Any]) -> list[Any] | None:
+        """``values`` if the whole check takes them (an array, a string, a non-finite value
+        to note, an int beyond a float's range: what one sum could not say), else None."""
         try:
             self.check_values(node, step, t, values)
         except Dropped:

@@ -23,11 +23,11 @@ import time
 from typing import Any
 
 from hycosim.core import frames
-from hycosim.master.barrier import Barrier
+from hycosim.master.barrier import Barrier, too_large
 from hycosim.master.observers import RecordedPoint
 from hycosim.master.plans import Plan
 from hycosim.master.point_records import PointRecords
-from hycosim.master.run_state import ModelEnded, Point, Progress, Rate, RunError
+from hycosim.master.run_state import ModelEnded, Point, Progress, Rate
 from hycosim.transport.session import FrameTooLarge
 
 
@@ -88,8 +88,7 @@ class PlainLoop:
                 try:
                     put(frame)
                 except FrameTooLarge as exc:
-                    raise RunError(f"the release of step {k} (t={t:g} s) is {exc}; largest inputs, by node: "
-                                   f"{frames.largest_values(inputs.items())}") from None
+                    raise too_large(k, t, inputs, exc) from None
                 messages["releases"] += 1
                 ledger.released(stepping, k, released, last_point=last_point)
             finally:  # recorded while the nodes step; also where the release failed
