@@ -15,6 +15,7 @@ import socket
 import threading
 from pathlib import Path
 
+import msgspec
 import pytest
 import structlog
 from hypothesis import given
@@ -747,33 +748,132 @@ def test_the_flat_outputs_path_takes_exactly_what_the_intake_takes(loaded, sent,
         assert flat.non_finite == whole.non_finite and flat.dropped == {}
 
 
+def _a_release(node: str):
+    """Payloads on ``down`` for ``node``: anything, any STEP-shaped array, and what its server sends."""
+    return (payloads | frame_arrays([frames.STEP]).map(frames.msgpack.packb)
+            | _from_the_server(node).map(lambda sent: sent[0])
+            | _from_the_server(node, None).map(lambda sent: sent[0]))
+
+
 @pytest.mark.parametrize("node", ["g", "h"])
 @given(data=st.data())
 def test_the_flat_release_path_passes_exactly_what_a_node_accepts(loaded, node, data):
-    """A node tries each release on frames.plain_step first: it must pass exactly the STEPs that
-    decode + check_release pass for this node (equal to what they give), and nothing else."""
+    """A node tries each release on ReleaseReader.plain first: it must pass exactly the STEPs that
+    the node's decode + check_release pass (equal to what they give), and nothing else."""
     _quiet()
     receiver = NodeRuntime(loaded, node, impl=None, endpoint="tcp/127.0.0.1:1").receiver
-    payload = data.draw(payloads | frame_arrays([frames.STEP]).map(frames.msgpack.packb)
-                        | _from_the_server(node).map(lambda sent: sent[0])
-                        | _from_the_server(node, None).map(lambda sent: sent[0]))
-    got = frames.plain_step(payload, node, receiver.in_types)
+    payload = data.draw(_a_release(node))
+    got = receiver.plain(payload)
     try:
         frame = receiver.accept(False, payload)
     except frames.FrameError:
         frame = None
     expected = frame if frame is not None and frame.kind == frames.STEP else None
-    assert (got is None) == (expected is None) and _same(got, expected)
+    assert (got is None) == (expected is None)
     if got is not None:
-        assert got.kind == frames.STEP and type(got) is frames.Step
+        release, mine = got
+        assert _same([release.step, release.t, release.h, release.mode, release.driven, mine],
+                     [expected.step, expected.t, expected.h, expected.mode, expected.driven, expected.inputs[node]])
+        assert node not in expected.slopes
+
+
+def _but_the_others(payload: bytes, node: str) -> bytes | None:
+    """The STEP in ``payload`` with every other node's entry of inputs and slopes taken out, the
+    rest byte for byte (None if msgspec does not read it as a STEP)."""
+    from hycosim.node.releases import _STEP
+
+    try:
+        wire = _STEP.decode(payload)
+    except Exception:
+        return None
+    wire.inputs = {n: raw for n, raw in wire.inputs.items() if n == node}
+    wire.slopes = {n: raw for n, raw in wire.slopes.items() if n == node}
+    return msgspec.msgpack.encode(wire)
+
+
+@pytest.mark.parametrize("node", ["g", "h"])
+@given(data=st.data())
+def test_a_node_reads_a_step_as_decode_reads_it_without_the_other_nodes_entries(loaded, node, data):
+    """A node reads a release's own entry alone (node/releases.py): any frame it takes, it takes
+    as frames.decode + check_release take the same frame with the other nodes' entries taken out;
+    a frame that is no STEP exactly as they do; and a STEP they take it refuses only for a name
+    that is no string (an entry's key, a driven node)."""
+    _quiet()
+    receiver = NodeRuntime(loaded, node, impl=None, endpoint="tcp/127.0.0.1:1").receiver
+    payload = data.draw(_a_release(node))
+
+    def whole(p: bytes):
+        try:
+            return receiver.accept_frame(False, frames.decode(p))
+        except frames.FrameError:
+            return "refused"
+
+    try:
+        mine = receiver.accept(False, payload)
+    except frames.FrameError:
+        mine = "refused"
+    theirs = whole(payload)
+    is_step = mine != "refused" and mine is not None and mine.kind == frames.STEP
+    if not is_step:
+        try:
+            is_step = frames.decode(payload).kind == frames.STEP
+        except frames.FrameError:
+            pass
+    if not is_step:
+        assert _same(mine, theirs)
+        return
+    if mine == "refused":
+        if theirs != "refused":  # they take it or pass it over: it names something by no string
+            step = frames.decode(payload)
+            assert any(type(n) is not str for n in [*step.inputs, *step.slopes, *step.driven])
+        return
+    assert _same(mine, whole(_but_the_others(payload, node)))
+
+
+class _Float(float):
+    """A subclass of float, as NumPy's float64 is: msgspec does not pack it, msgpack does."""
+
+
+def _raw_map(entries: dict[str, bytes]) -> bytes:
+    """A msgpack map of the given keys to values packed already (which may be no msgpack a
+    Python packer would write)."""
+    return bytes([0x80 | len(entries)]) + b"".join(frames.msgpack.packb(k) + v for k, v in entries.items())
+
+
+@pytest.mark.parametrize("garbage", [b"\xa2\xff\xfe", b"\x81\x91\x01\x01", b"\xd5\xff\x00\x00"],
+                         ids=["a string of no UTF-8", "a map keyed by an array", "a timestamp of 2 bytes"])
+def test_a_node_steps_on_a_release_whatever_another_nodes_entry_holds(loaded, garbage):
+    """Another node's entry is skipped, not judged: a node takes its own inputs from a STEP whose
+    entry for another node holds what msgpack-python will not decode (so frames.decode refuses
+    the whole frame); an entry that is no msgpack at all still makes the frame refused."""
+    _quiet()
+    receiver = NodeRuntime(loaded, "g", impl=None, endpoint="tcp/127.0.0.1:1").receiver
+    head = frames.msgpack.packb([frames.VERSION, frames.STEP, 3, 0.3, 0.1, "free"])[1:]
+    tail = frames.msgpack.packb([])  # driven
+    for other in (garbage, b"\xc1", b"\xdb\xff\xff\xff\xff"):
+        payload = b"\x99" + head + _raw_map({"g": frames.msgpack.packb([0.25]), "h": other}) + tail + _raw_map({})
+        if other is garbage:
+            with pytest.raises(frames.FrameError):
+                frames.decode(payload)
+            frame = receiver.accept(False, payload)
+            assert frame.kind == frames.STEP and frame.inputs == {"g": [0.25]} and frame.step == 3
+            release, values = receiver.plain(payload)
+            assert release.step == 3 and values == (0.25,)
+        else:  # an opcode msgpack never uses, or a string longer than the frame
+            with pytest.raises(frames.FrameError):
+                receiver.accept(False, payload)
+            assert receiver.plain(payload) is None
 
 
 @given(st.lists(frame_arrays(), min_size=1, max_size=8))
 def test_frames_packed_by_threads_at_once_are_each_what_msgpack_packs(arrays):
-    """frames.encode packs with a Packer of each thread's own (Zenoh's threads pack frames too):
-    whatever several threads pack at once, among frames a Packer refuses (an integer beyond 64
-    bits, an object), each frame is the bytes msgpack.packb gives it, and a refused one raises."""
-    fields = [(a[1], a[2:]) for a in arrays] + [(frames.OUTPUTS, [1, 2 ** 64]), (frames.STEP, [object()])]
+    """frames.encode packs with one msgspec Encoder for every thread (Zenoh's threads pack frames
+    too), and with msgpack what msgspec does not take: whatever several threads pack at once,
+    among frames neither packs (an integer beyond 64 bits, an object) and values only msgpack
+    packs (a subclass of float), each frame is the bytes msgpack.packb gives it, and a refused one
+    raises."""
+    fields = [(a[1], a[2:]) for a in arrays] + [(frames.OUTPUTS, [1, 2 ** 64]), (frames.STEP, [object()]),
+                                                (frames.OUTPUTS, [1, 2, 0.5, [_Float(0.25)]])]
     expected = []
     for kind, rest in fields:
         try:

@@ -165,3 +165,24 @@ def test_the_recorder_goes_back_only_to_a_checkpoint_whose_positions_it_was_give
     timing = list(csv.reader(open(tmp_path / "timing.csv", newline="")))[1:]
     assert [r[0] for r in rows] == [r[0] for r in timing] == ["0", "1"]
     assert json.loads((tmp_path / "meta.json").read_text())["status"] == "completed"
+
+
+_CELL = (st.floats() | st.floats(-1e-3, 1e-3) | st.floats(1e14, 1e18) | st.integers() | st.booleans()
+         | st.binary(max_size=3) | st.sampled_from([0.0, -0.0, 1e16, 1e-4, 9.999999999999999e-05, 1e15 + 0.5]))
+
+
+@given(st.integers(0, 2 ** 40), st.floats(0, 1e9), st.sampled_from(["free", "grasped"]), st.none() | st.text(max_size=5),
+       st.lists(_CELL, max_size=12))
+def test_a_values_row_is_the_text_csv_writer_gives_its_cells(step, t, mode, stepped, values):
+    """joined_row writes the ports' values through msgspec where its text of them is Python's:
+    every row, whatever its values (any float, integers beyond 64 bits, booleans, bytes),
+    is the text csv.writer writes of its cells."""
+    from hycosim.master.record_files import joined_row
+
+    lead = [step, t, mode] + ([] if stepped is None else [stepped.replace(",", "").replace('"', "")])
+    cells = [*lead, *values]
+    text = io.StringIO()
+    csv.writer(text).writerow(cells)
+    if '"' in text.getvalue():
+        return  # a cell csv.writer quotes: joined_row is never given one
+    assert joined_row(cells, len(lead)) == text.getvalue()

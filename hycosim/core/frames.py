@@ -64,11 +64,11 @@ from __future__ import annotations
 
 import math
 import reprlib
-import threading
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any, NamedTuple
 
 import msgpack
+import msgspec
 
 VERSION = 2
 
@@ -325,19 +325,22 @@ Frame = (Outputs | Sample | Start | Step | Stop | Live | Hello | Rollback | Repl
 _make = tuple.__new__  # a named tuple from the checked fields, without its __new__'s argument handling
 
 
-# Each thread's own packer: msgpack.packb makes a Packer (and its buffer) at every call, which
-# cost a small frame three times its packing (benchmarks/FINDINGS.md, 2026-12-04); a Packer is
-# not for two threads at once, and frames are packed in Zenoh's threads too.
-_packers = threading.local()
+# Frames are packed by msgspec, in C, without building a Packer (msgpack.packb makes one, and its
+# buffer, at every call; a kept Packer still cost a STEP at 8 nodes four times msgspec's:
+# benchmarks/FINDINGS.md, 2026-12-05). An Encoder is safe to share between threads (frames are
+# packed in Zenoh's threads too). For every value both pack, the bytes are msgpack's with
+# use_bin_type; a value msgspec refuses as a type (a subclass of float such as NumPy's float64)
+# is packed by msgpack, as before.
+_ENCODER = msgspec.msgpack.Encoder()
 
 
 def encode(kind: int, *fields: Any) -> bytes:
     """Pack one frame of the given kind."""
+    frame = [VERSION, kind, *fields]
     try:
-        pack = _packers.pack
-    except AttributeError:
-        pack = _packers.pack = msgpack.Packer(use_bin_type=True).pack
-    return pack([VERSION, kind, *fields])
+        return _ENCODER.encode(frame)
+    except TypeError:
+        return msgpack.packb(frame, use_bin_type=True)
 
 
 def decode(payload: bytes) -> Frame:
@@ -423,32 +426,6 @@ def check_release(frame: Frame, node: str | None = None, input_types: tuple[tupl
                     raise FrameError(f"{KIND_NAMES[frame.kind]} {k} gives node {node!r} {short(value)} for "
                                      f"input {i}, an array of {size} elements")
     return frame
-
-
-def plain_step(payload: bytes, node: str, input_types: tuple[tuple[type, ...], ...]) -> Step | None:
-    """The STEP in ``payload`` if it is one that :func:`decode` and :func:`check_release` pass
-    for ``node`` (whose inputs are all scalars of ``input_types``) with inputs for it and no
-    input slopes; None for anything else, which the caller hands to those two (the judges of
-    what it is and of why it is refused).
-
-    A node's every release comes here first: one function instead of the two and the layers
-    around them, for the release that is most of a run's frames."""
-    try:
-        obj = msgpack.unpackb(payload, raw=False, strict_map_key=False)
-    except Exception:  # any garbage: decode() says what it is
-        return None
-    if not (type(obj) is list and len(obj) == 9):
-        return None
-    version, kind, k, t, h, mode, inputs, driven, slopes = obj
-    if not (type(version) is int and version == VERSION and type(kind) is int and kind == STEP
-            and type(k) is int and 0 <= k < MAX_STEP and type(t) in _NUM and math.isfinite(t)
-            and type(h) in _NUM and math.isfinite(h) and h > 0 and type(mode) is str and type(inputs) is dict
-            and type(driven) is list and type(slopes) is dict and node not in slopes):
-        return None
-    mine = inputs.get(node)
-    if type(mine) is not list or len(mine) != len(input_types) or first_misfit(mine, input_types) is not None:
-        return None
-    return _make(Step, (k, t, h, mode, inputs, driven, slopes))
 
 
 def _check_slopes(k: int, node: str, mine: Any, input_types: tuple[tuple[type, ...], ...] | None,

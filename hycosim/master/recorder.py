@@ -134,7 +134,9 @@ class Recorder:
         if parquet:
             self._rows = ParquetTables(run_dir, project, self._marks_steps, at, timing_header)
         else:
-            self._rows = (RowWriter if rows_apart else LocalRows)(run_dir, self._timing_format, at)
+            # The cells before the ports' values: step, t, mode, and the nodes that stepped.
+            self._rows = (RowWriter if rows_apart else LocalRows)(run_dir, self._timing_format, at,
+                                                                 lead=4 if self._marks_steps else 3)
         self._values_row, self._timing_cells = self._rows.values, self._rows.timing
         if resume_at is None:
             out_cols = [c for n in project.nodeLists for p in n.output for c in p.columns(n.nodeName)]

@@ -75,8 +75,8 @@ class Tables(Protocol):
 class LocalRows:
     """The rows formatted and buffered in this thread, written at each flush."""
 
-    def __init__(self, run_dir: Path, timing_format: str | None, resume_at: dict[str, int]):
-        self._run_dir = run_dir
+    def __init__(self, run_dir: Path, timing_format: str | None, resume_at: dict[str, int], lead: int = 3):
+        self._run_dir, self._lead = run_dir, lead
         self._files: dict[str, RecordFile] = {}
         try:
             for name in ROW_FILES:
@@ -91,7 +91,7 @@ class LocalRows:
 
     def values(self, cells: list[Any]) -> None:
         """A ``values.csv`` row of cells none of which needs a quote."""
-        self._values(joined_row(cells))
+        self._values(joined_row(cells, self._lead))
 
     def timing(self, cells: tuple[Any, ...]) -> None:
         """A ``timing.csv`` row: the cells of the timing format."""
@@ -123,11 +123,12 @@ class RowWriter:
     """The rows written by a process of its own (``python -m hycosim.master.row_writer``): see
     the module's text. Same methods as :class:`LocalRows`."""
 
-    def __init__(self, run_dir: Path, timing_format: str | None, resume_at: dict[str, int],
+    def __init__(self, run_dir: Path, timing_format: str | None, resume_at: dict[str, int], lead: int = 3,
                  timeout: float = ANSWER_TIMEOUT_S):
-        self._run_dir = run_dir
+        self._run_dir, self._lead = run_dir, lead
         self._timeout = timeout
-        spec = json.dumps({"run_dir": str(run_dir), "timing_format": timing_format, "resume_at": resume_at})
+        spec = json.dumps({"run_dir": str(run_dir), "timing_format": timing_format, "resume_at": resume_at,
+                           "lead": lead})
         # This hycosim, wherever the master found it (an installed wheel, a checkout on sys.path).
         home = str(Path(__file__).resolve().parents[2])
         env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [home, os.environ.get("PYTHONPATH")])))
@@ -160,7 +161,7 @@ class RowWriter:
         try:
             self._batch += self._pack((VALUES, cells))
         except (OverflowError, TypeError, ValueError):  # an integer beyond 64 bits: the row as text
-            self._batch += self._pack((TEXT, "values.csv", joined_row(cells)))
+            self._batch += self._pack((TEXT, "values.csv", joined_row(cells, self._lead)))
         self._rows += 1
         if self._rows >= BATCH_ROWS:
             self._send(cells[0])  # a row's first cell is its step
@@ -278,7 +279,7 @@ class RowWriter:
             self._proc.wait()
 
 
-def serve(run_dir: Path, timing_format: str | None, resume_at: dict[str, int]) -> int:
+def serve(run_dir: Path, timing_format: str | None, resume_at: dict[str, int], lead: int = 3) -> int:
     """The writer's side: rows from standard input into the files, answers on standard output,
     until CLOSE or the end of the input (the master's process is gone: what came is written)."""
     out = sys.stdout.buffer
@@ -305,7 +306,7 @@ def serve(run_dir: Path, timing_format: str | None, resume_at: dict[str, int]) -
         for message in unpacker:
             kind = message[0]
             if kind == VALUES:
-                values(joined_row(message[1]))
+                values(joined_row(message[1], lead))
             elif kind == TIMING:
                 timing(timing_format % tuple(message[1]))  # type: ignore[operator]
             elif kind == TEXT:
@@ -338,4 +339,4 @@ def serve(run_dir: Path, timing_format: str | None, resume_at: dict[str, int]) -
 
 if __name__ == "__main__":
     _spec = json.loads(sys.argv[1])
-    sys.exit(serve(Path(_spec["run_dir"]), _spec["timing_format"], _spec["resume_at"]))
+    sys.exit(serve(Path(_spec["run_dir"]), _spec["timing_format"], _spec["resume_at"], _spec["lead"]))

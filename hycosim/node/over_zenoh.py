@@ -84,34 +84,34 @@ class ZenohNode(NodeRuntime):
 
     def _releases_plainly(self) -> bool:
         """Over Zenoh, while stepping: the releases as they come, each plain STEP
-        (frames.plain_step) stepped here, flat, as _on_release and _step_model step it; any
+        (``ReleaseReader.plain``) stepped here, flat, as _on_release and _step_model step it; any
         other frame through :meth:`handle`. True once the node is done; False where the whole
         way must take over (a link cut to wait out, a phase other than stepping).
 
         Every step of a run comes here, where the layers of the general path cost a node as
         much CPU as the floor's whole step (benchmarks/FINDINGS.md, 2026-12-04)."""
         receiver, link, impl, at = self.receiver, self.link, self.impl, self._stepping
-        name, types, in_names, uid = self.name, receiver.plain, self._in_names, self.spec.UID
-        pack, send_outputs, encode, plain_step = self.outbox.pack, self.outbox.send_outputs, frames.encode, \
-            frames.plain_step
+        name, plain, in_names, uid = self.name, receiver.plain, self._in_names, self.spec.UID
+        pack, send_outputs, encode = self.outbox.pack, self.outbox.send_outputs, frames.encode
         bound = self.cosim.stepTimeout + 30.0  # as _pull's: the last resort for a frozen server
         while True:
             msg = link.receive(bound)
             if msg is None:
                 raise receiver.silence(bound, "release")
-            frame = plain_step(msg[1], name, types) if msg[0] != LOCAL else None
-            if frame is None or at.checkpoint or at.pending_state is not None or self._rate != 1:
-                frame = frame or receiver.take(msg)
+            got = plain(msg[1]) if msg[0] != LOCAL else None
+            if got is None or at.checkpoint or at.pending_state is not None or self._rate != 1:
+                frame = receiver.take(msg)
                 if frame is not None and self.handle(frame):
                     return True
                 if self._phase != PHASE_STEPPING or receiver.server_lost is not None:
                     return False
                 continue
-            k, t, h, mode, driven = frame.step, frame.t, frame.h, frame.mode, name in frame.driven
+            release, mine = got
+            k, t, h, mode, driven = release.step, release.t, release.h, release.mode, name in release.driven
             if mode != at.mode or driven != at.driven:
                 self._enter_step(impl, at, k, mode, driven)
             try:
-                impl.step(t, h, dict(zip(in_names, frame.inputs[name])))
+                impl.step(t, h, dict(zip(in_names, mine)))
                 out = encode(frames.OUTPUTS, uid, k + 1, t + h, pack(impl.outputs()))
                 send_outputs(out, k + 1)
             except Exception as exc:

@@ -12,6 +12,7 @@ from typing import Any
 from hycosim.core import frames
 from hycosim.core.drops import DropLog
 from hycosim.core.schema import WIRE_TYPES, CoSimulation, Node as NodeSpec, wire_types
+from hycosim.node.releases import ReleaseReader
 from hycosim.transport.inbox import LOCAL
 from hycosim.transport.node_side import NodeLink
 
@@ -34,9 +35,12 @@ class Receiver:
         self.in_arrays = tuple((i, p.size, WIRE_TYPES[p.type]) for i, p in enumerate(spec.input)
                                if p.shape is not None)
         self.interpolating = False
-        # A stepping node whose inputs are all scalars: their types, for the flat path of its
-        # releases over Zenoh (frames.plain_step in ZenohNode); None: every release goes the whole way.
-        self.plain = None if self.release_for is None or self.in_arrays else self.in_types
+        # A stepping node reads a release's own entry alone (node/releases.py); its releases
+        # over Zenoh take the flat path (ReleaseReader.plain in ZenohNode) where every input is a
+        # scalar: None, every release goes the whole way.
+        self.releases = ReleaseReader(self.release_for, self.in_types) if self.release_for is not None else None
+        self._decode = self.releases.decode if self.releases is not None else frames.decode
+        self.plain = self.releases.plain if self.releases is not None and self.releases.flat else None
         self.tunable: dict[str, Any] = {}  # the model's tunable parameters and their start values
         self.link: NodeLink | None = None
         self.pulls = False  # over Zenoh frames are pulled; in process the master pushes them
@@ -106,7 +110,7 @@ class Receiver:
     def accept(self, local: bool, payload: bytes) -> frames.Frame | None:
         """A frame from ``down`` (or this process's own liveliness news) that this node can act
         on; None for one meant for another node; FrameError for anything else."""
-        return self.accept_frame(local, frames.decode(payload))
+        return self.accept_frame(local, self._decode(payload))
 
     def accept_frame(self, local: bool, frame: frames.Frame) -> frames.Frame | None:
         """:meth:`accept` of a frame decoded already."""
@@ -125,7 +129,7 @@ class Receiver:
         if kind == frames.REPLAY:
             if frame.node != self.name:
                 return None
-            inner = frames.decode(frame.release)
+            inner = self._decode(frame.release)
             if inner.kind not in (frames.START, frames.STEP, frames.STEPS):
                 raise frames.FrameError(f"a replay of a {frames.KIND_NAMES[inner.kind]} frame")
             return frames.Replay(self.name, frames.check_release(inner, self.release_for, self.in_types,

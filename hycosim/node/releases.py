@@ -1,0 +1,100 @@
+"""How a node reads a release off the wire: the frame's own fields and its own inputs, not the
+other nodes'.
+
+A STEP carries every stepping node's inputs in one message (``down``, docs/wire.md), and a
+node acts on its own entry alone. It decodes the frame with msgspec, typed, and leaves each
+entry of ``inputs`` and ``slopes`` as the bytes it spans (``msgspec.Raw``): another node's
+entry is parsed only as far as skipping it takes (well-formed msgpack, or the frame is refused)
+and is never built into Python objects or judged. Decoding every node's inputs had been a
+third of a node's Python a step at 8 nodes, and grew with the nodes.
+
+Both ways a node takes a release read it so: :meth:`ReleaseReader.decode` (every frame a node
+is sent, then checked by ``frames.check_release``) and :meth:`ReleaseReader.plain` (the flat
+path over Zenoh, which gives exactly the STEPs the first way acts on and None for the rest).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Literal, Union
+
+import msgpack
+import msgspec
+
+from hycosim.core import frames
+
+
+class StepWire(msgspec.Struct, array_like=True, forbid_unknown_fields=True):
+    """A STEP as the wire has it (``frames.Step``'s fields after version and kind), with each
+    node's inputs and input slopes left undecoded."""
+
+    version: Literal[frames.VERSION]
+    kind: Literal[frames.STEP]
+    step: int
+    t: int | float
+    h: int | float
+    mode: str
+    inputs: dict[str, msgspec.Raw]
+    driven: list[str]
+    slopes: dict[str, msgspec.Raw]
+
+
+_STEP = msgspec.msgpack.Decoder(StepWire)
+# msgspec's own errors, and RecursionError for nesting deeper than it follows (inside an entry
+# it skips too: it must find where the entry ends).
+_REFUSED = (msgspec.MsgspecError, RecursionError)
+
+
+class ReleaseReader:
+    """Releases as node ``node`` reads them; ``input_types`` per input the Python types msgpack
+    yields for it (``schema.wire_types``)."""
+
+    def __init__(self, node: str, input_types: tuple[tuple[type, ...], ...]):
+        self.node = node
+        # The flat path types the node's inputs in C where every one is a scalar (an array or
+        # binary port, which may be a list, goes the whole way).
+        self.flat = all(list not in types for types in input_types)
+        self._mine = msgspec.msgpack.Decoder(tuple[tuple(Union[types] for types in input_types)]) \
+            if self.flat else None
+
+    def decode(self, payload: bytes) -> frames.Frame:
+        """``frames.decode`` for this node: a STEP comes with this node's entry of ``inputs``
+        and ``slopes`` alone (none where the frame has none); FrameError for anything
+        ``frames.decode`` refuses, and for a STEP whose fields are not of their types or whose
+        entries are not well-formed msgpack (another node's entry is not looked into further)."""
+        try:
+            wire = _STEP.decode(payload)
+        except _REFUSED as exc:
+            frame = frames.decode(payload)
+            if frame.kind == frames.STEP:  # a STEP in shape, but not in its fields' types
+                raise frames.FrameError(f"STEP frame with fields of the wrong types: {frames.short(str(exc))}") \
+                    from None
+            return frame
+        node = self.node
+        inputs = {node: _unpack(wire.inputs[node])} if node in wire.inputs else {}
+        slopes = {node: _unpack(wire.slopes[node])} if node in wire.slopes else {}
+        return frames.Step(wire.step, wire.t, wire.h, wire.mode, inputs, wire.driven, slopes)
+
+    def plain(self, payload: bytes) -> tuple[StepWire, tuple[Any, ...]] | None:
+        """The STEP in ``payload`` and this node's inputs, if it is one that :meth:`decode` and
+        ``frames.check_release`` pass for this node, with inputs for it and no input slopes;
+        None for anything else, which the caller hands to those two (the judges of what it is
+        and of why it is refused). Only for a node whose inputs are all scalars (``flat``)."""
+        try:
+            wire = _STEP.decode(payload)
+            mine = self._mine.decode(wire.inputs[self.node])
+        except (*_REFUSED, KeyError):
+            return None
+        k, t, h = wire.step, wire.t, wire.h
+        if not (0 <= k < frames.MAX_STEP and math.isfinite(t) and math.isfinite(h) and h > 0) \
+                or self.node in wire.slopes:
+            return None
+        return wire, mine
+
+
+def _unpack(raw: msgspec.Raw) -> Any:
+    """One entry of a release, as ``frames.decode`` would have given it."""
+    try:
+        return msgpack.unpackb(raw, raw=False, strict_map_key=False)
+    except Exception as exc:  # msgpack raises several unrelated types for garbage
+        raise frames.FrameError(f"STEP frame with an entry that is not msgpack ({type(exc).__name__})") from None
