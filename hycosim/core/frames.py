@@ -325,12 +325,12 @@ Frame = (Outputs | Sample | Start | Step | Stop | Live | Hello | Rollback | Repl
 _make = tuple.__new__  # a named tuple from the checked fields, without its __new__'s argument handling
 
 
-# Frames are packed by msgspec, in C, without building a Packer (msgpack.packb makes one, and its
-# buffer, at every call; a kept Packer still cost a STEP at 8 nodes four times msgspec's:
-# benchmarks/FINDINGS.md, 2026-12-05). An Encoder is safe to share between threads (frames are
-# packed in Zenoh's threads too). For every value both pack, the bytes are msgpack's with
-# use_bin_type; a value msgspec refuses as a type (a subclass of float such as NumPy's float64)
-# is packed by msgpack, as before.
+# Frames are packed by msgspec, in C, without building a Packer (msgpack.packb makes one, and
+# its buffer, at every call; a kept Packer still cost a STEP at 8 nodes four times msgspec's:
+# benchmarks/FINDINGS.md, 2026-12-04, the last entry). An Encoder is safe to share between
+# threads (frames are packed in Zenoh's threads too). For every value both pack, the bytes are
+# msgpack's with use_bin_type; a value msgspec refuses as a type (a subclass of float such as
+# NumPy's float64) is packed by msgpack, as before.
 _ENCODER = msgspec.msgpack.Encoder()
 
 
