@@ -98,8 +98,10 @@ class ZenohNode(NodeRuntime):
             msg = link.receive(bound)
             if msg is None:
                 raise receiver.silence(bound, "release")
-            got = plain(msg[1]) if msg[0] != LOCAL else None
-            if got is None or at.checkpoint or at.pending_state is not None or self._rate != 1:
+            # Read flat only where the flat step will take it: not decoded twice otherwise.
+            got = plain(msg[1]) if msg[0] != LOCAL and not at.checkpoint and at.pending_state is None \
+                and self._rate == 1 else None
+            if got is None:
                 frame = receiver.take(msg)
                 if frame is not None and self.handle(frame):
                     return True
