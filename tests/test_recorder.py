@@ -186,3 +186,54 @@ def test_a_values_row_is_the_text_csv_writer_gives_its_cells(step, t, mode, step
     if '"' in text.getvalue():
         return  # a cell csv.writer quotes: joined_row is never given one
     assert joined_row(cells, len(lead)) == text.getvalue()
+
+
+_MODE = st.sampled_from(["free", "grasped", "null", "e", "n0"]) | st.from_regex(r"[A-Za-z_][A-Za-z0-9_\-]{0,6}", fullmatch=True)
+
+
+# Cells whose text msgspec writes as Python does (the rows of a run like any): batches of them
+# take the one call; any other cell among them sends the batch row by row.
+def _plain(x: float) -> bool:
+    return (x == 0 or abs(x) >= 1e-4) and "0.0000" not in repr(x)  # no exponent, nothing looking like one
+
+
+_PLAIN_CELL = st.integers(-2 ** 63, 2 ** 63) | st.floats(-1e9, 1e9).filter(_plain)
+_ROWS = st.lists(st.tuples(st.integers(0, 2 ** 40), st.floats(0, 1e9).filter(_plain),
+                           st.sampled_from(["free", "grasped"]), st.lists(_PLAIN_CELL, max_size=8)), min_size=2, max_size=12)
+
+
+@given(_ROWS | st.lists(st.tuples(st.integers(0, 2 ** 70), st.floats(0, 1e9) | st.floats(), _MODE,
+                                  st.lists(_CELL | _PLAIN_CELL | _MODE | st.text("0123456789abcdef", max_size=6)
+                                           | st.just("<40 bytes>"), max_size=8)), max_size=12))
+def test_rows_joined_together_are_the_text_csv_writer_gives_them(rows):
+    """joined_rows (a distributed server's rows at each flush, in one msgspec call) writes what
+    csv.writer writes of each row, one after another: whatever the modes (any identifier, one
+    that is also a value's text), the values (strings as the recorder makes of bytes, any float,
+    integers beyond 64 bits) and the steps."""
+    from hycosim.master.record_files import joined_rows
+
+    taken, expected = [], []
+    for step, t, mode, values in rows:
+        text = io.StringIO()
+        csv.writer(text).writerow([step, t, mode, *values])
+        if '"' not in text.getvalue():  # a cell csv.writer quotes: the recorder never joins one
+            taken.append([step, t, mode, *values])
+            expected.append(text.getvalue())
+    assert joined_rows(taken) == "".join(expected)
+    assert joined_rows(taken, lead=4) == "".join(expected)  # lead 4 ("stepped" cells): row by row
+
+
+@given(_ROWS)
+def test_plain_rows_are_joined_in_one_call(rows):
+    """A batch of plain rows (numbers, the run's modes) is written in one msgspec call, not row
+    by row, and its text is csv.writer's."""
+    from hycosim.master import record_files
+
+    cells = [[step, t, mode, *values] for step, t, mode, values in rows]
+    expected = "".join(record_files.joined_row(c) for c in cells)
+    by_row = record_files.joined_row
+    record_files.joined_row = None  # type: ignore[assignment]  # row by row would fail
+    try:
+        assert record_files.joined_rows(cells) == expected
+    finally:
+        record_files.joined_row = by_row

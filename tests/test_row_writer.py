@@ -126,21 +126,44 @@ def test_a_killed_run_in_one_process_leaves_its_rows_whole_and_its_writer_ends(t
 
 
 def test_an_answer_read_while_rows_are_sent_is_kept_for_the_wait_that_asks_for_it(tmp_path, monkeypatch):
-    import select as real_select
     import time
-    from types import SimpleNamespace
 
+    from hycosim.core.fd_wait import ready
     from hycosim.master import row_writer
 
-    def late_poll(r, w, x, timeout):
+    def late_poll(fd, *, write=False, timeout=None):
         if timeout == 0.0:  # the poll after a send: the writer's answer has come by then
             time.sleep(0.05)
-        return real_select.select(r, w, x, timeout)
+        return ready(fd, write=write, timeout=timeout)
 
     rows = RowWriter(tmp_path, FORMAT, {}, timeout=5.0)
-    monkeypatch.setattr(row_writer, "select", SimpleNamespace(select=late_poll))
+    monkeypatch.setattr(row_writer, "ready", late_poll)
     _write(rows, 0, 5)
     ends = rows.positions()
     assert ends["values.csv"] == (tmp_path / "values.csv").stat().st_size > 0
     rows.cut(ends)
     assert rows.close() == []
+
+
+def test_the_writer_serves_a_process_whose_descriptors_pass_1024(tmp_path):
+    """A master with over a thousand files open (a Dask worker after many runs) gets the
+    writer's pipes numbered past select()'s limit: rows, a checkpoint's ends and the close
+    work as anywhere."""
+    import resource
+
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft < 1200:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (min(2048, hard), hard))
+    held = [os.open(os.devnull, os.O_RDONLY) for _ in range(1100)]
+    try:
+        rows = RowWriter(tmp_path, FORMAT, {}, timeout=5.0)
+        assert min(rows._to, rows._from) >= 1024
+        _write(rows, 0, 600)
+        ends = rows.positions()
+        assert ends["values.csv"] == (tmp_path / "values.csv").stat().st_size > 0
+        assert rows.close() == []
+    finally:
+        for fd in held:
+            os.close(fd)
+        resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
+    assert len((tmp_path / "values.csv").read_text().splitlines()) == 600

@@ -10,8 +10,9 @@ the write end of the pipe whose closing tells the forkserver that its parent has
 from __future__ import annotations
 
 import os
-import select
 import threading
+
+from hycosim.core.fd_wait import ready
 
 
 def end_with(pid: int) -> None:
@@ -27,7 +28,7 @@ def end_with(pid: int) -> None:
         return
 
     def watch() -> None:
-        select.select([watched], [], [])  # readable once the process has ended
+        ready(watched)  # readable once the process has ended
         os._exit(0)
 
     threading.Thread(target=watch, name="end-with", daemon=True).start()

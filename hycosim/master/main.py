@@ -18,6 +18,7 @@ from hycosim.core import json_text, logs, signals
 from hycosim.core.config import LoadedProject, gateway_address, server_endpoint
 from hycosim.core.endpoints import GATEWAY_PORT, EndpointError, parse_address, parse_endpoint
 from hycosim.core.folders import make_folder, run_dir_for
+from hycosim.core.heap import set_up_frozen
 from hycosim.transport.local_bus import LocalBus
 from hycosim.transport.security import SecurityError, router_security
 from hycosim.transport.session import open_session, router_config
@@ -228,7 +229,8 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
     if on_relay is not None:
         on_relay(relay)
     try:
-        relay.run()
+        with set_up_frozen():
+            relay.run()
         code, message = 0, f"{'stopped after' if relay.stopped else 'completed'} {recorder.meta['steps']} macro steps"
         if relay.barrier.ending.by is not None:
             e = relay.barrier.ending.by

