@@ -46,6 +46,7 @@ class Ledger:
         self._early: dict[str, frames.Frame] = {}
         self._paced = frozenset(paced)
         self._rates = rates
+        self._one_rate = all(m == 1 for m in rates.values())
         # Each stepping node that owes one OUTPUTS (not a BATCH): (the step it carries, the
         # perf_counter of its release). Read by the barrier for every answer, so kept as it changes.
         self.owes_outputs: dict[str, tuple[int, float]] = {}
@@ -71,6 +72,14 @@ class Ledger:
         or faster owes one BATCH at its end, with its outputs after each of its steps before."""
         self.earlier.clear()
         label, due_at, batch, rates, owes = self._label, self._due_at, self._batch, self._rates, self.owes_outputs
+        if not batched and not batch and self._one_rate:
+            # Every node a base step a release, none in a batch (every step of a plain run):
+            # each owes the next point's outputs.
+            owed, at = (k + 1, released_at), self._released_at
+            for n in nodes:
+                label[n] = due_at[n] = k + 1
+                owes[n], at[n] = owed, released_at
+            return
         for n in nodes:
             label[n] = k + 1
             m = rates[n]

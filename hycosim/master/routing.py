@@ -93,6 +93,14 @@ class Router:
                                  src.output_names().index(r.src_port), r.extrapolation, widen,
                                  f"{r.dst_node}.{r.dst_port}"))
             self._plans[mode] = hops
+        # Each mode's hops that copy a stepping node's output as it is, as (destination node,
+        # input index, source node, output index), and the rest (a conversion, an asynchronous
+        # source): the first kind is most of a run's routing, a line of Python a hop.
+        self._copies = {mode: [(h.dst_node, h.dst_index, h.src_node, h.src_index) for h in hops
+                               if h.convert is None and h.src_node not in self._async]
+                        for mode, hops in self._plans.items()}
+        self._others = {mode: [h for h in hops if h.convert is not None or h.src_node in self._async]
+                        for mode, hops in self._plans.items()}
         # The same hops by destination node, for Gauss-Seidel's routing into one node at a time.
         self._into = {mode: {n.nodeName: [h for h in hops if h.dst_node == n.nodeName] for n in project.nodeLists}
                       for mode, hops in self._plans.items()}
@@ -102,7 +110,9 @@ class Router:
         """Update ``self.inputs`` for the mode; return the age of every asynchronous value used."""
         ages: dict[str, float | None] = {}
         inputs = self.inputs
-        for hop in self._plans[mode]:
+        for dst, i, src, j in self._copies[mode]:  # one input feeds from one link a mode: any order
+            inputs[dst][i] = outputs[src][j]
+        for hop in self._others[mode]:
             if hop.src_node in self._async:
                 value, age = histories[hop.src_node].value_at(hop.src_index, t, hop.extrapolation)
                 ages[hop.label] = age
