@@ -63,8 +63,7 @@ def joined_rows(rows: list[list[Any]], lead: int = 3) -> str:
     first two as str() does where the values' text is Python's, and the mode quoted, which is
     taken out. Where anything in the rows is not Python's text (an exponent, a quote left, a
     cell not a number) or a run marks the nodes that stepped, each row is made by
-    :func:`joined_row`. A row's own text at each point cost 2.4 µs at two nodes; the batch's,
-    a fifth of that."""
+    :func:`joined_row`. A row's own text cost 2.4 µs at two nodes; in a batch of 500, 0.7."""
     if lead == 3 and len(rows) > 1:
         try:
             text = _JSON.encode(rows)

@@ -80,7 +80,7 @@ class LocalRows:
     The cells wait in one flat list a file (a row's values, its width beside them; the timing
     rows all of the format's width), not a list or tuple a row: a row kept until the flush was
     an object the cyclic garbage collector walked at every young collection meanwhile, and a
-    third of the server's collections were theirs. The timing rows of a flush are made by one
+    quarter of the server's collections were theirs. The timing rows of a flush are made by one
     ``%`` of the format repeated."""
 
     def __init__(self, run_dir: Path, timing_format: str | None, resume_at: dict[str, int], lead: int = 3):
@@ -98,7 +98,7 @@ class LocalRows:
         self._values = self._files["values.csv"].buffer.write
         self._timing = self._files["timing.csv"].buffer.write
         self._timing_format = timing_format
-        self._timing_width = timing_format.count("%") if timing_format is not None else 0
+        self._timing_width = timing_format.replace("%%", "").count("%") if timing_format is not None else 0
         self._csv = {name: csv.writer(f.buffer) for name, f in self._files.items()}
 
     def values(self, cells: list[Any]) -> None:
