@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import gc
 import os
-import resource
 import subprocess
 import sys
 import time
@@ -26,19 +25,6 @@ def test_the_set_up_is_frozen_for_the_run_and_given_back_after_however_it_ends()
         with set_up_frozen():
             raise RuntimeError("the run failed")
     assert gc.get_freeze_count() == 0
-
-
-@pytest.fixture
-def high_descriptors():
-    """Descriptors held open so that the next ones are numbered past select()'s 1024."""
-    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
-    if soft < 1200:
-        resource.setrlimit(resource.RLIMIT_NOFILE, (min(2048, hard), hard))
-    held = [os.open(os.devnull, os.O_RDONLY) for _ in range(1100)]
-    yield
-    for fd in held:
-        os.close(fd)
-    resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
 
 
 def test_a_wait_on_a_pipe_numbered_past_1024_sees_data_room_a_closed_end_and_times_out(high_descriptors):
