@@ -156,3 +156,26 @@ def test_the_writer_serves_a_process_whose_descriptors_pass_1024(tmp_path, high_
     assert ends["values.csv"] == (tmp_path / "values.csv").stat().st_size > 0
     assert rows.close() == []
     assert len((tmp_path / "values.csv").read_text().splitlines()) == 600
+
+
+@pytest.mark.parametrize("kind", [LocalRows, RowWriter])
+def test_rows_of_any_widths_between_flushes_are_the_text_csv_writer_gives_them(tmp_path, kind):
+    """Rows wait for a flush in one flat list (LocalRows): rows of different widths, a flush
+    among them, and the timing rows made by one format for many come out one by one, as
+    csv.writer and the format write each."""
+    import csv
+    import io
+
+    rows = _rows(kind, tmp_path)
+    values = [[k, k * 0.25, "free", *[k / 7] * (k % 4)] for k in range(40)]
+    timing = [(k, k * 0.25, 1e-6 * k, "a", "", 2e-6 * k) for k in range(40)]
+    for k in range(40):
+        rows.values(values[k])
+        rows.timing(timing[k])
+        if k == 17:
+            rows.flush(k)
+    assert rows.close() == []
+    text = io.StringIO()
+    csv.writer(text).writerows(values)
+    assert (tmp_path / "values.csv").read_bytes().decode() == text.getvalue()
+    assert (tmp_path / "timing.csv").read_bytes().decode() == "".join(FORMAT % cells for cells in timing)
