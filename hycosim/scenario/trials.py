@@ -314,12 +314,21 @@ def _stop_trials_here() -> int:
 
     import psutil
 
-    stopped = 0
+    ours = []
     for child in psutil.Process(os.getpid()).children():
         try:
-            if "hycosim" in child.cmdline():
-                child.send_signal(signal.SIGINT)
-                stopped += 1
+            command = child.cmdline()
+        except psutil.Error:  # ended meanwhile, or not ours to look at
+            continue
+        if "hycosim" in command:
+            ours.append((0 if "server" in command else 1, child))
+    # The servers first: a node told first says it was interrupted, and a server that hears that
+    # before its own Ctrl-C records a failed run, not an interrupted one.
+    stopped = 0
+    for _, child in sorted(ours, key=lambda pair: pair[0]):
+        try:
+            child.send_signal(signal.SIGINT)
+            stopped += 1
         except psutil.Error:  # ended meanwhile, or not ours to signal
             pass
     return stopped
