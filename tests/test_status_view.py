@@ -143,7 +143,7 @@ def _point(project, released):
     from hycosim.master.observers import RecordedPoint
 
     point = RecordedPoint(project)
-    point.mode, point.outputs, point.inputs = "free", {"a": [1.0]}, {"b": [1.0]}
+    point.mode, point.outputs, point.inputs = "free", {"a": [released or 0.0], "b": [2.0]}, {"a": [], "b": [3.0]}
     point.released, point.holder, point.wait_s, point.arrivals = released, "a", 0.001, {"a": 0.001}
     return point
 
@@ -157,7 +157,8 @@ def test_the_status_answer_follows_the_points_as_an_observer_and_a_rollback():
         "nodeLists": [{"nodeName": "a", "UID": 1, "model": "ramp", "output": ["y"]},
                       {"nodeName": "b", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]}],
         "linkLists": [{"from": "a.y", "to": "b.u"}], "coSimulation": {"stepSize": 0.1, "stopTime": 1.0}})
-    latest = LatestPoints(0.0, 100, "free")
+    latest = LatestPoints(project, 100)
+    assert latest.answer(0.0, since=-1)["outputs"] == {}  # no point yet
     for k in range(8):
         # Points 3 and 4 lie inside a batched release: no release of their own.
         latest.step_complete(k, 0.1 * k, _point(project, None if k in (3, 4) else float(k)))
@@ -167,3 +168,55 @@ def test_the_status_answer_follows_the_points_as_an_observer_and_a_rollback():
     assert [p[0] for p in answer["points"]] == [0, 1, 2, 3, 4] and answer["step"] == 7
     latest.step_complete(5, 0.5, _point(project, 9.0))
     assert latest.answer(9.5, since=4)["points"][0][0] == 5
+
+
+@st.composite
+def projects_and_points(draw):
+    """A project of 1 to 5 nodes, each with 0 to 3 inputs and outputs (some arrays), and points
+    whose values are any of their ports' kinds, as the master gives them (every node, ports in order)."""
+    from hycosim.core.schema import Project
+
+    nodes, ports = [], {}
+    for i in range(draw(st.integers(1, 5))):
+        name = f"n{i}"
+        shapes = {side: draw(st.lists(st.sampled_from([None, [2], [2, 2]]), max_size=3)) for side in ("input", "output")}
+        ports[name] = shapes
+        nodes.append({"nodeName": name, "UID": i + 1, "model": "gain",
+                      **{side: [{"name": f"{side[0]}{j}", **({"shape": s} if s else {})} for j, s in enumerate(shapes[side])]
+                         for side in ("input", "output")}})
+    project = Project.model_validate({"projectName": "p", "nodeNum": len(nodes), "linkNum": 0, "nodeLists": nodes,
+                                      "linkLists": [], "coSimulation": {"stepSize": 0.1, "stopTime": 1.0}})
+    number = st.floats(allow_nan=False) | st.integers(-2**70, 2**70) | st.booleans()
+
+    def value(shape):
+        if shape is None:
+            return draw(number)
+        return draw(st.lists(number, min_size=math.prod(shape), max_size=math.prod(shape)))
+
+    points = [({n: [value(s) for s in ports[n]["output"]] for n in ports},
+               {n: [value(s) for s in ports[n]["input"]] for n in ports}) for _ in range(draw(st.integers(1, 5)))]
+    return project, points
+
+
+@given(projects_and_points())
+def test_the_status_answer_gives_each_point_as_it_was_told(case):
+    """The values kept flat come back as the mappings they were: the latest point's, and each
+    point's in the list after a step, however many nodes and ports, arrays among them."""
+    from hycosim.master.observers import RecordedPoint
+    from hycosim.master.status_view import LatestPoints
+
+    project, points = case
+    latest = LatestPoints(project, 100)
+    point = RecordedPoint(project)
+    point.stepped, point.lateness_s, point.takes = None, None, 1
+    for k, (outputs, inputs) in enumerate(points):
+        point.mode, point.outputs, point.inputs = "free", outputs, inputs
+        point.released, point.holder, point.wait_s, point.arrivals, point.ages = float(k), "n0", 0.0, {}, {}
+        latest.step_complete(k, 0.1 * k, point)
+        # The loop changes its lists after the call: what was kept must not change with them.
+        for values in (*outputs.values(), *inputs.values()):
+            values.append("changed")
+    answer = latest.answer(10.0, since=-1)
+    expected = [({n: v[:-1] for n, v in o.items()}, {n: v[:-1] for n, v in i.items()}) for o, i in points]
+    assert (answer["outputs"], answer["inputs"]) == expected[-1]
+    assert [(o, i) for _, _, o, i in answer["points"]] == expected

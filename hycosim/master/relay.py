@@ -35,7 +35,7 @@ import structlog
 from hycosim.bridge.gateway import Gateway, GatewayError
 from hycosim.core import frames, signals
 from hycosim.core.config import LoadedProject
-from hycosim.core.schema import FREE_MODE, ScenarioAction
+from hycosim.core.schema import ScenarioAction
 from hycosim.core.sim_clock import RealTimeClock
 from hycosim.master import initialisation, plans
 from hycosim.master.algorithms.choice import project_algorithm
@@ -86,7 +86,7 @@ class Relay:
         self.checkpointing = Checkpointing(loaded, recorder, stepping, self._log)
         self.barrier = Barrier(loaded, self.router, self.coordinator, recorder, self.members, self.checkpointing,
                                self.progress, self._log)
-        self.latest = LatestPoints(self.cosim.startTime, RECENT_KEPT, FREE_MODE)  # for the status answers
+        self.latest = LatestPoints(self.project, RECENT_KEPT)  # for the status answers
         # The master's own observers of the points: the recorder, and the status answer where
         # anyone can ask for it (in process nobody does: a fifth of a step's work saved).
         self.records = PointRecords(self.project, self.barrier,

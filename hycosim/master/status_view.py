@@ -11,13 +11,15 @@ that (2.0 ms) and show the same.
 from __future__ import annotations
 
 import bisect
-import operator
 import random
 import time
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
+from itertools import chain
+from operator import itemgetter
 from typing import Any
 
+from hycosim.core.schema import FREE_MODE, Project
 from hycosim.master.observers import RecordedPoint
 
 # At most this many points an answer (at five answers a second, 320 a second: more than a plot
@@ -28,6 +30,8 @@ STATUS_POINTS = 64
 # multi-rate run, Gauss-Seidel). A share from 256 draws is within 0.03 of the second's (sd).
 WINDOW_SAMPLES = 256
 
+_flat = chain.from_iterable
+
 # A recent point: (perf_counter at its release, the node the barrier waited for last, how long
 # it waited, each node's arrival after the release), in time order.
 Recent = tuple[float, str, float, dict[str, float]]
@@ -37,7 +41,7 @@ def barrier_window(recent: Sequence[Recent], now: float, kept: int) -> dict[str,
     """Steps in the second before ``now``, each node's share of the barrier held and its mean
     arrival (ms); ``kept``: how many points ``recent`` holds at most. When those do not reach a
     second back, the steps are the rate over the ones it holds."""
-    first = bisect.bisect_left(recent, now - 1.0, key=operator.itemgetter(0))
+    first = bisect.bisect_left(recent, now - 1.0, key=itemgetter(0))
     in_second = len(recent) - first
     steps = in_second
     if first == 0 and len(recent) >= kept > 1 and now > recent[0][0]:
@@ -67,17 +71,53 @@ def points_since(history: Sequence[tuple], since: int) -> list[list[Any]]:
     return [[k, t, outputs, inputs] for k, t, _, outputs, inputs, _ in kept]
 
 
+class Layout:
+    """Every node's values of one side (outputs or inputs) as one flat tuple, the nodes in the
+    project's order and each node's ports in its own: what the status answer keeps of a point.
+    A point kept as the mappings it came in held a dict and a list a node (the values' lists
+    of the nodes' frames, with them) for 4,096 points: objects the cyclic collector walked
+    until they died, some 3 µs a step at 8 nodes (benchmarks/FINDINGS.md, 2026-12-04, fifth
+    entry); tuples of numbers it stops tracking."""
+
+    def __init__(self, widths: Sequence[tuple[str, int]]):
+        self.names = [name for name, _ in widths]
+        # Every node's list of values, as a tuple in the project's order (one call in C where
+        # there are two nodes or more: itemgetter gives one node's list itself, not in a tuple).
+        self.lists: Callable[[Mapping[str, list[Any]]], tuple[list[Any], ...]] = (
+            itemgetter(*self.names) if len(self.names) > 1 else lambda values: tuple(map(values.__getitem__, self.names)))
+        self._slices: list[tuple[str, int, int]] = []
+        i = 0
+        for name, width in widths:
+            self._slices.append((name, i, i + width))
+            i += width
+
+    def flat(self, values: Mapping[str, list[Any]]) -> tuple[Any, ...]:
+        """The values of every node (``values``: node → its ports' values), flat; KeyError
+        where a node is missing. (LatestPoints.step_complete makes the same, inline.)"""
+        return tuple(_flat(self.lists(values)))
+
+    def nodes(self, flat: Sequence[Any] | None) -> dict[str, list[Any]]:
+        """What :meth:`flat` was made from ({} for None: no point yet)."""
+        if flat is None:
+            return {}
+        return {name: list(flat[a:b]) for name, a, b in self._slices}
+
+
 class LatestPoints:
     """The run's latest points as the status answer shows them (``hycosim status``, the
     dashboard's feed): an observer of the run's points, to which the loop adds each mode switch
     too; Zenoh's thread reads them for an answer, each a copy taken at once under the GIL."""
 
-    def __init__(self, start_time: float, kept: int, free_mode: str):
+    def __init__(self, project: Project, kept: int):
         self.kept = kept
+        self._outputs = Layout([(n.nodeName, len(n.output)) for n in project.nodeLists])
+        self._inputs = Layout([(n.nodeName, len(n.input)) for n in project.nodeLists])
         self.recent: deque[Recent] = deque(maxlen=kept)  # for the barrier window
-        self.history: deque[tuple] = deque(maxlen=kept)  # (step, t, mode, outputs, inputs, wall), for the dashboard
-        self.shown: tuple[int, float, str, dict[str, list[Any]], dict[str, list[Any]], float | None] = (
-            0, start_time, free_mode, {}, {}, None)
+        # (step, t, mode, outputs, inputs, wall), the values flat (Layout), for the dashboard
+        self.history: deque[tuple] = deque(maxlen=kept)
+        # Before the first point: no values to show.
+        self.shown: tuple[int, float, str, tuple[Any, ...] | None, tuple[Any, ...] | None, float | None] = (
+            0, project.coSimulation.startTime, FREE_MODE, None, None, None)
         self.ages: dict[str, float | None] = {}  # each asynchronous value's age at the latest point
         self.switches: deque[dict[str, Any]] = deque(maxlen=200)  # the latest mode switches
 
@@ -89,8 +129,9 @@ class LatestPoints:
         if point.released is not None:
             self.recent.append((point.released, point.holder, point.wait_s, point.arrivals))
             self.ages = point.ages
-        self.shown = (step, t, point.mode, dict(point.outputs), {n: list(v) for n, v in point.inputs.items()},
-                      time.time())
+        # Layout.flat of each side, inline: this runs at every point.
+        self.shown = (step, t, point.mode, tuple(_flat(self._outputs.lists(point.outputs))),
+                      tuple(_flat(self._inputs.lists(point.inputs))), time.time())
         self.history.append(self.shown)
 
     def state_restored(self, step: int, t: float) -> None:
@@ -104,7 +145,10 @@ class LatestPoints:
     def answer(self, now: float, since: int | None) -> dict[str, Any]:
         """The status answer's part on the latest points (``since``: also the points after that step)."""
         k, t, mode, outputs, inputs, wall = self.shown
+        out, into = self._outputs.nodes, self._inputs.nodes
+        points = None if since is None else [[k, t, out(o), into(i)] for k, t, o, i in
+                                             points_since(list(self.history), since)]
         return {"step": k, "t": t, "mode": mode, "switches": list(self.switches),
                 "window": barrier_window(list(self.recent), now, self.kept),
-                "outputs": outputs, "inputs": inputs, "point_wall": wall, "ages": dict(self.ages),
-                **({} if since is None else {"points": points_since(list(self.history), since)})}
+                "outputs": out(outputs), "inputs": into(inputs), "point_wall": wall, "ages": dict(self.ages),
+                **({} if since is None else {"points": points})}
