@@ -101,3 +101,39 @@ def test_a_state_that_comes_in_part_is_dropped_and_the_node_goes_on(hosted):
     runtime.deliver(frames.decode(_step(1, 2.0)))
     [outputs] = _sent(bus)
     assert (outputs.step, outputs.values) == (2, [4.0])
+
+
+def test_the_zenoh_end_receives_what_the_server_releases_and_nothing_once_closed(tmp_path):
+    """Over a real router on loopback: a frame on the node's ``down`` key is received as it was
+    put; once closed, the link gives None at once (its inbox is gone), as before it opened."""
+    import time
+
+    from hycosim.transport.keys import ProjectKeys
+    from hycosim.transport.session import open_session, router_config
+    from tests.helpers import free_endpoint
+
+    endpoint = free_endpoint()
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "g", "UID": 1, "model": "gain", "input": ["u"], "output": ["y"]}],
+        cosim={"stepSize": 0.1, "stopTime": 1.0, "attachTimeout": 5.0})
+    loaded = load_project(cfg)
+    router = open_session(router_config(endpoint), endpoint)
+    try:
+        link = ZenohNodeLink.open(loaded, "g", endpoint)
+        try:
+            release = _step(3, 1.5)
+            deadline = time.monotonic() + 10.0
+            got = None
+            while got is None and time.monotonic() < deadline:  # until the node's subscription is known
+                router.put(ProjectKeys(loaded.project.projectName).down, release)
+                got = link.receive(0.2)
+                while got is not None and got[1] != release:  # the server token's news, if any
+                    got = link.receive(0.2)
+            assert got is not None and got[1] == release
+        finally:
+            link.close()
+        started = time.monotonic()
+        assert link.receive(5.0) is None and time.monotonic() - started < 1.0
+        link.close()  # twice: nothing left to close
+    finally:
+        router.close()

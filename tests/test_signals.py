@@ -202,6 +202,34 @@ except signals.Stopped as exc:
 """
 
 
+_SEND_OUTPUTS = """
+import os, signal, sys, time, types
+from hycosim.core import signals
+from hycosim.node.sending import Outbox
+signals.raise_on_stop()
+def send(payload):  # the signal comes while the frame is sent, before the step is counted
+    os.kill(os.getpid(), signal.SIGTERM)
+    began = time.monotonic()
+    while time.monotonic() - began < 0.2:
+        pass
+outbox = types.SimpleNamespace(receiver=types.SimpleNamespace(link=types.SimpleNamespace(send=send)), steps=6)
+try:
+    Outbox.send_outputs(outbox, b"frame", 7)
+    print("not stopped")
+except signals.Stopped as exc:
+    print(f"stopped by {signals.name_of(exc)} with steps={outbox.steps} depth={signals.HELD.depth}")
+"""
+
+
+def test_send_outputs_holds_a_stop_until_the_step_is_counted():
+    """The node's send of its outputs at every step, which holds stops itself (not through
+    hold_stops): a SIGTERM during the send is raised once the step is counted, and nothing
+    is left held."""
+    done = subprocess.run([sys.executable, "-c", _SEND_OUTPUTS], capture_output=True, text=True, env=env(),
+                          timeout=60)
+    assert done.stdout.strip() == "stopped by SIGTERM with steps=7 depth=0", done.stdout + done.stderr
+
+
 @pytest.mark.parametrize("threads", ["main", "thread"])
 def test_a_stop_that_comes_between_sending_outputs_and_counting_them_waits_for_the_count(threads):
     """A node sends its outputs and counts the step with stop signals held: its END names the

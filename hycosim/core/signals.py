@@ -34,7 +34,10 @@ class _Held:
         self.pending: int | None = None
 
 
-_HELD = _Held()
+# The one record: hold_stops and release_stops move its depth, and a loop that sends at every
+# step may move it itself, as Outbox.send_outputs does (two calls fewer a step), ending with
+# raise_held where a stop came meanwhile.
+HELD = _Held()
 
 
 class Stopped(KeyboardInterrupt):
@@ -100,8 +103,8 @@ def raise_on_stop(heard: list[int] | None = None) -> dict[int, Any]:
 
 def _held_off(signum: int) -> bool:
     """In a handler: keep ``signum`` for :func:`release_stops` if stops are held now."""
-    if _HELD.depth:
-        _HELD.pending = _HELD.pending or signum
+    if HELD.depth:
+        HELD.pending = HELD.pending or signum
         return True
     return False
 
@@ -111,17 +114,25 @@ def hold_stops() -> None:
     says it sent must not be parted by a stop arriving between them. The handlers keep a signal
     that comes meanwhile (whichever thread the kernel gives it to); no signal mask is changed,
     which would cost two system calls a step and hold nothing more."""
-    _HELD.depth += 1
+    HELD.depth += 1
 
 
 def release_stops() -> None:
     """End a :func:`hold_stops`; a stop that came meanwhile is raised now."""
-    _HELD.depth -= 1
-    if _HELD.depth == 0 and _HELD.pending is not None:
-        signum, _HELD.pending = _HELD.pending, None
-        handler = signal.getsignal(signum)
-        if callable(handler):
-            handler(signum, None)
+    HELD.depth -= 1
+    if HELD.depth == 0 and HELD.pending is not None:
+        raise_held()
+
+
+def raise_held() -> None:
+    """Where no stop is held any more (``HELD.depth`` 0): the stop that came while one was, if
+    any, handled now as it would have been when it came."""
+    if HELD.depth or HELD.pending is None:
+        return
+    signum, HELD.pending = HELD.pending, None
+    handler = signal.getsignal(signum)
+    if callable(handler):
+        handler(signum, None)
 
 
 def ignore_stops() -> None:

@@ -111,15 +111,18 @@ class Outbox:
         """Send outputs and count them as this node's last ``step`` with no stop signal between:
         a SIGTERM that came after the send and before the count had the node's END name the
         step before the one the server had (once, in a loaded make test)."""
-        signals.hold_stops()
+        held = signals.HELD
+        held.depth += 1  # hold_stops() and release_stops(), inline: this runs at every step
         try:
-            try:  # send()'s body: this runs at every step
+            try:  # send()'s body
                 self.receiver.link.send(payload)
             except FrameTooLarge as exc:
                 raise self._too_large(payload, exc) from None
             self.steps = step
         finally:
-            signals.release_stops()
+            held.depth -= 1
+            if held.pending is not None:
+                signals.raise_held()
 
     def _await_stop(self, seconds: float) -> None:
         deadline = time.monotonic() + seconds

@@ -61,6 +61,7 @@ class ZenohNodeLink:
             cosim = loaded.project.coSimulation
             self._inbox = Inbox(session, self._keys.down, self._keys.down,
                                 poll=loaded.project.polls_before_blocking(os.cpu_count()))
+            self.receive = self._inbox.recv  # receive(), as the call it makes, until close()
             self._publisher = FramePublisher(session, self._keys.up(name), low_latency=cosim.lowLatency)
             self.send = self._publisher.put  # send(), as the call it makes: one call less at every step
             # history: fetch the server's token now. Without it this session learnt of the token
@@ -131,6 +132,7 @@ class ZenohNodeLink:
             undeclare()
         self._undeclare = []
         if self._inbox is not None:
+            del self.receive  # the class's receive() again: None from here on
             self._inbox.close()
             self._inbox = None
 
