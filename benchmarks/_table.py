@@ -55,12 +55,23 @@ def command() -> str:
     return " ".join([Path(sys.argv[0]).name, *args])
 
 
+def _processor() -> str:
+    """The machine and, where Linux says it, the processor's model: ratios between systems moved
+    by a fifth from one 2-core machine to another (benchmarks/FINDINGS.md, 2026-12-04, fifth entry)."""
+    try:
+        with open("/proc/cpuinfo") as info:
+            model = next((line.split(":", 1)[1].strip() for line in info if line.startswith("model name")), "")
+    except OSError:
+        model = ""
+    return f"{platform.machine()}, {model}" if model else platform.machine()
+
+
 def write(path: Path | None, *tables: Table) -> None:
     """Write ``tables`` to ``path`` (nothing when None) under one line saying how, when and where
     they were measured."""
     if path is None:
         return
-    lines = [f"`{command()}`, {time.strftime('%Y-%m-%d')}, {os.cpu_count()} cores ({platform.machine()}):", ""]
+    lines = [f"`{command()}`, {time.strftime('%Y-%m-%d')}, {os.cpu_count()} cores ({_processor()}):", ""]
     for i, table in enumerate(tables):
         lines += ([""] if i else []) + table.markdown()
     path.parent.mkdir(parents=True, exist_ok=True)
