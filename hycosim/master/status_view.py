@@ -91,13 +91,9 @@ class Layout:
             self._slices.append((name, i, i + width))
             i += width
 
-    def flat(self, values: Mapping[str, list[Any]]) -> tuple[Any, ...]:
-        """The values of every node (``values``: node → its ports' values), flat; KeyError
-        where a node is missing. (LatestPoints.step_complete makes the same, inline.)"""
-        return tuple(_flat(self.lists(values)))
-
     def nodes(self, flat: Sequence[Any] | None) -> dict[str, list[Any]]:
-        """What :meth:`flat` was made from ({} for None: no point yet)."""
+        """Each node's values again from ``tuple(chain.from_iterable(self.lists(values)))``
+        ({} for None: no point yet)."""
         if flat is None:
             return {}
         return {name: list(flat[a:b]) for name, a, b in self._slices}
@@ -129,7 +125,7 @@ class LatestPoints:
         if point.released is not None:
             self.recent.append((point.released, point.holder, point.wait_s, point.arrivals))
             self.ages = point.ages
-        # Layout.flat of each side, inline: this runs at every point.
+        # Each side's values flat, in the project's order (Layout).
         self.shown = (step, t, point.mode, tuple(_flat(self._outputs.lists(point.outputs))),
                       tuple(_flat(self._inputs.lists(point.inputs))), time.time())
         self.history.append(self.shown)
@@ -146,7 +142,7 @@ class LatestPoints:
         """The status answer's part on the latest points (``since``: also the points after that step)."""
         k, t, mode, outputs, inputs, wall = self.shown
         out, into = self._outputs.nodes, self._inputs.nodes
-        points = None if since is None else [[k, t, out(o), into(i)] for k, t, o, i in
+        points = None if since is None else [[step, at, out(o), into(i)] for step, at, o, i in
                                              points_since(list(self.history), since)]
         return {"step": k, "t": t, "mode": mode, "switches": list(self.switches),
                 "window": barrier_window(list(self.recent), now, self.kept),
