@@ -22,6 +22,9 @@ than processes the rate depends on how the scheduler shares the cores; the CPU a
 does much less. The times come from the rusage of reaped processes: this process is made
 their subreaper, so that a process a run leaves to end by itself (a master that does not wait
 for its simulators) is reaped and counted here too, and before each run all are reaped.
+Two more tables split that cost: the coordinating process's own (hycosim's and the floor's
+server, HELICS's broker, mosaik's world; read from its /proc stat once it has exited, before
+it is reaped) and every other process's (the rest).
 
 HELICS and mosaik come from the optional extra: pip install -e '.[bench]'.
 """
@@ -39,9 +42,10 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import _table
-from _procs import descendants, free_port, run, start, wait_all
+from _procs import descendants, free_port, own_cpu_at_exit, run, start, stop_all, wait_all
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
@@ -76,17 +80,24 @@ def _rate_of(runs: Path) -> float:
     return float(json.loads(next(runs.glob("ring*/meta.json")).read_text())["steps_per_s"])
 
 
-def run_hycosim_processes(n: int, steps: int, wait_strategy: str, timeout: float) -> float:
+def _start_hycosim(n: int, steps: int, wait_strategy: str, tmp: str,
+                   server_out: Any) -> tuple[subprocess.Popen, list[subprocess.Popen]]:
     """The ring as its processes alone, started as the floor's and HELICS's are: ``hycosim
     server`` and a ``hycosim node`` each, without the ``hycosim run`` launcher, whose progress
     bar and closing report (it reads the run's timing back) are no part of a macro step."""
+    cfg = ring_config(n, steps, Path(tmp) / "ring.json", wait_strategy)
+    py = [sys.executable, "-P", "-m", "hycosim"]
+    server = start([*py, "server", str(cfg), "--runs-dir", tmp], cwd=REPO, stdout=server_out,
+                   stderr=subprocess.STDOUT if server_out is not subprocess.PIPE else subprocess.PIPE, text=True)
+    nodes = [start([*py, "node", f"n{i}", str(cfg)], cwd=REPO, stdout=subprocess.DEVNULL,
+                   stderr=subprocess.DEVNULL) for i in range(n)]
+    return server, nodes
+
+
+def run_hycosim_processes(n: int, steps: int, wait_strategy: str, timeout: float) -> float:
+    """The ring's steps/s as its processes alone (:func:`_start_hycosim`)."""
     with tempfile.TemporaryDirectory() as tmp:
-        cfg = ring_config(n, steps, Path(tmp) / "ring.json", wait_strategy)
-        py = [sys.executable, "-P", "-m", "hycosim"]
-        server = start([*py, "server", str(cfg), "--runs-dir", tmp], cwd=REPO, stdout=subprocess.PIPE,
-                       stderr=subprocess.PIPE, text=True)
-        nodes = [start([*py, "node", f"n{i}", str(cfg)], cwd=REPO, stdout=subprocess.DEVNULL,
-                       stderr=subprocess.DEVNULL) for i in range(n)]
+        server, nodes = _start_hycosim(n, steps, wait_strategy, tmp, subprocess.PIPE)
         try:
             out, err = wait_all(server, nodes, timeout)
         except subprocess.TimeoutExpired:
@@ -128,8 +139,8 @@ def _figure(out: str) -> float:
     raise RuntimeError(f"no figure in the federate's output: {out[-500:]!r}")
 
 
-def run_mosaik(n: int, steps: int, timeout: float) -> float:
-    code = f"""
+def _mosaik_code(n: int, steps: int) -> str:
+    return f"""
 import sys, time, mosaik, logging
 from loguru import logger
 logger.remove()
@@ -142,7 +153,10 @@ t0 = time.perf_counter()
 world.run(until={steps}, print_progress=False)
 print({steps} / (time.perf_counter() - t0))
 """
-    res = run([sys.executable, "-c", code], timeout)
+
+
+def run_mosaik(n: int, steps: int, timeout: float) -> float:
+    res = run([sys.executable, "-c", _mosaik_code(n, steps)], timeout)
     if res.returncode:
         raise RuntimeError(res.stderr[-2000:])
     return float(res.stdout.split()[-1])
@@ -155,8 +169,81 @@ RUNNERS = {
     "helics-zmq": lambda n, s, w, timeout: run_helics("zmq", n, s, timeout),
     "mosaik": lambda n, s, w, timeout: run_mosaik(n, s, timeout),
 }
-# The CPU of a system's own processes: hycosim's server and nodes as the others' are started.
-CPU_RUNNERS = {**RUNNERS, "hycosim": run_hycosim_processes}
+
+
+def coordinator_cpu(coordinator: subprocess.Popen, others: list[subprocess.Popen], timeout: float, what: str,
+                    output: Path) -> float:
+    """Wait for ``others`` and then ``coordinator`` (one ``timeout`` for all) and return the
+    CPU seconds the coordinator used itself (:func:`own_cpu_at_exit`). RuntimeError naming
+    ``what`` for a timeout or a process that failed (with ``output``'s tail, the coordinator's
+    output); every group still running on the way out is killed."""
+    deadline = time.monotonic() + timeout
+    try:
+        for p in others:
+            p.wait(timeout=max(0.0, deadline - time.monotonic()))
+        cpu = own_cpu_at_exit(coordinator, max(0.0, deadline - time.monotonic()))
+        coordinator.wait()
+    except subprocess.TimeoutExpired:
+        raise RuntimeError(f"timed out after {timeout:g} s (--timeout): {what}") from None
+    finally:
+        stop_all(coordinator, *others)
+    failed = [p.returncode for p in (coordinator, *others) if p.returncode]
+    if failed:
+        raise RuntimeError(f"{what}: a process exited {failed[0]}: {output.read_text()[-800:]}")
+    return cpu
+
+
+def cpu_hycosim(n: int, steps: int, timeout: float) -> float:
+    """hycosim's ring, waiting by blocking; its server's own CPU seconds."""
+    with tempfile.TemporaryDirectory() as tmp:
+        output = Path(tmp) / "server.txt"
+        with output.open("w") as out:
+            server, nodes = _start_hycosim(n, steps, "block", tmp, out)
+        return coordinator_cpu(server, nodes, timeout, f"hycosim with {n} nodes", output)
+
+
+def cpu_zenoh_floor(n: int, steps: int, timeout: float) -> float:
+    """The floor, waiting by blocking; its server's own CPU seconds (its nodes are its children)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        output = Path(tmp) / "server.txt"
+        with output.open("w") as out:
+            server = start([sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{free_port()}",
+                            str(n), str(steps), "block"], stdout=out, stderr=subprocess.STDOUT)
+        return coordinator_cpu(server, [], timeout, f"the Zenoh floor with {n} nodes", output)
+
+
+def cpu_helics(core: str, n: int, steps: int, timeout: float) -> float:
+    """HELICS's ring; its broker's own CPU seconds."""
+    port = free_port()
+    script = str(HERE / "_helics_fed.py")
+    with tempfile.TemporaryDirectory() as tmp:
+        output = Path(tmp) / "broker.txt"
+        with output.open("w") as out:
+            broker = start([sys.executable, script, "broker", core, str(n), str(port)], stdout=out,
+                           stderr=subprocess.STDOUT)
+        feds = [start([sys.executable, script, "fed", core, str(n), str(i), str(steps), str(port)],
+                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for i in range(n)]
+        return coordinator_cpu(broker, feds, timeout, f"HELICS {core} with {n} federates", output)
+
+
+def cpu_mosaik(n: int, steps: int, timeout: float) -> float:
+    """mosaik's ring; its world's (the master's) own CPU seconds (its simulators are its children)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        output = Path(tmp) / "world.txt"
+        with output.open("w") as out:
+            world = start([sys.executable, "-c", _mosaik_code(n, steps)], stdout=out, stderr=subprocess.STDOUT)
+        return coordinator_cpu(world, [], timeout, f"mosaik with {n} simulators", output)
+
+
+# What one run of a system for --cpu does, waiting by blocking where the system can: the CPU
+# seconds its coordinating process (the server, the broker, the world) used itself.
+CPU_RUNNERS = {
+    "hycosim": cpu_hycosim,
+    "zenoh-floor": cpu_zenoh_floor,
+    "helics-tcp": lambda n, s, timeout: cpu_helics("tcp", n, s, timeout),
+    "helics-zmq": lambda n, s, timeout: cpu_helics("zmq", n, s, timeout),
+    "mosaik": cpu_mosaik,
+}
 
 
 CPU_LENGTHS = 4  # the longer of the two runs --cpu compares, in --steps
@@ -197,25 +284,26 @@ def reap(timeout: float = 10.0) -> None:
         time.sleep(0.02)
 
 
-def cpu_seconds(system: str, n: int, steps: int, timeout: float) -> float:
+def cpu_seconds(system: str, n: int, steps: int, timeout: float) -> tuple[float, float]:
     """The CPU time (user + system) of all the processes of one run of ``system``, waiting by
-    blocking (the runners that take a wait strategy get ``block``)."""
+    blocking, and of its coordinating process alone (:data:`CPU_RUNNERS`)."""
     reap()  # what an earlier run left is not this one's
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     try:
-        CPU_RUNNERS[system](n, steps, "block", timeout)
+        coordinator = CPU_RUNNERS[system](n, steps, timeout)
     finally:
         reap()
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+    return (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime), coordinator
 
 
-def cpu_per_step(system: str, n: int, steps: int, timeout: float) -> float:
-    """µs of CPU a macro step costs all of a system's processes: a run of CPU_LENGTHS × ``steps``
-    less a run of ``steps``, over the steps between them."""
-    short = cpu_seconds(system, n, steps, timeout)
-    long = cpu_seconds(system, n, CPU_LENGTHS * steps, timeout)
-    return (long - short) / ((CPU_LENGTHS - 1) * steps) * 1e6
+def cpu_per_step(system: str, n: int, steps: int, timeout: float) -> tuple[float, float]:
+    """µs of CPU a macro step costs all of a system's processes, and its coordinating process
+    alone: a run of CPU_LENGTHS × ``steps`` less a run of ``steps``, over the steps between them."""
+    short, short_coordinator = cpu_seconds(system, n, steps, timeout)
+    long, long_coordinator = cpu_seconds(system, n, CPU_LENGTHS * steps, timeout)
+    between = (CPU_LENGTHS - 1) * steps
+    return (long - short) / between * 1e6, (long_coordinator - short_coordinator) / between * 1e6
 
 
 def _median(values: list[float]) -> float:
@@ -244,6 +332,7 @@ def main() -> None:
     args = ap.parse_args()
     runs: dict[tuple[str, int], list[float]] = {(system, n): [] for n in args.n for system in args.systems}
     cpu: dict[tuple[str, int], list[float]] = {key: [] for key in runs}
+    coordinator: dict[tuple[str, int], list[float]] = {key: [] for key in runs}
     skipped: set[str] = set()
     if args.cpu:
         become_subreaper()
@@ -256,7 +345,9 @@ def main() -> None:
                     runs[(system, n)].append(RUNNERS[system](n, args.steps, args.wait_strategy, args.timeout))
                     if args.cpu:
                         time.sleep(0.5)
-                        cpu[(system, n)].append(cpu_per_step(system, n, args.steps, args.timeout))
+                        total, own = cpu_per_step(system, n, args.steps, args.timeout)
+                        cpu[(system, n)].append(total)
+                        coordinator[(system, n)].append(own)
                 except ImportError as exc:
                     skipped.add(system)
                     print(f"# {system}: skipped ({exc}; pip install -e '.[bench]')", file=sys.stderr)
@@ -269,18 +360,25 @@ def main() -> None:
                 line = {"system": system, "n": n, "steps_per_s": _median(rates) if rates else None,
                         "runs": [round(r, 1) for r in rates]}
                 if args.cpu:
+                    own, rest = coordinator[(system, n)], _rest(cpu, coordinator)[(system, n)]
                     line |= {"cpu_us_per_step": _median(costs) if costs else None,
-                             "cpu_runs": [round(c, 1) for c in costs]}
+                             "cpu_runs": [round(c, 1) for c in costs],
+                             "cpu_coordinator_us_per_step": _median(own) if own else None,
+                             "cpu_coordinator_runs": [round(c, 1) for c in own],
+                             "cpu_rest_us_per_step": _median(rest) if rest else None}
                 print(json.dumps(line), flush=True)
     empty = sorted(f"{system} N={n}" for (system, n), rates in runs.items() if not rates and system not in skipped)
     tables = [_manual_table(args, runs, skipped, _rate_caption(args))]
     if args.cpu:
-        tables.append(_manual_table(args, cpu, skipped, _cpu_caption(args)))
+        tables += [_manual_table(args, cpu, skipped, _cpu_caption(args)),
+                   _manual_table(args, coordinator, skipped, _COORDINATOR_CAPTION),
+                   _manual_table(args, _rest(cpu, coordinator), skipped, _REST_CAPTION)]
     _table.write(args.table, *tables)
     if not args.json:
         _print_table(args, runs, skipped)
         if args.cpu:
-            print("\n" + "\n".join(tables[1].markdown()))
+            for table in tables[1:]:
+                print("\n" + "\n".join(table.markdown()))
     if empty:
         print(f"# no run completed for {', '.join(empty)}", file=sys.stderr)
         sys.exit(1)
@@ -296,6 +394,17 @@ def _manual_table(args: argparse.Namespace, figures: dict[tuple[str, int], list[
     rows = [[n, *(_table.rate(medians[(s, n)]) for s in systems),
              *(_table.ratio(medians[("hycosim", n)], medians[(s, n)]) for s in others)] for n in args.n]
     return _table.Table(caption, header, rows)
+
+
+def _rest(cpu: dict[tuple[str, int], list[float]],
+          coordinator: dict[tuple[str, int], list[float]]) -> dict[tuple[str, int], list[float]]:
+    """Per round, the CPU a step of every process but the coordinating one."""
+    return {key: [total - own for total, own in zip(totals, coordinator[key])] for key, totals in cpu.items()}
+
+
+_COORDINATOR_CAPTION = ("Of which the coordinating process alone (hycosim's and the floor's server, HELICS's "
+                        "broker, mosaik's world), µs a macro step, medians:")
+_REST_CAPTION = "Of which every other process (the nodes, federates, simulators), µs a macro step, medians:"
 
 
 def _rate_caption(args: argparse.Namespace) -> str:

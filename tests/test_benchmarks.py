@@ -71,11 +71,34 @@ def test_barrier_benchmark_measures_the_cpu_a_step_costs_every_process_of_a_run(
         # polling); a quarter of it leaves room for noise, and only the run's own process
         # (the children not counted) would be below it.
         assert 1e6 / r["steps_per_s"] * 0.25 < r["cpu_us_per_step"] < 20_000, r
-    [rates, [row]] = manual_tables(tmp_path / "b.md")
-    cost = {s: r["cpu_us_per_step"] for s, r in lines.items()}
-    assert row == {"N": "2", "hycosim": f"{cost['hycosim']:,.0f}", "zenoh-floor": f"{cost['zenoh-floor']:,.0f}",
-                   "hycosim / zenoh-floor": f"{cost['hycosim'] / cost['zenoh-floor']:.2f}"}
-    assert "CPU µs a macro step costs" in (tmp_path / "b.md").read_text()
+        # The server's own share: some of the step's CPU, never all of it (the nodes' counts too).
+        own, rest = r["cpu_coordinator_us_per_step"], r["cpu_rest_us_per_step"]
+        assert len(r["cpu_coordinator_runs"]) == 1 and 0 < own < r["cpu_us_per_step"], r
+        assert rest == pytest.approx(r["cpu_us_per_step"] - own, abs=0.1)
+    [rates, [row], [own_row], [rest_row]] = manual_tables(tmp_path / "b.md")
+    for figure, got in (("cpu_us_per_step", row), ("cpu_coordinator_us_per_step", own_row),
+                        ("cpu_rest_us_per_step", rest_row)):
+        cost = {s: r[figure] for s, r in lines.items()}
+        assert got == {"N": "2", "hycosim": f"{cost['hycosim']:,.0f}", "zenoh-floor": f"{cost['zenoh-floor']:,.0f}",
+                       "hycosim / zenoh-floor": f"{cost['hycosim'] / cost['zenoh-floor']:.2f}"}
+    text = (tmp_path / "b.md").read_text()
+    assert "CPU µs a macro step costs" in text and "the coordinating process alone" in text
+
+
+def test_own_cpu_at_exit_counts_every_thread_of_the_process_and_none_of_its_children():
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    try:
+        from _procs import own_cpu_at_exit
+    finally:
+        sys.path.remove(str(REPO / "benchmarks"))
+    burn = "import time\ndef burn(s):\n    t = time.thread_time()\n    while time.thread_time() - t < s: pass\n"
+    code = (burn + "import subprocess, sys, threading\nth = threading.Thread(target=burn, args=(0.3,)); th.start()\n"
+            "burn(0.2); th.join()\nsubprocess.run([sys.executable, '-c', " + repr(burn + "burn(0.6)") + "])\n")
+    proc = subprocess.Popen([sys.executable, "-c", code])
+    own = own_cpu_at_exit(proc, timeout=60)
+    assert proc.wait() == 0  # not reaped by own_cpu_at_exit
+    # Both threads' 0.5 s and the interpreter's start, not the child's 0.6 s.
+    assert 0.45 <= own < 1.0, own
 
 
 def test_barrier_benchmark_kills_a_run_past_its_timeout_and_says_so():
