@@ -137,3 +137,95 @@ def test_the_zenoh_end_receives_what_the_server_releases_and_nothing_once_closed
         link.close()  # twice: nothing left to close
     finally:
         router.close()
+
+
+class _ScriptedLink:
+    """A node's end of a link that gives the node ``script`` (payloads as the server puts them on
+    ``down``) and keeps what the node sends: the Zenoh node's loop without a network."""
+
+    def __init__(self, script: list[bytes]):
+        self._script, self.sent = iter(script), []
+        self.session = type("Session", (), {"close": lambda self: None})()
+        self.waits = None
+
+    def receive(self, timeout: float):
+        return "hycosim/p/down", next(self._script)
+
+    def send(self, payload: bytes) -> None:
+        self.sent.append(payload)
+
+    def close(self) -> None:
+        pass
+
+
+def _run_scripted(monkeypatch, tmp_path, impl, script: list[bytes]) -> list[frames.Frame]:
+    """What a Zenoh node of the gain ``g`` sends over :class:`_ScriptedLink`, decoded."""
+    from hycosim.node import over_zenoh
+
+    cfg = write_project(tmp_path / "p.json", [
+        {"nodeName": "g", "UID": 1, "model": "gain", "parameters": {"k": 0.5, "b": 1.0}, "input": ["u"],
+         "output": ["y"]}], cosim={"stepSize": 0.1, "stopTime": 1.0})
+    loaded = load_project(cfg)
+    link = _ScriptedLink(script)
+    monkeypatch.setattr(over_zenoh.ZenohNodeLink, "open", classmethod(lambda cls, *args, **kwargs: link))
+    over_zenoh.ZenohNode(loaded, "g", impl, "tcp/127.0.0.1:1").run()
+    return [frames.decode(p) for p in link.sent]
+
+
+def test_a_zenoh_node_steps_a_model_on_lists_where_it_can_as_it_steps_it_through_dicts(monkeypatch, tmp_path):
+    """Over Zenoh every plain release steps a model that offers listed_step by it (no dict either
+    way): the gain's outputs are the same frames, byte for byte in their values, as stepped
+    through step() and outputs(), its parameters tuned between steps included; and every step
+    went through the listed call."""
+    from hycosim.node.reference.gain import Gain
+
+    calls = {"listed": 0, "step": 0}
+
+    class Counted(Gain):
+        def listed_step(self, inputs, outputs):
+            stepped = super().listed_step(inputs, outputs)
+
+            def step(t, h, values):
+                calls["listed"] += 1
+                return stepped(t, h, values)
+            return step if stepped is not None else None
+
+        def step(self, t, h, inputs):
+            calls["step"] += 1
+            super().step(t, h, inputs)
+
+    class Dicts(Gain):
+        def listed_step(self, inputs, outputs):
+            return None
+
+    script = [frames.encode(frames.START, "run", 0.0, 0.1, 0.0, None, {})]
+    for k in range(6):
+        if k == 3:
+            script.append(frames.encode(frames.TUNE, "g", 3, 0.3, {"k": -2.0}))
+        script.append(frames.encode(frames.STEP, k, 0.1 * k, 0.1, "free",
+                                    {"g": [0.25 * k if k % 2 else k], "h": [9.0]}, [], {}))
+    script.append(frames.encode(frames.STOP, 6, "completed"))
+    listed = _run_scripted(monkeypatch, tmp_path, Counted(), script)
+    through_dicts = _run_scripted(monkeypatch, tmp_path, Dicts(), script)
+    assert calls == {"listed": 6, "step": 0}
+    outputs = [f for f in listed if f.kind == frames.OUTPUTS]
+    assert [(f.step, f.values) for f in outputs] == [(f.step, f.values) for f in through_dicts
+                                                     if f.kind == frames.OUTPUTS]
+    assert [f.values for f in outputs][1:] == [[0.5 * 0.0 + 1.0], [0.5 * 0.25 + 1.0], [0.5 * 2 + 1.0],
+                                               [-2.0 * 0.75 + 1.0], [-2.0 * 4 + 1.0], [-2.0 * 1.25 + 1.0]]
+    assert all(type(v) is float for f in outputs for v in f.values)
+
+
+def test_the_gain_steps_on_lists_only_where_its_ports_are_its_own():
+    """Gain.listed_step: for input ``u`` and a real scalar ``y`` a call that does what step() and
+    outputs() do; None for any other ports (an integer y, an array, another input)."""
+    from hycosim.core.schema import Port
+    from hycosim.node.reference.gain import Gain
+
+    gain = Gain()
+    gain.k, gain.b, gain.work_s, gain.y = 3.0, -1.0, 0.0, 0.0
+    step = gain.listed_step(["u"], [Port(name="y")])
+    assert step(0.0, 0.1, (2,)) == [5.0] and gain.y == 5.0 and gain.outputs() == {"y": 5.0}
+    for inputs, outputs in ((["v"], [Port(name="y")]), (["u"], [Port(name="y", type="Integer")]),
+                            (["u"], [Port(name="y", shape=[2])]), (["u", "w"], [Port(name="y")])):
+        assert gain.listed_step(inputs, outputs) is None

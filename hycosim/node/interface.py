@@ -107,11 +107,13 @@ class Node(ABC):
         """Advance from t to t+h; ``inputs`` are the routed values at t."""
 
     def listed_step(self, inputs: list[str], outputs: list[Port]) -> Callable[[float, float, list[Any]], list[Any]] | None:
-        """Optional, for a run in process: a callable ``step(t, h, values)`` doing what step()
-        then outputs() do, on the inputs as a list (one per port named in ``inputs``, in that
-        order) and returning the outputs as a list of their wire values (one per port of
-        ``outputs``, in order, each of the type the port declares). It raises what step()
-        raises. None (the default): the node is stepped through step() and outputs()."""
+        """Optional: a callable ``step(t, h, values)`` doing what step() then outputs() do, on
+        the inputs as a sequence (a list or a tuple, one value per port named in ``inputs``, in
+        that order; not to be kept or changed) and returning the outputs as a list of their wire
+        values (one per port of ``outputs``, in order, each of the type the port declares). It
+        raises what step() raises. A run in process steps the node by it, and a node over Zenoh
+        every plain release. None (the default): the node is stepped through step() and
+        outputs()."""
         return None
 
     def set_mode(self, mode: str, driven: bool) -> None:

@@ -45,17 +45,29 @@ _STEP = msgspec.msgpack.Decoder(StepWire)
 _REFUSED = (msgspec.MsgspecError, RecursionError)
 
 
+def _plain_step(node: str, input_types: tuple[tuple[type, ...], ...]) -> type[msgspec.Struct]:
+    """A STEP as node ``node`` reads it on the flat path: StepWire's fields, with ``inputs`` a
+    struct of one field, this node's entry, typed (its other keys, the other nodes' entries, are
+    skipped as a struct's unknown fields are: checked to be well-formed, never built). Its name
+    is the wire's key, which need not be a Python identifier; ``mine`` is its field."""
+    mine = msgspec.defstruct("Mine", [("mine", tuple[tuple(Union[types] for types in input_types)])],
+                             rename={"mine": node}, gc=False)
+    return msgspec.defstruct("PlainStep", [
+        ("version", Literal[frames.VERSION]), ("kind", Literal[frames.STEP]), ("step", int), ("t", int | float),
+        ("h", int | float), ("mode", str), ("inputs", mine), ("driven", list[str]),
+        ("slopes", dict[str, msgspec.Raw])], array_like=True, forbid_unknown_fields=True, gc=False)
+
+
 class ReleaseReader:
     """Releases as node ``node`` reads them; ``input_types`` per input the Python types msgpack
     yields for it (``schema.wire_types``)."""
 
     def __init__(self, node: str, input_types: tuple[tuple[type, ...], ...]):
         self.node = node
-        # The flat path types the node's inputs in C where every one is a scalar (an array or
-        # binary port, which may be a list, goes the whole way).
+        # The flat path decodes and types a STEP and the node's inputs in one call in C where
+        # every input is a scalar (an array or binary port, which may be a list, goes the whole way).
         self.flat = all(list not in types for types in input_types)
-        self._mine = msgspec.msgpack.Decoder(tuple[tuple(Union[types] for types in input_types)]) \
-            if self.flat else None
+        self._plain = msgspec.msgpack.Decoder(_plain_step(node, input_types)) if self.flat else None
 
     def decode(self, payload: bytes) -> frames.Frame:
         """``frames.decode`` for this node: a STEP comes with this node's entry of ``inputs``
@@ -75,21 +87,21 @@ class ReleaseReader:
         slopes = {node: _unpack(wire.slopes[node])} if node in wire.slopes else {}
         return frames.Step(wire.step, wire.t, wire.h, wire.mode, inputs, wire.driven, slopes)
 
-    def plain(self, payload: bytes) -> tuple[StepWire, tuple[Any, ...]] | None:
-        """The STEP in ``payload`` and this node's inputs, if it is one that :meth:`decode` and
-        ``frames.check_release`` pass for this node, with inputs for it and no input slopes;
-        None for anything else, which the caller hands to those two (the judges of what it is
-        and of why it is refused). Only for a node whose inputs are all scalars (``flat``)."""
+    def plain(self, payload: bytes) -> tuple[Any, tuple[Any, ...]] | None:
+        """The STEP in ``payload`` (its fields named as StepWire's) and this node's inputs, if
+        it is one that :meth:`decode` and ``frames.check_release`` pass for this node, with
+        inputs for it and no input slopes; None for anything else, which the caller hands to
+        those two (the judges of what it is and of why it is refused). Only for a node whose
+        inputs are all scalars (``flat``)."""
         try:
-            wire = _STEP.decode(payload)
-            mine = self._mine.decode(wire.inputs[self.node])
-        except (*_REFUSED, KeyError):
+            wire = self._plain.decode(payload)
+        except _REFUSED:
             return None
         k, t, h = wire.step, wire.t, wire.h
         if not (0 <= k < frames.MAX_STEP and math.isfinite(t) and math.isfinite(h) and h > 0) \
                 or self.node in wire.slopes:
             return None
-        return wire, mine
+        return wire, wire.inputs.mine
 
 
 def _unpack(raw: msgspec.Raw) -> Any:

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Sequence
 from typing import Any
 
+from hycosim.core.schema import Port, PortType
 from hycosim.node import parameters as check
 from hycosim.node.interface import Node, NodeContext, pack_state, unpack_state
 
@@ -49,6 +51,19 @@ class Gain(Node):
         if self.work_s > 0:
             time.sleep(self.work_s)
         self.y = self.k * inputs["u"] + self.b
+
+    def listed_step(self, inputs: list[str], outputs: list[Port]) -> Callable[[float, float, list[Any]], list[Any]] | None:
+        """step() then outputs() on lists, where the ports are the gain's own: input ``u``, and
+        output ``y`` a real scalar (its wire value a float)."""
+        if inputs != ["u"] or [(p.name, p.type, p.shape) for p in outputs] != [("y", PortType.REAL, None)]:
+            return None
+
+        def step(t: float, h: float, values: Sequence[Any]) -> list[Any]:
+            if self.work_s > 0:
+                time.sleep(self.work_s)
+            self.y = y = self.k * values[0] + self.b
+            return [y]
+        return step
 
     @property
     def can_rollback(self) -> bool:
