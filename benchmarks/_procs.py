@@ -36,15 +36,28 @@ def stop_all(*procs: subprocess.Popen) -> None:
             p.wait()
 
 
-def start(cmd: list[str], **kwargs) -> subprocess.Popen:
-    """Popen in a process group of its own (stop it with :func:`stop_all`)."""
-    return subprocess.Popen(cmd, start_new_session=True, **kwargs)
+def start(cmd: list[str], *, own_session: bool = True, **kwargs) -> subprocess.Popen:
+    """Popen in a process group of its own (stop it with :func:`stop_all`), and in a session of
+    its own unless not ``own_session``.
+
+    The session matters to the scheduler where the kernel groups processes by session
+    (``/proc/sys/kernel/sched_autogroup_enabled``, on by default in most distributions): each
+    session is one group, given its fair share of the cores as a whole. The processes of one
+    run of a distributed system are started in one session (``own_session=False``), as a
+    user's launcher (``hycosim run``, a shell) starts them: in sessions of their own, nine
+    processes on two cores were preempted twice as often, and hycosim's ring at 8 nodes cost
+    6 % more CPU a step (benchmarks/FINDINGS.md, 2026-12-04)."""
+    if own_session:
+        return subprocess.Popen(cmd, start_new_session=True, **kwargs)
+    return subprocess.Popen(cmd, process_group=0, **kwargs)
 
 
-def run(cmd: list[str], timeout: float, **kwargs) -> subprocess.CompletedProcess:
-    """subprocess.run with text output captured, in a process group of its own, all of
-    which is killed on timeout; the timeout raises RuntimeError naming the command."""
-    with start(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs) as proc:
+def run(cmd: list[str], timeout: float, *, own_session: bool = True, **kwargs) -> subprocess.CompletedProcess:
+    """subprocess.run with text output captured, in a process group of its own (and a
+    session, as :func:`start`), all of which is killed on timeout; the timeout raises
+    RuntimeError naming the command."""
+    with start(cmd, own_session=own_session, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+               **kwargs) as proc:
         try:
             out, err = proc.communicate(timeout=timeout)
         except subprocess.TimeoutExpired:

@@ -4,6 +4,9 @@ One workload for every system, in one run: N nodes, each its own OS process, in 
 one float in and out each, y = 0.5·u + 1, for 3000 macro steps; N = 2, 4, 8, 16.
 Rates count macro steps per second of the stepping loop only (start-up excluded).
 Processes are not pinned to cores: on 2 cores the scheduler decides, as it would for a user.
+Every process of a run is started in this one's session, as a user's launcher (``hycosim run``,
+a shell) starts them: where the kernel groups processes by session to schedule them (autogroup),
+processes in sessions of their own were preempted twice as often (``_procs.start``).
 
     python benchmarks/barrier.py [--n 2 4] [--steps 3000] [--repeat 3] [--systems hycosim helics-tcp ...]
                                  [--wait-strategy auto|block|yield] [--timeout 120] [--cpu] [--json]
@@ -68,7 +71,7 @@ def run_hycosim(n: int, steps: int, wait_strategy: str, timeout: float) -> float
     with tempfile.TemporaryDirectory() as tmp:
         cfg = ring_config(n, steps, Path(tmp) / "ring.json", wait_strategy)
         res = run([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", tmp, "--no-progress"],
-                  timeout, cwd=REPO)
+                  timeout, own_session=False, cwd=REPO)
         if res.returncode:
             logs = "".join(f"--- {p.name}\n{p.read_text()[-800:]}" for p in Path(tmp).glob("ring*/*.stderr.txt"))
             raise RuntimeError(res.stderr + logs)
@@ -87,9 +90,9 @@ def _start_hycosim(n: int, steps: int, wait_strategy: str, tmp: str,
     bar and closing report (it reads the run's timing back) are no part of a macro step."""
     cfg = ring_config(n, steps, Path(tmp) / "ring.json", wait_strategy)
     py = [sys.executable, "-P", "-m", "hycosim"]
-    server = start([*py, "server", str(cfg), "--runs-dir", tmp], cwd=REPO, stdout=server_out,
+    server = start([*py, "server", str(cfg), "--runs-dir", tmp], own_session=False, cwd=REPO, stdout=server_out,
                    stderr=subprocess.STDOUT if server_out is not subprocess.PIPE else subprocess.PIPE, text=True)
-    nodes = [start([*py, "node", f"n{i}", str(cfg)], cwd=REPO, stdout=subprocess.DEVNULL,
+    nodes = [start([*py, "node", f"n{i}", str(cfg)], own_session=False, cwd=REPO, stdout=subprocess.DEVNULL,
                    stderr=subprocess.DEVNULL) for i in range(n)]
     return server, nodes
 
@@ -109,7 +112,7 @@ def run_hycosim_processes(n: int, steps: int, wait_strategy: str, timeout: float
 
 def run_zenoh_floor(n: int, steps: int, wait_strategy: str, timeout: float) -> float:
     res = run([sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{free_port()}",
-               str(n), str(steps), wait_strategy], timeout)
+               str(n), str(steps), wait_strategy], timeout, own_session=False)
     if res.returncode:
         raise RuntimeError(res.stderr)
     return float(res.stdout.split()[-1])
@@ -118,9 +121,9 @@ def run_zenoh_floor(n: int, steps: int, wait_strategy: str, timeout: float) -> f
 def run_helics(core: str, n: int, steps: int, timeout: float) -> float:
     port = free_port()
     script = str(HERE / "_helics_fed.py")
-    broker = start([sys.executable, script, "broker", core, str(n), str(port)],
+    broker = start([sys.executable, script, "broker", core, str(n), str(port)], own_session=False,
                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    feds = [start([sys.executable, script, "fed", core, str(n), str(i), str(steps), str(port)],
+    feds = [start([sys.executable, script, "fed", core, str(n), str(i), str(steps), str(port)], own_session=False,
                   stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True) for i in range(n)]
     try:  # one limit for the whole run, as for the other systems
         out = wait_all(feds[0], [*feds[1:], broker], timeout)[0]
@@ -156,7 +159,7 @@ print({steps} / (time.perf_counter() - t0))
 
 
 def run_mosaik(n: int, steps: int, timeout: float) -> float:
-    res = run([sys.executable, "-c", _mosaik_code(n, steps)], timeout)
+    res = run([sys.executable, "-c", _mosaik_code(n, steps)], timeout, own_session=False)
     if res.returncode:
         raise RuntimeError(res.stderr[-2000:])
     return float(res.stdout.split()[-1])
@@ -208,7 +211,7 @@ def cpu_zenoh_floor(n: int, steps: int, timeout: float) -> float:
         output = Path(tmp) / "server.txt"
         with output.open("w") as out:
             server = start([sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{free_port()}",
-                            str(n), str(steps), "block"], stdout=out, stderr=subprocess.STDOUT)
+                            str(n), str(steps), "block"], own_session=False, stdout=out, stderr=subprocess.STDOUT)
         return coordinator_cpu(server, [], timeout, f"the Zenoh floor with {n} nodes", output)
 
 
@@ -219,9 +222,9 @@ def cpu_helics(core: str, n: int, steps: int, timeout: float) -> float:
     with tempfile.TemporaryDirectory() as tmp:
         output = Path(tmp) / "broker.txt"
         with output.open("w") as out:
-            broker = start([sys.executable, script, "broker", core, str(n), str(port)], stdout=out,
+            broker = start([sys.executable, script, "broker", core, str(n), str(port)], own_session=False, stdout=out,
                            stderr=subprocess.STDOUT)
-        feds = [start([sys.executable, script, "fed", core, str(n), str(i), str(steps), str(port)],
+        feds = [start([sys.executable, script, "fed", core, str(n), str(i), str(steps), str(port)], own_session=False,
                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for i in range(n)]
         return coordinator_cpu(broker, feds, timeout, f"HELICS {core} with {n} federates", output)
 
@@ -231,7 +234,8 @@ def cpu_mosaik(n: int, steps: int, timeout: float) -> float:
     with tempfile.TemporaryDirectory() as tmp:
         output = Path(tmp) / "world.txt"
         with output.open("w") as out:
-            world = start([sys.executable, "-c", _mosaik_code(n, steps)], stdout=out, stderr=subprocess.STDOUT)
+            world = start([sys.executable, "-c", _mosaik_code(n, steps)], own_session=False, stdout=out,
+                          stderr=subprocess.STDOUT)
         return coordinator_cpu(world, [], timeout, f"mosaik with {n} simulators", output)
 
 

@@ -85,12 +85,51 @@ def test_barrier_benchmark_measures_the_cpu_a_step_costs_every_process_of_a_run(
     assert "CPU µs a macro step costs" in text and "the coordinating process alone" in text
 
 
-def test_own_cpu_at_exit_counts_every_thread_of_the_process_and_none_of_its_children():
+def _benchmark_procs():
     sys.path.insert(0, str(REPO / "benchmarks"))
     try:
-        from _procs import own_cpu_at_exit
+        import _procs
     finally:
         sys.path.remove(str(REPO / "benchmarks"))
+    return _procs
+
+
+def test_a_run_s_processes_share_the_callers_session_and_each_leads_its_own_group():
+    """barrier.py starts every process of a run in its own session (``own_session=False``), as a
+    launcher does, so that the scheduler's autogroup takes them as one; each still leads a group
+    of its own, which a timeout kills whole (its children with it); by default, a session of its own."""
+    import os
+    import signal
+
+    _procs = _benchmark_procs()
+    code = "import os, subprocess, sys, time\n" \
+           "child = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(60)'])\n" \
+           "print(os.getsid(0), os.getpgid(0), child.pid, flush=True)\ntime.sleep(60)"
+
+    def gone(pid: int) -> bool:  # ended: no process, or one left for init to reap
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                return f.read().rsplit(")", 1)[1].split()[0] == "Z"
+        except FileNotFoundError:
+            return True
+
+    for own_session in (False, True):
+        proc = _procs.start([sys.executable, "-c", code], own_session=own_session, stdout=subprocess.PIPE, text=True)
+        try:
+            sid, pgid, child = map(int, proc.stdout.readline().split())
+            assert pgid == proc.pid and (sid == proc.pid) == own_session and (sid == os.getsid(0)) != own_session
+            _procs.kill_group(proc)
+            assert proc.wait(timeout=10) == -signal.SIGKILL
+            deadline = time.monotonic() + 10
+            while not gone(child) and time.monotonic() < deadline:  # the child went with its group
+                time.sleep(0.05)
+            assert gone(child)
+        finally:
+            _procs.stop_all(proc)
+
+
+def test_own_cpu_at_exit_counts_every_thread_of_the_process_and_none_of_its_children():
+    own_cpu_at_exit = _benchmark_procs().own_cpu_at_exit
     burn = "import time\ndef burn(s):\n    t = time.thread_time()\n    while time.thread_time() - t < s: pass\n"
     code = (burn + "import subprocess, sys, threading\nth = threading.Thread(target=burn, args=(0.3,)); th.start()\n"
             "burn(0.2); th.join()\nsubprocess.run([sys.executable, '-c', " + repr(burn + "burn(0.6)") + "])\n")

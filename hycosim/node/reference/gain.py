@@ -52,7 +52,8 @@ class Gain(Node):
             time.sleep(self.work_s)
         self.y = self.k * inputs["u"] + self.b
 
-    def listed_step(self, inputs: list[str], outputs: list[Port]) -> Callable[[float, float, list[Any]], list[Any]] | None:
+    def listed_step(self, inputs: list[str],
+                    outputs: list[Port]) -> Callable[[float, float, Sequence[Any]], list[Any]] | None:
         """step() then outputs() on lists, where the ports are the gain's own: input ``u``, and
         output ``y`` a real scalar (its wire value a float)."""
         if inputs != ["u"] or [(p.name, p.type, p.shape) for p in outputs] != [("y", PortType.REAL, None)]:
