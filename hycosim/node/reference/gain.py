@@ -54,8 +54,11 @@ class Gain(Node):
 
     def listed_step(self, inputs: list[str],
                     outputs: list[Port]) -> Callable[[float, float, Sequence[Any]], list[Any]] | None:
-        """step() then outputs() on lists, where the ports are the gain's own: input ``u``, and
-        output ``y`` a real scalar (its wire value a float)."""
+        """step() then outputs() on lists, where the ports are the gain's own (input ``u``, and
+        output ``y`` a real scalar, its wire value a float) and they are the gain's own too: a
+        subclass that changes step() or outputs() is stepped through them."""
+        if type(self).step is not Gain.step or type(self).outputs is not Gain.outputs:
+            return None
         if inputs != ["u"] or [(p.name, p.type, p.shape) for p in outputs] != [("y", PortType.REAL, None)]:
             return None
 
