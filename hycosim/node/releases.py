@@ -11,6 +11,9 @@ third of a node's Python a step at 8 nodes, and grew with the nodes.
 Both ways a node takes a release read it so: :meth:`ReleaseReader.decode` (every frame a node
 is sent, then checked by ``frames.check_release``) and :meth:`ReleaseReader.plain` (the flat
 path over Zenoh, which gives exactly the STEPs the first way acts on and None for the rest).
+The flat path reads ``inputs`` as a struct whose one field is the node's entry: the other
+entries are skipped as unknown fields are, and the frame and the node's inputs are decoded and
+typed in one call.
 """
 
 from __future__ import annotations
