@@ -54,6 +54,37 @@ def test_model_fmu_runs_as_a_node_with_parameters_and_a_renamed_port(tmp_path, f
         assert n[k] == k  # one doStep per macro step
 
 
+def test_an_fmu_node_steps_on_lists_unless_a_subclass_changes_its_step(tmp_path, fmus):
+    """The FMU node's listed step does what step() then outputs() do; a subclass that changes
+    step() gets none, so that a run in process or over Zenoh steps it through its own."""
+    from hycosim.core.schema import Port
+    from hycosim.node.fmu_node import FmuNode
+    from hycosim.node.runtime import node_context
+
+    cfg = write_project(tmp_path / "p.json", [_gain_node(fmus["gain"], output=["y"])],
+                        cosim={"stepSize": 0.1, "stopTime": 1.0})
+    loaded = load_project(cfg)
+    spec = loaded.project.node("g")
+
+    class Clamped(FmuNode):
+        def step(self, t, h, inputs):
+            super().step(t, h, {"u": min(inputs["u"], 1.0)})
+
+    nodes = []
+    for cls in (FmuNode, FmuNode, Clamped):
+        node = cls(spec, loaded.resolve(spec.fmu))
+        node.setup(node_context(loaded, spec))
+        nodes.append(node)
+    try:
+        listed = nodes[0].listed_step(["u"], [Port(name="y")])
+        assert listed is not None and nodes[2].listed_step(["u"], [Port(name="y")]) is None
+        nodes[1].step(0.0, 0.1, {"u": 3.0})
+        assert listed(0.0, 0.1, (3.0,)) == [nodes[1].outputs()["y"]] == [2.0 * 3.0 + 0.5]
+    finally:
+        for node in nodes:
+            node.teardown()
+
+
 def test_fmi3_model_fmu_runs_as_a_node(tmp_path, fmus):
     cfg = write_project(tmp_path / "p.json", [
         {"nodeName": "clock", "UID": 1, "model": "ramp", "output": ["y", "v"]},
