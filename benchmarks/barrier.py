@@ -84,14 +84,15 @@ def _rate_of(runs: Path) -> float:
 
 
 def _start_hycosim(n: int, steps: int, wait_strategy: str, tmp: str,
-                   server_out: Any) -> tuple[subprocess.Popen, list[subprocess.Popen]]:
+                   **server_output: Any) -> tuple[subprocess.Popen, list[subprocess.Popen]]:
     """The ring as its processes alone, started as the floor's and HELICS's are: ``hycosim
     server`` and a ``hycosim node`` each, without the ``hycosim run`` launcher, whose progress
-    bar and closing report (it reads the run's timing back) are no part of a macro step."""
+    bar and closing report (it reads the run's timing back) are no part of a macro step.
+    ``server_output``: where the server's stdout and stderr go (Popen's arguments)."""
     cfg = ring_config(n, steps, Path(tmp) / "ring.json", wait_strategy)
     py = [sys.executable, "-P", "-m", "hycosim"]
-    server = start([*py, "server", str(cfg), "--runs-dir", tmp], own_session=False, cwd=REPO, stdout=server_out,
-                   stderr=subprocess.STDOUT if server_out is not subprocess.PIPE else subprocess.PIPE, text=True)
+    server = start([*py, "server", str(cfg), "--runs-dir", tmp], own_session=False, cwd=REPO, text=True,
+                   **server_output)
     nodes = [start([*py, "node", f"n{i}", str(cfg)], own_session=False, cwd=REPO, stdout=subprocess.DEVNULL,
                    stderr=subprocess.DEVNULL) for i in range(n)]
     return server, nodes
@@ -100,7 +101,7 @@ def _start_hycosim(n: int, steps: int, wait_strategy: str, tmp: str,
 def run_hycosim_processes(n: int, steps: int, wait_strategy: str, timeout: float) -> float:
     """The ring's steps/s as its processes alone (:func:`_start_hycosim`)."""
     with tempfile.TemporaryDirectory() as tmp:
-        server, nodes = _start_hycosim(n, steps, wait_strategy, tmp, subprocess.PIPE)
+        server, nodes = _start_hycosim(n, steps, wait_strategy, tmp, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         try:
             out, err = wait_all(server, nodes, timeout)
         except subprocess.TimeoutExpired:
@@ -110,21 +111,31 @@ def run_hycosim_processes(n: int, steps: int, wait_strategy: str, timeout: float
         return _rate_of(Path(tmp))
 
 
+def _floor_command(n: int, steps: int, wait_strategy: str) -> list[str]:
+    """The floor's server, which starts its nodes and prints its rate."""
+    return [sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{free_port()}", str(n),
+            str(steps), wait_strategy]
+
+
 def run_zenoh_floor(n: int, steps: int, wait_strategy: str, timeout: float) -> float:
-    res = run([sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{free_port()}",
-               str(n), str(steps), wait_strategy], timeout, own_session=False)
+    res = run(_floor_command(n, steps, wait_strategy), timeout, own_session=False)
     if res.returncode:
         raise RuntimeError(res.stderr)
     return float(res.stdout.split()[-1])
 
 
+def _helics_commands(core: str, n: int, steps: int) -> tuple[list[str], list[list[str]]]:
+    """HELICS's broker and its ``n`` federates (the first prints the rate), on a free port."""
+    port, script = str(free_port()), str(HERE / "_helics_fed.py")
+    return ([sys.executable, script, "broker", core, str(n), port],
+            [[sys.executable, script, "fed", core, str(n), str(i), str(steps), port] for i in range(n)])
+
+
 def run_helics(core: str, n: int, steps: int, timeout: float) -> float:
-    port = free_port()
-    script = str(HERE / "_helics_fed.py")
-    broker = start([sys.executable, script, "broker", core, str(n), str(port)], own_session=False,
-                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    feds = [start([sys.executable, script, "fed", core, str(n), str(i), str(steps), str(port)], own_session=False,
-                  stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True) for i in range(n)]
+    broker_command, fed_commands = _helics_commands(core, n, steps)
+    broker = start(broker_command, own_session=False, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    feds = [start(command, own_session=False, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+            for command in fed_commands]
     try:  # one limit for the whole run, as for the other systems
         out = wait_all(feds[0], [*feds[1:], broker], timeout)[0]
     except subprocess.TimeoutExpired:
@@ -201,7 +212,7 @@ def cpu_hycosim(n: int, steps: int, timeout: float) -> float:
     with tempfile.TemporaryDirectory() as tmp:
         output = Path(tmp) / "server.txt"
         with output.open("w") as out:
-            server, nodes = _start_hycosim(n, steps, "block", tmp, out)
+            server, nodes = _start_hycosim(n, steps, "block", tmp, stdout=out, stderr=subprocess.STDOUT)
         return coordinator_cpu(server, nodes, timeout, f"hycosim with {n} nodes", output)
 
 
@@ -210,22 +221,19 @@ def cpu_zenoh_floor(n: int, steps: int, timeout: float) -> float:
     with tempfile.TemporaryDirectory() as tmp:
         output = Path(tmp) / "server.txt"
         with output.open("w") as out:
-            server = start([sys.executable, str(HERE / "_zenoh_floor.py"), "server", f"tcp/127.0.0.1:{free_port()}",
-                            str(n), str(steps), "block"], own_session=False, stdout=out, stderr=subprocess.STDOUT)
+            server = start(_floor_command(n, steps, "block"), own_session=False, stdout=out, stderr=subprocess.STDOUT)
         return coordinator_cpu(server, [], timeout, f"the Zenoh floor with {n} nodes", output)
 
 
 def cpu_helics(core: str, n: int, steps: int, timeout: float) -> float:
     """HELICS's ring; its broker's own CPU seconds."""
-    port = free_port()
-    script = str(HERE / "_helics_fed.py")
+    broker_command, fed_commands = _helics_commands(core, n, steps)
     with tempfile.TemporaryDirectory() as tmp:
         output = Path(tmp) / "broker.txt"
         with output.open("w") as out:
-            broker = start([sys.executable, script, "broker", core, str(n), str(port)], own_session=False, stdout=out,
-                           stderr=subprocess.STDOUT)
-        feds = [start([sys.executable, script, "fed", core, str(n), str(i), str(steps), str(port)], own_session=False,
-                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for i in range(n)]
+            broker = start(broker_command, own_session=False, stdout=out, stderr=subprocess.STDOUT)
+        feds = [start(command, own_session=False, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                for command in fed_commands]
         return coordinator_cpu(broker, feds, timeout, f"HELICS {core} with {n} federates", output)
 
 

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import subprocess
 import sys
 import time
+import uuid
 
 import pytest
 from hypothesis import given
@@ -95,10 +97,9 @@ def _benchmark_procs():
 
 
 def test_a_run_s_processes_share_the_callers_session_and_each_leads_its_own_group():
-    """barrier.py starts every process of a run in its own session (``own_session=False``), as a
-    launcher does, so that the scheduler's autogroup takes them as one; each still leads a group
+    """barrier.py starts every process of a run in the benchmark's session (``own_session=False``),
+    as a launcher does, so that the scheduler's autogroup takes them as one; each still leads a group
     of its own, which a timeout kills whole (its children with it); by default, a session of its own."""
-    import os
     import signal
 
     _procs = _benchmark_procs()
@@ -140,19 +141,36 @@ def test_own_cpu_at_exit_counts_every_thread_of_the_process_and_none_of_its_chil
     assert 0.45 <= own < 1.0, own
 
 
+def _tagged(tag: str) -> list[int]:
+    """The processes running with ``tag`` in their environment (what one test's run started,
+    whichever other tests run beside it)."""
+    found = []
+    for entry in os.listdir("/proc"):
+        try:
+            with open(f"/proc/{entry}/environ", "rb") as f:
+                if tag.encode() in f.read().split(b"\0"):
+                    found.append(int(entry))
+        except (OSError, ValueError):
+            continue
+    return found
+
+
 def test_barrier_benchmark_kills_a_run_past_its_timeout_and_says_so():
     # Steps enough that neither finishes in 0.5 s (200 floor steps did, on a machine at rest).
+    tag = f"HYCOSIM_TEST_RUN={uuid.uuid4().hex}"
     res = subprocess.run([sys.executable, "benchmarks/barrier.py", "--n", "2", "--steps", "1000000", "--repeat", "1",
                           "--systems", "hycosim", "zenoh-floor", "--timeout", "0.5"],
-                         capture_output=True, text=True, timeout=120, cwd=REPO, env=env())
+                         capture_output=True, text=True, timeout=120, cwd=REPO,
+                         env=dict(env(), HYCOSIM_TEST_RUN=tag.split("=", 1)[1]))
     assert res.returncode == 1
     assert "# hycosim n=2: failed:\ntimed out after 0.5 s (--timeout)" in res.stderr
     assert "# zenoh-floor n=2: failed:\ntimed out after 0.5 s (--timeout)" in res.stderr
     assert "# no run completed for hycosim N=2, zenoh-floor N=2" in res.stderr
     assert "hycosim N=2: 0 of 1" in res.stdout
-    # The server and nodes of the killed runs went with them (the floor's are named by its script).
+    # The server and nodes of the killed runs went with them (every process the run started
+    # carries its tag; another test's floor may run beside this one).
     time.sleep(0.5)
-    left = subprocess.run(["pgrep", "-f", "_zenoh_floor.py"], capture_output=True, text=True).stdout.split()
+    left = _tagged(tag)
     assert left == []
 
 
@@ -175,7 +193,8 @@ def test_fmu_overhead_benchmark_runs_every_measurement(tmp_path):
 
 
 def test_fmu_overhead_benchmark_kills_a_cosimulation_past_its_timeout_and_says_which(tmp_path):
-    res = subprocess.run([sys.executable, "benchmarks/fmu_overhead.py", "--steps", "200", "--timeout", "0.5"],
+    # Steps enough that the first co-simulation cannot finish in 0.5 s (200 did, once, beside other tests).
+    res = subprocess.run([sys.executable, "benchmarks/fmu_overhead.py", "--steps", "20000", "--timeout", "0.5"],
                          capture_output=True, text=True, timeout=120, cwd=REPO, env=env())
     assert res.returncode == 1
     assert "fmu_overhead: the Python node's co-simulation failed: timed out after 0.5 s (--timeout)" in res.stderr
@@ -197,7 +216,7 @@ def test_scale_benchmark_over_namespaces_reports_and_kills_a_run_past_its_timeou
                           "--timeout", "3"], capture_output=True, text=True, timeout=120, cwd=REPO, env=env())
     assert res.returncode == 1 and "scale: N=2: timed out after 3 s (--timeout)" in res.stderr
     time.sleep(0.5)  # the server and nodes went with it, though their namespaces did
-    left = subprocess.run(["pgrep", "-f", "hycosim (server|node) .*ring.json"], capture_output=True, text=True)
+    left = subprocess.run(["pgrep", "-f", "hycosim (server|node) .*scale-ring.json"], capture_output=True, text=True)
     assert left.stdout.split() == []
 
 

@@ -136,7 +136,7 @@ class FmuNode(Node):
     def listed_step(self, inputs: list[str], outputs: list[Port]) -> Callable[[float, float, list[Any]], list[Any]] | None:
         """The FMU's step on lists (``FmuInstance.listed_step``), or None: where the FMU's ports
         do not allow it, and for a subclass that changes step() or outputs() (stepped through them)."""
-        if type(self).step is not FmuNode.step or type(self).outputs is not FmuNode.outputs:
+        if not self.steps_as(FmuNode):
             return None
         stepped = self.fmu.listed_step(inputs, outputs) if self.fmu is not None else None
         if stepped is None:

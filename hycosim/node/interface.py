@@ -113,8 +113,14 @@ class Node(ABC):
         values (one per port of ``outputs``, in order, each of the type the port declares). It
         raises what step() raises. A run in process steps the node by it, and a node over Zenoh
         every plain release. None (the default): the node is stepped through step() and
-        outputs()."""
+        outputs(). An implementation returns None too where the node does not step as the class
+        it was written for (:meth:`steps_as`): a subclass that changes step() is stepped by it."""
         return None
+
+    def steps_as(self, cls: type[Node]) -> bool:
+        """Whether this node's step() and outputs() are ``cls``'s, which a listed_step written
+        for ``cls`` does the work of (a subclass that changes either must be stepped through them)."""
+        return type(self).step is cls.step and type(self).outputs is cls.outputs
 
     def set_mode(self, mode: str, driven: bool) -> None:
         """The coordinator entered ``mode``; ``driven`` says whether this node now follows another."""
