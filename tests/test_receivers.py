@@ -748,6 +748,28 @@ def test_the_flat_outputs_path_takes_exactly_what_the_intake_takes(loaded, sent,
         assert flat.non_finite == whole.non_finite and flat.dropped == {}
 
 
+@pytest.mark.parametrize("uid", [0, 2**63 - 1, 2**63, 2**64 - 1])
+def test_the_flat_outputs_path_takes_a_real_nodes_own_outputs_whatever_its_uid(uid):
+    """A node whose outputs are all real scalars is read by a decoder that checks its UID in C,
+    as a literal, which msgspec takes only up to 2**63 - 1: a larger UID goes msgpack's way, and
+    either way the node's own OUTPUTS of the step owed are taken and nothing else is."""
+    from hycosim.core.schema import Node
+
+    _quiet()
+    node = Node.model_validate({"nodeName": "g", "UID": uid, "model": "gain",
+                                "output": [{"name": "y", "type": "Real"}, {"name": "z", "type": "Real"}]})
+    intake = Intake([node])
+    own = frames.encode(frames.OUTPUTS, uid, 7, 0.7, [1.5, 2])
+    assert intake.plain_outputs("g", own, 7) == [1.5, 2]
+    other = uid - 1 if uid else 1
+    for payload, step in ((own, 8), (frames.encode(frames.OUTPUTS, other, 7, 0.7, [1.5, 2]), 7),
+                          (frames.encode(frames.OUTPUTS, uid, 7, 0.7, [1.5]), 7),
+                          (frames.encode(frames.OUTPUTS, uid, 7, math.inf, [1.5, 2]), 7)):
+        assert intake.plain_outputs("g", payload, step) is None
+    noted = intake.plain_outputs("g", frames.encode(frames.OUTPUTS, uid, 7, 0.7, [math.nan, 2]), 7)
+    assert math.isnan(noted[0]) and set(intake.non_finite) == {"g.y"}
+
+
 def _a_release(node: str):
     """Payloads on ``down`` for ``node``: anything, any STEP-shaped array, and what its server sends."""
     return (payloads | frame_arrays([frames.STEP]).map(frames.msgpack.packb)

@@ -332,6 +332,9 @@ _make = tuple.__new__  # a named tuple from the checked fields, without its __ne
 # msgpack's with use_bin_type; a value msgspec refuses as a type (a subclass of float such as
 # NumPy's float64) is packed by msgpack, as before.
 _ENCODER = msgspec.msgpack.Encoder()
+#: A frame's list packed as :func:`encode` packs it where msgspec takes every value (TypeError
+#: where it refuses one, which encode() then packs by msgpack): for a loop that runs every step.
+packed = _ENCODER.encode
 
 
 def encode(kind: int, *fields: Any) -> bytes:

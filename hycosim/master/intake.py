@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import msgpack
 import msgspec
@@ -45,11 +45,17 @@ def port_mismatch(spec: Node, theirs: Any) -> str | None:
 
 _NUM = (int, float)
 
-# An OUTPUTS frame of a node whose outputs are all real scalars, decoded and typed in C:
-# version, kind, UID, step, t, then a number for each output, ints and floats as msgpack
-# gives them (a bool or anything else is no such frame). A third of plain_outputs' time
-# against msgpack's unpacking and the checks in Python (benchmarks/FINDINGS.md, 2026-12-04).
-_REAL_OUTPUTS = msgspec.msgpack.Decoder(tuple[int, int, int, int, int | float, list[int | float]])
+
+def _real_outputs(uid: int, count: int) -> msgspec.msgpack.Decoder:
+    """The decoder of an OUTPUTS frame from a stepping node whose ``count`` outputs are all real
+    scalars, which checks in C what it can: the version, the kind and the node's UID as
+    themselves, a step in range, then a time and ``count`` values, ints and floats as msgpack
+    gives them (a bool or anything else is no such frame). Decoding untyped and checking in
+    Python cost three times as much (benchmarks/FINDINGS.md, 2026-12-04)."""
+    return msgspec.msgpack.Decoder(tuple[
+        Literal[frames.VERSION], Literal[frames.OUTPUTS], Literal[uid],  # type: ignore[valid-type]
+        Annotated[int, msgspec.Meta(ge=0, lt=frames.MAX_STEP)], int | float,
+        Annotated[list[int | float], msgspec.Meta(min_length=count, max_length=count)]])
 
 
 class Dropped(Exception):
@@ -76,9 +82,10 @@ class Intake:
         # Stepping nodes whose outputs are all scalar numbers: their types, checked in one pass,
         # and one sum for whether all are finite (plain_outputs).
         self._scalar_types = {n.nodeName: self._types[n.nodeName] for n in nodes if n.nodeName in self._summable}
-        # Stepping nodes whose outputs are all real scalars, and how many: decoded by _REAL_OUTPUTS.
-        self._reals = {n.nodeName: len(n.output) for n in nodes if n.nodeName in self._uids and all(
-            p.shape is None and p.type is PortType.REAL for p in n.output)}
+        # Stepping nodes whose outputs are all real scalars: each one's decoder (_real_outputs;
+        # msgspec takes no literal past 2**63 - 1, which leaves such a UID to msgpack's path).
+        self._reals = {n.nodeName: _real_outputs(n.UID, len(n.output)) for n in nodes if n.nodeName in self._uids
+                       and n.UID < 1 << 63 and all(p.shape is None and p.type is PortType.REAL for p in n.output)}
         self.non_finite: dict[str, dict[str, float]] = {}  # "node.port" → first {"step", "t"} (or "t")
         self._log = structlog.get_logger("server.intake")
         self.drops = DropLog(self._log)
@@ -148,23 +155,20 @@ class Intake:
         The answer of every node in every macro step comes here first: the same checks as
         decode + accept, in one function, without the named tuple (a tenth of the server's
         CPU a step went to the layers this replaces); a node's whose outputs are all real
-        scalars decoded and typed in one call in C (_REAL_OUTPUTS)."""
-        uid = self._uids.get(node)
+        scalars decoded and checked in one call in C (_real_outputs)."""
         reals = self._reals.get(node)
         if reals is not None:
             try:
-                version, kind, sender, k, t, values = _REAL_OUTPUTS.decode(payload)
-            except Exception:  # garbage, or not this shape: accept() says what it is
+                _, _, _, k, t, values = reals.decode(payload)
+            except Exception:  # garbage, or not this node's OUTPUTS: accept() says what it is
                 return None
-            if not (version == frames.VERSION and kind == frames.OUTPUTS and sender == uid and k == step
-                    and 0 <= k < frames.MAX_STEP and math.isfinite(t) and len(values) == reals):
+            if k != step:
                 return None
-            try:
-                if math.isfinite(sum(values)):  # the answer of every step: no call more than this
-                    return values
-            except OverflowError:  # an int beyond a float's range
-                pass
-            return self._checked(node, step, t, values)
+            # The answer of every step: one sum says that the time and every value are finite.
+            if math.isfinite(t + sum(values)):
+                return values
+            return self._checked(node, step, t, values) if math.isfinite(t) else None
+        uid = self._uids.get(node)
         try:
             obj = msgpack.unpackb(payload, raw=False, strict_map_key=False)
         except Exception:  # any garbage: accept() says what it is

@@ -92,25 +92,30 @@ class ZenohNode(NodeRuntime):
         much CPU as the floor's whole step (benchmarks/FINDINGS.md, 2026-12-04)."""
         receiver, link, impl, at = self.receiver, self.link, self.impl, self._stepping
         name, plain, in_names, uid = self.name, receiver.plain, self._in_names, self.spec.UID
-        pack, send_outputs, encode = self.outbox.pack, self.outbox.send_outputs, frames.encode
+        pack, send_outputs, encode, packed = self.outbox.pack, self.outbox.send_outputs, frames.encode, frames.packed
+        head = [frames.VERSION, frames.OUTPUTS, uid]
         # A model that steps on lists (an FMU, Node.listed_step) takes the inputs as read and
         # gives its outputs as the wire has them: no dict either way, no conversion. Asked at
         # every entry: a restored or restarted model may step through other objects.
         listed = impl.listed_step(list(in_names), list(self.spec.output))
         bound = self.cosim.stepTimeout + 30.0  # as _pull's: the last resort for a frozen server
+        # Read flat only where the flat step will take it (not decoded twice otherwise): not in
+        # a run with checkpoints or for a node of its own rate, nor while a state waits to go
+        # (only a frame taken the whole way below asks for one).
+        flat = not at.checkpoint and self._rate == 1
+        flat_now = flat and at.pending_state is None
         while True:
             msg = link.receive(bound)
             if msg is None:
                 raise receiver.silence(bound, "release")
-            # Read flat only where the flat step will take it: not decoded twice otherwise.
-            got = plain(msg[1]) if msg[0] != LOCAL and not at.checkpoint and at.pending_state is None \
-                and self._rate == 1 else None
+            got = plain(msg[1]) if flat_now and msg[0] != LOCAL else None
             if got is None:
                 frame = receiver.take(msg)
                 if frame is not None and self.handle(frame):
                     return True
                 if self._phase != PHASE_STEPPING or receiver.server_lost is not None:
                     return False
+                flat_now = flat and at.pending_state is None
                 continue
             release, mine = got
             k, t, h, mode, driven = release.step, release.t, release.h, release.mode, name in release.driven
@@ -122,7 +127,10 @@ class ZenohNode(NodeRuntime):
                 else:
                     impl.step(t, h, dict(zip(in_names, mine)))
                     values = pack(impl.outputs())
-                out = encode(frames.OUTPUTS, uid, k + 1, t + h, values)
+                try:  # frames.encode's packing, without its call
+                    out = packed([*head, k + 1, t + h, values])
+                except TypeError:
+                    out = encode(frames.OUTPUTS, uid, k + 1, t + h, values)
                 send_outputs(out, k + 1)
             except Exception as exc:
                 self._step_failed(exc, k, t, impl=impl)

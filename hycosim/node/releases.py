@@ -19,7 +19,7 @@ typed in one call.
 from __future__ import annotations
 
 import math
-from typing import Any, Literal, Union
+from typing import Annotated, Any, Literal, Union
 
 import msgpack
 import msgspec
@@ -56,7 +56,8 @@ def _plain_step(node: str, input_types: tuple[tuple[type, ...], ...]) -> type[ms
     mine = msgspec.defstruct("Mine", [("mine", tuple[tuple(Union[types] for types in input_types)])],
                              rename={"mine": node}, gc=False)
     return msgspec.defstruct("PlainStep", [
-        ("version", Literal[frames.VERSION]), ("kind", Literal[frames.STEP]), ("step", int), ("t", int | float),
+        ("version", Literal[frames.VERSION]), ("kind", Literal[frames.STEP]),
+        ("step", Annotated[int, msgspec.Meta(ge=0, lt=frames.MAX_STEP)]), ("t", int | float),
         ("h", int | float), ("mode", str), ("inputs", mine), ("driven", list[str]),
         ("slopes", dict[str, msgspec.Raw])], array_like=True, forbid_unknown_fields=True, gc=False)
 
@@ -100,9 +101,8 @@ class ReleaseReader:
             wire = self._plain.decode(payload)
         except _REFUSED:
             return None
-        k, t, h = wire.step, wire.t, wire.h
-        if not (0 <= k < frames.MAX_STEP and math.isfinite(t) and math.isfinite(h) and h > 0) \
-                or self.node in wire.slopes:
+        t, h = wire.t, wire.h  # the step is in range, as its type says
+        if not (math.isfinite(t) and math.isfinite(h) and h > 0) or self.node in wire.slopes:
             return None
         return wire, wire.inputs.mine
 

@@ -137,7 +137,11 @@ class Inbox:
             self._kick.set()
         try:
             while True:
-                sample = self._next()
+                if self._poll:
+                    sample = self._polled()
+                else:  # one call less for every frame of a blocking run
+                    self._waits["slept"] += 1
+                    sample = self._sub.recv()
                 payload = sample.payload.to_bytes()
                 key = str(sample.key_expr)
                 if key != self._local_key or payload[:_SECRET_LEN] != self._secret:
@@ -150,11 +154,9 @@ class Inbox:
         finally:
             self._deadline = None
 
-    def _next(self) -> zenoh.Sample:
+    def _polled(self) -> zenoh.Sample:
+        """The next sample, the channel polled before the thread blocks (see the module's text)."""
         waits = self._waits
-        if not self._poll:
-            waits["slept"] += 1
-            return self._sub.recv()
         sample = self._sub.try_recv()
         if sample is not None:  # already queued: says nothing about polling
             waits["queued"] += 1
