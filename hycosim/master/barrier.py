@@ -300,60 +300,71 @@ class Barrier:
         for node, frame in self.ledger.kept_for(pending):
             self._take(node, frame, released_at, pending, arrivals)
         deadline = time.monotonic() + self.cosim.stepTimeout
-        # Read once: this loop runs for every answer of every step.
+        # Read once: this loop runs for every answer of every step, and each instruction of it
+        # counts (benchmarks/FINDINGS.md, 2026-12-04, seventh entry).
         up_nodes, owes, outputs_in = self._up_nodes, self.ledger.owes_outputs, self.intake.plain_outputs
-        members, recv, outputs, messages = self.members, self.inbox.recv, self.outputs, self.messages
+        members, recv, outputs = self.members, self.inbox.recv, self.outputs
         monotonic, perf_counter = time.monotonic, time.perf_counter
-        while pending:
-            if members.lost:
-                deadline, wait = self._patience(deadline, step)
-            else:
-                wait = deadline - monotonic()
-                wait = wait if wait > 0.0 else 0.0
-            msg = recv(wait)
-            if msg is None:
+        flat = 0  # answers taken on the flat path, counted once at the end
+        try:
+            while pending:
                 if members.lost:
-                    continue  # _patience reports a node lost too long
-                raise RunError(f"timed out after {self.cosim.stepTimeout:g} s at step {step} "
-                               f"(t={self.members.time_of(step):g} s) waiting for outputs of {', '.join(sorted(pending))}")
-            key, payload = msg
-            node = up_nodes.get(key)
-            if node is not None and node in pending and (owed := owes.get(node)) is not None:
-                values = outputs_in(node, payload, owed[0])
-                if values is not None:  # a stepping node's outputs, all as owed: what _take does, flat
-                    messages["received"] += 1
-                    pending.discard(node)
-                    outputs[node] = values
-                    arrivals[node] = perf_counter() - owed[1]
-                    continue
-            got = self.take_in(key, payload, step, True)
-            if got is None:
-                continue
-            node, frame = got
-            if frame.kind == frames.END and (self.project.node(node).asynchronous or (
-                    frame.step == self.ledger.label(node, step) + 1 and not frame.clean)):
-                # A source stopped or failed (never clean: the intake), or a node stopped
-                # (SIGTERM) while waiting for a release: it names the next step.
-                self.on_end(node, frame)
-            verdict = self.ledger.sort(node, frame, step, pending)
-            if verdict is TAKE:
-                self._take(node, frame, released_at, pending, arrivals)
-            elif verdict is LATER:
-                self.ledger.keep(node, frame)
-            elif verdict is ENDED:
-                self.on_end(node, frame)
-                # The others' outputs at the step's end (inside a batch: their batches, which
-                # hold the points its earlier steps reached) are gathered before the run ends.
-                pending.discard(node)
-                self.ledger.earlier[node] = frame.earlier
-                arrivals[node] = self.ledger.since_release(node, released_at)
-                self.ending.inside.add(node)
-                self.ending.arrivals = arrivals
-            else:
-                self.intake.drop(verdict.reason, verdict.detail, step, node)
+                    deadline, wait = self._patience(deadline, step)
+                else:
+                    wait = deadline - monotonic()  # a wait already past returns what is queued, or None
+                msg = recv(wait)
+                if msg is None:
+                    if members.lost:
+                        continue  # _patience reports a node lost too long
+                    raise RunError(f"timed out after {self.cosim.stepTimeout:g} s at step {step} (t="
+                                   f"{self.members.time_of(step):g} s) waiting for outputs of {', '.join(sorted(pending))}")
+                key, payload = msg
+                # No None among the nodes pending: a key that is no node's is not pending either.
+                if (node := up_nodes.get(key)) in pending and (owed := owes.get(node)) is not None:
+                    values = outputs_in(node, payload, owed[0])
+                    if values is not None:  # a stepping node's outputs, all as owed: what _take does, flat
+                        flat += 1
+                        pending.discard(node)
+                        outputs[node] = values
+                        arrivals[node] = perf_counter() - owed[1]
+                        continue
+                self._sort_in(key, payload, step, released_at, pending, arrivals)
+        finally:
+            self.messages["received"] += flat
         if self.ending.inside:
             raise ModelEnded
         return arrivals
+
+    def _sort_in(self, key: str, payload: bytes, step: int, released_at: float, pending: set[str],
+                 arrivals: dict[str, float]) -> None:
+        """One message of the inbox while point ``step`` is gathered, other than a stepping
+        node's outputs as owed (those the gathering takes flat): taken in, and where it is a
+        node's answer, sorted by the ledger."""
+        got = self.take_in(key, payload, step, True)
+        if got is None:
+            return
+        node, frame = got
+        if frame.kind == frames.END and (self.project.node(node).asynchronous or (
+                frame.step == self.ledger.label(node, step) + 1 and not frame.clean)):
+            # A source stopped or failed (never clean: the intake), or a node stopped
+            # (SIGTERM) while waiting for a release: it names the next step.
+            self.on_end(node, frame)
+        verdict = self.ledger.sort(node, frame, step, pending)
+        if verdict is TAKE:
+            self._take(node, frame, released_at, pending, arrivals)
+        elif verdict is LATER:
+            self.ledger.keep(node, frame)
+        elif verdict is ENDED:
+            self.on_end(node, frame)
+            # The others' outputs at the step's end (inside a batch: their batches, which
+            # hold the points its earlier steps reached) are gathered before the run ends.
+            pending.discard(node)
+            self.ledger.earlier[node] = frame.earlier
+            arrivals[node] = self.ledger.since_release(node, released_at)
+            self.ending.inside.add(node)
+            self.ending.arrivals = arrivals
+        else:
+            self.intake.drop(verdict.reason, verdict.detail, step, node)
 
     def _take(self, node: str, frame: frames.Frame, released_at: float, pending: set[str],
               arrivals: dict[str, float]) -> None:

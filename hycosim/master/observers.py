@@ -13,7 +13,8 @@ these methods will do.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from operator import itemgetter
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -62,6 +63,14 @@ def project_observers(loaded: LoadedProject) -> list[Observer]:
         if missing := missing_methods(made[-1]):
             raise ObserverLoadError(f"{where} is no observer: it lacks {', '.join(missing)}")
     return made
+
+
+def node_lists(names: Sequence[str]) -> Callable[[Mapping[str, list[Any]]], tuple[list[Any], ...]]:
+    """What gives the lists of a point's ``outputs`` or ``inputs`` of nodes ``names``, as a tuple
+    in that order: one call in C where there are two nodes or more (itemgetter gives one node's
+    list itself, not in a tuple). The recorder and the status answer take each point's values so."""
+    names = list(names)
+    return itemgetter(*names) if len(names) > 1 else lambda values: tuple(map(values.__getitem__, names))
 
 
 class RecordedPoint(Mapping[str, Any]):

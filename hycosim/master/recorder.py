@@ -18,6 +18,7 @@ from __future__ import annotations
 import errno
 import json
 import time
+from itertools import chain
 from pathlib import Path
 from typing import Any, Iterator
 
@@ -25,10 +26,12 @@ from hycosim.core.schema import PortType
 
 from hycosim.core.config import LoadedProject
 from hycosim.core.recordings import SAMPLES_FILE, encode_sample
-from hycosim.master.observers import RecordedPoint
+from hycosim.master.observers import RecordedPoint, node_lists
 from hycosim.master.record_files import RecordError, RecordFile, close_all, flush_all
 from hycosim.master.parquet_tables import ParquetTables
 from hycosim.master.row_writer import LocalRows, RowWriter, Tables
+
+_flat = chain.from_iterable
 
 __all__ = ["FLUSH_EVERY_S", "RESERVE_BYTES", "RESERVE_NAME", "RecordError", "Recorder"]
 
@@ -116,6 +119,12 @@ class Recorder:
         self._joined = parquet or not any(p.type is PortType.STRING for n in project.nodeLists
                                           for p in (*n.output, *n.input))
         self._plain_nodes = [(n, self._plain_out[n], self._plain_in[n]) for n in self._nodes]
+        # Where every port of every node is one cell (most runs), a row's values are the nodes'
+        # lists end to end: two calls in C. A loop over the nodes on both sides took as long hot
+        # and ran ten times the bytecode, which costs in a run where the server's code is cold
+        # at each point (benchmarks/FINDINGS.md, 2026-12-04, seventh entry).
+        self._lists = node_lists(self._nodes) if all(self._plain_out.values()) and all(self._plain_in.values()) \
+            else None
         # A timing row of one release's arrivals, every stepping node's and no other's, in one format.
         self._timing_format = None if self._async_labels or self._counts_takes else \
             "%d,%r,%.9f,%s,%s" + ",%.9f" * len(self._stepping) + "\r\n"
@@ -184,10 +193,14 @@ class Recorder:
         cells: list[Any] = [step, t, mode]
         if self._marks_steps:
             cells.append(" ".join(stepped or ()))
-        for n, plain_out, _ in self._plain_nodes:
-            cells.extend(outputs[n] if plain_out else self._spread(outputs[n], self._arrays_out[n]))
-        for n, _, plain_in in self._plain_nodes:
-            cells.extend(inputs[n] if plain_in else self._spread(inputs[n], self._arrays_in[n]))
+        if self._lists is not None:
+            cells += _flat(self._lists(outputs))
+            cells += _flat(self._lists(inputs))
+        else:
+            for n, plain_out, _ in self._plain_nodes:
+                cells.extend(outputs[n] if plain_out else self._spread(outputs[n], self._arrays_out[n]))
+            for n, _, plain_in in self._plain_nodes:
+                cells.extend(inputs[n] if plain_in else self._spread(inputs[n], self._arrays_in[n]))
         self.meta["steps"] = step + 1  # the row is taken even where its sending tells of a refused write
         if self._joined:
             self._values_row(cells)

@@ -20,7 +20,7 @@ from operator import itemgetter
 from typing import Any
 
 from hycosim.core.schema import FREE_MODE, Project
-from hycosim.master.observers import RecordedPoint
+from hycosim.master.observers import RecordedPoint, node_lists
 
 # At most this many points an answer (at five answers a second, 320 a second: more than a plot
 # a thousand pixels wide keeps of a run past its first seconds).
@@ -81,10 +81,8 @@ class Layout:
 
     def __init__(self, widths: Sequence[tuple[str, int]]):
         self.names = [name for name, _ in widths]
-        # Every node's list of values, as a tuple in the project's order (one call in C where
-        # there are two nodes or more: itemgetter gives one node's list itself, not in a tuple).
-        self.lists: Callable[[Mapping[str, list[Any]]], tuple[list[Any], ...]] = (
-            itemgetter(*self.names) if len(self.names) > 1 else lambda values: tuple(map(values.__getitem__, self.names)))
+        # Every node's list of values, as a tuple in the project's order.
+        self.lists: Callable[[Mapping[str, list[Any]]], tuple[list[Any], ...]] = node_lists(self.names)
         self._slices: list[tuple[str, int, int]] = []
         i = 0
         for name, width in widths:
