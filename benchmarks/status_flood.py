@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import statistics
 import subprocess
 import sys
@@ -44,34 +45,39 @@ sys.path.insert(0, str(REPO))
 
 from barrier import ring_config  # noqa: E402
 
-# The flooder: asks until killed; prints its tally (answers, busy replies) each half second.
+# The flooder: asks until interrupted; prints its tally (answers, busy replies) each half second
+# and once more as it ends, so that the last line is the whole tally however loaded the machine.
 _FLOODER = r"""
 import sys, time
 from hycosim.transport.keys import ProjectKeys
 from hycosim.transport.session import client_config, open_session
 endpoint, project = sys.argv[1], sys.argv[2]
-session = None
-while session is None:  # a short attempt, again and again: one of 2 s could outlast a short run
-    try:
-        session = open_session(client_config(endpoint, timeout_s=0.1), endpoint)
-    except Exception:
-        time.sleep(0.01)
 waits = sys.argv[3] == "waits"
-key, tally, shown = ProjectKeys(project).status, [0, 0], time.monotonic()
+key, tally = ProjectKeys(project).status, [0, 0]
 def count(reply):  # an answer, or the server's "busy" (a timeout's error, as the run ends, is neither)
     if reply.ok is not None:
         tally[0] += 1
     elif reply.err is not None and reply.err.payload.to_bytes().startswith(b"busy: "):
         tally[1] += 1
-while True:
-    if waits:  # one question at a time, the next as soon as the last is answered
-        for reply in session.get(key, timeout=1.0):
-            count(reply)
-    else:  # questions sent without waiting for their replies
-        session.get(key, count, timeout=1.0)
-    if time.monotonic() - shown > 0.5:
-        print(*tally, flush=True)
-        shown = time.monotonic()
+try:
+    session = None
+    while session is None:  # a short attempt, again and again: one of 2 s could outlast a short run
+        try:
+            session = open_session(client_config(endpoint, timeout_s=0.1), endpoint)
+        except Exception:
+            time.sleep(0.01)
+    shown = time.monotonic()
+    while True:
+        if waits:  # one question at a time, the next as soon as the last is answered
+            for reply in session.get(key, timeout=1.0):
+                count(reply)
+        else:  # questions sent without waiting for their replies
+            session.get(key, count, timeout=1.0)
+        if time.monotonic() - shown > 0.5:
+            print(*tally, flush=True)
+            shown = time.monotonic()
+except KeyboardInterrupt:
+    print(*tally, flush=True)
 """
 
 
@@ -86,7 +92,8 @@ def one_run(kind: str, steps: int, timeout: float) -> dict:
         elif kind.startswith("flood"):
             beside = start([sys.executable, "-c", _FLOODER, endpoint, json.loads(cfg.read_text())["projectName"],
                             "waits" if kind == "flood, waiting" else "fires"], cwd=REPO, stdout=subprocess.PIPE, text=True)
-            threading.Thread(target=lambda: lines.extend(beside.stdout), daemon=True).start()
+            reader = threading.Thread(target=lambda: lines.extend(beside.stdout), daemon=True)
+            reader.start()
         try:
             run = start([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", tmp, "--no-progress",
                          "--listen", endpoint], cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
@@ -97,13 +104,16 @@ def one_run(kind: str, steps: int, timeout: float) -> dict:
                 raise RuntimeError(f"{kind}: the run passed --timeout {timeout:g} s") from None
         finally:
             if beside is not None:
-                # A short run can end before the flooder's first tally: wait for the tally it
-                # prints after the run (its questions time out once the server is gone).
-                seen, until = len(lines), time.monotonic() + 3.0
-                while kind.startswith("flood") and len(lines) == seen and time.monotonic() < until and run.poll() is not None:
-                    time.sleep(0.05)
+                if kind.startswith("flood"):  # its whole tally, printed as it ends
+                    beside.send_signal(signal.SIGINT)
+                    try:
+                        beside.wait(timeout=10)
+                    except subprocess.TimeoutExpired:
+                        pass
                 kill_group(beside)
                 beside.wait()
+                if kind.startswith("flood"):
+                    reader.join(timeout=5)
         if run.returncode:
             raise RuntimeError(f"{kind}: the run failed ({run.returncode}): {err[-600:]}")
         meta = json.loads(next(Path(tmp).glob("ring*/meta.json")).read_text())

@@ -306,6 +306,10 @@ def _trial_on_worker(angle: float, trial: int, out: Path, correction: bool, driv
         return _not_run(angle, trial, out, correction, nodes, signals.describe(stop))
 
 
+# How long a worker's trial nodes have to end by their server's STOP before they are told too.
+_NODES_FOLLOW_S = 3.0
+
+
 def _stop_trials_here() -> int:
     """On a worker: Ctrl-C to the hycosim processes the worker started (a trial's server and
     nodes), as a serial trial takes it: the server writes its records and the nodes follow."""
@@ -314,22 +318,30 @@ def _stop_trials_here() -> int:
 
     import psutil
 
-    ours = []
+    servers, nodes = [], []
     for child in psutil.Process(os.getpid()).children():
         try:
             command = child.cmdline()
         except psutil.Error:  # ended meanwhile, or not ours to look at
             continue
         if "hycosim" in command:
-            ours.append((0 if "server" in command else 1, child))
-    # The servers first: a node told first says it was interrupted, and a server that hears that
-    # before its own Ctrl-C records a failed run, not an interrupted one.
+            (servers if "server" in command else nodes).append(child)
+    # The servers alone first; their nodes end on the STOP each server sends as it stops. A node
+    # told too ends at once, and its launcher, in this worker, which was told nothing, takes a
+    # node that ended by Ctrl-C before its server for a failed node and records the run failed.
     stopped = 0
-    for _, child in sorted(ours, key=lambda pair: pair[0]):
+    for child in servers:
         try:
             child.send_signal(signal.SIGINT)
             stopped += 1
         except psutil.Error:  # ended meanwhile, or not ours to signal
+            pass
+    _, left = psutil.wait_procs(nodes, timeout=_NODES_FOLLOW_S if servers else 0)
+    for child in left:  # a node whose server had not started, or did not stop it
+        try:
+            child.send_signal(signal.SIGINT)
+            stopped += 1
+        except psutil.Error:
             pass
     return stopped
 
