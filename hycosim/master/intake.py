@@ -50,8 +50,9 @@ def _real_outputs(uid: int, count: int) -> msgspec.msgpack.Decoder:
     """The decoder of an OUTPUTS frame from a stepping node whose ``count`` outputs are all real
     scalars, which checks in C what it can: the version, the kind and the node's UID as
     themselves, a step in range, then a time and ``count`` values, ints and floats as msgpack
-    gives them (a bool or anything else is no such frame). Decoding untyped and checking in
-    Python cost three times as much (benchmarks/FINDINGS.md, 2026-12-04)."""
+    gives them (a bool or anything else is no such frame). Decoded untyped and checked in
+    Python, an answer ran twice the bytecode, which a run pays cold (benchmarks/FINDINGS.md,
+    2026-12-04, seventh entry)."""
     return msgspec.msgpack.Decoder(tuple[
         Literal[frames.VERSION], Literal[frames.OUTPUTS], Literal[uid],  # type: ignore[valid-type]
         Annotated[int, msgspec.Meta(ge=0, lt=frames.MAX_STEP)], int | float,
