@@ -18,7 +18,7 @@ from pathlib import Path
 import msgspec
 import pytest
 import structlog
-from hypothesis import given
+from hypothesis import event, given
 from hypothesis import strategies as st
 
 from hycosim.core import frames
@@ -768,6 +768,41 @@ def test_the_flat_outputs_path_takes_a_real_nodes_own_outputs_whatever_its_uid(u
         assert intake.plain_outputs("g", payload, step) is None
     noted = intake.plain_outputs("g", frames.encode(frames.OUTPUTS, uid, 7, 0.7, [math.nan, 2]), 7)
     assert math.isnan(noted[0]) and set(intake.non_finite) == {"g.y"}
+
+
+@given(st.sampled_from([2**63 - 1, 2**63, 2**64 - 1]), st.data())
+def test_the_flat_outputs_path_of_a_real_node_takes_what_the_intake_takes_whatever_its_uid(uid, data):
+    """Garbage, OUTPUTS-shaped arrays and the node's own frames with one thing wrong, for a node
+    of real outputs whose UID is either side of msgspec's literal limit: Intake.plain_outputs
+    takes exactly what decode + accept take as its OUTPUTS of the step owed."""
+    from hycosim.core.schema import Node
+
+    _quiet()
+    node = Node.model_validate({"nodeName": "g", "UID": uid, "model": "gain",
+                                "output": [{"name": "y", "type": "Real"}, {"name": "z", "type": "Real"}]})
+    number = st.floats(allow_nan=True, allow_infinity=True) | st.integers(-3, 3) | st.sampled_from(_ODD)
+    # The node's own OUTPUTS of the step owed, with at most one thing wrong (half of them right).
+    wrong = data.draw(st.sampled_from([None, None, None, None, "uid", "step", "t", "values"]))
+    fields = [uid, 7, data.draw(st.floats(0, 10)), data.draw(st.lists(st.floats(), min_size=2, max_size=2))]
+    if wrong is not None:
+        at = ["uid", "step", "t", "values"].index(wrong)
+        fields[at] = data.draw({"uid": st.sampled_from([uid - 1, 0, -1]), "step": st.sampled_from([6, -1, frames.MAX_STEP]),
+                                "t": st.sampled_from([math.nan, math.inf, -math.inf]),
+                                "values": st.lists(number, max_size=3)}[wrong])
+    source = data.draw(st.sampled_from(["own", "own", "own", "garbage", "array"]))
+    payload = (frames.encode(frames.OUTPUTS, *fields) if source == "own" else data.draw(
+        payloads if source == "garbage" else frame_arrays([frames.OUTPUTS]).map(frames.msgpack.packb)))
+    flat, whole = Intake([node]), Intake([node])
+    got = flat.plain_outputs("g", payload, 7)
+    try:
+        frame = whole.accept("g", payload)
+    except Dropped:
+        frame = None
+    expected = frame.values if frame is not None and frame.kind == frames.OUTPUTS and frame.step == 7 else None
+    assert (got is None) == (expected is None) and _same(got, expected)
+    if got is not None:
+        assert flat.non_finite == whole.non_finite
+    event("taken" if got is not None else "refused")
 
 
 def _a_release(node: str):

@@ -127,9 +127,9 @@ class Inbox:
             pass
 
     def recv(self, timeout: float) -> tuple[str, bytes] | None:
-        """The next sample as (key, payload), or None once ``timeout`` seconds pass (a timeout
-        of zero or less: a sample already there, else None); an injected payload comes as
-        (LOCAL, payload)."""
+        """The next sample as (key, payload), or None once ``timeout`` seconds pass (zero or
+        less: None unless a sample is there or comes before the watchdog's wake-up, which is
+        sent at once); an injected payload comes as (LOCAL, payload)."""
         now = time.monotonic()
         deadline = now + timeout
         self._last_wake = now
