@@ -1,8 +1,9 @@
 """The floor for a Zenoh barrier in Python: one step message out, N replies back, nothing else.
 
 Same transport choices as hycosim (its router and client session configs, so the
-low-latency transport; its Zenoh runtime threads; BLOCK + express publishers; the same
-reader, an Inbox in the main thread that polls before it blocks as hycosim's
+low-latency transport; its Zenoh runtime threads; BLOCK + express publishers; the server's
+Unix socket beside its TCP port, which the nodes take where they block, as hycosim's do; the
+same reader, an Inbox in the main thread that polls before it blocks as hycosim's
 waitStrategy says; msgpack) but no config, routing, checking or recording.
 """
 
@@ -16,15 +17,19 @@ import zenoh
 
 from hycosim.core.schema import polls_before_blocking
 from hycosim.transport.inbox import Inbox
-from hycosim.transport.session import client_config, prefer_shared_runtime, router_config
+from hycosim.transport.session import (client_config, local_socket, prefer_shared_runtime, private_folder, reach,
+                                      router_config)
 
 
-def _conf(endpoint: str, router: bool) -> zenoh.Config:
-    return router_config(endpoint) if router else client_config(endpoint)
+def _conf(endpoint: str, router: bool, polls: bool = False) -> zenoh.Config:
+    local = local_socket(endpoint)  # hycosim's choice (coSimulation.localSocket, on by default)
+    if router:
+        return router_config(endpoint, local=local if local is not None and private_folder(local.parent) else None)
+    return client_config(endpoint if local is None or polls else reach(endpoint, local, 10.0))
 
 
 def node(endpoint: str, i: int, polls: bool) -> None:
-    with zenoh.open(_conf(endpoint, False)) as s:
+    with zenoh.open(_conf(endpoint, False, polls)) as s:
         pub = s.declare_publisher(f"floor/out/{i}", congestion_control=zenoh.CongestionControl.BLOCK, express=True)
         inbox = Inbox(s, "floor/step/**", f"floor/step/local{i}", poll=polls)
         s.liveliness().declare_token(f"floor/alive/{i}")

@@ -147,6 +147,7 @@ class _ScriptedLink:
         self._script, self.sent = iter(script), []
         self.session = type("Session", (), {"close": lambda self: None})()
         self.waits = None
+        self.over = "scripted"  # what ZenohNodeLink.open says it connected to
 
     def receive(self, timeout: float):
         return "hycosim/p/down", next(self._script)

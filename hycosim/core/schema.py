@@ -305,6 +305,11 @@ class CoSimulation(_Strict):
     # on loopback, but it cannot fragment, so every frame must stay within
     # core.session.LOW_LATENCY_MAX_FRAME bytes. false: standard transport, any size.
     lowLatency: bool = True
+    # A node on the server's host that waits by blocking (waitStrategy) reaches it over a Unix
+    # socket beside serverIP's TCP port, where serverIP is a loopback address and not TLS: less
+    # CPU a frame than TCP on loopback. Where nodes poll, TCP: polling catches a frame on TCP,
+    # which Zenoh's Unix socket reader hands over in two wake-ups. false: TCP always.
+    localSocket: bool = True
     # How the server and each node wait for their next frame. "block": sleep in Zenoh's
     # channel until it comes. "yield": poll it first, yielding the CPU between polls
     # (core.inbox): faster when frames come quickly, slower when many more processes

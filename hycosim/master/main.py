@@ -21,7 +21,7 @@ from hycosim.core.folders import make_folder, run_dir_for
 from hycosim.core.heap import set_up_frozen
 from hycosim.transport.local_bus import LocalBus
 from hycosim.transport.security import SecurityError, router_security
-from hycosim.transport.session import open_session, router_config
+from hycosim.transport.session import ConnectError, local_socket, open_session, private_folder, router_config
 
 from hycosim.master import checkpoints
 from hycosim.master.coordinator import GuardEvaluationError
@@ -102,6 +102,27 @@ def _resume_plan(loaded: LoadedProject, run_dir: Path) -> tuple[dict[str, Any], 
     if earlier is not None and type(earlier) is not list:
         del meta["checkpoints_passed_over"]
     return meta, cp.server["records"], recorded
+
+
+def _router_session(loaded: LoadedProject, endpoint: str, security: dict | None, log: Any) -> Any:
+    """The server's Zenoh router on ``endpoint``, and on a Unix socket beside it for the nodes
+    on this host where the project allows one (transport.session.local_socket) and it can be
+    listened on; ConnectError where the router cannot be opened."""
+    cosim = loaded.project.coSimulation
+    local = local_socket(endpoint) if cosim.localSocket else None
+    if local is not None and not private_folder(local.parent):
+        log.warning("no Unix socket for nodes on this host: its folder is not this user's alone",
+                    folder=str(local.parent))
+        local = None
+    try:
+        return open_session(router_config(endpoint, security=security, local=local, low_latency=cosim.lowLatency),
+                            endpoint)
+    except ConnectError as exc:
+        if local is None or str(local) not in str(exc):
+            raise
+        # The socket is a shortcut: where it cannot be listened on, the nodes take TCP.
+        log.warning("no Unix socket for nodes on this host", socket=str(local), error=str(exc))
+        return open_session(router_config(endpoint, security=security, low_latency=cosim.lowLatency), endpoint)
 
 
 def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = Path("runs"),
@@ -211,8 +232,7 @@ def serve(loaded: LoadedProject, *, listen: str | None = None, runs_dir: Path = 
         transport: Transport = InProcessTransport(bus)
     else:
         try:
-            session = open_session(router_config(endpoint, security=security,
-                                                 low_latency=loaded.project.coSimulation.lowLatency), endpoint)
+            session = _router_session(loaded, endpoint, security, log)
         except KeyboardInterrupt as exc:
             recorder.close("interrupted", reason=f"{signals.describe(exc)} before the run started")
             return done(signals.exit_code(exc), run_dir, f"{signals.describe(exc)} before the run started")

@@ -25,6 +25,7 @@ class ZenohNode(NodeRuntime):
         self._setup()
         try:
             link = ZenohNodeLink.open(self.loaded, self.name, self.endpoint, self.password)
+            self._log.info("attached", over=link.over)
             self.receiver.link, self.receiver.pulls = link, True
             try:
                 if isinstance(self.impl, AsyncSource) and not isinstance(self.impl, SamplePlayer):

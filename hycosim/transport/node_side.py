@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import time
 from typing import Protocol
 
 import zenoh
@@ -21,7 +22,8 @@ from hycosim.transport.inbox import Inbox
 from hycosim.transport.keys import SERVER_TOKEN, ProjectKeys
 from hycosim.transport.local_bus import LocalBus
 from hycosim.transport.security import client_tls
-from hycosim.transport.session import ConnectError, FramePublisher, client_config, open_session, token_held
+from hycosim.transport.session import (ConnectError, FramePublisher, client_config, local_socket, open_session,
+                                      reach, token_held)
 
 
 class NodeLink(Protocol):
@@ -49,6 +51,7 @@ class ZenohNodeLink:
 
     def __init__(self, session: zenoh.Session, loaded: LoadedProject, name: str, endpoint: str):
         self.session, self.endpoint = session, endpoint
+        self.over = endpoint  # the endpoint connected to: ``endpoint``, or the server's Unix socket beside it
         self._project = loaded.project.projectName
         self._keys = ProjectKeys(self._project)
         self._inbox: Inbox | None = None
@@ -83,7 +86,13 @@ class ZenohNodeLink:
         """Connect to the server at ``endpoint`` as node ``name`` (authenticated as the user of
         that name where ``password`` is given) and declare what the node needs."""
         cosim = loaded.project.coSimulation
-        conf = client_config(endpoint, timeout_s=cosim.attachTimeout, low_latency=cosim.lowLatency,
+        polls = loaded.project.polls_before_blocking(os.cpu_count())
+        local = local_socket(endpoint) if cosim.localSocket and not polls else None
+        started = time.monotonic()
+        connect = endpoint if local is None else reach(endpoint, local, cosim.attachTimeout)
+        # What the probe took comes off Zenoh's connect timeout: the attach timeout bounds both.
+        timeout = max(cosim.attachTimeout - (time.monotonic() - started), 1.0)
+        conf = client_config(connect, timeout_s=timeout, low_latency=cosim.lowLatency,
                              user=name if password is not None else None, password=password,
                              tls=client_tls(loaded, endpoint))
         try:
@@ -94,10 +103,12 @@ class ZenohNodeLink:
                                    "wrong credentials are refused this way too)") from None
             raise
         try:
-            return cls(session, loaded, name, endpoint)
+            link = cls(session, loaded, name, endpoint)
         except BaseException:
             session.close()
             raise
+        link.over = connect
+        return link
 
     def _on_server(self, sample: zenoh.Sample) -> None:
         if self._inbox is not None:

@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import os
 import re
+import socket
+import stat
 import threading
+import time
+from pathlib import Path
 
 import zenoh
 
@@ -90,9 +95,92 @@ def _transport(low_latency: bool) -> dict[str, object]:
     return {"transport/unicast/lowlatency": True, "transport/unicast/qos/enabled": False}
 
 
+# A node on its server's host may reach it over a Unix socket instead of TCP on loopback:
+# 2-5 % less CPU a macro step and 7-11 % more macro steps/s with 4 and 8 nodes blocking on 2
+# cores (benchmarks/FINDINGS.md, 2026-12-04, eighth entry). The folder is the same for every process
+# of the host whatever its TMPDIR (HYCOSIM_SOCKETS, where set for all of them, moves it); the
+# socket's name says which network namespace's loopback and which port it stands beside, since
+# servers in other namespaces may use the same port.
+LOCAL_SOCKETS = "/tmp"
+
+
+def local_socket(endpoint: str) -> Path | None:
+    """The Unix socket a server listening on ``endpoint`` also listens on, where that is TCP
+    on a loopback address (reached from this host alone); None for any other endpoint."""
+    kind, _, address = endpoint.partition("/")
+    host, colon, port = address.rpartition(":")
+    if kind != "tcp" or not colon or not port.isdigit():
+        return None
+    host = host.strip("[]")
+    if host != "localhost":
+        try:
+            if not ipaddress.ip_address(host).is_loopback:
+                return None
+        except ValueError:  # a host name: it may be this host or any other
+            return None
+    try:
+        netns = os.stat("/proc/self/ns/net").st_ino
+    except OSError:
+        return None
+    path = Path(os.environ.get("HYCOSIM_SOCKETS", LOCAL_SOCKETS)) / f"hycosim-{os.getuid()}" / f"{netns}-{port}.sock"
+    # A socket's path has room for 107 bytes: a longer one could not be listened on.
+    return path if len(os.fsencode(path)) <= 107 else None
+
+
+def private_folder(folder: Path) -> bool:
+    """Whether ``folder`` is (made, where missing) a folder of this user's alone: a server
+    listens on a socket there only then, so that nobody else can stand in for it."""
+    try:
+        folder.mkdir(mode=0o700, exist_ok=True)
+        info = folder.lstat()
+    except OSError:
+        return False
+    return stat.S_ISDIR(info.st_mode) and info.st_uid == os.getuid() and info.st_mode & 0o077 == 0
+
+
+def _accepts(family: int, address: object) -> bool:
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.settimeout(0.5)
+        try:
+            probe.connect(address)
+        except OSError:
+            return False
+    return True
+
+
+def reach(endpoint: str, local: Path, timeout_s: float) -> str:
+    """The endpoint a node connects to its server at ``endpoint`` by: the server's Unix socket
+    ``local`` (:func:`local_socket`) once it listens there, else ``endpoint`` (the server up on
+    TCP alone, or not up within ``timeout_s``, which Zenoh's connect then reports).
+
+    A node usually starts before its server listens. Zenoh's client cannot choose itself: an
+    endpoint it cannot reach holds it until its connect timeout though the next one listens.
+    A probe is a connection opened and closed, which the router drops as a link that never
+    said hello."""
+    host, _, port = endpoint.partition("/")[2].rpartition(":")
+    unix = f"unixsock-stream/{local}"
+    deadline, pause = time.monotonic() + timeout_s, 0.05
+    while True:
+        if _accepts(socket.AF_UNIX, str(local)):
+            return unix
+        if _accepts(socket.AF_INET6 if ":" in host else socket.AF_INET, (host.strip("[]"), int(port))):
+            # The server opens both in one call: its socket follows its TCP port within moments.
+            until = time.monotonic() + 0.2
+            while time.monotonic() < until:
+                if _accepts(socket.AF_UNIX, str(local)):
+                    return unix
+                time.sleep(0.01)
+            return endpoint
+        if time.monotonic() + pause >= deadline:
+            return endpoint
+        time.sleep(pause)
+        pause = min(1.5 * pause, 0.5)
+
+
 def router_config(listen: str, *, lease_ms: int = 1000, security: dict | None = None,
-                  low_latency: bool = True) -> zenoh.Config:
-    """Config for the relay server: a Zenoh router listening on exactly one endpoint.
+                  low_latency: bool = True, local: Path | None = None) -> zenoh.Config:
+    """Config for the relay server: a Zenoh router listening on exactly one endpoint (and on
+    the Unix socket ``local`` beside it, where given: :func:`local_socket`).
 
     Multicast scouting is off so that nothing beyond the named endpoint is reached; a
     short lease lets nodes notice a cut link within about a second. ``security`` adds
@@ -102,7 +190,7 @@ def router_config(listen: str, *, lease_ms: int = 1000, security: dict | None = 
     """
     settings: dict[str, object] = {
         "mode": "router",
-        "listen/endpoints": [listen],
+        "listen/endpoints": [listen] if local is None else [listen, f"unixsock-stream/{local}"],
         "scouting/multicast/enabled": False,
         # zenoh.open waits this long (500 ms) for peers that scouting finds before it returns.
         # The server has none to find (no multicast, no endpoint to connect to), so every run
