@@ -12,6 +12,8 @@ import time
 from pathlib import Path
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from hycosim.transport.session import local_socket, private_folder, reach
 from tests.helpers import free_port, hycosim, meta, read_rows, reap, run_project, spawn, wait_for, write_project
@@ -42,6 +44,25 @@ def test_only_a_tcp_endpoint_on_a_loopback_address_has_a_socket_beside_it(socket
     for other in ("tcp/10.0.0.1:7447", "tcp/[fe80::1]:7447", "tls/127.0.0.1:7447", "udp/127.0.0.1:7447",
                   "tcp/server:7447", "tcp/127.0.0.1", "tcp/127.0.0.1:http", "127.0.0.1:7447", ""):
         assert local_socket(other) is None, other
+
+
+_HOSTS = st.sampled_from(["127.0.0.1", "127.255.0.9", "[::1]", "::1", "localhost", "10.0.0.1", "[fe80::1]",
+                          "127.1", "0.0.0.0", "", "[]", "[127.0.0.1]", "x"]) | st.text(max_size=20)
+_PORTS = st.integers(-5, 70_000).map(str) | st.sampled_from(["", "٣", "7 ", "+1", "0x1f"]) | st.text(max_size=6)
+_ENDPOINTS = st.text(max_size=60) | st.builds("{}/{}:{}".format, st.sampled_from(["tcp", "tls", "udp", "TCP", ""]),
+                                              _HOSTS, _PORTS)
+
+
+@given(_ENDPOINTS)
+def test_any_endpoint_text_has_no_socket_or_one_in_the_users_folder(endpoint):
+    got = local_socket(endpoint)
+    if got is None:
+        return
+    kind, _, address = endpoint.partition("/")
+    port = address.rpartition(":")[2]
+    assert kind == "tcp" and port.isascii() and port.isdigit()
+    assert got.parent.name == f"hycosim-{os.getuid()}" and got.name.endswith(f"-{port}.sock")
+    assert len(os.fsencode(got)) <= 107
 
 
 def test_a_socket_folder_is_used_only_when_it_is_this_users_alone(tmp_path):

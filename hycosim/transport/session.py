@@ -109,7 +109,7 @@ def local_socket(endpoint: str) -> Path | None:
     on a loopback address (reached from this host alone); None for any other endpoint."""
     kind, _, address = endpoint.partition("/")
     host, colon, port = address.rpartition(":")
-    if kind != "tcp" or not colon or not port.isdigit():
+    if kind != "tcp" or not colon or not (port.isascii() and port.isdigit()):
         return None
     host = host.strip("[]")
     if host != "localhost":
