@@ -3,6 +3,7 @@ waits by blocking (coSimulation.localSocket): the same run, the same values, the
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import shutil
@@ -15,7 +16,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hycosim.transport.session import local_socket, private_folder, reach
+from hycosim.transport.session import local_socket, private_folder, reach, sweep_sockets
 from tests.helpers import free_port, hycosim, meta, read_rows, reap, run_project, spawn, wait_for, write_project
 
 NOBODY = 65534
@@ -224,3 +225,27 @@ def test_a_socket_the_server_cannot_listen_on_leaves_its_nodes_tcp(tmp_path, soc
 def test_a_socket_path_too_long_to_listen_on_is_none(monkeypatch, tmp_path):
     monkeypatch.setenv("HYCOSIM_SOCKETS", str(tmp_path / ("x" * 90)))
     assert local_socket("tcp/127.0.0.1:7447") is None
+
+
+def test_a_server_sweeps_the_sockets_killed_servers_left_and_keeps_the_live_ones(tmp_path, sockets):
+    folder = sockets / f"hycosim-{os.getuid()}"
+    assert private_folder(folder)
+    stale = folder / "1-1111.sock"
+    _unix_listener(stale).close()  # a killed server's: its file stays, nobody listens
+    (folder / "1-1111.sock.lock").write_text("")
+    live = folder / "1-2222.sock"
+    listener = _unix_listener(live)
+    (folder / "1-2222.sock.lock").write_text("")
+    holder = os.open(folder / "1-2222.sock.lock", os.O_RDWR)
+    fcntl.flock(holder, fcntl.LOCK_EX)  # as a listening router holds its lock
+    try:
+        assert sweep_sockets(folder) == 1
+        assert sorted(p.name for p in folder.iterdir()) == ["1-2222.sock", "1-2222.sock.lock"]
+        # A server's start sweeps its folder: what a killed one left goes, its own socket comes.
+        _unix_listener(stale).close()
+        (folder / "1-1111.sock.lock").write_text("")
+        run_project(_ring(tmp_path, 2), tmp_path / "runs")
+        assert sorted(p.name for p in folder.iterdir()) == ["1-2222.sock", "1-2222.sock.lock"]
+    finally:
+        os.close(holder)
+        listener.close()

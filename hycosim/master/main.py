@@ -21,7 +21,8 @@ from hycosim.core.folders import make_folder, run_dir_for
 from hycosim.core.heap import set_up_frozen
 from hycosim.transport.local_bus import LocalBus
 from hycosim.transport.security import SecurityError, router_security
-from hycosim.transport.session import ConnectError, local_socket, open_session, private_folder, router_config
+from hycosim.transport.session import (ConnectError, local_socket, open_session, private_folder, router_config,
+                                      sweep_sockets)
 
 from hycosim.master import checkpoints
 from hycosim.master.coordinator import GuardEvaluationError
@@ -114,6 +115,8 @@ def _router_session(loaded: LoadedProject, endpoint: str, security: dict | None,
         log.warning("no Unix socket for nodes on this host: its folder is not this user's alone",
                     folder=str(local.parent))
         local = None
+    if local is not None:
+        sweep_sockets(local.parent)  # what killed servers left there
     try:
         return open_session(router_config(endpoint, security=security, local=local, low_latency=cosim.lowLatency),
                             endpoint)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import fcntl
 import ipaddress
 import json
 import os
@@ -136,6 +137,32 @@ def private_folder(folder: Path) -> bool:
     except OSError:
         return False
     return stat.S_ISDIR(info.st_mode) and info.st_uid == os.getuid() and info.st_mode & 0o077 == 0
+
+
+def sweep_sockets(folder: Path) -> int:
+    """Remove the sockets in ``folder`` that no server listens on any more (one killed leaves
+    its socket and lock file behind); return how many. A listening router holds its socket's
+    lock file (flock) while it listens: a lock that can be taken has no owner left."""
+    swept = 0
+    for lock in folder.glob("*.sock.lock"):
+        try:
+            fd = os.open(lock, os.O_RDWR | os.O_NOFOLLOW)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:  # held: its server is listening
+            os.close(fd)
+            continue
+        try:
+            Path(str(lock)[:-len(".lock")]).unlink(missing_ok=True)
+            lock.unlink(missing_ok=True)
+            swept += 1
+        except OSError:
+            pass
+        finally:
+            os.close(fd)
+    return swept
 
 
 def _accepts(family: int, address: object) -> bool:
