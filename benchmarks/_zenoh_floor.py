@@ -17,15 +17,14 @@ import zenoh
 
 from hycosim.core.schema import polls_before_blocking
 from hycosim.transport.inbox import Inbox
-from hycosim.transport.session import (client_config, local_socket, prefer_shared_runtime, private_folder, reach,
-                                      router_config)
+from hycosim.transport.session import client_config, prefer_shared_runtime, reach, router_config, server_socket
 
 
 def _conf(endpoint: str, router: bool, polls: bool = False) -> zenoh.Config:
-    local = local_socket(endpoint)  # hycosim's choice (coSimulation.localSocket, on by default)
+    # hycosim's choice (coSimulation.localSocket, on by default), by the same functions.
     if router:
-        return router_config(endpoint, local=local if local is not None and private_folder(local.parent) else None)
-    return client_config(endpoint if local is None or polls else reach(endpoint, local, 10.0))
+        return router_config(endpoint, local=server_socket(endpoint)[0])
+    return client_config(endpoint if polls else reach(endpoint, 10.0))
 
 
 def node(endpoint: str, i: int, polls: bool) -> None:

@@ -16,7 +16,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from hycosim.transport.session import local_socket, private_folder, reach, sweep_sockets
+from hycosim.transport.session import local_socket, private_folder, reach, server_socket, sweep_sockets
 from tests.helpers import free_port, hycosim, meta, read_rows, reap, run_project, spawn, wait_for, write_project
 
 NOBODY = 65534
@@ -95,16 +95,16 @@ def test_a_node_takes_the_socket_where_it_listens_and_tcp_where_only_tcp_does(so
     endpoint = f"tcp/127.0.0.1:{port}"
     local = local_socket(endpoint)
     t0 = time.monotonic()
-    assert reach(endpoint, local, 0.3) == endpoint  # nothing up: TCP, for Zenoh to report
+    assert reach(endpoint, 0.3) == endpoint  # nothing up: TCP, for Zenoh to report
     assert time.monotonic() - t0 < 2.0
     with socket.create_server(("127.0.0.1", port)):
-        assert reach(endpoint, local, 5.0) == endpoint  # a server on TCP alone
+        assert reach(endpoint, 5.0) == endpoint  # a server on TCP alone
         with _unix_listener(local):
-            assert reach(endpoint, local, 5.0) == f"unixsock-stream/{local}"
+            assert reach(endpoint, 5.0) == f"unixsock-stream/{local}"
     # What a killed server leaves: its socket's file, which nobody answers at any more.
     assert local.exists()
     with socket.create_server(("127.0.0.1", port)):
-        assert reach(endpoint, local, 5.0) == endpoint
+        assert reach(endpoint, 5.0) == endpoint
 
 
 def _ring(tmp_path: Path, n: int, **cosim) -> Path:
@@ -249,3 +249,23 @@ def test_a_server_sweeps_the_sockets_killed_servers_left_and_keeps_the_live_ones
     finally:
         os.close(holder)
         listener.close()
+
+
+def test_a_relative_socket_folder_gives_no_socket_and_such_an_endpoint_is_reached_as_it_is(monkeypatch):
+    monkeypatch.setenv("HYCOSIM_SOCKETS", "relative/folder")  # the server's and a node's may differ
+    assert local_socket("tcp/127.0.0.1:7447") is None
+    t0 = time.monotonic()
+    assert reach("tcp/127.0.0.1:7447", 30.0) == "tcp/127.0.0.1:7447"  # no probe where no socket can be
+    assert reach("tcp/10.0.0.1:7447", 30.0) == "tcp/10.0.0.1:7447"
+    assert time.monotonic() - t0 < 1.0
+
+
+def test_a_server_takes_a_socket_only_in_a_folder_of_its_users_alone(sockets):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    assert server_socket("tcp/10.0.0.1:7447") == (None, None)
+    local, why_not = server_socket(endpoint)
+    assert local == local_socket(endpoint) and why_not is None
+    assert local.parent.stat().st_mode & 0o777 == 0o700
+    os.chown(local.parent, NOBODY, NOBODY)
+    local, why_not = server_socket(endpoint)
+    assert local is None and str(sockets) in why_not and "not this user's alone" in why_not

@@ -21,8 +21,7 @@ from hycosim.core.folders import make_folder, run_dir_for
 from hycosim.core.heap import set_up_frozen
 from hycosim.transport.local_bus import LocalBus
 from hycosim.transport.security import SecurityError, router_security
-from hycosim.transport.session import (ConnectError, local_socket, open_session, private_folder, router_config,
-                                      sweep_sockets)
+from hycosim.transport.session import ConnectError, open_session, router_config, server_socket
 
 from hycosim.master import checkpoints
 from hycosim.master.coordinator import GuardEvaluationError
@@ -110,13 +109,9 @@ def _router_session(loaded: LoadedProject, endpoint: str, security: dict | None,
     on this host where the project allows one (transport.session.local_socket) and it can be
     listened on; ConnectError where the router cannot be opened."""
     cosim = loaded.project.coSimulation
-    local = local_socket(endpoint) if cosim.localSocket else None
-    if local is not None and not private_folder(local.parent):
-        log.warning("no Unix socket for nodes on this host: its folder is not this user's alone",
-                    folder=str(local.parent))
-        local = None
-    if local is not None:
-        sweep_sockets(local.parent)  # what killed servers left there
+    local, why_not = server_socket(endpoint) if cosim.localSocket else (None, None)
+    if why_not is not None:
+        log.warning(f"no Unix socket for nodes on this host: {why_not}")
     try:
         return open_session(router_config(endpoint, security=security, local=local, low_latency=cosim.lowLatency),
                             endpoint)

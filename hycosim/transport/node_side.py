@@ -22,8 +22,7 @@ from hycosim.transport.inbox import Inbox
 from hycosim.transport.keys import SERVER_TOKEN, ProjectKeys
 from hycosim.transport.local_bus import LocalBus
 from hycosim.transport.security import client_tls
-from hycosim.transport.session import (ConnectError, FramePublisher, client_config, local_socket, open_session,
-                                      reach, token_held)
+from hycosim.transport.session import ConnectError, FramePublisher, client_config, open_session, reach, token_held
 
 
 class NodeLink(Protocol):
@@ -87,9 +86,8 @@ class ZenohNodeLink:
         that name where ``password`` is given) and declare what the node needs."""
         cosim = loaded.project.coSimulation
         polls = loaded.project.polls_before_blocking(os.cpu_count())
-        local = local_socket(endpoint) if cosim.localSocket and not polls else None
         started = time.monotonic()
-        connect = endpoint if local is None else reach(endpoint, local, cosim.attachTimeout)
+        connect = reach(endpoint, cosim.attachTimeout) if cosim.localSocket and not polls else endpoint
         # What the probe took comes off Zenoh's connect timeout: the attach timeout bounds both.
         timeout = max(cosim.attachTimeout - (time.monotonic() - started), 1.0)
         conf = client_config(connect, timeout_s=timeout, low_latency=cosim.lowLatency,

@@ -123,9 +123,25 @@ def local_socket(endpoint: str) -> Path | None:
         netns = os.stat("/proc/self/ns/net").st_ino
     except OSError:
         return None
-    path = Path(os.environ.get("HYCOSIM_SOCKETS", LOCAL_SOCKETS)) / f"hycosim-{os.getuid()}" / f"{netns}-{port}.sock"
+    folder = Path(os.environ.get("HYCOSIM_SOCKETS", LOCAL_SOCKETS))
+    if not folder.is_absolute():  # the server and its nodes may not share a working folder
+        return None
+    path = folder / f"hycosim-{os.getuid()}" / f"{netns}-{port}.sock"
     # A socket's path has room for 107 bytes: a longer one could not be listened on.
     return path if len(os.fsencode(path)) <= 107 else None
+
+
+def server_socket(endpoint: str) -> tuple[Path | None, str | None]:
+    """The Unix socket a server on ``endpoint`` listens on beside it (:func:`local_socket`),
+    its folder swept of what killed servers left (:func:`sweep_sockets`); (None, why) where
+    its folder is not its user's alone, (None, None) where ``endpoint`` takes no socket."""
+    local = local_socket(endpoint)
+    if local is None:
+        return None, None
+    if not private_folder(local.parent):
+        return None, f"its folder {local.parent} is not this user's alone"
+    sweep_sockets(local.parent)
+    return local, None
 
 
 def private_folder(folder: Path) -> bool:
@@ -175,15 +191,19 @@ def _accepts(family: int, address: object) -> bool:
     return True
 
 
-def reach(endpoint: str, local: Path, timeout_s: float) -> str:
+def reach(endpoint: str, timeout_s: float) -> str:
     """The endpoint a node connects to its server at ``endpoint`` by: the server's Unix socket
-    ``local`` (:func:`local_socket`) once it listens there, else ``endpoint`` (the server up on
-    TCP alone, or not up within ``timeout_s``, which Zenoh's connect then reports).
+    beside it (:func:`local_socket`) once it listens there, else ``endpoint`` (one that takes
+    no socket, the server up on TCP alone, or not up within ``timeout_s``, which Zenoh's
+    connect then reports).
 
     A node usually starts before its server listens. Zenoh's client cannot choose itself: an
     endpoint it cannot reach holds it until its connect timeout though the next one listens.
     A probe is a connection opened and closed, which the router drops as a link that never
     said hello."""
+    local = local_socket(endpoint)
+    if local is None:
+        return endpoint
     host, _, port = endpoint.partition("/")[2].rpartition(":")
     unix = f"unixsock-stream/{local}"
     deadline, pause = time.monotonic() + timeout_s, 0.05
