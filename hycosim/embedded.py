@@ -195,17 +195,20 @@ def run_embedded(loaded: LoadedProject, config_path: Path, *, listen: str | None
                         code, message = msg["done"], msg["message"]
                 for name, proc in list(nodes.items()):
                     # Before the run starts no node has a reason to end (exit status 0 included),
-                    # unless the launcher stopped the server for another node's failure.
-                    if name not in failures and proc.poll() is not None and (
-                            proc.returncode not in (0, FAILED_ELSEWHERE) or not (started or server_stopped)):
+                    # unless the launcher stopped the server for another node's failure. A node
+                    # the server stopped (FAILED_ELSEWHERE) did not fail, at any time: the server
+                    # says why it stopped (a Dask worker stops a trial's server alone, and the
+                    # server may stop the run before this loop has read that it started).
+                    if name not in failures and proc.poll() is not None and proc.returncode != FAILED_ELSEWHERE and (
+                            proc.returncode != 0 or not (started or server_stopped)):
                         cause = _node_failure(run_dir, name, proc.returncode, before_start=not started)
                         # Before the start nothing of the node's is lost: its new process attaches as
                         # the first did. During the run the server restores it from the last
                         # checkpoint once the new process says HELLO. Not started again: a process
                         # that fails before the start as the one before it did (a broken model), one
-                        # the server stopped (FAILED_ELSEWHERE), one whose server is gone.
+                        # whose server is gone.
                         again = (restarted.get(name, 0) < restarts and code is None and not server_stopped
-                                 and proc.returncode not in (FAILED_ELSEWHERE, NODE_UNLOADABLE)
+                                 and proc.returncode != NODE_UNLOADABLE
                                  and server.poll() is None
                                  and (restartable if started else last_cause.get(name) != cause))
                         if again:

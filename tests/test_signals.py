@@ -5,6 +5,7 @@ reported at once by the launcher."""
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -16,7 +17,8 @@ import zenoh
 from hycosim.core import frames
 from hycosim.transport.keys import SERVER_TOKEN, ProjectKeys
 from hycosim.transport.session import open_session, router_config
-from tests.helpers import HYCOSIM, REPO, env, free_port, meta, read_rows, reap, spawn, wait_for, write_project
+from tests.helpers import (HYCOSIM, REPO, env, free_port, meta, pids, read_rows, reap, spawn, wait_for,
+                           write_project)
 from tests.test_faults import _pair as fault_pair
 
 
@@ -259,6 +261,37 @@ def test_the_launcher_sent_sigterm_stops_the_run_and_keeps_its_records(tmp_path)
     m = meta(run_dir)
     assert m["status"] == "interrupted" and m["reason"] == "stopped by SIGTERM"
     assert len(_contiguous(run_dir)) > 30
+
+
+def test_a_launchers_server_stopped_alone_before_the_run_starts_records_an_interrupted_run(tmp_path):
+    """The server alone is stopped (a Dask worker stops a trial's server so) while a slow node
+    still loads: the attached node leaves on the server's STOP before the launcher has seen the
+    run start, and is not taken for a failed node: the run is interrupted, not failed."""
+    cfg = _pair(tmp_path)
+    doc = json.loads(cfg.read_text())
+    doc["nodeLists"].append({"nodeName": "late", "UID": 3, "model": "tests.nodes:SlowStart",
+                             "parameters": {"setup_s": 30.0}, "input": [], "output": ["y"]})
+    doc["nodeNum"] = len(doc["nodeLists"])
+    cfg.write_text(json.dumps(doc))
+    runs = tmp_path / "runs"
+    proc = spawn("run", str(cfg), "--runs-dir", str(runs), "--no-progress")
+    try:
+        log = lambda: next(runs.iterdir()) / "node-g.log.jsonl"  # noqa: E731
+        wait_for(lambda: runs.exists() and any(runs.iterdir()) and log().exists()
+                 and "server seen" in log().read_text(), 60, "node g attached")
+        server = pids(f"hycosim server {cfg}")
+        assert len(server) == 1
+        os.kill(server[0], signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        reap(proc)
+    run_dir = next(runs.iterdir())
+    assert proc.returncode == 130, err
+    assert "interrupted by Ctrl-C" in err and "node 'g'" not in err, err
+    m = meta(run_dir)
+    assert m["status"] == "interrupted" and m["reason"] == "interrupted by Ctrl-C", m
+    # g left by the server's word, not by a signal of its own
+    assert "the server stopped the run: interrupted by Ctrl-C" in (run_dir / "node-g.stderr.txt").read_text()
 
 
 _SELF_ENDING = '''
