@@ -4,7 +4,8 @@ Same transport choices as hycosim (its router and client session configs, so the
 low-latency transport; its Zenoh runtime threads; BLOCK + express publishers; the server's
 Unix socket beside its TCP port, which the nodes take where they block, as hycosim's do; the
 same reader, an Inbox in the main thread that polls before it blocks as hycosim's
-waitStrategy says; msgpack) but no config, routing, checking or recording.
+waitStrategy says; its nodes scheduled as batch work where hycosim's nodeScheduling would
+schedule them so; msgpack) but no config, routing, checking or recording.
 """
 
 import os
@@ -16,6 +17,7 @@ import msgpack
 import zenoh
 
 from hycosim.core.schema import polls_before_blocking
+from hycosim.core.scheduling import batch_nodes, schedule_as_batch
 from hycosim.transport.inbox import Inbox
 from hycosim.transport.session import client_config, prefer_shared_runtime, reach, router_config, server_socket
 
@@ -46,7 +48,9 @@ def server(endpoint: str, n: int, steps: int, wait_strategy: str) -> float:
         pub = s.declare_publisher("floor/step", congestion_control=zenoh.CongestionControl.BLOCK, express=True)
         inbox = Inbox(s, "floor/out/**", "floor/out/local", poll=polls)
         alive = s.liveliness().declare_subscriber("floor/alive/*", zenoh.handlers.FifoChannel(64), history=True)
-        procs = [subprocess.Popen([sys.executable, __file__, "node", endpoint, str(i), str(int(polls))]) for i in range(n)]
+        batch = str(int(batch_nodes("auto", n + 1, os.cpu_count(), paced=False)))
+        procs = [subprocess.Popen([sys.executable, __file__, "node", endpoint, str(i), str(int(polls)), batch])
+                 for i in range(n)]
         seen = set()
         while len(seen) < n:
             seen.add(str(alive.recv().key_expr))
@@ -68,6 +72,8 @@ def server(endpoint: str, n: int, steps: int, wait_strategy: str) -> float:
 if __name__ == "__main__":
     prefer_shared_runtime()  # the nodes it starts inherit it
     if sys.argv[1] == "node":
+        if sys.argv[5] == "1":  # before Zenoh starts its threads, which take this thread's policy
+            schedule_as_batch()
         node(sys.argv[2], int(sys.argv[3]), sys.argv[4] == "1")
     else:
         print(server(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]), sys.argv[5]), flush=True)

@@ -7,6 +7,9 @@ Processes are not pinned to cores: on 2 cores the scheduler decides, as it would
 Every process of a run is started in this one's session, as a user's launcher (``hycosim run``,
 a shell) starts them: where the kernel groups processes by session to schedule them (autogroup),
 processes in sessions of their own were preempted twice as often (``_procs.start``).
+hycosim's nodes are scheduled as its project says (``nodeScheduling``: as batch work where they
+outnumber the cores), and so are the floor's; HELICS's and mosaik's processes as the system's
+default.
 
     python benchmarks/barrier.py [--n 2 4] [--steps 3000] [--repeat 3] [--systems hycosim helics-tcp ...]
                                  [--wait-strategy auto|block|yield] [--timeout 120] [--cpu] [--json]

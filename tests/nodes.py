@@ -214,3 +214,27 @@ class Typed(Node):
         import struct
 
         self.k, self.u = struct.unpack("<qd", state)
+
+
+class Scheduling(Node):
+    """``policy``: the kernel's scheduling policy of the thread that steps the node (Linux's
+    ``os.SCHED_*`` number); ``others``: how many of the process's threads (Zenoh's among them)
+    have another policy."""
+
+    def setup(self, ctx: NodeContext) -> None:
+        self.policy, self.others = -1, -1
+
+    def outputs(self) -> dict[str, Any]:
+        return {"policy": self.policy, "others": self.others}
+
+    def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
+        import os
+
+        self.policy = os.sched_getscheduler(0)
+        policies = []
+        for tid in os.listdir("/proc/self/task"):
+            try:
+                policies.append(os.sched_getscheduler(int(tid)))
+            except OSError:  # a thread that ended meanwhile
+                pass
+        self.others = sum(p != self.policy for p in policies)

@@ -18,6 +18,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt, field_validator, model_validator
 
+from hycosim.core.scheduling import batch_nodes
+
 
 FREE_MODE = "free"
 
@@ -316,6 +318,12 @@ class CoSimulation(_Strict):
     # than cores compete. "auto": "yield" for up to 2 processes per core (the server and the
     # project's nodes), else "block".
     waitStrategy: Literal["auto", "block", "yield"] = "auto"
+    # How the kernel schedules each node's process (core.scheduling). "batch": as batch work
+    # (Linux's SCHED_BATCH): a node woken by a release does not preempt the process on its
+    # core, the server sending that release among them. "normal": the system's default.
+    # "auto": "batch" where the server and the nodes outnumber the cores and the run is not
+    # paced to the wall clock (realTime, asynchronous sources), else "normal".
+    nodeScheduling: Literal["auto", "batch", "normal"] = "auto"
     # How ``hycosim run`` carries the frames. "zenoh": the server and each node a process of
     # its own, over Zenoh on loopback. "inprocess": the master and every node in one process,
     # each release a call (as ``hycosim run --in-process``): no sockets, no per-node restarts,
@@ -495,6 +503,12 @@ class Project(_Strict):
     def polls_before_blocking(self, cpus: int | None) -> bool:
         """Whether a hycosim process on a machine with ``cpus`` cores polls before it blocks."""
         return polls_before_blocking(self.coSimulation.waitStrategy, len(self.nodeLists) + 1, cpus)
+
+    def batch_nodes(self, cpus: int | None) -> bool:
+        """Whether each node's process is scheduled as batch work on a machine with ``cpus`` cores
+        (``coSimulation.nodeScheduling``)."""
+        paced = self.coSimulation.real_time_factor() is not None or bool(self.async_nodes())
+        return batch_nodes(self.coSimulation.nodeScheduling, len(self.nodeLists) + 1, cpus, paced)
 
 
 def project_json_schema() -> dict[str, Any]:

@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import os
 import signal
 from pathlib import Path
+
+import structlog
 
 from hycosim.core import logs, signals
 from hycosim.core.config import LoadedProject, server_endpoint
 from hycosim.core.endpoints import EndpointError, parse_endpoint
 from hycosim.core.heap import set_up_frozen
+from hycosim.core.scheduling import schedule_as_batch
 from hycosim.transport.security import SecurityError, node_password
 from hycosim.transport.session import ConnectError
 from hycosim.core.signals import FAILED_ELSEWHERE, NODE_UNLOADABLE
@@ -32,6 +36,9 @@ def run_node(loaded: LoadedProject, name: str, connect: str | None = None,
         endpoint = str(parse_endpoint(connect)) if connect else server_endpoint(loaded.project.serverIP)
     except EndpointError as exc:
         return 2, f"{'--connect' if connect else 'serverIP'}: {exc}"
+    # Before any thread starts (Zenoh's, a model's): each takes its policy from this one.
+    if loaded.project.batch_nodes(os.cpu_count()) and schedule_as_batch():
+        structlog.get_logger("node").bind(node=name).info("scheduled", policy="batch")
     interrupted: list[int] = []  # the stop signal that came, if any
     previous = signals.raise_on_stop(interrupted)
     try:
