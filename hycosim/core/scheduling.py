@@ -31,8 +31,9 @@ def batch_nodes(policy: str, processes: int, cpus: int | None, paced: bool) -> b
 
 
 def schedule_as_batch() -> bool:
-    """The calling thread, and every thread it starts from now on, scheduled as batch work
-    (``SCHED_BATCH``); call it before a process starts its threads (Zenoh's, a model's).
+    """The calling thread, and every thread and process it starts from now on (a model's tool
+    started as a process of its own too), scheduled as batch work (``SCHED_BATCH``); call it
+    before a process starts its threads (Zenoh's, a model's).
     False where the system has no such policy or refuses it (not Linux, a sandbox): the process
     then runs as before."""
     try:
