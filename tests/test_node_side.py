@@ -6,6 +6,7 @@ in-process run never takes (a state restored in pieces), as a Zenoh node does.""
 from __future__ import annotations
 
 import inspect
+from types import SimpleNamespace
 
 import pytest
 
@@ -16,6 +17,7 @@ from hycosim.node.loader import load_node
 from hycosim.node.in_process import HostedNode
 from hycosim.transport.local_bus import LocalBus
 from hycosim.transport.node_side import LocalNodeLink, NodeLink, ZenohNodeLink
+from hycosim.transport.session import LOW_LATENCY_MAX_FRAME
 from tests.helpers import write_project
 
 
@@ -148,6 +150,8 @@ class _ScriptedLink:
         self.session = type("Session", (), {"close": lambda self: None})()
         self.waits = None
         self.over = "scripted"  # what ZenohNodeLink.open says it connected to
+        # What the flat path sends its outputs through (ZenohNodeLink.publisher).
+        self.publisher = SimpleNamespace(unchecked_put=self.send, limit=LOW_LATENCY_MAX_FRAME)
 
     def receive(self, timeout: float):
         return "hycosim/p/down", next(self._script)

@@ -65,7 +65,8 @@ class PlainLoop:
         inputs, route, gather, ledger, sent = router.inputs, router.route, b.gather, b.ledger, b.sent
         put, messages = b.release.put, b.messages
         H, stop_time, last_point = b.cosim.stepSize, b.cosim.stopTime, b.last_point
-        encode, STEP, perf_counter, driven, no_slopes = frames.encode, frames.STEP, time.perf_counter, [], {}
+        encode, packed, VERSION, STEP = frames.encode, frames.packed, frames.VERSION, frames.STEP
+        perf_counter, driven, no_slopes = time.perf_counter, [], {}
         # Every node gets every release: one that comes back is replayed the last (Barrier.replay).
         sent.of.clear()
         point = self._point  # what a plain run's every point has alike (Relay._arrive's Seen for it)
@@ -83,7 +84,10 @@ class PlainLoop:
             # Barrier.send's, flat: every node is released, and the inputs hold no other node's.
             released = perf_counter()
             try:
-                frame = encode(STEP, k, t, next_t - t, mode, inputs, driven, no_slopes)
+                try:  # frames.encode's packing, without its call
+                    frame = packed((VERSION, STEP, k, t, next_t - t, mode, inputs, driven, no_slopes))
+                except TypeError:
+                    frame = encode(STEP, k, t, next_t - t, mode, inputs, driven, no_slopes)
                 sent.last = frame
                 try:
                     put(frame)

@@ -119,7 +119,8 @@ class Router:
             else:
                 value = outputs[hop.src_node][hop.src_index]
             inputs[hop.dst_node][hop.dst_index] = value if hop.convert is None else hop.convert(value)
-        self._pin(inputs)
+        if self.pins:
+            self._pin(inputs)
         return ages
 
     def _pin(self, inputs: dict[str, list[Any]]) -> None:

@@ -7,14 +7,16 @@ from __future__ import annotations
 
 import time
 
-from hycosim.core import frames
+from hycosim.core import frames, signals
 from hycosim.node.interface import AsyncSource
 from hycosim.node.receiving import NodeRunError
+from hycosim.node.releases import REFUSED
 from hycosim.node.replay import SamplePlayer
 from hycosim.node.runtime import NodeRuntime, PHASE_RESTART, PHASE_RESTORING, PHASE_START, PHASE_STEPPING
 from hycosim.node.sources import run_source, source_start
 from hycosim.transport.inbox import LOCAL
 from hycosim.transport.node_side import ZenohNodeLink
+from hycosim.transport.session import FrameTooLarge
 
 
 class ZenohNode(NodeRuntime):
@@ -91,10 +93,11 @@ class ZenohNode(NodeRuntime):
 
         Every step of a run comes here, where the layers of the general path cost a node as
         much CPU as the floor's whole step (benchmarks/FINDINGS.md, 2026-12-04)."""
-        receiver, link, impl, at = self.receiver, self.link, self.impl, self._stepping
-        name, plain, in_names, uid = self.name, receiver.plain, self._in_names, self.spec.UID
-        pack, send_outputs, encode, packed = self.outbox.pack, self.outbox.send_outputs, frames.encode, frames.packed
-        head = [frames.VERSION, frames.OUTPUTS, uid]
+        receiver, link, impl, at, outbox = self.receiver, self.link, self.impl, self._stepping, self.outbox
+        name, decode, in_names, uid = self.name, receiver.releases.plain_decode, self._in_names, self.spec.UID
+        pack, encode, packed = outbox.pack, frames.encode, frames.packed
+        put, limit = link.publisher.unchecked_put, link.publisher.limit
+        held, VERSION, OUTPUTS = signals.HELD, frames.VERSION, frames.OUTPUTS
         # A model that steps on lists (an FMU, Node.listed_step) takes the inputs as read and
         # gives its outputs as the wire has them: no dict either way, no conversion. Asked at
         # every entry: a restored or restarted model may step through other objects.
@@ -109,8 +112,13 @@ class ZenohNode(NodeRuntime):
             msg = link.receive(bound)
             if msg is None:
                 raise receiver.silence(bound, "release")
-            got = plain(msg[1]) if flat_now and msg[0] != LOCAL else None
-            if got is None:
+            release = None
+            if flat_now and msg[0] != LOCAL:
+                try:  # ReleaseReader.plain, without its call
+                    release = decode(msg[1])
+                except REFUSED:
+                    pass
+            if release is None:
                 frame = receiver.take(msg)
                 if frame is not None and self.handle(frame):
                     return True
@@ -118,21 +126,34 @@ class ZenohNode(NodeRuntime):
                     return False
                 flat_now = flat and at.pending_state is None
                 continue
-            release, mine = got
-            k, t, h, mode, driven = release.step, release.t, release.h, release.mode, name in release.driven
-            if mode != at.mode or driven != at.driven:
-                self._enter_step(impl, at, k, mode, driven)
+            k, t, h, mode = release.step, release.t, release.h, release.mode
+            if mode != at.mode or (name in release.driven) != at.driven:
+                self._enter_step(impl, at, k, mode, name in release.driven)
             try:
                 if listed is not None:
-                    values = listed(t, h, mine)
+                    values = listed(t, h, release.inputs.mine)
                 else:
-                    impl.step(t, h, dict(zip(in_names, mine)))
+                    impl.step(t, h, dict(zip(in_names, release.inputs.mine)))
                     values = pack(impl.outputs())
                 try:  # frames.encode's packing, without its call
-                    out = packed([*head, k + 1, t + h, values])
+                    out = packed((VERSION, OUTPUTS, uid, k + 1, t + h, values))
                 except TypeError:
-                    out = encode(frames.OUTPUTS, uid, k + 1, t + h, values)
-                send_outputs(out, k + 1)
+                    out = encode(OUTPUTS, uid, k + 1, t + h, values)
+                # Outbox.send_outputs and FramePublisher.put, without their calls: measured, sent
+                # and counted with no stop between.
+                held.depth += 1
+                try:
+                    if len(out) > limit:
+                        raise FrameTooLarge(len(out), limit)
+                    put(out)
+                    outbox.steps = k + 1
+                finally:
+                    held.depth -= 1
+                    if held.pending is not None:
+                        signals.raise_held()
+            except FrameTooLarge as exc:
+                self._step_failed(outbox.too_large(out, exc), k, t, impl=impl)
+                return True
             except Exception as exc:
                 self._step_failed(exc, k, t, impl=impl)
                 return True  # the model ended the simulation (a failure raised)

@@ -18,7 +18,7 @@ typed in one call.
 
 from __future__ import annotations
 
-import math
+import sys
 from typing import Annotated, Any, Literal, Union
 
 import msgpack
@@ -43,23 +43,32 @@ class StepWire(msgspec.Struct, array_like=True, forbid_unknown_fields=True):
 
 
 _STEP = msgspec.msgpack.Decoder(StepWire)
+# What ``frames.check_release`` asks of a release's time and step size, as types msgspec checks
+# in C while it decodes: a finite time (NaN fails every bound), a finite step size above zero.
+_LARGEST = sys.float_info.max
+_FINITE = Union[int, Annotated[float, msgspec.Meta(ge=-_LARGEST, le=_LARGEST)]]
+_POSITIVE = Union[Annotated[int, msgspec.Meta(gt=0)], Annotated[float, msgspec.Meta(gt=0, le=_LARGEST)]]
 # msgspec's own errors, and RecursionError for nesting deeper than it follows (inside an entry
 # it skips too: it must find where the entry ends).
-_REFUSED = (msgspec.MsgspecError, RecursionError)
+REFUSED = (msgspec.MsgspecError, RecursionError)
 
 
 def _plain_step(node: str, input_types: tuple[tuple[type, ...], ...]) -> type[msgspec.Struct]:
     """A STEP as node ``node`` reads it on the flat path: StepWire's fields, with ``inputs`` a
     struct of one field, this node's entry, typed (its other keys, the other nodes' entries, are
-    skipped as a struct's unknown fields are: checked to be well-formed, never built). Its name
-    is the wire's key, which need not be a Python identifier; ``mine`` is its field."""
+    skipped as a struct's unknown fields are: checked to be well-formed, never built), and
+    ``slopes`` a struct whose one field, this node's entry, takes no value: a release with input
+    slopes for this node goes the whole way. The field's name is the wire's key, which need not
+    be a Python identifier; ``mine`` is its field."""
     mine = msgspec.defstruct("Mine", [("mine", tuple[tuple(Union[types] for types in input_types)])],
                              rename={"mine": node}, gc=False)
+    no_slopes = msgspec.defstruct("NoSlopes", [("mine", msgspec.UnsetType, msgspec.UNSET)],
+                                  rename={"mine": node}, gc=False)
     return msgspec.defstruct("PlainStep", [
         ("version", Literal[frames.VERSION]), ("kind", Literal[frames.STEP]),
-        ("step", Annotated[int, msgspec.Meta(ge=0, lt=frames.MAX_STEP)]), ("t", int | float),
-        ("h", int | float), ("mode", str), ("inputs", mine), ("driven", list[str]),
-        ("slopes", dict[str, msgspec.Raw])], array_like=True, forbid_unknown_fields=True, gc=False)
+        ("step", Annotated[int, msgspec.Meta(ge=0, lt=frames.MAX_STEP)]), ("t", _FINITE),
+        ("h", _POSITIVE), ("mode", str), ("inputs", mine), ("driven", list[str]),
+        ("slopes", no_slopes)], array_like=True, forbid_unknown_fields=True, gc=False)
 
 
 class ReleaseReader:
@@ -71,7 +80,9 @@ class ReleaseReader:
         # The flat path decodes and types a STEP and the node's inputs in one call in C where
         # every input is a scalar (an array or binary port, which may be a list, goes the whole way).
         self.flat = all(list not in types for types in input_types)
-        self._plain = msgspec.msgpack.Decoder(_plain_step(node, input_types)) if self.flat else None
+        # plain() without its call, for the loop that reads every release: it raises REFUSED
+        # where plain() gives None.
+        self.plain_decode = msgspec.msgpack.Decoder(_plain_step(node, input_types)).decode if self.flat else None
 
     def decode(self, payload: bytes) -> frames.Frame:
         """``frames.decode`` for this node: a STEP comes with this node's entry of ``inputs``
@@ -80,7 +91,7 @@ class ReleaseReader:
         entries are not well-formed msgpack (another node's entry is not looked into further)."""
         try:
             wire = _STEP.decode(payload)
-        except _REFUSED as exc:
+        except REFUSED as exc:
             frame = frames.decode(payload)
             if frame.kind == frames.STEP:  # a STEP in shape, but not in its fields' types
                 raise frames.FrameError(f"STEP frame with fields of the wrong types: {frames.short(str(exc))}") \
@@ -91,20 +102,16 @@ class ReleaseReader:
         slopes = {node: _unpack(wire.slopes[node])} if node in wire.slopes else {}
         return frames.Step(wire.step, wire.t, wire.h, wire.mode, inputs, wire.driven, slopes)
 
-    def plain(self, payload: bytes) -> tuple[Any, tuple[Any, ...]] | None:
-        """The STEP in ``payload`` (its fields named as StepWire's) and this node's inputs, if
-        it is one that :meth:`decode` and ``frames.check_release`` pass for this node, with
-        inputs for it and no input slopes; None for anything else, which the caller hands to
-        those two (the judges of what it is and of why it is refused). Only for a node whose
-        inputs are all scalars (``flat``)."""
+    def plain(self, payload: bytes) -> Any | None:
+        """The STEP in ``payload`` (its fields named as StepWire's, this node's inputs as
+        ``inputs.mine``) if it is one that :meth:`decode` and ``frames.check_release`` pass for
+        this node, with inputs for it and no input slopes; None for anything else, which the
+        caller hands to those two (the judges of what it is and of why it is refused). Only for
+        a node whose inputs are all scalars (``flat``)."""
         try:
-            wire = self._plain.decode(payload)
-        except _REFUSED:
+            return self.plain_decode(payload)
+        except REFUSED:
             return None
-        t, h = wire.t, wire.h  # the step is in range, as its type says
-        if not (math.isfinite(t) and math.isfinite(h) and h > 0) or self.node in wire.slopes:
-            return None
-        return wire, wire.inputs.mine
 
 
 def _unpack(raw: msgspec.Raw) -> Any:

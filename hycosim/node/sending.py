@@ -98,9 +98,9 @@ class Outbox:
         try:
             self.receiver.link.send(payload)
         except FrameTooLarge as exc:
-            raise self._too_large(payload, exc) from None
+            raise self.too_large(payload, exc) from None
 
-    def _too_large(self, payload: bytes, exc: FrameTooLarge) -> NodeRunError:
+    def too_large(self, payload: bytes, exc: FrameTooLarge) -> NodeRunError:
         """The error for a frame the link cannot carry, naming the node's largest outputs."""
         frame = frames.decode(payload)
         values = frame.values if frame.kind in (frames.OUTPUTS, frames.SAMPLE, frames.BATCH) else []
@@ -117,7 +117,7 @@ class Outbox:
             try:  # send()'s body
                 self.receiver.link.send(payload)
             except FrameTooLarge as exc:
-                raise self._too_large(payload, exc) from None
+                raise self.too_large(payload, exc) from None
             self.steps = step
         finally:
             held.depth -= 1

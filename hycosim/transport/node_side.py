@@ -64,8 +64,8 @@ class ZenohNodeLink:
             self._inbox = Inbox(session, self._keys.down, self._keys.down,
                                 poll=loaded.project.polls_before_blocking(os.cpu_count()))
             self.receive = self._inbox.recv  # receive(), as the call it makes, until close()
-            self._publisher = FramePublisher(session, self._keys.up(name), low_latency=cosim.lowLatency)
-            self.send = self._publisher.put  # send(), as the call it makes: one call less at every step
+            self.publisher = FramePublisher(session, self._keys.up(name), low_latency=cosim.lowLatency)
+            self.send = self.publisher.put  # send(), as the call it makes: one call less at every step
             # history: fetch the server's token now. Without it this session learnt of the token
             # only if the router's announcement won a race with the subscription (it lost about one
             # attach in fifteen with Zenoh receiving on the app runtime), and a session that never
@@ -113,7 +113,7 @@ class ZenohNodeLink:
             self._inbox.inject(frames.encode(frames.LIVE, SERVER_TOKEN, sample.kind == zenoh.SampleKind.PUT))
 
     def send(self, payload: bytes) -> None:
-        self._publisher.put(payload)
+        self.publisher.put(payload)
 
     def receive(self, timeout: float) -> tuple[str, bytes] | None:
         return self._inbox.recv(timeout) if self._inbox is not None else None

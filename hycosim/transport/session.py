@@ -9,6 +9,7 @@ import os
 import re
 import socket
 import stat
+import sys
 import threading
 import time
 from pathlib import Path
@@ -58,12 +59,16 @@ class FramePublisher:
 
     def __init__(self, session: zenoh.Session, key: str, *, low_latency: bool):
         self._pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK, express=True)
-        self._limit = LOW_LATENCY_MAX_FRAME if low_latency else None
+        #: The largest frame the transport carries (``sys.maxsize``: any).
+        self.limit = LOW_LATENCY_MAX_FRAME if low_latency else sys.maxsize
+        #: Zenoh's put, unchecked: for a loop that sends a frame at every step and compares its
+        #: length with :attr:`limit` itself (one call less a frame; a node's flat path).
+        self.unchecked_put = self._pub.put
 
     def put(self, payload: bytes) -> None:
         """Send one frame; raise FrameTooLarge (nothing sent) if it cannot be carried."""
-        if self._limit is not None and len(payload) > self._limit:
-            raise FrameTooLarge(len(payload), self._limit)
+        if len(payload) > self.limit:
+            raise FrameTooLarge(len(payload), self.limit)
         self._pub.put(payload)
 
 
