@@ -26,13 +26,14 @@ from hycosim.node.interface import NodeContext
 
 def _project(tmp_path: Path, every: float | None = 0.5, clock: bool = False) -> Path:
     """Four nodes, the MuJoCo rod among them; one gain takes a little time per step so that a
-    kill lands mid-run."""
+    kill lands mid-run (g2, or g1 where g2 is a clock that cannot serialise)."""
     nodes = [
         {"nodeName": "rod", "UID": 1, "model": "hycosim.scenario.rod.node:RodNode", "parameters": {"initial_angle_deg": 35},
          "input": [], "output": ["angle", "omega"]},
         {"nodeName": "pend", "UID": 2, "model": "pendulum", "parameters": {"theta0": 0.5}, "input": ["theta_in"],
          "output": ["theta", "omega"]},
-        {"nodeName": "g1", "UID": 3, "model": "gain", "parameters": {"k": 2.0}, "input": ["u"], "output": ["y"]},
+        {"nodeName": "g1", "UID": 3, "model": "gain", "parameters": {"k": 2.0, "work_s": 0.003} if clock else {"k": 2.0},
+         "input": ["u"], "output": ["y"]},
         {"nodeName": "g2", "UID": 4, "model": "tests.nodes:Clock" if clock else "gain",
          "parameters": {} if clock else {"k": 0.5, "work_s": 0.003}, "input": [] if clock else ["u"],
          "output": ["y"]},
