@@ -8,15 +8,19 @@ from hycosim.node.interface import AsyncSource, Node, NodeContext, SimulationEnd
 
 
 class Text(Node):
-    """Every output is a string of ``size`` characters (parameter); inputs are ignored."""
+    """Every output is a string of ``size`` characters (parameter), ``grown`` characters from
+    step ``grow_at`` on where those are given; inputs are ignored."""
 
     def setup(self, ctx: NodeContext) -> None:
         self.size = int(ctx.parameter("size", 10))
+        self.grow_at = ctx.parameter("grow_at", None)
+        self.grown = int(ctx.parameter("grown", self.size))
         self.ports = [p.name for p in ctx.outputs]
         self.k = 0
 
     def outputs(self) -> dict[str, Any]:
-        return {port: (f"{self.k}:" + "x" * self.size)[: self.size] for port in self.ports}
+        size = self.grown if self.grow_at is not None and self.k >= self.grow_at else self.size
+        return {port: (f"{self.k}:" + "x" * size)[:size] for port in self.ports}
 
     def step(self, t: float, h: float, inputs: dict[str, Any]) -> None:
         self.k += 1

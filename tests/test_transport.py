@@ -37,6 +37,19 @@ def test_outputs_over_the_low_latency_limit_stop_the_run_naming_node_and_port(tm
     assert meta(run_dir)["status"] == "failed"
 
 
+def test_outputs_that_outgrow_the_limit_mid_run_stop_it_naming_node_and_port_rows_kept(tmp_path):
+    """A node's steps after the first take its flat path, which measures each frame itself."""
+    node = _text_node("big", 1, 10, ["small", "blob"])
+    node["parameters"].update(grow_at=3, grown=40_000)
+    res, run_dir = _run(tmp_path, [node])
+    text = res.stdout + res.stderr
+    assert res.returncode != 0
+    assert "'big'" in text and "at step 2" in text and "blob (40" in text and f"{LIMIT} bytes" in text
+    assert meta(run_dir)["status"] == "failed"
+    rows = (run_dir / "values.csv").read_text().splitlines()[1:]
+    assert [r.split(",")[0] for r in rows] == ["0", "1", "2"]
+
+
 def test_a_release_over_the_limit_names_the_node_whose_inputs_fill_it(tmp_path):
     # 20 kB out of "src" is within the limit; fanned out to two inputs of "dst", the release is not.
     nodes = [_text_node("src", 1, 20_000, ["s"]), _text_node("dst", 2, 5, ["y"], inputs=["a", "b"])]
