@@ -16,13 +16,14 @@ NODES = ["a", "b", "c"]
 
 @st.composite
 def recents(draw, most: int = 600):
-    """Points in time order: gaps from 0 to 20 ms, random holders, waits and arrivals."""
+    """Points in time order: gaps from 0 to 20 ms, random holders, waits and arrivals, and
+    between any two up to 3 points told and not kept."""
     gaps = draw(st.lists(st.floats(0.0, 0.02), min_size=0, max_size=most))
-    t, points = 100.0, []
+    t, told, points = 100.0, 0, []
     for gap in gaps:
-        t += gap
+        t, told = t + gap, told + 1 + draw(st.integers(0, 3))
         arrivals = draw(st.dictionaries(st.sampled_from(NODES), st.floats(0.0, 0.01), max_size=3))
-        points.append((t, draw(st.sampled_from(["", *NODES])), draw(st.floats(0.0, 0.01)), arrivals))
+        points.append((t, draw(st.sampled_from(["", *NODES])), draw(st.floats(0.0, 0.01)), arrivals, told))
     return points, t + draw(st.floats(0.0, 0.5))
 
 
@@ -30,7 +31,7 @@ def _every_point(recent, now):
     """The window as reckoned from every point of the second (what the server did before)."""
     second = [p for p in recent if p[0] >= now - 1.0]
     held, arrived = {}, {}
-    for _, holder, wait, arrivals in second:
+    for _, holder, wait, arrivals, _ in second:
         if holder:
             held[holder] = held.get(holder, 0.0) + wait
         for node, at in arrivals.items():
@@ -43,7 +44,8 @@ def test_window_counts_the_second_and_samples_within_it(drawn):
     recent, now = drawn
     window = barrier_window(recent, now, kept=10_000)
     second, held, arrived = _every_point(recent, now)
-    assert window["steps"] == len(second)
+    # Every point told from the second's first kept one to its last, kept or not.
+    assert window["steps"] == (second[-1][4] - second[0][4] + 1 if second else 0) >= len(second)
     assert set(window["held"]) <= set(held) and set(window["arrival_ms"]) <= set(arrived)
     if window["held"]:
         assert math.isclose(sum(window["held"].values()), 1.0)
@@ -60,7 +62,7 @@ def test_window_samples_a_busy_second_without_aliasing(period):
     # 3,000 points in the second, node a held the barrier on every period-th: its share is
     # 1/period whatever the period (every k-th point would see a alone, or never).
     now = 10.0
-    recent = [(now - 1.0 + (i + 0.5) / 3000, "a" if i % period == 0 else "b", 1e-3, {"a": 2e-3, "b": 1e-3})
+    recent = [(now - 1.0 + (i + 0.5) / 3000, "a" if i % period == 0 else "b", 1e-3, {"a": 2e-3, "b": 1e-3}, i + 1)
               for i in range(3000)]
     window = barrier_window(recent, now, kept=4096)
     assert window["steps"] == 3000
@@ -71,7 +73,7 @@ def test_window_samples_a_busy_second_without_aliasing(period):
 def test_window_reckons_the_rate_when_the_kept_points_span_less_than_a_second():
     # 4,096 points kept at 10,000 steps/s span 0.41 s: the steps of a second are their rate.
     now = 50.0
-    recent = [(now - (4095 - i) / 10_000, "a", 1e-4, {}) for i in range(4096)]
+    recent = [(now - (4095 - i) / 10_000, "a", 1e-4, {}, i + 1) for i in range(4096)]
     assert barrier_window(recent, now, kept=4096)["steps"] == 10_000
     assert barrier_window(recent, now, kept=8192)["steps"] == 4096  # not full: all there were
 
@@ -220,3 +222,39 @@ def test_the_status_answer_gives_each_point_as_it_was_told(case):
     expected = [({n: v[:-1] for n, v in o.items()}, {n: v[:-1] for n, v in i.items()}) for o, i in points]
     assert (answer["outputs"], answer["inputs"]) == expected[-1]
     assert [(o, i) for _, _, o, i in answer["points"]] == expected
+
+
+def test_the_status_answer_takes_a_point_a_millisecond_counts_them_all_and_keeps_the_last():
+    """Points told ten a millisecond are taken one a millisecond, the steps a second counted
+    from all of them; the last told, not taken, becomes the answer's at the run's end, unless a
+    rollback went back before it."""
+    from hycosim.core.schema import Project
+    from hycosim.master.status_view import LatestPoints
+
+    project = Project.model_validate({
+        "projectName": "p", "nodeNum": 2, "linkNum": 1,
+        "nodeLists": [{"nodeName": "a", "UID": 1, "model": "ramp", "output": ["y"]},
+                      {"nodeName": "b", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]}],
+        "linkLists": [{"from": "a.y", "to": "b.u"}], "coSimulation": {"stepSize": 0.1, "stopTime": 1.0}})
+    latest = LatestPoints(project, 4096, every_s=0.001)
+    for k in range(1005):  # 0.1 ms apart: 100.5 ms of points
+        latest.step_complete(k, 0.1 * k, _point(project, 10.0 + 1e-4 * k))
+    taken = [step for step, *_ in latest.history]
+    # One point of each millisecond (floating point may move a boundary by one point).
+    assert taken[0] == 0 and 100 <= len(taken) <= 101 and all(9 <= b - a <= 11 for a, b in zip(taken, taken[1:]))
+    answer = latest.answer(10.5, since=None)
+    assert answer["window"]["steps"] == taken[-1] + 1  # from the first kept to the last, all counted
+    assert answer["step"] == taken[-1] < 1004
+    latest.run_ended("completed")
+    answer = latest.answer(10.5, since=taken[-2])
+    assert answer["step"] == 1004 and answer["outputs"] == {"a": [10.0 + 1e-4 * 1004], "b": [2.0]}
+    assert [p[0] for p in answer["points"]] == [taken[-1], 1004]
+    assert answer["window"]["steps"] == 1005  # every point told, counted once
+
+    # A point left untaken, then a rollback to before it: the run's end takes nothing back.
+    again = LatestPoints(project, 4096, every_s=0.001)
+    for k in range(3):
+        again.step_complete(k, 0.1 * k, _point(project, 20.0 + 1e-4 * k))
+    again.state_restored(1, 0.1)
+    again.run_ended("completed")
+    assert again.answer(20.5, since=None)["step"] == 0 and [s for s, *_ in again.history] == [0]

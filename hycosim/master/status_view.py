@@ -6,11 +6,18 @@ built. Reckoning every point of the last second and sending 256 points took 6 ms
 2 cores at 3,000 steps/s: at five answers a second, 3 % of the run's time, which the run lost
 (benchmarks/dashboard_cost.py). Samples drawn from the second, and fewer points, take a third of
 that (2.0 ms) and show the same.
+
+Nor does it take every point: at most one a millisecond (:data:`TAKE_EVERY_S`), and the run's
+last at its end. Copying each point's values cost the server some 5 µs a point at 2 nodes, a
+twelfth of its work, where a plain run goes 15,000 points a second (benchmarks/FINDINGS.md,
+tenth entry); a dashboard plots at most 320 points a second of them. The steps a second are
+counted from every point told, taken or not.
 """
 
 from __future__ import annotations
 
 import bisect
+import math
 import random
 import time
 from collections import deque
@@ -29,30 +36,34 @@ STATUS_POINTS = 64
 # drawn at random: every k-th point would see one node only where the nodes take turns (a
 # multi-rate run, Gauss-Seidel). A share from 256 draws is within 0.03 of the second's (sd).
 WINDOW_SAMPLES = 256
+# A point is taken at most this often (s); the points between are only counted.
+TAKE_EVERY_S = 0.001
 
 _flat = chain.from_iterable
 
 # A recent point: (perf_counter at its release, the node the barrier waited for last, how long
-# it waited, each node's arrival after the release), in time order.
-Recent = tuple[float, str, float, dict[str, float]]
+# it waited, each node's arrival after the release, how many points with a release had been
+# told by then, this one among them), in time order.
+Recent = tuple[float, str, float, dict[str, float], int]
 
 
 def barrier_window(recent: Sequence[Recent], now: float, kept: int) -> dict[str, Any]:
     """Steps in the second before ``now``, each node's share of the barrier held and its mean
-    arrival (ms); ``kept``: how many points ``recent`` holds at most. When those do not reach a
-    second back, the steps are the rate over the ones it holds."""
+    arrival (ms); ``kept``: how many points ``recent`` holds at most. The steps are counted
+    from the first point kept in the second to the last, those not kept between them among them;
+    when the kept points do not reach a second back, the steps are the rate over them."""
     first = bisect.bisect_left(recent, now - 1.0, key=itemgetter(0))
     in_second = len(recent) - first
-    steps = in_second
+    steps = recent[-1][4] - recent[first][4] + 1 if in_second else 0
     if first == 0 and len(recent) >= kept > 1 and now > recent[0][0]:
-        steps = round((len(recent) - 1) / (now - recent[0][0]))
+        steps = round((recent[-1][4] - recent[0][4]) / (now - recent[0][0]))
     held: dict[str, float] = {}
     arrived: dict[str, list[float]] = {}
     drawn = range(first, len(recent))
     if in_second > WINDOW_SAMPLES:  # seeded by the count: the same points give the same answer
         drawn = random.Random(in_second).sample(drawn, WINDOW_SAMPLES)
     for i in drawn:
-        _, holder, wait, arrivals = recent[i]
+        _, holder, wait, arrivals, _ = recent[i]
         if holder:
             held[holder] = held.get(holder, 0.0) + wait
         for node, at in arrivals.items():
@@ -102,8 +113,8 @@ class LatestPoints:
     dashboard's feed): an observer of the run's points, to which the loop adds each mode switch
     too; Zenoh's thread reads them for an answer, each a copy taken at once under the GIL."""
 
-    def __init__(self, project: Project, kept: int):
-        self.kept = kept
+    def __init__(self, project: Project, kept: int, every_s: float = TAKE_EVERY_S):
+        self.kept, self.every_s = kept, every_s
         self._outputs = Layout([(n.nodeName, len(n.output)) for n in project.nodeLists])
         self._inputs = Layout([(n.nodeName, len(n.input)) for n in project.nodeLists])
         self.recent: deque[Recent] = deque(maxlen=kept)  # for the barrier window
@@ -114,15 +125,27 @@ class LatestPoints:
             0, project.coSimulation.startTime, FREE_MODE, None, None, None)
         self.ages: dict[str, float | None] = {}  # each asynchronous value's age at the latest point
         self.switches: deque[dict[str, Any]] = deque(maxlen=200)  # the latest mode switches
+        self._told = 0  # points with a release told, taken or not
+        self._due = -math.inf  # perf_counter from which a point with a release is taken again
+        # The latest point told and not taken, if the latest told was not: taken at the run's end.
+        self._left: tuple[int, float, RecordedPoint] | None = None
 
     # --- an observer of the run's points (master.observers) --------------------------
 
     def step_complete(self, step: int, t: float, point: RecordedPoint) -> None:
-        """Point ``step`` as recorded: its values whole (copies: the loop goes on changing them),
-        and where a release left from it, how the barrier held it."""
-        if point.released is not None:
-            self.recent.append((point.released, point.holder, point.wait_s, point.arrivals))
+        """Point ``step`` as recorded, taken if the last was taken ``every_s`` before its release
+        or more (or it had no release of its own): its values whole (copies: the loop goes on
+        changing them), and where a release left from it, how the barrier held it."""
+        released = point.released
+        if released is not None:
+            self._told += 1
+            if released < self._due:
+                self._left = (step, t, point)
+                return
+            self._due = released + self.every_s
+            self.recent.append((released, point.holder, point.wait_s, point.arrivals, self._told))
             self.ages = point.ages
+        self._left = None
         # Each side's values flat, in the project's order (Layout).
         self.shown = (step, t, point.mode, tuple(_flat(self._outputs.lists(point.outputs))),
                       tuple(_flat(self._inputs.lists(point.inputs))), time.time())
@@ -132,9 +155,16 @@ class LatestPoints:
         """Back at point ``step``: the points from it on come again, and are shown again."""
         while self.history and self.history[-1][0] >= step:
             self.history.pop()
+        if self._left is not None and self._left[0] >= step:
+            self._left = None
 
     def run_ended(self, status: str) -> None:
-        """Nothing to do: the latest point stays the answer's, for whoever asks while the run closes."""
+        """The run's last point taken, if it was not (the master's point still holds it: nothing
+        is routed after it); it stays the answer's, for whoever asks while the run closes."""
+        if self._left is not None:
+            step, t, point = self._left
+            self._left, self._due, self._told = None, -math.inf, self._told - 1  # told once already
+            self.step_complete(step, t, point)
 
     def answer(self, now: float, since: int | None) -> dict[str, Any]:
         """The status answer's part on the latest points (``since``: also the points after that step)."""
