@@ -16,7 +16,9 @@ default.
 
 On a small machine one run of any system scatters by ±20 % (who shares a core with whom
 is the scheduler's choice), so every system runs ``--repeat`` times, the rounds
-interleaved (system after system, then again), and the table shows the median.
+interleaved (system after system, then again), and the table shows the median; each ratio of
+hycosim's figure to another system's comes with the range of the rounds' own ratios (round i
+against round i), which says how far one round's comparison strays from the medians'.
 A run that fails or passes ``--timeout`` (its whole process group is killed) is reported
 and left out of the median; the exit status is 1 when some system and N has no run left.
 
@@ -399,16 +401,36 @@ def main() -> None:
         sys.exit(1)
 
 
+def round_ratios(ours: list[float], theirs: list[float]) -> tuple[float, float] | None:
+    """The lowest and highest of the rounds' own ratios (round i's ``ours`` over round i's
+    ``theirs``): how far one round's comparison strays from the medians'. None where there are
+    fewer than two rounds or a run failed (the rounds no longer pair)."""
+    if len(ours) < 2 or len(ours) != len(theirs) or not all(theirs):
+        return None
+    ratios = [a / b for a, b in zip(ours, theirs)]
+    return min(ratios), max(ratios)
+
+
+def _ratio_cell(ours: list[float], theirs: list[float]) -> str | None:
+    """The ratio of the medians, with the rounds' own ratios' range in brackets where they pair."""
+    median = _table.ratio(_median(ours) if ours else None, _median(theirs) if theirs else None)
+    spread = round_ratios(ours, theirs)
+    return median if median is None or spread is None else f"{median} ({spread[0]:.2f}–{spread[1]:.2f})"
+
+
 def _manual_table(args: argparse.Namespace, figures: dict[tuple[str, int], list[float]], skipped: set[str],
                   caption: str) -> _table.Table:
-    """The medians of ``figures`` (rates, or CPU a step) by N and system, and hycosim's ratio to each other."""
+    """The medians of ``figures`` (rates, or CPU a step) by N and system, and hycosim's ratio to
+    each other (the ratio of the medians, the rounds' own ratios' range in brackets)."""
     systems = [s for s in args.systems if s not in skipped]
     medians = {key: (_median(values) if values else None) for key, values in figures.items()}
     others = [s for s in systems if s != "hycosim"] if "hycosim" in systems else []
     header = ["N", *systems, *(f"hycosim / {s}" for s in others)]
     rows = [[n, *(_table.rate(medians[(s, n)]) for s in systems),
-             *(_table.ratio(medians[("hycosim", n)], medians[(s, n)]) for s in others)] for n in args.n]
-    return _table.Table(caption, header, rows)
+             *(_ratio_cell(figures[("hycosim", n)], figures[(s, n)]) for s in others)] for n in args.n]
+    after = ("A ratio is that of the medians; in brackets, the lowest and highest of the rounds' own "
+             "ratios (a round's hycosim against the same round's other)." if args.repeat > 1 and others else "")
+    return _table.Table(caption, header, rows, after)
 
 
 def _rest(cpu: dict[tuple[str, int], list[float]],
@@ -445,14 +467,14 @@ def _print_table(args: argparse.Namespace, runs: dict[tuple[str, int], list[floa
              if len(rates) < args.repeat and system not in skipped]
     if short:
         print("runs that failed are left out (see above): " + "; ".join(short))
-    print("\nratios of the medians (hycosim / other):")
+    print("\nratios of the medians (hycosim / other; the rounds' own ratios' range in brackets):")
     for system in args.systems:
         if system == "hycosim":
             continue
         cells = []
         for n in args.n:
-            a, b = results.get(("hycosim", n)), results[(system, n)]
-            cells.append(f"{a / b:>24.2f}" if a and b else f"{'-':>24}")
+            cell = _ratio_cell(runs.get(("hycosim", n), []), runs[(system, n)])
+            cells.append(f"{cell or '-':>24}")
         print(f"{system:<12}" + "".join(cells))
     if "hycosim" in args.systems and len(args.n) > 1:
         base_n = args.n[0]

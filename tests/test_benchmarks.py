@@ -53,11 +53,30 @@ def test_barrier_benchmark_json_reports_medians_of_its_runs(tmp_path):
         assert set(r) == {"system", "n", "steps_per_s", "runs"}
         assert len(r["runs"]) == 2 and all(x > 0 for x in r["runs"])
         assert min(r["runs"]) <= r["steps_per_s"] <= max(r["runs"])
-    # The manual's table holds the same medians and their ratio.
+    # The manual's table holds the same medians and their ratio, and the range of the rounds'
+    # own ratios (round by round: a run's list is in the rounds' order).
     [[row]] = manual_tables(tmp_path / "barrier.md")
     rate = {r["system"]: r["steps_per_s"] for r in lines}
+    runs = {r["system"]: r["runs"] for r in lines}
+    paired = [a / b for a, b in zip(runs["hycosim"], runs["zenoh-floor"])]
     assert row == {"N": "2", "hycosim": f"{rate['hycosim']:,.0f}", "zenoh-floor": f"{rate['zenoh-floor']:,.0f}",
-                   "hycosim / zenoh-floor": f"{rate['hycosim'] / rate['zenoh-floor']:.2f}"}
+                   "hycosim / zenoh-floor": f"{rate['hycosim'] / rate['zenoh-floor']:.2f} "
+                                            f"({min(paired):.2f}–{max(paired):.2f})"}
+    assert "the lowest and highest of the rounds' own ratios" in (tmp_path / "barrier.md").read_text()
+
+
+def test_the_rounds_own_ratios_pair_round_with_round_or_are_not_given():
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    try:
+        from barrier import round_ratios
+    finally:
+        sys.path.remove(str(REPO / "benchmarks"))
+    # Round 1: 2.0, round 2: 0.5 — the medians' ratio (1.0) hides both.
+    assert round_ratios([4.0, 1.0], [2.0, 2.0]) == (0.5, 2.0)
+    assert round_ratios([3.0, 1.0, 2.0], [1.0, 2.0, 4.0]) == (0.5, 3.0)
+    assert round_ratios([1.0], [2.0]) is None  # one round: no range
+    assert round_ratios([1.0, 2.0], [2.0]) is None  # a run failed: the rounds no longer pair
+    assert round_ratios([1.0, 2.0], [2.0, 0.0]) is None
 
 
 def test_barrier_benchmark_measures_the_cpu_a_step_costs_every_process_of_a_run(tmp_path):

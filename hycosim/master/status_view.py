@@ -8,10 +8,10 @@ built. Reckoning every point of the last second and sending 256 points took 6 ms
 that (2.0 ms) and show the same.
 
 Nor does it take every point: at most one a millisecond (:data:`TAKE_EVERY_S`), and the run's
-last at its end. Copying each point's values cost the server some 5 µs a point at 2 nodes, a
-twelfth of its work, where a plain run goes 15,000 points a second (benchmarks/FINDINGS.md,
-tenth entry); a dashboard plots at most 320 points a second of them. The steps a second are
-counted from every point told, taken or not.
+last at its end. Copying each point's values cost 0.6 µs a point hot at 2 nodes and, in whole
+runs, where the loop runs cold, up to 5 µs of the server's 60, at 15,000 points a second
+(benchmarks/FINDINGS.md, tenth and eleventh entries); a dashboard plots at most 320 points a
+second of them. The steps a second are counted from every point told, taken or not.
 """
 
 from __future__ import annotations
