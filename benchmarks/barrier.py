@@ -401,20 +401,21 @@ def main() -> None:
         sys.exit(1)
 
 
-def round_ratios(ours: list[float], theirs: list[float]) -> tuple[float, float] | None:
+def round_ratios(ours: list[float], theirs: list[float], rounds: int) -> tuple[float, float] | None:
     """The lowest and highest of the rounds' own ratios (round i's ``ours`` over round i's
     ``theirs``): how far one round's comparison strays from the medians'. None where there are
-    fewer than two rounds or a run failed (the rounds no longer pair)."""
-    if len(ours) < 2 or len(ours) != len(theirs) or not all(theirs):
+    fewer than two rounds or a run of either failed: a list then lacks a round, and position i
+    of the one may be another round than position i of the other."""
+    if rounds < 2 or len(ours) != rounds or len(theirs) != rounds or not all(theirs):
         return None
     ratios = [a / b for a, b in zip(ours, theirs)]
     return min(ratios), max(ratios)
 
 
-def _ratio_cell(ours: list[float], theirs: list[float]) -> str | None:
+def _ratio_cell(ours: list[float], theirs: list[float], rounds: int) -> str | None:
     """The ratio of the medians, with the rounds' own ratios' range in brackets where they pair."""
     median = _table.ratio(_median(ours) if ours else None, _median(theirs) if theirs else None)
-    spread = round_ratios(ours, theirs)
+    spread = round_ratios(ours, theirs, rounds)
     return median if median is None or spread is None else f"{median} ({spread[0]:.2f}–{spread[1]:.2f})"
 
 
@@ -427,7 +428,7 @@ def _manual_table(args: argparse.Namespace, figures: dict[tuple[str, int], list[
     others = [s for s in systems if s != "hycosim"] if "hycosim" in systems else []
     header = ["N", *systems, *(f"hycosim / {s}" for s in others)]
     rows = [[n, *(_table.rate(medians[(s, n)]) for s in systems),
-             *(_ratio_cell(figures[("hycosim", n)], figures[(s, n)]) for s in others)] for n in args.n]
+             *(_ratio_cell(figures[("hycosim", n)], figures[(s, n)], args.repeat) for s in others)] for n in args.n]
     after = ("A ratio is that of the medians; in brackets, the lowest and highest of the rounds' own "
              "ratios (a round's hycosim against the same round's other)." if args.repeat > 1 and others else "")
     return _table.Table(caption, header, rows, after)
@@ -473,7 +474,7 @@ def _print_table(args: argparse.Namespace, runs: dict[tuple[str, int], list[floa
             continue
         cells = []
         for n in args.n:
-            cell = _ratio_cell(runs.get(("hycosim", n), []), runs[(system, n)])
+            cell = _ratio_cell(runs.get(("hycosim", n), []), runs[(system, n)], args.repeat)
             cells.append(f"{cell or '-':>24}")
         print(f"{system:<12}" + "".join(cells))
     if "hycosim" in args.systems and len(args.n) > 1:

@@ -72,11 +72,13 @@ def test_the_rounds_own_ratios_pair_round_with_round_or_are_not_given():
     finally:
         sys.path.remove(str(REPO / "benchmarks"))
     # Round 1: 2.0, round 2: 0.5 — the medians' ratio (1.0) hides both.
-    assert round_ratios([4.0, 1.0], [2.0, 2.0]) == (0.5, 2.0)
-    assert round_ratios([3.0, 1.0, 2.0], [1.0, 2.0, 4.0]) == (0.5, 3.0)
-    assert round_ratios([1.0], [2.0]) is None  # one round: no range
-    assert round_ratios([1.0, 2.0], [2.0]) is None  # a run failed: the rounds no longer pair
-    assert round_ratios([1.0, 2.0], [2.0, 0.0]) is None
+    assert round_ratios([4.0, 1.0], [2.0, 2.0], 2) == (0.5, 2.0)
+    assert round_ratios([3.0, 1.0, 2.0], [1.0, 2.0, 4.0], 3) == (0.5, 3.0)
+    assert round_ratios([1.0], [2.0], 1) is None  # one round: no range
+    assert round_ratios([1.0, 2.0], [2.0], 2) is None  # a run failed: the rounds no longer pair
+    assert round_ratios([1.0, 2.0], [2.0, 0.0], 2) is None
+    # Each lost one of three rounds, not the same one: as long as each other, yet unpaired.
+    assert round_ratios([1.0, 2.0], [2.0, 4.0], 3) is None
 
 
 def test_barrier_benchmark_measures_the_cpu_a_step_costs_every_process_of_a_run(tmp_path):
