@@ -427,11 +427,24 @@ def _manual_table(args: argparse.Namespace, figures: dict[tuple[str, int], list[
     medians = {key: (_median(values) if values else None) for key, values in figures.items()}
     others = [s for s in systems if s != "hycosim"] if "hycosim" in systems else []
     header = ["N", *systems, *(f"hycosim / {s}" for s in others)]
-    rows = [[n, *(_table.rate(medians[(s, n)]) for s in systems),
+    rows = [[n, *(_median_cell(figures[(s, n)]) for s in systems),
              *(_ratio_cell(figures[("hycosim", n)], figures[(s, n)], args.repeat) for s in others)] for n in args.n]
-    after = ("A ratio is that of the medians; in brackets, the lowest and highest of the rounds' own "
-             "ratios (a round's hycosim against the same round's other)." if args.repeat > 1 and others else "")
+    after = ""
+    if args.repeat > 1:
+        after = "A figure is the median of its rounds; in brackets, the lowest and highest round."
+        if others:
+            after += (" A ratio is that of the medians; in brackets, the lowest and highest of the rounds' "
+                      "own ratios (a round's hycosim against the same round's other).")
     return _table.Table(caption, header, rows, after)
+
+
+def _median_cell(values: list[float]) -> str | None:
+    """A system's median, with its lowest and highest round in brackets where it has more than
+    one: a system whose rounds spread widely moves every ratio to it."""
+    median = _table.rate(_median(values) if values else None)
+    if median is None or len(values) < 2:
+        return median
+    return f"{median} ({_table.rate(min(values))}–{_table.rate(max(values))})"
 
 
 def _rest(cpu: dict[tuple[str, int], list[float]],
