@@ -421,10 +421,10 @@ def _ratio_cell(ours: list[float], theirs: list[float], rounds: int) -> str | No
 
 def _manual_table(args: argparse.Namespace, figures: dict[tuple[str, int], list[float]], skipped: set[str],
                   caption: str) -> _table.Table:
-    """The medians of ``figures`` (rates, or CPU a step) by N and system, and hycosim's ratio to
-    each other (the ratio of the medians, the rounds' own ratios' range in brackets)."""
+    """The medians of ``figures`` (rates, or CPU a step) by N and system, each with its lowest
+    and highest round in brackets, and hycosim's ratio to each other (the ratio of the medians,
+    the rounds' own ratios' range in brackets)."""
     systems = [s for s in args.systems if s not in skipped]
-    medians = {key: (_median(values) if values else None) for key, values in figures.items()}
     others = [s for s in systems if s != "hycosim"] if "hycosim" in systems else []
     header = ["N", *systems, *(f"hycosim / {s}" for s in others)]
     rows = [[n, *(_median_cell(figures[(s, n)]) for s in systems),
