@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import json
 import math
 import os
@@ -75,11 +76,7 @@ def test_barrier_benchmark_json_reports_medians_of_its_runs(tmp_path):
 
 
 def test_the_rounds_own_ratios_pair_round_with_round_or_are_not_given():
-    sys.path.insert(0, str(REPO / "benchmarks"))
-    try:
-        from barrier import round_ratios
-    finally:
-        sys.path.remove(str(REPO / "benchmarks"))
+    round_ratios = _benchmark_module("barrier").round_ratios
     # Round 1: 2.0, round 2: 0.5 — the medians' ratio (1.0) hides both.
     assert round_ratios([4.0, 1.0], [2.0, 2.0], 2) == (0.5, 2.0)
     assert round_ratios([3.0, 1.0, 2.0], [1.0, 2.0, 4.0], 3) == (0.5, 3.0)
@@ -117,13 +114,13 @@ def test_barrier_benchmark_measures_the_cpu_a_step_costs_every_process_of_a_run(
     assert "CPU µs a macro step costs" in text and "the coordinating process alone" in text
 
 
-def _benchmark_procs():
+def _benchmark_module(name: str):
+    """A module of benchmarks/ (not a package), imported with the folder on the path while it loads."""
     sys.path.insert(0, str(REPO / "benchmarks"))
     try:
-        import _procs
+        return importlib.import_module(name)
     finally:
         sys.path.remove(str(REPO / "benchmarks"))
-    return _procs
 
 
 def test_a_run_s_processes_share_the_callers_session_and_each_leads_its_own_group():
@@ -132,7 +129,7 @@ def test_a_run_s_processes_share_the_callers_session_and_each_leads_its_own_grou
     of its own, which a timeout kills whole (its children with it); by default, a session of its own."""
     import signal
 
-    _procs = _benchmark_procs()
+    _procs = _benchmark_module("_procs")
     code = "import os, subprocess, sys, time\n" \
            "child = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(60)'])\n" \
            "print(os.getsid(0), os.getpgid(0), child.pid, flush=True)\ntime.sleep(60)"
@@ -160,7 +157,7 @@ def test_a_run_s_processes_share_the_callers_session_and_each_leads_its_own_grou
 
 
 def test_own_cpu_at_exit_counts_every_thread_of_the_process_and_none_of_its_children():
-    own_cpu_at_exit = _benchmark_procs().own_cpu_at_exit
+    own_cpu_at_exit = _benchmark_module("_procs").own_cpu_at_exit
     burn = "import time\ndef burn(s):\n    t = time.thread_time()\n    while time.thread_time() - t < s: pass\n"
     code = (burn + "import subprocess, sys, threading\nth = threading.Thread(target=burn, args=(0.3,)); th.start()\n"
             "burn(0.2); th.join()\nsubprocess.run([sys.executable, '-c', " + repr(burn + "burn(0.6)") + "])\n")

@@ -143,7 +143,13 @@ class LatestPoints:
                 self._left = (step, t, point)
                 return
             self._due = released + self.every_s
-            self.recent.append((released, point.holder, point.wait_s, point.arrivals, self._told))
+        self._take(step, t, point)
+
+    def _take(self, step: int, t: float, point: RecordedPoint) -> None:
+        """Point ``step`` kept: in the barrier window (with the points told by then) where a
+        release left from it, and shown."""
+        if point.released is not None:
+            self.recent.append((point.released, point.holder, point.wait_s, point.arrivals, self._told))
             self.ages = point.ages
         self._left = None
         # Each side's values flat, in the project's order (Layout).
@@ -161,10 +167,8 @@ class LatestPoints:
     def run_ended(self, status: str) -> None:
         """The run's last point taken, if it was not (the master's point still holds it: nothing
         is routed after it); it stays the answer's, for whoever asks while the run closes."""
-        if self._left is not None:
-            step, t, point = self._left
-            self._left, self._due, self._told = None, -math.inf, self._told - 1  # told once already
-            self.step_complete(step, t, point)
+        if self._left is not None:  # the latest told: the points told by then are all there were
+            self._take(*self._left)
 
     def answer(self, now: float, since: int | None) -> dict[str, Any]:
         """The status answer's part on the latest points (``since``: also the points after that step)."""
