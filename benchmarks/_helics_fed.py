@@ -7,6 +7,7 @@ import helics as h
 
 
 def broker(core: str, n: int, port: int) -> None:
+    """Run HELICS's broker for ``n`` federates on ``port`` until they have all left."""
     b = h.helicsCreateBroker(core, "", f"-f {n} --name=bench --local_interface=127.0.0.1 --port={port}")
     while h.helicsBrokerIsConnected(b):
         time.sleep(0.05)
@@ -14,6 +15,8 @@ def broker(core: str, n: int, port: int) -> None:
 
 
 def federate(core: str, n: int, i: int, steps: int, port: int) -> None:
+    """Run federate ``i`` of the ring for ``steps`` time steps (y = 0.5·u + 1 on its predecessor's y);
+    the first prints the ring's steps/s."""
     fi = h.helicsCreateFederateInfo()
     h.helicsFederateInfoSetCoreTypeFromString(fi, core)
     h.helicsFederateInfoSetCoreInitString(fi, f"--federates=1 --broker_address=127.0.0.1 --brokerport={port}")

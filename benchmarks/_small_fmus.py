@@ -55,6 +55,8 @@ def _start(type_: str, start: object) -> str:
 
 
 def model_description(name: str) -> str:
+    """The modelDescription.xml of small FMU ``name``: its variables, outputs and initial unknowns with
+    their dependencies."""
     number, variables = MODELS[name]
     rows, outputs, initial = [], [], []
     index = {var: i + 1 for i, (var, *_) in enumerate(variables)}

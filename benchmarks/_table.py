@@ -29,6 +29,8 @@ class Table:
     after: str = ""
 
     def markdown(self) -> list[str]:
+        """The table as the manual's Markdown lines: caption, header, rows (a missing cell as a dash),
+        and the text after it."""
         lines = [self.caption, "", "| " + " | ".join(self.header) + " |", "|" + "---|" * len(self.header)]
         lines += ["| " + " | ".join("–" if c is None else str(c) for c in row) + " |" for row in self.rows]
         return lines + (["", self.after] if self.after else [])

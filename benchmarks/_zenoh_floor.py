@@ -30,6 +30,7 @@ def _conf(endpoint: str, router: bool, polls: bool = False) -> zenoh.Config:
 
 
 def node(endpoint: str, i: int, polls: bool) -> None:
+    """Node ``i`` of the floor: answer each step message with 0.5·u + 1 until the stop message."""
     with zenoh.open(_conf(endpoint, False, polls)) as s:
         pub = s.declare_publisher(f"floor/out/{i}", congestion_control=zenoh.CongestionControl.BLOCK, express=True)
         inbox = Inbox(s, "floor/step/**", f"floor/step/local{i}", poll=polls)
@@ -43,6 +44,8 @@ def node(endpoint: str, i: int, polls: bool) -> None:
 
 
 def server(endpoint: str, n: int, steps: int, wait_strategy: str) -> float:
+    """The floor's server: start ``n`` nodes, wait for their tokens, run ``steps`` barrier steps and
+    return the steps/s."""
     polls = polls_before_blocking(wait_strategy, n + 1, os.cpu_count())
     with zenoh.open(_conf(endpoint, True)) as s:
         pub = s.declare_publisher("floor/step", congestion_control=zenoh.CongestionControl.BLOCK, express=True)

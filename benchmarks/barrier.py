@@ -61,6 +61,8 @@ SYSTEMS = ["hycosim", "zenoh-floor", "helics-tcp", "helics-zmq", "mosaik"]
 
 
 def ring_config(n: int, steps: int, path: Path, wait_strategy: str = "auto") -> Path:
+    """A ring of ``n`` gain nodes (each y = 0.5·u + 1 on its predecessor's y), ``steps`` macro steps,
+    written to ``path``; its path."""
     nodes = [{"nodeName": f"n{i}", "UID": i + 1, "model": "gain", "parameters": {"k": 0.5, "b": 1.0},
               "input": ["u"], "output": ["y"]} for i in range(n)]
     links = [{"from": f"n{i}.y", "to": f"n{(i + 1) % n}.u"} for i in range(n)]
@@ -73,6 +75,7 @@ def ring_config(n: int, steps: int, path: Path, wait_strategy: str = "auto") -> 
 
 
 def run_hycosim(n: int, steps: int, wait_strategy: str, timeout: float) -> float:
+    """The ring's steps/s as ``hycosim run`` runs it."""
     with tempfile.TemporaryDirectory() as tmp:
         cfg = ring_config(n, steps, Path(tmp) / "ring.json", wait_strategy)
         res = run([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", tmp, "--no-progress"],
@@ -123,6 +126,7 @@ def _floor_command(n: int, steps: int, wait_strategy: str) -> list[str]:
 
 
 def run_zenoh_floor(n: int, steps: int, wait_strategy: str, timeout: float) -> float:
+    """The floor's steps/s for ``n`` nodes."""
     res = run(_floor_command(n, steps, wait_strategy), timeout, own_session=False)
     if res.returncode:
         raise RuntimeError(res.stderr)
@@ -137,6 +141,7 @@ def _helics_commands(core: str, n: int, steps: int) -> tuple[list[str], list[lis
 
 
 def run_helics(core: str, n: int, steps: int, timeout: float) -> float:
+    """HELICS's steps/s for ``n`` federates over ``core`` (tcp, zmq)."""
     broker_command, fed_commands = _helics_commands(core, n, steps)
     broker = start(broker_command, own_session=False, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     feds = [start(command, own_session=False, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
@@ -175,6 +180,7 @@ print({steps} / (time.perf_counter() - t0))
 
 
 def run_mosaik(n: int, steps: int, timeout: float) -> float:
+    """mosaik 3's steps/s for ``n`` simulators."""
     res = run([sys.executable, "-c", _mosaik_code(n, steps)], timeout, own_session=False)
     if res.returncode:
         raise RuntimeError(res.stderr[-2000:])
@@ -330,6 +336,8 @@ def _median(values: list[float]) -> float:
 
 
 def main() -> None:
+    """Measure the systems' rates (and with ``--cpu`` their CPU a step) in interleaved rounds and print
+    the medians; ``--json`` a line per system and N, ``--table`` the manual's tables."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, nargs="+", default=[2, 4, 8, 16])
     ap.add_argument("--steps", type=int, default=3000)

@@ -34,6 +34,8 @@ from hycosim.scenario.rod.model import RodModel, RodParams, pendulum_period  # n
 
 
 def accuracy_and_rate() -> dict:
+    """The detector on an emulated swing from 60°: frames, frames missed, angle errors and frames
+    detected a second on one core."""
     p = RodParams(initial_angle=math.radians(60))
     cam = EmulatedRodCamera(p, CameraSetup(noise_sigma=25, fps=120, seed=7))
     frames = cam.frames_until(pendulum_period(p, math.radians(60)))
@@ -61,6 +63,8 @@ def accuracy_and_rate() -> dict:
 
 
 def twin_error(gain: float, seconds: float = 2.0, h: float = 0.01) -> float:
+    """The twin's angle error after ``seconds`` with the camera's correction at ``gain`` (0: none), the
+    real rod 5 % longer and released 3° apart."""
     truth = RodParams(length=0.6 * 1.05, initial_angle=math.radians(43))
     cam = EmulatedRodCamera(truth, CameraSetup(noise_sigma=25, fps=60, seed=11))
     det, tracker = RodDetector(cam.calibration), Tracker()
@@ -80,6 +84,7 @@ def twin_error(gain: float, seconds: float = 2.0, h: float = 0.01) -> float:
 
 
 def main() -> None:
+    """Measure and print the camera's figures (``--json``: one object)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()

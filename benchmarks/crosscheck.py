@@ -306,6 +306,8 @@ def compare(ours: dict[str, list[float]], theirs: dict[str, list[float | None]],
 
 
 def main() -> None:
+    """Run every system through hycosim and each reference engine installed (ECOS, libcosim, FMPy; an
+    OSP structure through libcosim), compare them point by point and print the differences."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=400)
     ap.add_argument("--h", type=float, default=0.01)

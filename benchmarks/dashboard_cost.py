@@ -290,6 +290,8 @@ def ratio_interval(plain: list[float], board: list[float], level: float = 0.9, d
 
 
 def main() -> None:
+    """Measure a run's rate watched against left alone, and how late the page shows a step; print the
+    figures (``--json``: one object)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=2)
     ap.add_argument("--steps", type=int, default=20000)

@@ -85,6 +85,8 @@ def _time(decode, payload: bytes, count: int) -> float:
 
 
 def measure(n: int, repeat: int, count: int) -> list[dict[str, Any]]:
+    """Nanoseconds a decode takes per frame kind and node count: ``frames.decode``, the typed msgspec
+    candidate and msgpack alone, medians of ``repeat`` rounds of ``count`` decodes."""
     decoder, tag = _candidate_types() if msgspec is not None else (None, None)
     out = []
     for kind_name, (fields, kind) in frames_for(n).items():
@@ -106,6 +108,7 @@ def measure(n: int, repeat: int, count: int) -> list[dict[str, Any]]:
 
 
 def main() -> None:
+    """Measure and print the decodes (``--json``: one object a line)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, nargs="+", default=[2, 4, 8])
     ap.add_argument("--repeat", type=int, default=5)

@@ -59,6 +59,7 @@ def _project(tmp: Path, node: dict, steps: int) -> Path:
 
 
 def cosim(cfg: Path, tmp: Path, timeout: float) -> float:
+    """The steps/s of the co-simulation in ``cfg`` (from its meta.json)."""
     res = run([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", str(tmp / "runs"), "--no-progress"],
               timeout, cwd=REPO)
     if res.returncode:
@@ -68,6 +69,8 @@ def cosim(cfg: Path, tmp: Path, timeout: float) -> float:
 
 
 def in_process(fmu: Path, steps: int) -> tuple[float, float]:
+    """Seconds a macro step takes the gain as a Python node and as the FMU ``fmu``, each stepped in this
+    process."""
     from hycosim.node.fmu_node import FmuNode
     from hycosim.node.interface import NodeContext
     from hycosim.node.reference.gain import Gain
@@ -130,6 +133,7 @@ class Bridge:
 
 
 def build_bridge(tmp: Path, steps: int) -> Bridge:
+    """A bridge FMU of the benchmark's node, built and extracted, and the C importer that drives it."""
     cfg = _project(tmp, BRIDGE_NODE, steps)
     built = build_bridge_fmu(load_project(cfg), "tool", tmp / "fmus")
     with zipfile.ZipFile(built.path) as zf:
@@ -143,6 +147,7 @@ def build_bridge(tmp: Path, steps: int) -> Bridge:
 
 
 def bridge(tmp: Path, built: Bridge, steps: int, timeout: float, run_dir: Path) -> float:
+    """The steps/s of a run whose node is the bridge FMU, driven by the C importer, into ``run_dir``."""
     cfg = _project(tmp, BRIDGE_NODE, steps)  # fresh ports for every run
     gateway = json.loads(cfg.read_text())["gatewayIP"]
     server = start([sys.executable, "-m", "hycosim", "server", str(cfg), "--run-dir", str(run_dir)],
@@ -162,6 +167,7 @@ def bridge(tmp: Path, built: Bridge, steps: int, timeout: float, run_dir: Path) 
 
 
 def main() -> None:
+    """Measure the FMU overheads in interleaved rounds and print them (``--json``: one object)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=3000)
     ap.add_argument("--repeat", type=int, default=3, help="interleaved rounds; the figures are their medians")
@@ -236,6 +242,7 @@ def _manual_table(args: argparse.Namespace, f: dict[str, float]) -> _table.Table
 
 
 def report(f: dict[str, float]) -> None:
+    """Print the figures ``f`` as lines of text, each with its ratio."""
     py_step, fmu_step = f["python_node_step_us"], f["fmu_node_step_us"]
     py_cosim, fmu_cosim = f["python_node_cosim_steps_per_s"], f["fmu_node_cosim_steps_per_s"]
     bridge_rate, floor_rate = f["bridge_fmu_cosim_steps_per_s"], f["zenoh_floor_steps_per_s"]

@@ -53,6 +53,8 @@ BLOCK = zenoh.CongestionControl.BLOCK
 
 
 def project(folder: Path, port: int, stop_time: float, secure: bool) -> Path:
+    """The fuzzed project (a clock and two gains, paced in real time) in ``folder``, with credentials
+    and access control where ``secure``; its path."""
     doc = {"projectName": "fuzz", "serverIP": f"tcp/127.0.0.1:{port}", "nodeNum": 3, "nodeLists": NODES,
            "linkNum": 2, "linkLists": [{"from": "clock.y", "to": "g.u"}, {"from": "g.y", "to": "h.u"}],
            "coSimulation": {"stepSize": 0.01, "stopTime": stop_time, "realTime": True, "stepTimeout": 30.0}}
@@ -65,12 +67,15 @@ def project(folder: Path, port: int, stop_time: float, secure: bool) -> Path:
 
 
 def start_run(cfg: Path, runs: Path, port: int) -> subprocess.Popen:
+    """``hycosim run`` of ``cfg``, its server listening on ``port``."""
     return subprocess.Popen([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", str(runs),
                              "--no-progress", "--listen", f"tcp/127.0.0.1:{port}"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO)
 
 
 def wait_started(runs: Path, timeout: float = 60.0) -> Path:
+    """The run directory under ``runs`` once its values.csv holds 50 rows; RuntimeError after
+    ``timeout`` seconds."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         for d in runs.glob("*"):
@@ -82,11 +87,13 @@ def wait_started(runs: Path, timeout: float = 60.0) -> Path:
 
 
 def finish(proc: subprocess.Popen, runs: Path) -> tuple[int, Path, str]:
+    """Wait for the run to end: its exit code, run directory and output."""
     out, err = proc.communicate(timeout=300)
     return proc.returncode, next(runs.iterdir()), (out + err).strip()
 
 
 def clean_run(folder: Path, stop_time: float, secure: bool) -> Path:
+    """The project run alone, for the attacked runs to be compared with; its run directory."""
     folder.mkdir()
     port = free_port()
     code, run_dir, text = finish(start_run(project(folder, port, stop_time, secure), folder / "runs", port),
@@ -97,6 +104,8 @@ def clean_run(folder: Path, stop_time: float, secure: bool) -> Path:
 
 
 def fuzz(tmp: Path, n_frames: int, n_streams: int, stop_time: float) -> dict:
+    """Run the project while fuzzed frames go to every key and garbage to the gateway; what was sent,
+    what was dropped, and whether the values came out as the clean run's."""
     clean = clean_run(tmp / "clean", stop_time, secure=False)
     keys = ProjectKeys("fuzz")
     targets = [keys.up("clock"), keys.up("g"), keys.up("h"), keys.up("nobody"), f"{keys.root}/up/_local",
@@ -140,6 +149,8 @@ def fuzz(tmp: Path, n_frames: int, n_streams: int, stop_time: float) -> dict:
 
 
 def forgery(tmp: Path, n_forged: int, stop_time: float) -> dict:
+    """Run the secured project while an authenticated node forges frames on every key it may use; what
+    reached the server and the nodes, and whether the values came out as the clean run's."""
     clean = clean_run(tmp / "secure-clean", stop_time, secure=True)
     folder = tmp / "secure-attacked"
     folder.mkdir()
@@ -189,6 +200,7 @@ def forgery(tmp: Path, n_forged: int, stop_time: float) -> dict:
 
 
 def main() -> None:
+    """Run the fuzz and the forgery experiments and print them (``--json``: one object each)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=100_000)
     ap.add_argument("--streams", type=int, default=500, help="garbage connections to the gateway")

@@ -130,6 +130,8 @@ def ecos(ssp: Path, steps: int, h: float, out: Path, timeout: float) -> float | 
 
 
 def fmpy_loop(fmus: dict[str, Path], steps: int, h: float, timeout: float) -> float:
+    """The steps/s of a plain FMPy loop over the three FMUs (the floor of a Python master in one
+    process)."""
     res = run([sys.executable, "-c", _FMPY_LOOP, *(str(fmus[n]) for n in ("Dahlquist", "Feedthrough", "VanDerPol")),
                str(steps), str(h)], timeout)
     if res.returncode:
@@ -138,6 +140,8 @@ def fmpy_loop(fmus: dict[str, Path], steps: int, h: float, timeout: float) -> fl
 
 
 def main() -> None:
+    """Measure in-process runs against distributed runs and ECOS in interleaved rounds and print the
+    medians (``--json``: one object)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, nargs="+", default=[2, 4], help="ring sizes")
     ap.add_argument("--ring-steps", type=int, default=20_000)

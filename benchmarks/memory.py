@@ -118,6 +118,8 @@ def measure(system: str, n: int, steps: int, timeout: float) -> dict[str, float]
 
 
 def main() -> None:
+    """Measure the peak resident sets of a short and a long run of hycosim and of the floor, and print
+    them and their growth (``--json``: one object a line)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=4, help="nodes in the ring")
     ap.add_argument("--steps", type=int, default=2000, help="macro steps of the short run; the long run has 10×")

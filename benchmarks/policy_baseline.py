@@ -68,6 +68,9 @@ def ours_history(folder: Path) -> tuple[str, list[dict]]:
 
 
 def main() -> None:
+    """Train the paper's formulation for ``--minutes`` a seed (or read its curves from
+    ``--paper-from``), read the engineered policy's from ``--ours``, plot both and print their
+    evaluations."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=20.0)
     parser.add_argument("--seeds", type=int, nargs="+", default=[0])

@@ -72,6 +72,8 @@ def measure(loaded, folder: Path, fmt: str, apart: bool, steps: int) -> tuple[fl
 
 
 def main() -> None:
+    """Measure what a point's record costs as CSV and as Parquet, and the files' sizes; print the
+    figures (``--json``: one object)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=100_000)
     ap.add_argument("--nodes", type=int, default=5)

@@ -83,11 +83,13 @@ def pids(pattern: str) -> list[int]:
 
 
 def hycosim_run(cfg: Path, runs: Path, *extra: str, timeout: float = 900.0) -> subprocess.CompletedProcess:
+    """``hycosim run`` of ``cfg`` into ``runs`` (with ``extra`` options), to its end."""
     return subprocess.run([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", str(runs), "--no-progress",
                            *extra], capture_output=True, text=True, timeout=timeout, cwd=REPO)
 
 
 def newest_run(runs: Path) -> Path:
+    """The run directory under ``runs`` written last."""
     return max((p for p in runs.iterdir() if p.is_dir()), key=lambda p: p.stat().st_mtime)
 
 
@@ -162,6 +164,8 @@ def check_rows(values: Path) -> int:
 
 
 def node_kills(cfg: Path, runs: Path, names: list[str], kills: int, seed: int) -> tuple[Path, list, dict]:
+    """A run whose node processes are killed ``kills`` times: its run directory, the kills and its
+    meta.json."""
     log: list = []
     t = threading.Thread(target=killer, args=(cfg, runs, names, kills, random.Random(seed), log), daemon=True)
     t.start()
@@ -174,6 +178,8 @@ def node_kills(cfg: Path, runs: Path, names: list[str], kills: int, seed: int) -
 
 
 def server_kills(cfg: Path, runs: Path, kills: int, after: float) -> tuple[Path, dict]:
+    """A run whose server is killed ``kills`` times, each ``after`` seconds into its life, and resumed
+    from its checkpoint: its run directory and meta.json."""
     proc = subprocess.Popen([sys.executable, "-m", "hycosim", "run", str(cfg), "--runs-dir", str(runs), "--no-progress"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO)
     run, before = None, set(runs.iterdir()) if runs.is_dir() else set()
@@ -232,6 +238,7 @@ def replay_trial(tmp: Path, stop: float) -> dict:
 
 
 def ring_rate(n: int, steps: int, every: float | None, tmp: Path) -> float:
+    """A ring's steps/s with checkpoints every ``every`` simulated seconds (None: none)."""
     cfg = ring_config(n, steps, tmp / f"ring-{every}.json")
     doc = json.loads(cfg.read_text())
     doc["coSimulation"].update(stepSize=0.001, stopTime=steps * 0.001)
@@ -245,6 +252,9 @@ def ring_rate(n: int, steps: int, every: float | None, tmp: Path) -> float:
 
 
 def main() -> int:
+    """Run a reference, the node and server kills (each run's values.csv against the reference's), a
+    replay trial and what checkpoints cost; print the figures (``--json``: one object); 0 where every
+    run's values came out as the reference's, else 1."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--stop", type=float, default=60.0, help="simulated seconds")
     ap.add_argument("--every", type=float, default=1.0, help="checkpointEvery, simulated seconds")

@@ -26,6 +26,7 @@ from _procs import start, stop_all, wait_all  # noqa: E402
 
 
 def ring(n: int, steps: int, path: Path) -> Path:
+    """A ring of ``n`` gain nodes for ``steps`` steps, written to ``path``; its path."""
     nodes = [{"nodeName": f"n{i}", "UID": i + 1, "model": "gain", "parameters": {"k": 0.5, "b": 1.0},
               "input": ["u"], "output": ["y"]} for i in range(n)]
     links = [{"from": f"n{i}.y", "to": f"n{(i + 1) % n}.u"} for i in range(n)]
@@ -36,6 +37,8 @@ def ring(n: int, steps: int, path: Path) -> Path:
 
 
 def run(n: int, steps: int, n_hosts: int, timeout: float) -> float:
+    """The ring's steps/s with its nodes spread over ``n_hosts`` network namespaces and the server in
+    one of its own."""
     py = [sys.executable, "-m", "hycosim"]
     with tempfile.TemporaryDirectory() as tmp, hosts([f"h{i}" for i in range(n_hosts)], subnet=214) as h:
         cfg = ring(n, steps, Path(tmp) / "scale-ring.json")  # named apart: a test looks for what is left of it
@@ -63,6 +66,8 @@ def run(n: int, steps: int, n_hosts: int, timeout: float) -> float:
 
 
 def main() -> None:
+    """Measure each ring size and print the rates and the cost a step (``--json``: one object a
+    line)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, nargs="+", default=[8, 16, 32])
     ap.add_argument("--steps", type=int, default=1000)

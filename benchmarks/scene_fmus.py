@@ -47,6 +47,7 @@ def _slave(path: Path):
 
 
 def rod(steps: int, fmu_path: Path) -> tuple[float, float]:
+    """Seconds a 10 ms macro step takes the bare rod model and its FMU through fmpy."""
     model = RodModel()
     t0 = time.perf_counter()
     for _ in range(steps):
@@ -68,6 +69,7 @@ def rod(steps: int, fmu_path: Path) -> tuple[float, float]:
 
 
 def robot(steps: int, fmu_path: Path) -> tuple[float, float]:
+    """Seconds a 10 ms macro step takes the bare robot scene and its FMU through fmpy."""
     scene = RobotScene()
     targets = [kr6.HOME + np.radians([20 * math.sin(k / 50), 10 * math.sin(k / 70), 0, 0, 0, 0]) for k in range(steps)]
     t0 = time.perf_counter()
@@ -91,6 +93,8 @@ def robot(steps: int, fmu_path: Path) -> tuple[float, float]:
 
 
 def main() -> None:
+    """Build the FMUs, measure both models bare and as FMUs and print the ratios (``--json``: one object
+    a model)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=20.0, help="simulated seconds per measurement")
     ap.add_argument("--json", action="store_true")

@@ -123,6 +123,8 @@ def one_run(kind: str, steps: int, timeout: float) -> dict:
 
 
 def main() -> None:
+    """Measure a fast run's rate while peers ask its status in a loop, against the same run left alone;
+    print the figures (``--json``: one object)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=20_000)
     ap.add_argument("--repeat", type=int, default=3, help="rounds of the four kinds, interleaved")

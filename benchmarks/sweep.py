@@ -57,6 +57,8 @@ def swept(project: Path, variants: list[dict], out: Path, workers: int) -> float
 
 
 def main() -> None:
+    """Time the same runs as a plain loop of ``hycosim.open`` and as sweeps on one and two Dask workers;
+    print runs a second and the ratios (``--json``: one object)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=200)
     ap.add_argument("--steps", type=int, default=200)

@@ -43,6 +43,8 @@ def measured(angles: list[float], trials: int, out: Path, workers: int | None) -
 
 
 def main() -> None:
+    """Run the trials one after another and on Dask workers, and print each way's wall time, rate,
+    success and grasp error (``--json``: one object)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--angles", type=float, nargs="+", default=[30, 40, 50, 60])
     ap.add_argument("--trials", type=int, default=3, help="trials per angle")

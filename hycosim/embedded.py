@@ -30,6 +30,7 @@ from hycosim.core.signals import FAILED_ELSEWHERE, NODE_UNLOADABLE
 
 
 def free_loopback_endpoint() -> str:
+    """A Zenoh endpoint on a TCP port of 127.0.0.1 that was free a moment ago."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return f"tcp/127.0.0.1:{s.getsockname()[1]}"
@@ -37,6 +38,9 @@ def free_loopback_endpoint() -> str:
 
 @dataclass
 class EmbeddedResult:
+    """How ``hycosim run`` ended: its exit code, the run directory, the message for the user, each
+    failed node's own words, and what went amiss without harming the records."""
+
     code: int
     run_dir: Path
     message: str

@@ -43,6 +43,9 @@ class BridgeBuildError(RuntimeError):
 
 @dataclass(frozen=True)
 class BuiltFmu:
+    """A bridge FMU written to disk: the node it stands for, the ``.fmu`` file, and the model identifier
+    and GUID its modelDescription.xml declares."""
+
     node: str
     path: Path
     model_identifier: str

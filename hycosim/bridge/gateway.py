@@ -109,6 +109,9 @@ def translate_release(payload: bytes, conns: list[_Connection], stop_time: float
 
 
 class Gateway:
+    """The TCP gateway of one relay (see the module's text): accepts bridge FMUs for the project's
+    nodes, each connection an ordinary node to the relay, until :meth:`close`."""
+
     def __init__(self, nodes: list[Node], session: zenoh.Session, keys: ProjectKeys, host: str, port: int,
                  drop: Callable[..., None], rates: dict[str, int] | None = None, stop_time: float = math.inf,
                  hello_timeout: float = 10.0):
@@ -296,6 +299,8 @@ class Gateway:
                 pass  # the reader thread reports the loss
 
     def close(self, reason: str = "the server stopped") -> None:
+        """Stop accepting, tell every connected bridge FMU the run is over (``reason``, as a STOP) and
+        close its connection; undeclare what the gateway declared. Safe to call more than once."""
         self._closing.set()
         with self._lock:
             down, self._down = self._down, None

@@ -56,6 +56,7 @@ def frame(kind: int, payload: bytes = b"") -> bytes:
 
 
 def hello(uid: int, name: str, n_outputs: int, n_inputs: int) -> bytes:
+    """A HELLO frame: the bridge FMU's UID, its node's name and its numbers of outputs and inputs."""
     raw = name.encode()
     return frame(HELLO, struct.pack("<IH", uid, len(raw)) + raw + struct.pack("<HH", n_outputs, n_inputs))
 
@@ -77,14 +78,18 @@ def parse_hello(payload: bytes) -> tuple[int, str, int, int]:
 
 
 def start(t0: float, h: float) -> bytes:
+    """A START frame: the run's start time and the node's own step size."""
     return frame(START, struct.pack("<dd", t0, h))
 
 
 def outputs(step: int, t: float, values: list[float]) -> bytes:
+    """An OUTPUTS frame: the FMU's count of its own steps, its time and its output values (as f64)."""
     return frame(OUTPUTS, struct.pack(f"<qdH{len(values)}d", step, t, len(values), *values))
 
 
 def parse_outputs(payload: bytes) -> tuple[int, float, list[float]]:
+    """Step count, time and values of an OUTPUTS payload; ProtocolError where its length does not match
+    the values it declares."""
     try:
         step, t, n = struct.unpack_from("<qdH", payload)
         if len(payload) != 18 + 8 * n:
@@ -95,15 +100,20 @@ def parse_outputs(payload: bytes) -> tuple[int, float, list[float]]:
 
 
 def step(k: int, t: float, h: float, driven: bool, values: list[float]) -> bytes:
+    """A STEP frame: the server's step and time at the node's step start, its length, whether the node
+    is driven, and its input values (as f64)."""
     return frame(STEP, struct.pack(f"<qddBH{len(values)}d", k, t, h, int(driven), len(values), *values))
 
 
 def parse_step(payload: bytes) -> tuple[int, float, float, bool, list[float]]:
+    """Step, time, step size, driven flag and input values of a STEP payload (written by the gateway,
+    read by the C side and the tests)."""
     k, t, h, driven, n = struct.unpack_from("<qddBH", payload)
     return k, t, h, bool(driven), list(struct.unpack_from(f"<{n}d", payload, 27))
 
 
 def text(kind: int, message: str) -> bytes:
+    """A frame of ``kind`` carrying ``message`` as UTF-8, cut to the largest payload (REFUSE, STOP)."""
     return frame(kind, message.encode()[:MAX_PAYLOAD])
 
 

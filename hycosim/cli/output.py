@@ -78,6 +78,9 @@ def say_outcome(console: Console, text: str, error: bool = False) -> None:
 
 
 def print_summary(s) -> None:
+    """Print a run's :class:`~hycosim.master.report.RunSummary` as the command line's closing lines:
+    status, steps, rate, mode switches, where the results are, and who ended the run where a node
+    did."""
     rate = f"{s.steps_per_s:,.0f} steps/s" if s.steps_per_s else "-"
     wall = f"{s.wall_time_s:.2f} s" if s.wall_time_s else "-"
     out.print(f"[bold]{s.status}[/bold]: {s.steps} macro steps in {wall} ({rate}); "

@@ -53,6 +53,7 @@ class LoadedProject:
 
     @property
     def name(self) -> str:
+        """The project's name (``projectName``), which keys its Zenoh traffic and its run folders."""
         return self.project.projectName
 
     @cached_property

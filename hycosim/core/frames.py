@@ -178,6 +178,9 @@ class FrameError(ValueError):
 
 
 class Outputs(NamedTuple):
+    """Node to server: a stepping node's output values (in its output order) at point ``step``, time
+    ``t``."""
+
     kind = OUTPUTS
     uid: int
     step: int
@@ -186,6 +189,8 @@ class Outputs(NamedTuple):
 
 
 class Sample(NamedTuple):
+    """Asynchronous node to server: its ``seq``-th sample of output values, stamped ``t``."""
+
     kind = SAMPLE
     uid: int
     seq: int
@@ -194,6 +199,9 @@ class Sample(NamedTuple):
 
 
 class Start(NamedTuple):
+    """Server to nodes: the run begins at ``t0`` with steps of ``h`` (``options``: whether to save state
+    before each step)."""
+
     kind = START
     run_id: str
     t0: float
@@ -204,6 +212,9 @@ class Start(NamedTuple):
 
 
 class Step(NamedTuple):
+    """Server to nodes: the release of step ``step`` from ``t`` over ``h`` in ``mode``, each node's
+    inputs, the driven nodes, and interpolated inputs' slopes."""
+
     kind = STEP
     step: int
     t: float
@@ -215,36 +226,52 @@ class Step(NamedTuple):
 
 
 class Stop(NamedTuple):
+    """Server to nodes: the run ends at ``step``; ``reason`` is ``completed``, ``stopped``, or why it
+    failed."""
+
     kind = STOP
     step: int
     reason: str
 
 
 class Live(NamedTuple):
+    """Local to the server only: node ``node`` attached (``alive``) or left, from its liveliness
+    token."""
+
     kind = LIVE
     node: str
     alive: bool
 
 
 class Hello(NamedTuple):
+    """Node to server, before its first outputs: its UID and what it can do (rollback, variable steps,
+    interpolation, its ports)."""
+
     kind = HELLO
     uid: int
     capabilities: dict[str, Any]
 
 
 class Rollback(NamedTuple):
+    """Server to nodes: restore the state saved before step ``step`` (at ``t``)."""
+
     kind = ROLLBACK
     step: int
     t: float
 
 
 class Replay(NamedTuple):
+    """Server to one node: the last START or STEP again, for a node that came back after a link cut."""
+
     kind = REPLAY
     node: str
     release: Any  # on the wire the release's bytes; a node's check_release gives the frame
 
 
 class End(NamedTuple):
+    """Node to server, in place of its outputs: its model ended the simulation at ``t`` (``clean``) or
+    failed (``message``), with the outputs it reached on the way."""
+
     kind = END
     uid: int
     step: int
@@ -256,11 +283,16 @@ class End(NamedTuple):
 
 
 class Checkpoint(NamedTuple):
+    """Server to nodes, before a release: serialise the state at point ``step`` and send it after the
+    step's outputs."""
+
     kind = CHECKPOINT
     step: int
 
 
 class State(NamedTuple):
+    """Node to server: piece ``index`` of ``count`` of its serialised state at point ``step``."""
+
     kind = STATE
     uid: int
     step: int
@@ -270,6 +302,9 @@ class State(NamedTuple):
 
 
 class Restore(NamedTuple):
+    """Server to nodes: set node ``node``'s state to a checkpoint's at ``step`` (in pieces, as STATE)
+    and answer with a HELLO and its outputs there."""
+
     kind = RESTORE
     node: str
     step: int
@@ -281,6 +316,9 @@ class Restore(NamedTuple):
 
 
 class Steps(NamedTuple):
+    """Server to nodes: a batched multi-rate release of the base steps between ``times``, from point
+    ``step``."""
+
     kind = STEPS
     step: int
     times: list[float]
@@ -290,6 +328,9 @@ class Steps(NamedTuple):
 
 
 class Batch(NamedTuple):
+    """Node to server: the answer to a STEPS, its outputs at the end of its last step and after each one
+    before it."""
+
     kind = BATCH
     uid: int
     step: int
@@ -299,6 +340,9 @@ class Batch(NamedTuple):
 
 
 class Init(NamedTuple):
+    """Server to nodes, before the first release: each named node's inputs at ``t0``, taken without
+    stepping (``leave``: and leave initialisation mode)."""
+
     kind = INIT
     t0: float
     inputs: dict[str, list[Any]]

@@ -105,9 +105,11 @@ class Guard:
             raise GuardError(f"guard {self.text!r}: {type(node).__name__} is not allowed")
 
     def evaluate(self, values: Mapping[tuple[str, str], Any]) -> Any:
+        """The guard's value on ``values`` (each referenced port's value by (node, port))."""
         return self._eval(self._tree, values)
 
     def holds(self, values: Mapping[tuple[str, str], Any]) -> bool:
+        """Whether the guard holds on ``values`` (its value, taken as a truth value)."""
         return bool(self.evaluate(values))
 
     def inputs(self, values: Mapping[tuple[str, str], Any]) -> dict[str, Any]:

@@ -14,6 +14,9 @@ from hycosim.core.schema import Issue, Port, PortType, Project, ScenarioAction
 
 @dataclass(frozen=True)
 class Target:
+    """An input a scenario may override: its node, its position among the node's inputs, and the
+    port."""
+
     node: str
     index: int
     port: Port

@@ -25,6 +25,9 @@ FREE_MODE = "free"
 
 
 class PortType(str, Enum):
+    """A port's type, as the project file names it; each travels as its own msgpack type
+    (``WIRE_TYPES``)."""
+
     REAL = "Real"
     INTEGER = "Integer"
     BOOLEAN = "Boolean"
@@ -90,6 +93,9 @@ ARRAY_TYPES = (PortType.REAL, PortType.INTEGER, PortType.BOOLEAN)
 
 
 class Port(_Strict):
+    """One input or output of a node: its name, type, unit and start value, and for an FMU node the
+    variable it maps to."""
+
     name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")
     type: PortType = PortType.REAL
     unit: str | None = None
@@ -159,6 +165,9 @@ def _as_port(value: Any) -> Any:
 
 
 class Node(_Strict):
+    """One entry of ``nodeLists``: a node's name, UID, ports, what implements it (a model or an
+    FMU), its parameters, and how it steps (its own step size, asynchronous, played back)."""
+
     # No leading underscore: hycosim's own keys (_server, _local) start with one. A run's folder
     # holds files named after each node ("node-NAME.stderr.txt"), and a file name has at most
     # 255 bytes.
@@ -196,15 +205,18 @@ class Node(_Strict):
         return [_as_port(v) for v in value] if isinstance(value, list) else value
 
     def port(self, name: str) -> Port | None:
+        """The node's port named ``name`` (inputs first), or None."""
         for p in (*self.input, *self.output):
             if p.name == name:
                 return p
         return None
 
     def output_names(self) -> list[str]:
+        """The node's output names, in the order its OUTPUTS carry their values."""
         return [p.name for p in self.output]
 
     def input_names(self) -> list[str]:
+        """The node's input names, in the order a release carries their values."""
         return [p.name for p in self.input]
 
     def wire_ports(self) -> dict[str, list[str]]:
@@ -281,6 +293,9 @@ MAX_WAIT_S = 1e6  # about 11 days: the longest wall-clock wait a project may ask
 
 
 class CoSimulation(_Strict):
+    """The project's ``coSimulation`` settings: the grid (start, stop, step size), the master algorithm
+    and its tolerances, real time, timeouts, waiting, recording and checkpoints."""
+
     # Infinity or NaN in a time would make a run endless or its comparisons meaningless.
     model_config = ConfigDict(allow_inf_nan=False)
     stepSize: float = Field(default=0.01, gt=0)
@@ -354,6 +369,8 @@ class CoSimulation(_Strict):
     batchReleases: bool = True
 
     def real_time_factor(self) -> float | None:
+        """Wall seconds a simulated second takes in a paced run (``realTime``: true is 1.0), or None for
+        a run as fast as it goes."""
         if self.realTime is False:
             return None
         if self.realTime is True:
@@ -362,6 +379,9 @@ class CoSimulation(_Strict):
 
 
 class Event(_Strict):
+    """One event of the project (Equations 5-6): while ``when`` holds, the node ``drives`` names follows
+    its driver through the event's routes, until ``until`` holds."""
+
     name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_\-]*$")
     when: str
     drives: str
@@ -413,10 +433,13 @@ class ScenarioAction(_Strict):
 
     @property
     def kind(self) -> str:
+        """What the action does: ``override``, ``release`` or ``parameter``."""
         return "override" if self.override is not None else "release" if self.release is not None else "parameter"
 
     @property
     def target(self) -> str:
+        """What the action acts on: the overridden or released input, or the parameter, as
+        ``node.name``."""
         return self.override if self.override is not None else self.release if self.release is not None \
             else self.parameter
 
@@ -460,6 +483,9 @@ class Recording(_Strict):
 
 
 class Project(_Strict):
+    """A project file (the paper's JSON): the server's address, the nodes, the links, the events and the
+    co-simulation settings."""
+
     # The JSON Schema an editor validates and completes the file against (hycosim schema); not read.
     schema_ref: str | None = Field(default=None, alias="$schema")
     projectName: str = Field(default="project", pattern=r"^[A-Za-z0-9_\-]+$")
@@ -481,18 +507,22 @@ class Project(_Strict):
     description: str | None = None
 
     def node(self, name: str) -> Node:
+        """The node named ``name``; KeyError if the project has none."""
         for n in self.nodeLists:
             if n.nodeName == name:
                 return n
         raise KeyError(name)
 
     def modes(self) -> list[str]:
+        """The run's modes: free running first, then one per event."""
         return [FREE_MODE, *(e.name for e in self.events)]
 
     def stepping_nodes(self) -> list[Node]:
+        """The nodes the barrier releases and waits for (every node but the asynchronous sources)."""
         return [n for n in self.nodeLists if not n.asynchronous]
 
     def async_nodes(self) -> list[Node]:
+        """The asynchronous sources: nodes that send samples when they have them, never released."""
         return [n for n in self.nodeLists if n.asynchronous]
 
     def paced_nodes(self) -> list[Node]:
@@ -557,15 +587,21 @@ class Route:
     src_element: int | None = None
 
     def active(self, mode: str) -> bool:
+        """Whether the route carries values in ``mode`` (a route of an event's only while that event is
+        in force)."""
         return self.active_in is None or mode in self.active_in
 
 
 @dataclass(frozen=True)
 class Issue:
+    """One problem found in a project file: where (``path``, as JSON keys joined by dots), what, and a
+    hint."""
+
     path: str
     message: str
     hint: str = ""
 
     def render(self) -> str:
+        """The issue as one line: its path, its message and its hint."""
         hint = f" (hint: {self.hint})" if self.hint else ""
         return f"{self.path}: {self.message}{hint}"

@@ -41,12 +41,17 @@ MAX_SELECT = 16  # ports plotted at once
 
 
 class Source(Protocol):
+    """What a dashboard page shows: a live run's feed or a finished run's files."""
+
     version: int  # changes whenever there is more to show
     watchers: Watchers  # notified at each change
 
-    def ports(self) -> list[str]: ...
+    def ports(self) -> list[str]:
+        """The ports the source can plot, as ``node.port``."""
 
-    def snapshot(self, select: list[str], held: dict[str, tuple[int, int]] | None = None) -> dict[str, Any]: ...
+    def snapshot(self, select: list[str], held: dict[str, tuple[int, int]] | None = None) -> dict[str, Any]:
+        """The page's view: the source's state and each selected port's series, as what
+        ``held`` (per port: the version and length of the series the page has) lacks."""
 
 
 def closest(name: str, ports: list[str]) -> list[str]:

@@ -27,10 +27,12 @@ class Watchers:
         return event
 
     def remove(self, event: asyncio.Event) -> None:
+        """Stop waking ``event`` (its page's feed ended)."""
         with self._lock:
             self._events.pop(event, None)
 
     def notify(self) -> None:
+        """Wake every waiting feed on its own event loop; a loop already closed is passed over."""
         with self._lock:
             waiting = list(self._events.items())
         for event, loop in waiting:

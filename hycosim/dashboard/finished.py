@@ -149,6 +149,9 @@ def guard_ports(path: Path, ports: list[str]) -> list[str]:
 
 
 class FinishedRun:
+    """A run directory as a dashboard source (see the module's text); RunDirError where the folder is
+    not one."""
+
     def __init__(self, run_dir: Path):
         self.run_dir = run_dir
         self.meta = read_meta(run_dir)  # RunDirError: not a run directory
@@ -205,6 +208,7 @@ class FinishedRun:
             self._summary, self._summary_error = summary, problem
 
     def ports(self) -> list[str]:
+        """The ports of the run's ``values.csv``, as ``node.port``."""
         return list(self._ports)
 
     def _load(self, port: str) -> None:

@@ -34,6 +34,9 @@ _NUMBER = (int, float)
 
 @dataclass
 class NodeView:
+    """A node as the status answer describes it: name, UID, whether it is asynchronous, its ports,
+    the host it runs on and how often it was restarted."""
+
     name: str
     uid: int
     asynchronous: bool
@@ -140,10 +143,12 @@ class LiveFeed:
     # --- lifecycle ------------------------------------------------------------------
 
     def start(self) -> None:
+        """Start asking the server in a thread of the feed's own."""
         self._thread = threading.Thread(target=self._run, name="dashboard-feed", daemon=True)
         self._thread.start()
 
     def close(self) -> None:
+        """Stop asking and wait (up to 5 s) for the feed's thread."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5)
@@ -301,6 +306,7 @@ class LiveFeed:
         return values
 
     def ports(self) -> list[str]:
+        """The ports plotted so far, as ``node.port``."""
         with self._lock:
             return list(self.series)
 

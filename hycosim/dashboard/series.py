@@ -14,6 +14,9 @@ from dataclasses import dataclass, field
 
 @dataclass
 class ThinnedSeries:
+    """One port's values over time, at most about twice ``capacity`` points at an even spacing (see the
+    module's text)."""
+
     capacity: int = 1000
     t: list[float] = field(default_factory=list)
     y: list[float] = field(default_factory=list)

@@ -27,10 +27,13 @@ class Metric:
 
     @property
     def column(self) -> str:
+        """The metric's column in the sweep's table, ``node.port:how``."""
         return f"{self.port}:{self.how}"
 
 
 def parse_metric(text: str) -> Metric:
+    """A ``--metric`` as written (``node.port:final``, ``:min``, ``:max`` or ``:mean``); SweepError
+    naming it otherwise."""
     port, _, how = text.rpartition(":")
     if not port or "." not in port or how not in REDUCTIONS:
         raise SweepError(f"--metric {text!r}: write node.port:final, :min, :max or :mean")

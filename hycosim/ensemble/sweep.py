@@ -31,6 +31,7 @@ class Tally:
 
     @property
     def running(self) -> int:
+        """Runs neither done nor failed yet."""
         return self.total - self.done - self.failed
 
 

@@ -32,6 +32,7 @@ class Setting:
 
     @property
     def key(self) -> str:
+        """The setting as ``node.name``."""
         return f"{self.node}.{self.name}"
 
 

@@ -64,6 +64,9 @@ _PYTHON_TYPES = {PortType.REAL: float, PortType.INTEGER: int, PortType.BOOLEAN: 
 
 @dataclass(frozen=True)
 class MappedPort:
+    """A node's port bound to its FMU variable: the variable's name, value reference and FMI type, and
+    for an array its element count."""
+
     port: str
     variable: str
     vr: int
@@ -981,15 +984,19 @@ class FmuInstance:
             return self.time
 
     def get_state(self) -> Any:
+        """The FMU's state and the communication time it is at (fmi2GetFMUstate / fmi3GetFMUState);
+        FmuError naming the node where the FMU cannot get and set its state."""
         if not self.can_rollback:
             raise FmuError(f"node {self.node!r}: {self.path.name} cannot get and set its state")
         return (self.fmu.getFMUState() if self.fmi3 else self.fmu.getFMUstate()), self.time
 
     def set_state(self, state: Any) -> None:
+        """Set the FMU back to a state :meth:`get_state` gave, and its time with it."""
         handle, self.time = state
         (self.fmu.setFMUState if self.fmi3 else self.fmu.setFMUstate)(handle)
 
     def free_state(self, state: Any) -> None:
+        """Free a state :meth:`get_state` gave (the FMU holds its memory until then)."""
         (self.fmu.freeFMUState if self.fmi3 else self.fmu.freeFMUstate)(state[0])
 
     def serialize_state(self) -> bytes:
@@ -1026,6 +1033,8 @@ class FmuInstance:
         self.time = t
 
     def close(self) -> None:
+        """Terminate the FMU and free its instance; errors on the way out are let go (the FMU may have
+        failed already)."""
         try:
             self.fmu.terminate()
         except Exception:

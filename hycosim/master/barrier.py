@@ -92,14 +92,17 @@ class Barrier:
 
     @property
     def meta(self) -> dict[str, Any]:
+        """The run's meta.json, written at the end however the run ends (the recorder's)."""
         return self.recorder.meta
 
     @property
     def order(self) -> list[str]:
+        """Gauss-Seidel's order of the stepping nodes."""
         return list(self.coupling.order)
 
     @property
     def inputs(self) -> dict[str, list[Any]]:
+        """The inputs the next exchange steps on: the router's, routed at the point."""
         return self.router.inputs
 
     @inputs.setter
@@ -107,15 +110,20 @@ class Barrier:
         self.router.inputs = value
 
     def route_into(self, node: str, mode: str) -> None:
+        """Route ``node``'s inputs again in ``mode`` from the outputs held now."""
         self.router.route_into(node, mode, self.outputs)
 
     def candidate(self, mode: str) -> dict[str, list[Any]]:
+        """The inputs the outputs held now would route to in ``mode``, the router's left as they are."""
         return self.router.candidate(mode, self.outputs)
 
     def guard_pending(self) -> bool:
+        """Whether the guard of an event not in force holds on the outputs held now."""
         return self.coordinator.pending_guard_holds(OutputView(self.router.output_index, self.outputs))
 
     def rollback(self, k: int, t: float) -> None:
+        """Tell every node to go back to point ``k`` (at ``t``), whose state it saved before the step (a
+        ROLLBACK)."""
         self.release.put(frames.encode(frames.ROLLBACK, k, t))
 
     def exchange(self, nodes: list[str] | None, k: int, t: float, h: float, mode: str, *,
@@ -215,6 +223,8 @@ class Barrier:
                 raise RunError(f"cannot replay the last release to {node!r}: {exc}") from None
 
     def broadcast_stop(self, reason: str, step: int) -> None:
+        """Tell every node the run ends at ``step`` and why (a STOP); a session already gone is let
+        go."""
         try:
             self.release.put(frames.encode(frames.STOP, step, reason))
         except Exception:  # the session may be gone with Ctrl-C

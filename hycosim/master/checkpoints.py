@@ -107,6 +107,9 @@ class CheckpointError(RuntimeError):
 
 @dataclass
 class Checkpoint:
+    """A checkpoint read back: the point it was taken at, its file, the server's state and each node's
+    serialised state."""
+
     step: int
     path: Path
     server: dict[str, Any]

@@ -32,6 +32,9 @@ class GuardEvaluationError(RuntimeError):
 
 @dataclass(frozen=True)
 class ModeSwitch:
+    """One mode switch: the point, the event, the modes from and to, the guard that fired and the values
+    it read."""
+
     step: int
     t: float
     event: str
@@ -41,11 +44,15 @@ class ModeSwitch:
     values: dict[str, Any]
 
     def as_record(self) -> dict[str, Any]:
+        """The switch as a line of ``events.jsonl``."""
         return {"step": self.step, "t": self.t, "event": self.event, "from": self.from_mode,
                 "to": self.to_mode, "guard": self.guard, "values": self.values}
 
 
 class Coordinator:
+    """The run's mode (Equations 5-6): which event is in force, checked against each point's outputs; a
+    released event waits for its rearm guard before it fires again."""
+
     def __init__(self, events: list[Event], guards: Mapping[str, EventGuards]):
         self._events = events
         self._guards = guards

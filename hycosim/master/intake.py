@@ -69,6 +69,9 @@ class Dropped(Exception):
 
 
 class Intake:
+    """The judge of what nodes send: decodes and checks each frame written on a node's ``up`` key
+    against the project (its UID, its ports' number and types), and counts and logs what it drops."""
+
     def __init__(self, nodes: list[Node]):
         self._nodes = {n.nodeName: n for n in nodes}
         self._ports = {n.nodeName: [p.name for p in n.output] for n in nodes}
@@ -97,6 +100,8 @@ class Intake:
         return self.drops.counts
 
     def drop(self, reason: str, detail: str, step: int, sender: str = "") -> None:
+        """Count and log a dropped frame (``reason``, ``detail``) at ``step``, from ``sender`` where
+        known."""
         self.drops.drop(reason, detail, step, sender)
 
     def accept(self, node: str, payload: bytes) -> frames.Frame:

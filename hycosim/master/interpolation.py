@@ -70,6 +70,7 @@ class InputTrack:
         self._mode: str | None = None
 
     def clear(self) -> None:
+        """Forget the points kept (a new mode, a rollback, a restore)."""
         self._points.clear()
 
     def add(self, t: float, mode: str, inputs: Mapping[str, list[Any]]) -> None:

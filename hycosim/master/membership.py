@@ -38,6 +38,7 @@ class Membership:
         self.restoring = False
 
     def time_of(self, step: int) -> float:
+        """The time of point ``step`` on the run's grid (a step before the start: the start)."""
         return self.cosim.startTime + max(step, 0) * self.cosim.stepSize
 
     def said(self, stepping: list[str]) -> dict[str, dict[str, Any]]:

@@ -115,7 +115,7 @@ class RecordedPoint(Mapping[str, Any]):
         return len(self._where)
 
 
-class LastValues:
+class LastValues(Observer):
     """Each port's value at the latest point recorded (libcosim's last-value observer)."""
 
     def __init__(self) -> None:
@@ -133,7 +133,7 @@ class LastValues:
         pass
 
 
-class TimeSeries:
+class TimeSeries(Observer):
     """Chosen ports at every point recorded: ``t`` and a list per port (libcosim's time-series
     observer). A rollback to a checkpoint drops what lies from its point on."""
 

@@ -71,6 +71,8 @@ def value_types(project: Project, marks_steps: bool) -> dict[str, Any]:
 
 
 def timing_type(column: str) -> Any:
+    """The Arrow type of a ``timing`` column: integers for the step and the takes, text for the holder,
+    floats for the rest."""
     import pyarrow as pa
 
     if column in ("step", "takes"):
@@ -202,6 +204,7 @@ class ParquetTables:
         return {name: table.written for name, table in self._tables.items()}
 
     def cut(self, positions: dict[str, int]) -> None:
+        """Each table back to its row count in ``positions`` (a checkpoint's)."""
         for name, table in self._tables.items():
             table.cut(positions[name])
 

@@ -25,6 +25,7 @@ class PointRecords:
         self._point = RecordedPoint(project)
 
     def add_observer(self, observer: Observer) -> None:
+        """Tell ``observer`` of every point from now on, after the observers already there."""
         self.observers.append(observer)
         self._told.append((observer, observer.step_complete))
 

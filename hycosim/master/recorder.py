@@ -190,6 +190,8 @@ class Recorder:
 
     def row(self, step: int, t: float, mode: str, outputs: dict[str, list[Any]], inputs: dict[str, list[Any]],
             stepped: list[str] | None = None) -> None:
+        """A ``values`` row: point ``step`` at ``t`` in ``mode``, every output and input as the point
+        holds it (and, in a multi-rate run, the nodes that started a step there)."""
         cells: list[Any] = [step, t, mode]
         if self._marks_steps:
             cells.append(" ".join(stepped or ()))
@@ -256,6 +258,8 @@ class Recorder:
         flush_all(self.run_dir, self._files, step)
 
     def event(self, record: dict[str, Any]) -> None:
+        """A line of ``events.jsonl`` (a mode switch, a scenario's action taking effect), written
+        and flushed at once; RecordError naming the file where the disk refuses it."""
         try:
             self._events_file.buffer.write(json.dumps(record) + "\n")
             self._events_file.flush()
@@ -263,6 +267,8 @@ class Recorder:
             raise RecordError.writing(self.run_dir, "events.jsonl", exc, record.get("step")) from None
 
     def write_meta(self) -> None:
+        """Write ``meta.json`` whole, through a temporary file, so that a reader never sees half of it;
+        RecordError naming the file where the disk refuses it."""
         tmp = self.run_dir / "meta.json.tmp"
         try:
             tmp.write_text(json.dumps(self.meta, indent=2, default=str))
@@ -272,6 +278,7 @@ class Recorder:
 
     @property
     def closed(self) -> bool:
+        """Whether the records are closed (the run's end wrote them)."""
         return self._events_file.closed
 
     def free_reserve(self) -> None:

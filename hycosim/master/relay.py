@@ -161,6 +161,9 @@ class Relay:
     # --- the run ------------------------------------------------------------------
 
     def run(self) -> None:
+        """Run the co-simulation: open the transport, wait for the nodes, start them, take the points to
+        the stop time (or a stop, a failure, a node's end) and stop them; the records written and
+        ``meta.json`` said however it ends."""
         b = self.barrier
         polls = self.project.polls_before_blocking(os.cpu_count())
         self.recorder.meta["server_polls"] = polls

@@ -28,6 +28,10 @@ class RunDirError(RuntimeError):
 
 @dataclass
 class RunSummary:
+    """What ``hycosim report`` says of a run: its outcome and rate, who held the barrier and how long
+    answers took, the slowest steps, the mode switches, the frames dropped, and the values that were not
+    finite."""
+
     run_dir: str
     status: str
     reason: str
@@ -58,6 +62,8 @@ class RunSummary:
 
 
 class EndedBy(BaseModel):
+    """The node that ended the run with its own END: at which point and time, with its message."""
+
     node: str
     step: int
     t: float
@@ -124,6 +130,8 @@ def _rows(path: Path, numeric=None, required: tuple[str, ...] = ()) -> Iterator[
 
 
 def read_meta(run_dir: Path) -> RunMeta:
+    """A run directory's ``meta.json``, checked (:class:`RunMeta`); RunDirError naming the folder where
+    it is missing or is not what a run writes."""
     path = run_dir / "meta.json"
     try:
         data = json.loads(path.read_bytes())

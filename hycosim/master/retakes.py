@@ -100,6 +100,7 @@ class Settled:
 
     @property
     def converged(self) -> bool:
+        """Whether the last take's change was within the tolerances."""
         return self.change <= 1.0
 
 
@@ -146,6 +147,8 @@ class IterationLog:
     _worst_change: float = 0.0
 
     def add(self, step: int, t: float, takes: int, change: float, port: str, absolute: float) -> None:
+        """One iterated step: point ``step`` at ``t`` taken ``takes`` times, its change left (in
+        tolerances) worst at ``port`` by ``absolute``."""
         self.steps += 1
         self.takes += takes
         self.most = max(self.most, takes)
@@ -157,6 +160,8 @@ class IterationLog:
                               "change_in_tolerances": change if math.isfinite(change) else None}
 
     def record(self) -> dict[str, Any]:
+        """The iteration over the run as ``meta.json`` keeps it: steps, mean and most takes, steps not
+        converged, and the worst change left."""
         return {"steps": self.steps, "mean_takes": self.takes / self.steps if self.steps else 0.0,
                 "max_takes": self.most, "not_converged": self.not_converged, "worst": self.worst or None}
 
@@ -175,6 +180,7 @@ class StepSizer:
 
     @classmethod
     def starting(cls, settings: StepControl, first: float) -> "StepSizer":
+        """A sizer whose first step is ``first`` bounded to the settings' minStep and maxStep."""
         return cls(settings, min(max(first, settings.minStep), settings.maxStep))
 
     def judge(self, h: float, change: float) -> float | None:
@@ -195,6 +201,8 @@ class StepSizer:
         return None
 
     def record(self) -> dict[str, Any]:
+        """The step control over the run as ``meta.json`` keeps it: steps accepted, rejected, forced at
+        minStep, and the smallest and largest step taken."""
         return {"accepted": self.accepted, "rejected": self.rejected, "at_min_step_over_tolerance": self.forced,
                 "smallest_step": self.smallest if self.accepted else None,
                 "largest_step": self.largest if self.accepted else None}

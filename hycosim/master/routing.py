@@ -62,6 +62,9 @@ class OutputView(Mapping[tuple[str, str], Any]):
 
 
 class Router:
+    """The links as index plans: which output feeds which input in each mode, and the inputs routed at
+    each point (per node, a list in its ports' order)."""
+
     def __init__(self, loaded: LoadedProject):
         project = loaded.project
         self.inputs: dict[str, list[Any]] = {

@@ -109,9 +109,12 @@ class Rate:
         self.began, self.k0, self.reported = 0.0, 0, 0.0
 
     def begin(self, k: int) -> None:
+        """The loop begins at point ``k``: the rate counts from here."""
         self.began, self.k0 = time.perf_counter(), k
 
     def point(self, progress: Progress, k: int, now: float) -> None:
+        """Point ``k`` reached at ``now`` (perf_counter): hand ``progress`` with the rate to
+        ``on_progress`` where ``every`` seconds have passed since it was last told."""
         if self.on_progress is not None and now - self.reported >= self.every:
             self.reported = now
             progress.steps_per_s = (k - self.k0) / (now - self.began) if now > self.began else 0.0
@@ -135,7 +138,7 @@ class PointGate(Protocol):
         the point meanwhile: its outputs gathered and its inputs routed, nothing stepping."""
 
 
-class OpenGate:
+class OpenGate(PointGate):
     """Every step at once: a run from the command line."""
 
     def hold(self, step: int, t: float) -> None:

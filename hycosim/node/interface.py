@@ -52,6 +52,7 @@ class NodeContext:
     stop_time: float | None = None
 
     def parameter(self, key: str, default: Any) -> Any:
+        """The node's parameter ``key`` from the project file, or ``default``."""
         return self.parameters.get(key, default)
 
 
@@ -125,14 +126,15 @@ class Node(ABC):
     def set_mode(self, mode: str, driven: bool) -> None:
         """The coordinator entered ``mode``; ``driven`` says whether this node now follows another."""
 
-    # Initialisation: between setup and the first step the master gives each node whose outputs
-    # at the start depend directly on inputs those inputs, as the links carry its peers' start
-    # outputs, in the order the dependencies give (a cycle: until a fixed point), so that the
-    # run's first point is consistent. A node takes part by naming those outputs here (output →
-    # the inputs it reads at the start) and taking the inputs in start_inputs; by default it does
-    # not (its outputs at the start are what setup made them).
     @property
     def start_feedthrough(self) -> dict[str, list[str]]:
+        """The outputs whose values at the start depend directly on inputs, each with those inputs
+        (none by default: the outputs at the start are what setup made them).
+
+        Between setup and the first step the master gives each node that names some here those
+        inputs (:meth:`start_inputs`), as the links carry its peers' start outputs, in the order
+        the dependencies give (a cycle: until a fixed point), so that the run's first point is
+        consistent."""
         return {}
 
     def start_inputs(self, inputs: dict[str, Any]) -> None:
@@ -169,24 +171,26 @@ class Node(ABC):
         their types, checked by the runtime) for the steps from now on."""
         raise NodeModelError(f"{type(self).__name__} has no tunable parameters")
 
-    # Rollback, for event localisation, iterative coupling and the controlled step: a node that
-    # can save and restore its state lets the coordinator retry a macro step. A model that
-    # overrides get_state and set_state can; one that must not be retried all the same says False.
     @property
     def can_rollback(self) -> bool:
+        """Whether the node can save and restore its state, so that the coordinator may retry a
+        macro step (event localisation, iterative coupling, the controlled step). A model that
+        overrides get_state and set_state can; one that must not be retried all the same says
+        False."""
         return missing_state_methods(type(self)) is None
 
-    # Variable steps, for the error-controlled macro step (and event localisation): a node whose
-    # step assumes one fixed h returns False, and the run keeps fixed steps.
     @property
     def can_vary_step(self) -> bool:
+        """Whether the node takes steps of any length (the error-controlled macro step, event
+        localisation); one whose step assumes one fixed h says False, and the run keeps fixed
+        steps."""
         return True
 
-    # Interpolated inputs, for iterative coupling (coSimulation.iterate.interpolate): a node that
-    # can make its Real inputs follow a polynomial over a step says so, and the server then
-    # sends it their derivatives at the step's start with each release.
     @property
     def can_interpolate(self) -> bool:
+        """Whether the node can make its Real inputs follow a polynomial over a step (iterative
+        coupling with ``interpolate``): the server then sends their derivatives at the step's
+        start with each release (:meth:`set_input_derivatives`)."""
         return False
 
     def set_input_derivatives(self, derivatives: dict[str, list[float]]) -> None:
@@ -203,10 +207,11 @@ class Node(ABC):
         """Restore a snapshot taken by get_state (in this process or, as bytes, in another)."""
         raise NotImplementedError
 
-    # Checkpoints: a node whose state survives its process takes part in them, so that the run
-    # goes on after any process crashes. A Python node's get_state gives bytes: both at once.
     @property
     def can_serialize(self) -> bool:
+        """Whether the node's state survives its process (:meth:`serialize_state`), so that it
+        takes part in checkpoints and the run goes on after a crash. A Python node's get_state
+        gives bytes: it can where it can roll back."""
         return self.can_rollback
 
     def serialize_state(self) -> bytes:

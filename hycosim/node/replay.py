@@ -76,6 +76,7 @@ class SamplePlayer(AsyncSource):
         self._names = [p.name for p in ctx.outputs]
 
     def values(self, sample: Sample) -> dict[str, Any]:
+        """A recorded sample's values by output name."""
         return dict(zip(self._names, sample.values))
 
     def due(self, after: int, upto: int) -> list[Sample]:

@@ -81,6 +81,7 @@ class NodeRuntime:
 
     @property
     def link(self) -> NodeLink | None:
+        """The node's end of its transport, once it is open (None before)."""
         return self.receiver.link
 
     def _setup(self) -> None:

@@ -182,6 +182,8 @@ class Inbox:
         return self._sub.recv()
 
     def close(self) -> None:
+        """Stop the watchdog thread and undeclare the subscriber (a session already closed is let
+        go)."""
         self._closed = True
         self._kick.set()
         self._watchdog.join(timeout=1.0)

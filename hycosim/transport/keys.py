@@ -19,6 +19,7 @@ class ProjectKeys:
 
     @property
     def root(self) -> str:
+        """The key every key of the project lies under, ``hycosim/<project>``."""
         return f"hycosim/{self.project}"
 
     def up(self, node: str) -> str:
@@ -27,6 +28,7 @@ class ProjectKeys:
 
     @property
     def up_all(self) -> str:
+        """Every node's ``up`` key: what the server subscribes to."""
         return f"{self.root}/up/*"
 
     @property
@@ -40,10 +42,12 @@ class ProjectKeys:
 
     @property
     def alive_all(self) -> str:
+        """Every liveliness token of the project: what the server watches."""
         return f"{self.root}/alive/*"
 
     @property
     def status(self) -> str:
+        """The key of the server's status queryable."""
         return f"{self.root}/status"
 
     @staticmethod

@@ -43,7 +43,7 @@ class NodeLink(Protocol):
         """Leave: this end takes and sends nothing more."""
 
 
-class ZenohNodeLink:
+class ZenohNodeLink(NodeLink):
     """A node's Zenoh client session: a publisher on its ``up`` key, an inbox on the server's
     ``down`` key, its liveliness token, and a watch on the server's token whose news comes
     through the inbox as LIVE frames. Opened by :meth:`open`; closed once, in a ``finally``."""
@@ -146,7 +146,7 @@ class ZenohNodeLink:
             self._inbox = None
 
 
-class LocalNodeLink:
+class LocalNodeLink(NodeLink):
     """A node's end of an in-process run: its frames go into the master's inbox, and the master
     hands it each release by calling the runtime, so nothing is ever received here."""
 

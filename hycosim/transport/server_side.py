@@ -23,15 +23,24 @@ from hycosim.transport.answer_budget import AnswerBudget
 
 
 class RelayInbox(Protocol):
-    waits: dict[str, int]
+    """Where the relay reads everything its nodes send, and the news of them attaching and
+    leaving (:class:`hycosim.transport.inbox.Inbox`, or the local bus's)."""
 
-    def recv(self, timeout: float) -> tuple[str, bytes] | None: ...
+    waits: dict[str, int]  # how each read got its frame (queued, polled, slept)
 
-    def close(self) -> None: ...
+    def recv(self, timeout: float) -> tuple[str, bytes] | None:
+        """The next frame as (key, payload) within ``timeout`` seconds, or None; LIVE news
+        under the key ``inbox.LOCAL``."""
+
+    def close(self) -> None:
+        """Stop reading: nothing more is taken in."""
 
 
 class Publisher(Protocol):
-    def put(self, payload: bytes) -> None: ...
+    """Where the relay's releases, starts and stops go to every node."""
+
+    def put(self, payload: bytes) -> None:
+        """Send one frame to every node (FrameTooLarge where the transport cannot carry it)."""
 
 
 class Transport(Protocol):

@@ -118,7 +118,7 @@ class MasterAlgorithm(Protocol):
         """Take back what :meth:`checkpoint` kept (``what`` names the checkpoint for errors)."""
 
 
-class Algorithm(ABC):
+class Algorithm(MasterAlgorithm, ABC):
     """A base for master algorithms: :meth:`step` to write, the rest of
     :class:`MasterAlgorithm` as a plain one-take algorithm needs it."""
 

@@ -13,7 +13,7 @@ from hycosim.master.algorithms.interface import Barrier, Coupling, MasterAlgorit
 from hycosim.master.localisation import bisect_crossing
 
 
-class Localised:
+class Localised(MasterAlgorithm):
     """``inner`` takes each step; the retakes that locate a crossing go through ``coupling``
     (one take each)."""
 

@@ -26,6 +26,9 @@ class CalibrationError(ValueError):
 
 @dataclass(frozen=True)
 class Calibration:
+    """A camera's view of the swing plane: its intrinsics (focal lengths and principal point, px), where
+    the pivot lies in the image, the metres a pixel spans there, and whether the image is mirrored."""
+
     fx: float
     fy: float
     cx: float
@@ -42,6 +45,7 @@ class Calibration:
         return math.atan2(du, dv)
 
     def save(self, path: Path) -> None:
+        """Write the calibration as JSON to ``path`` (what :meth:`load` reads)."""
         path.write_text(json.dumps(asdict(self), indent=2))
 
     @staticmethod

@@ -19,6 +19,8 @@ from hycosim.scenario.camera.calibration import Calibration
 
 @dataclass(frozen=True)
 class Detection:
+    """The rod found in one frame: its angle (rad), a confidence (0..1) and its length in pixels."""
+
     angle: float          # rad
     confidence: float     # 0..1
     length_px: float
@@ -27,6 +29,9 @@ class Detection:
 
 
 class RodDetector:
+    """Finds the rod in a frame (see the module's text); a blob shorter than ``min_length_px`` or a fit
+    less sure than ``min_confidence`` gives no detection."""
+
     def __init__(self, calibration: Calibration, min_length_px: float = 25.0, min_confidence: float = 0.5):
         self.cal = calibration
         self.min_length_px = min_length_px

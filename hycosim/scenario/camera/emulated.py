@@ -25,6 +25,9 @@ from hycosim.scenario.rod.model import RodModel, RodParams  # noqa: E402
 
 @dataclass(frozen=True)
 class CameraSetup:
+    """The emulated camera: image size, field of view, where it stands and looks, its frame rate, and
+    the noise, blur and dropped frames it adds."""
+
     width: int = 320
     height: int = 240
     fovy_deg: float = 45.0
@@ -38,6 +41,8 @@ class CameraSetup:
 
 
 def visual_mjcf(rod: RodParams, cam: CameraSetup) -> str:
+    """A MuJoCo scene of the rod and its pivot as the camera ``cam`` sees them (the model is only
+    rendered, never stepped)."""
     px, py, pz = rod.pivot
     return f"""
 <mujoco model="physical-rod-view">
@@ -72,6 +77,9 @@ def camera_calibration(rod: RodParams, cam: CameraSetup) -> Calibration:
 
 @dataclass
 class Frame:
+    """One captured frame: its simulated capture time, the image (None where it was dropped), and the
+    true angle where the source knows it."""
+
     t: float                 # simulated time of capture, s
     image: np.ndarray | None  # BGR uint8; None: the frame was dropped
     true_angle: float = math.nan
@@ -142,4 +150,5 @@ class EmulatedRodCamera:
         return skipped
 
     def close(self) -> None:
+        """Free the renderer."""
         self.renderer.close()

@@ -34,6 +34,7 @@ from hycosim.scenario.rod.node import ROD_PARAMETERS, rod_params
 
 
 def camera_setup(parameters: dict[str, Any]) -> CameraSetup:
+    """The emulated camera's setup from a node's parameters, each unset one at its default."""
     d = CameraSetup()
     return CameraSetup(width=int(parameters.get("width", d.width)), height=int(parameters.get("height", d.height)),
                        fps=float(parameters.get("fps", parameters.get("rate", d.fps))),
@@ -44,6 +45,10 @@ def camera_setup(parameters: dict[str, Any]) -> CameraSetup:
 
 
 class CameraNode(AsyncSource):
+    """The camera as an asynchronous node: frames from an emulated camera, a video file or a device, the
+    rod found in each and tracked, its angle and angular velocity sent as samples as they are
+    measured."""
+
     PARAMETERS = frozenset({"source", "width", "height", "fps", "rate", "noise_sigma", "blur_sigma",
                             "drop_probability", "seed", "physical", "calibration", "buffer_frames"})
     OUTPUTS = frozenset({"meas_angle", "meas_omega", "meas_t", "meas_conf", "meas_valid", "latency", "true_angle"})

@@ -44,6 +44,7 @@ class VideoFileSource:
         self.index = 0
 
     def frames(self) -> Iterator[Frame]:
+        """The file's frames in order, each stamped by its position; ends at the end of the file."""
         while True:
             ok, image = self.capture.read()
             if not ok:
@@ -52,6 +53,7 @@ class VideoFileSource:
             self.index += 1
 
     def close(self) -> None:
+        """Release the file."""
         self.capture.release()
 
 
@@ -69,6 +71,8 @@ class LiveSource:
         self.factor = factor
 
     def frames(self) -> Iterator[Frame]:
+        """The camera's frames as they come, stamped from when the first was asked for; CameraError
+        naming the camera where it stops giving frames."""
         origin = time.monotonic()
         while True:
             ok, image = self.capture.read()
@@ -78,6 +82,7 @@ class LiveSource:
             yield Frame(t, image)
 
     def close(self) -> None:
+        """Release the capture."""
         self.capture.release()
 
 

@@ -40,6 +40,7 @@ class AnnotatedVideo:
         self._writer: cv2.VideoWriter | None = None
 
     def write(self, image) -> None:
+        """Add one frame (BGR); the first opens the file at the frame's size."""
         if self._writer is None:
             h, w = image.shape[:2]
             fourcc = cv2.VideoWriter_fourcc(*("mp4v" if self.path.suffix == ".mp4" else "MJPG"))
@@ -50,6 +51,7 @@ class AnnotatedVideo:
         self._writer.write(image)
 
     def close(self) -> None:
+        """Finish the file (nothing was written where no frame came)."""
         if self._writer is not None:
             self._writer.release()
 

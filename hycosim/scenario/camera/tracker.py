@@ -9,6 +9,9 @@ from hycosim.scenario.camera.detect import Detection
 
 @dataclass(frozen=True)
 class Measurement:
+    """The rod's state as the camera measured it: capture time, angle, angular velocity and the
+    detection's confidence."""
+
     t: float           # capture time, s
     angle: float       # rad
     omega: float       # rad/s (0 until two detections close enough in time)
@@ -24,6 +27,8 @@ class Tracker:
         self._last: Measurement | None = None
 
     def update(self, t: float, detection: Detection | None) -> Measurement | None:
+        """The measurement of a frame captured at ``t``: the detection's angle and the angular velocity
+        since the last detection within ``max_gap``; None where nothing was detected."""
         if detection is None:
             return None
         omega = 0.0

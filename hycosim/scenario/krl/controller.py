@@ -41,6 +41,9 @@ MAX_FRAME_BYTES = 1 << 20
 
 @dataclass
 class ProgramResult:
+    """What one program did: whether and when the gripper closed on the rod, how far the TCP was from
+    the grasp point then, how long it ran, the frames it took and the ones it rejected."""
+
     grasped: bool
     grasp_time_s: float | None
     grasp_error_mm: float | None
@@ -49,6 +52,7 @@ class ProgramResult:
     rejected: list[str] = field(default_factory=list)
 
     def to_xml(self) -> str:
+        """The result as the acknowledgement the controller sends back (``<Robot><Ack …/></Robot>``)."""
         err = "" if self.grasp_error_mm is None else f"{self.grasp_error_mm:.2f}"
         tg = "" if self.grasp_time_s is None else f"{self.grasp_time_s:.3f}"
         return (f'<Robot><Ack Result="{"grasped" if self.grasped else "missed"}" T="{tg}" Error_mm="{err}" '
@@ -78,10 +82,13 @@ class Program:
             self.result.grasp_error_mm = 1000 * float(np.linalg.norm(out.tcp - grasp_point))
 
     def run_until(self, t: float) -> None:
+        """Run the controller's cycle, and the rod with it, until ``t`` (or the grasp)."""
         while self.t < t - 1e-9 and not self.result.grasped:
             self._tick()
 
     def accept(self, q_deg: list[float], t: float, close: bool) -> None:
+        """One frame of the program: the first moves the robot to its axes at once (the reset), each
+        waits for its time ``t`` and then moves towards ``q_deg`` and closes or opens the gripper."""
         q = np.radians(q_deg)
         if not self.started:
             # PTP to the initial position (reset) before the rod is released: no time passes.
@@ -92,12 +99,15 @@ class Program:
         self.result.frames += 1
 
     def finish(self, settle: float = 0.3) -> ProgramResult:
+        """End the program after ``settle`` more seconds (the last move completes, the jaws finish
+        closing) and return its result."""
         self.run_until(self.t + settle)  # the last move completes; the jaws finish closing
         self.result.execution_time_s = self.t
         return self.result
 
 
 def check_limits(q_deg: list[float]) -> str | None:
+    """Why axes ``q_deg`` (degrees) are out of the KR6's limits, or None."""
     for i, (v, (lo, hi)) in enumerate(zip(q_deg, kr6.LIMITS_DEG)):
         if not lo <= v <= hi:
             return f"A{i + 1}={v:.2f}° is outside its limits [{lo}, {hi}]°"
@@ -105,12 +115,16 @@ def check_limits(q_deg: list[float]) -> str | None:
 
 
 def check_time(t: float) -> str | None:
+    """Why a frame's time ``t`` is outside a program's time, or None."""
     if not math.isfinite(t) or not 0.0 <= t <= MAX_PROGRAM_S:
         return f"T={t:g} s is outside a program's time [0, {MAX_PROGRAM_S:g}] s"
     return None
 
 
 class EmulatedController:
+    """The emulated controller (see the module's text): listens on its EKI port and runs each program it
+    is sent, until :meth:`stop`."""
+
     def __init__(self, config: EkiConfig, rod: RodParams, scene: SceneParams | None = None,
                  host: str = "127.0.0.1", port: int | None = None):
         self.config = config
@@ -126,6 +140,8 @@ class EmulatedController:
         self._stop = threading.Event()
 
     def serve_forever(self) -> None:
+        """Take connections one after another, each a program, until :meth:`stop`; a program that breaks
+        a rule is rejected with a message and the controller goes on."""
         self.listener.settimeout(0.2)
         while not self._stop.is_set():
             try:
@@ -138,6 +154,7 @@ class EmulatedController:
                 self.handle(conn, str(peer))
 
     def stop(self) -> None:
+        """Stop taking programs and close the listening socket."""
         self._stop.set()
         self.listener.close()
 
@@ -214,6 +231,8 @@ def stream_program(host: str, port: int, frames_text: str, timeout: float = 60.0
 
 
 def parse_ack(text: str) -> dict:
+    """The controller's acknowledgement in ``text`` as a dict (grasped, its time and error, the
+    execution time, frames taken and rejected); ValueError where the text holds none."""
     import xml.etree.ElementTree as ET
 
     for part in text.split("</Robot>"):

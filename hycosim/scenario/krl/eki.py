@@ -31,6 +31,9 @@ class EkiError(ValueError):
 
 @dataclass
 class EkiConfig:
+    """An EthernetKRL configuration: its name, the PC's and the controller's IPs, the port, and the
+    elements each frame carries (the six axes, the time, the gripper)."""
+
     name: str = "HycosimGrasp"
     external_ip: str = "192.168.1.10"   # the PC streaming the path
     internal_ip: str = "192.168.1.147"  # the robot controller
@@ -40,6 +43,7 @@ class EkiConfig:
         *((f"Robot/Pos/@{a}", "REAL") for a in AXES), ("Robot/Pos/@T", "REAL"), ("Robot/Gripper/@Close", "BOOL")])
 
     def to_xml(self) -> str:
+        """The configuration as the controller's EKI XML file."""
         # quoted: a configuration read from a file may hold any text in its IPs and Tags
         elements = "\n".join(f"      <ELEMENT Tag={quoteattr(tag)} Type={quoteattr(typ)}/>" for tag, typ in self.elements)
         return f"""<ETHERNETKRL>
@@ -128,6 +132,9 @@ def frame(q_deg: list[float] | None, t: float = 0.0, close: bool = False) -> str
 
 @dataclass
 class Frame:
+    """One frame of the path: the axes in degrees (None: the program ends), the time to reach them and
+    whether the gripper closes."""
+
     q_deg: list[float] | None  # None: the program ends
     t: float
     close: bool

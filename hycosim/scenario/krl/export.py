@@ -33,6 +33,9 @@ class ExportError(RuntimeError):
 
 @dataclass
 class JointPath:
+    """The robot's joint path as a run recorded it: times from its start, the six axes in degrees, the
+    gripper command, and the row where it grasped (None: it did not)."""
+
     t: list[float]
     q_deg: list[list[float]]
     close: list[bool]
@@ -40,6 +43,8 @@ class JointPath:
 
 
 def read_path(run_dir: Path, robot: str = "robot") -> JointPath:
+    """The joint path of node ``robot`` in a run's ``values.csv``, up to the grasp; ExportError naming
+    the file where it holds none."""
     path = run_dir / "values.csv"
     cols = [f"{robot}.q{i}" for i in range(1, 7)]
     flags = (f"{robot}.grasped", f"{robot}.grip_cmd")
@@ -67,6 +72,8 @@ def read_path(run_dir: Path, robot: str = "robot") -> JointPath:
 
 
 def export(run_dir: Path, out: Path, config: EkiConfig | None = None) -> dict[str, Path]:
+    """Write the run's path as EthernetKRL files in ``out``: the EKI configuration, the KRL program and
+    the frames to stream; the files by kind."""
     config = config or EkiConfig()
     jp = read_path(run_dir)
     make_folder(out)

@@ -42,6 +42,7 @@ CHECKPOINT_VERSION = 1
 
 
 def seed_everything(seed: int) -> None:
+    """Seed Python's, NumPy's and torch's generators alike, so that a training run repeats."""
     random.seed(seed)
     np.random.seed(seed)
     torch.manual_seed(seed)
@@ -57,6 +58,7 @@ class RunningNorm:
         self.clip = clip
 
     def update(self, x: np.ndarray) -> None:
+        """Fold a batch of observations (one per row) into the running mean and variance."""
         x = np.atleast_2d(x)
         b_mean, b_var, n = x.mean(0), x.var(0), len(x)
         delta = b_mean - self.mean
@@ -69,6 +71,7 @@ class RunningNorm:
         return np.clip((x - self.mean) / np.sqrt(self.var + 1e-8), -self.clip, self.clip).astype(np.float32)
 
     def state(self) -> dict:
+        """The statistics as plain data, for a checkpoint (:meth:`from_state` reads them back)."""
         return {"mean": self.mean.tolist(), "var": self.var.tolist(), "count": self.count}
 
     @staticmethod
@@ -87,6 +90,8 @@ class RunningNorm:
 
 
 def mlp(inp: int, out: int, hidden: int = 256, final: nn.Module | None = None) -> nn.Sequential:
+    """A perceptron of two hidden ReLU layers of ``hidden`` units, from ``inp`` to ``out``, with
+    ``final`` (an activation) after it where given."""
     layers: list[nn.Module] = [nn.Linear(inp, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(),
                                nn.Linear(hidden, out)]
     if final is not None:
@@ -143,6 +148,9 @@ class ReplayBuffer:
             self.add(o, a, r, o2, d, demo, (total, last[3], last[4], g ** len(window)))
 
     def sample(self, n: int, rng: np.random.Generator):
+        """``n`` transitions drawn uniformly with ``rng``, as arrays: observations, actions, rewards,
+        next observations, dones, demonstration flags, and the n-step reward sums, observations, dones
+        and discounts."""
         idx = rng.integers(0, self.size, n)
         return (self.obs[idx], self.act[idx], self.rew[idx], self.nxt[idx], self.done[idx], self.demo[idx],
                 self.rew_n[idx], self.nxt_n[idx], self.done_n[idx], self.disc_n[idx])
@@ -150,6 +158,9 @@ class ReplayBuffer:
 
 @dataclass
 class DDPGConfig:
+    """DDPG's settings: discount, soft-update rate, learning rates, batch size, exploration noise, TD3's
+    smoothing and delay, the cloning terms' weights, the network size and the seed."""
+
     gamma: float = 0.98
     tau: float = 0.005
     actor_lr: float = 1e-5
@@ -177,6 +188,9 @@ class DDPGConfig:
 
 
 class DDPG:
+    """The agent (see the module's text): actor, twin critics and their targets, with their optimisers
+    and the observations' normalisation."""
+
     def __init__(self, config: DDPGConfig | None = None, obs_dim: int = OBS_DIM, act_dim: int = ACT_DIM):
         self.cfg = config or DDPGConfig()
         self.obs_dim, self.act_dim = obs_dim, act_dim
@@ -264,6 +278,8 @@ class DDPG:
         return torch.min(self.critic_target(oa2), self.critic2_target(oa2))
 
     def update(self, buffer: ReplayBuffer, train_actor: bool = True) -> dict[str, float]:
+        """One gradient step of the critics on a batch from ``buffer``, and of the actor where
+        ``train_actor`` and the policy delay say so; the losses and figures of the step by name."""
         cfg = self.cfg
         o, a, r, o2, d, demo, rn, on, dn, gn = self._batch(buffer)
         with torch.no_grad():
@@ -342,6 +358,8 @@ class DDPG:
     # --- checkpoints -----------------------------------------------------------------
 
     def state(self, **extra) -> dict:
+        """Everything the agent is (networks, optimisers, normalisation, settings), with ``extra``, as a
+        checkpoint torch can save."""
         return {"version": CHECKPOINT_VERSION, "obs_dim": self.obs_dim, "act_dim": self.act_dim, "hidden": self.cfg.hidden,
                 "residual_deg": RESIDUAL_DEG,
                 "actor": self.actor.state_dict(), "critic": self.critic.state_dict(), "critic2": self.critic2.state_dict(),
@@ -352,6 +370,8 @@ class DDPG:
                 "norm": self.norm.state(), "config": self.cfg.__dict__, **extra}
 
     def load_state(self, state: dict, optimisers: bool = True) -> None:
+        """Take a checkpoint's networks and normalisation, and its optimisers where ``optimisers``
+        (older checkpoints lack some networks: those start from their peers)."""
         self.actor.load_state_dict(state["actor"])
         self.critic.load_state_dict(state["critic"])
         self.critic2.load_state_dict(state.get("critic2", state["critic"]))

@@ -59,6 +59,9 @@ def reward(collision: bool, out_of_bounds: bool, near_miss: bool, grasped: bool,
 
 
 class GraspEnv(gym.Env):
+    """The grasp task as a gymnasium environment (see the module's text): one step a macro step, the
+    paper's reward, episodes released from ``angle_range_deg``."""
+
     metadata = {"render_modes": []}
     grasp_tolerance = GRASP_TOLERANCE
 

@@ -109,6 +109,9 @@ def missed(gap: float, rod_radius: float) -> bool:
 
 @dataclass
 class TurningPoint:
+    """A turning point of the rod ahead: its time and angle, the IK pose that catches it there, whether
+    the IK converged, and where the grasp point will be."""
+
     t: float       # absolute time
     angle: float
     q: np.ndarray  # IK pose to catch it there
@@ -128,6 +131,9 @@ class Predictor:
         self.predicted_at = -math.inf
 
     def update(self, t: float, angle: float, omega: float, q: np.ndarray) -> list[TurningPoint]:
+        """The next turning points at ``t`` from the rod's measured ``angle`` and ``omega`` and the
+        robot's axes ``q``: predicted anew where the last prediction is stale, refined near a turning
+        point, else as they were."""
         stale = not self.points or self.points[0].t < t or t - self.predicted_at >= REPREDICT_EVERY
         if not stale and self.points[0].t - t < REPREDICT_NEAR:
             self._refine_next(t, angle, omega)
@@ -153,6 +159,10 @@ class Predictor:
 
 def observe(t: float, q: np.ndarray, tcp: np.ndarray, grasp: np.ndarray, angle: float, omega: float, gap: float,
             points: list[TurningPoint], aim: float | None) -> np.ndarray:
+    """The policy's observation vector: the robot's axes, TCP and the grasp point, the rod's angle,
+    angular velocity and the gripper's gap; for the next two turning points their angle, the time
+    to them and the slack left after the travel there, and their poses; then the time to the
+    point aimed at (clipped)."""
     feats = [*q, *tcp, *grasp, angle, omega, gap]
     poses = []
     for i in range(2):

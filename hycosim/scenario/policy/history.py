@@ -24,18 +24,26 @@ class _Record(BaseModel):
 
 
 class AngleFigures(_Record):
+    """One release angle's figures in an evaluation: the share of grasps, of precise grasps, and the
+    mean time to grasp."""
+
     success: Share
     precise: Share = 0.0
     time_s: Annotated[float, Field(ge=0.0, allow_inf_nan=False)]
 
 
 class Evaluation(_Record):
+    """An evaluation during training: after which DDPG episode, each angle's figures and the mean
+    success."""
+
     episode: Episode
     per_angle: dict[str, AngleFigures]
     mean_success: Share
 
 
 class EpisodeRecord(_Record):
+    """One training episode: its number, return, whether it grasped and its release angle."""
+
     episode: Episode
     return_: Finite = Field(alias="return")
     success: bool
@@ -43,6 +51,9 @@ class EpisodeRecord(_Record):
 
 
 class TrainingHistory(_Record):
+    """What a ``last.pt`` records of its training: every episode's return and every evaluation (the
+    cloned start's first)."""
+
     returns: list[EpisodeRecord]
     evals: list[Evaluation] = Field(min_length=1)  # the cloned start's, written before any resume
 

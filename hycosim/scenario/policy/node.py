@@ -31,6 +31,9 @@ PRETRAINED = Path(__file__).with_name("pretrained") / "ddpg_grasp.pt"
 
 
 class PolicyNode(Node):
+    """The trained DDPG policy as a node: from the robot's axes and the rod's state it commands the axes
+    and the gripper at each macro step, and says how long its inference took."""
+
     PARAMETERS = SCENE_PARAMETERS | {"checkpoint"}
     INPUTS = frozenset({f"q{i + 1}" for i in range(6)} | {
         "rod_angle", "rod_omega", "grasp_x", "grasp_y", "grasp_z", "tcp_x", "tcp_y", "tcp_z", "gap", "dist", "grasped"})

@@ -34,6 +34,9 @@ SELECTION_SEED = 20_000  # episodes the final choice of checkpoint is made on (e
 
 @dataclass
 class TrainConfig:
+    """A training run's settings: demonstrations, behaviour cloning and DAgger rounds, the critics'
+    warm-up, the DDPG episodes and their evaluation, and DDPG's own settings."""
+
     demo_episodes: int = 100
     bc_steps: int = 5000
     dagger_rounds: int = 3      # the cloned policy drives, the reference labels what it sees
@@ -49,6 +52,7 @@ class TrainConfig:
     ddpg: DDPGConfig = field(default_factory=DDPGConfig)
 
     def digest(self) -> str:
+        """A short hash of the settings: a resume takes only a ``last.pt`` written with the same."""
         return hashlib.sha256(json.dumps(asdict(self), sort_keys=True).encode()).hexdigest()[:16]
 
 
@@ -387,6 +391,8 @@ def _score(evaluation: dict) -> tuple[float, float, float]:
 
 
 def plot_learning_curve(history: dict, path: Path) -> Path:
+    """Plot the training's returns and its evaluations' success per angle into ``path`` (PNG); returns
+    ``path``."""
     import matplotlib
 
     matplotlib.use("Agg")

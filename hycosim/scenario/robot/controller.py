@@ -34,6 +34,9 @@ MAX_OMEGA = 100.0
 
 @dataclass
 class Plan:
+    """The reference controller's plan: the turning point it aims at (its time and the rod's angle
+    there) and the joint target that catches the rod there."""
+
     t_turn: float      # absolute time of the turning point
     angle: float       # rod angle there
     q: np.ndarray      # joint target at the turning point
@@ -60,6 +63,7 @@ def turning_points(rod: RodModel, angle: float, omega: float, horizon: float) ->
 
 
 def travel_time(q_from: np.ndarray, q_to: np.ndarray) -> float:
+    """Seconds the slowest axis takes from ``q_from`` to ``q_to`` at the axes' speed limits."""
     return float(np.max(np.abs(q_to - q_from) / kr6.SPEEDS))
 
 

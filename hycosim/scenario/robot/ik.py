@@ -14,6 +14,9 @@ import numpy as np
 
 @dataclass
 class IkResult:
+    """An inverse kinematics solution: the axes, how far the TCP is from the target (m, rad), and the
+    iterations it took."""
+
     q: np.ndarray
     position_error: float  # m
     rotation_error: float  # rad

@@ -46,6 +46,8 @@ def pose_problem(q0_deg: Any) -> str | None:
 
 
 def scene_params(parameters: dict[str, Any]) -> SceneParams:
+    """The robot scene's settings from a node's parameters (the rod's, the base, whether to check
+    reach)."""
     rod = rod_params(parameters)
     return SceneParams(base=tuple(float(v) for v in parameters.get("base", (0.0, 0.0, 0.0))),
                        rod_length=rod.length, rod_radius=rod.radius, pivot=rod.pivot, grasp_distance=rod.grasp_distance,
@@ -53,6 +55,7 @@ def scene_params(parameters: dict[str, Any]) -> SceneParams:
 
 
 def scene_output_dict(o: SceneOutputs) -> dict[str, Any]:
+    """A scene's outputs as the node's output ports have them, by name."""
     roll, pitch, yaw = euler_zyx(o.tcp_rot)
     out: dict[str, Any] = {f"q{i + 1}": float(o.q[i]) for i in range(6)}
     out.update(tcp_x=o.tcp[0], tcp_y=o.tcp[1], tcp_z=o.tcp[2], tcp_roll=roll, tcp_pitch=pitch, tcp_yaw=yaw,
@@ -73,6 +76,10 @@ def initial_pose(node: str, q0_deg: Any) -> np.ndarray:
 
 
 class RobotNode(Node):
+    """The robot scene as a Python node: it moves the KR6's axes towards their commands, closes the
+    gripper as told, mirrors the rod at the angle it receives, and outputs the axes, the TCP, the
+    distance to the grasp point and the contact flags."""
+
     PARAMETERS = SCENE_PARAMETERS | {"q0_deg"}
     INPUTS = frozenset({f"q_cmd{i + 1}" for i in range(6)} | {"grip_cmd", "rod_angle"})
     OUTPUTS = frozenset({f"q{i + 1}" for i in range(6)} | {

@@ -19,6 +19,8 @@ from hycosim.scenario.robot.scene import RobotScene, SceneParams
 
 @dataclass
 class ReachPoint:
+    """One rod angle of the sweep: where the grasp point lies there and whether the robot reaches it."""
+
     angle_deg: float
     position: tuple[float, float, float]
     reachable: bool
@@ -29,10 +31,14 @@ class ReachPoint:
 
 @dataclass
 class ReachReport:
+    """The sweep over the rod's swing for one placement of the robot: each angle and whether it is
+    reached."""
+
     params: SceneParams
     points: list[ReachPoint] = field(default_factory=list)
 
     def reachable_range(self) -> tuple[float, float] | None:
+        """The smallest and largest angle reached (degrees), or None where none is."""
         ok = [p.angle_deg for p in self.points if p.reachable]
         return (min(ok), max(ok)) if ok else None
 
@@ -43,6 +49,8 @@ class ReachReport:
 
 
 def analyse_reach(params: SceneParams, max_deg: float = 75.0, step_deg: float = 2.5) -> ReachReport:
+    """Sweep the rod's angles up to ``max_deg`` on both sides in steps of ``step_deg`` and solve the
+    grasp pose's IK at each (see the module's text)."""
     scene = RobotScene(SceneParams(**{**params.__dict__, "check_reach": False}))
     report = ReachReport(params)
     by_angle: dict[float, ReachPoint] = {}
@@ -66,6 +74,7 @@ def analyse_reach(params: SceneParams, max_deg: float = 75.0, step_deg: float = 
 
 
 def plot_reach(report: ReachReport, out: Path) -> Path:
+    """Plot the report's reached and unreached angles into ``out`` (PNG); returns ``out``."""
     import matplotlib
 
     matplotlib.use("Agg")

@@ -23,6 +23,9 @@ _RANGES = {"rod_length": LIMITS["length"], "rod_radius": LIMITS["radius"], "gras
 
 
 class RobotScene6(Fmi2Slave):
+    """The robot scene as an FMI 2.0 co-simulation FMU (pythonfmu): axis commands, the gripper command
+    and the rod's angle in; axes, TCP, distance and contact flags out."""
+
     description = "hycosim KUKA KR6 R700 sixx cell with gripper and mirrored rod (MuJoCo)"
     author = "hycosim"
 
@@ -79,9 +82,11 @@ class RobotScene6(Fmi2Slave):
         self.scene.restore(snap)
 
     def exit_initialization_mode(self):
+        """Build the scene from the parameters set during initialisation."""
         self._build()
 
     def do_step(self, current_time, step_size):
+        """Step the scene over ``step_size`` on the inputs set, and publish its outputs."""
         q_cmd = np.array([getattr(self, f"q_cmd{i + 1}") for i in range(6)])
         self._publish(self.scene.step(step_size, q_cmd, bool(self.grip_cmd), self.rod_angle))
         return True

@@ -26,6 +26,9 @@ from hycosim.scenario.robot.ik import IkResult, solve_ik
 
 @dataclass(frozen=True)
 class SceneParams:
+    """The cell: the robot's base, the rod's size, pivot and grasp point, and the distances that count
+    as a near miss and a grasp."""
+
     base: tuple[float, float, float] = (0.0, 0.0, 0.0)
     rod_length: float = 0.6
     rod_radius: float = 0.01
@@ -39,6 +42,9 @@ class SceneParams:
 
 @dataclass
 class SceneOutputs:
+    """The scene after a step: axes, TCP position and orientation, distance to the grasp point, the
+    flags (grasped, collision, reachable, near miss), the jaws' gap and the grasp target."""
+
     q: np.ndarray
     tcp: np.ndarray
     tcp_rot: np.ndarray = field(repr=False)
@@ -73,6 +79,9 @@ def grasp_rotation(angle: float) -> np.ndarray:
 
 
 class RobotScene:
+    """The robot scene (see the module's text): the KR6 with its gripper and the mirrored rod in
+    MuJoCo."""
+
     def __init__(self, params: SceneParams | None = None):
         self.p = params or SceneParams()
         p = self.p
@@ -144,6 +153,8 @@ class RobotScene:
         self._update()
 
     def set_state(self, q: np.ndarray, gap: float, rod_angle: float) -> None:
+        """Put the robot at axes ``q`` with the jaws ``gap`` apart and the rod at ``rod_angle``, holding
+        nothing."""
         self.q = np.asarray(q, dtype=float).copy()
         self.gap = gap
         self.holding = False
@@ -165,10 +176,12 @@ class RobotScene:
 
     @property
     def tcp(self) -> np.ndarray:
+        """The TCP's position (m, world)."""
         return self.data.site_xpos[self._tcp].copy()
 
     @property
     def tcp_rot(self) -> np.ndarray:
+        """The TCP's orientation, a 3×3 rotation matrix."""
         return self.data.site_xmat[self._tcp].reshape(3, 3).copy()
 
     def _rod_frame(self) -> tuple[np.ndarray, np.ndarray]:
@@ -233,6 +246,8 @@ class RobotScene:
         return result
 
     def outputs(self, grip_close: bool = False) -> SceneOutputs:
+        """The scene's outputs as it stands (``grip_close``: the gripper is told to close, so the rod is
+        held once the jaws meet it)."""
         within, rod_distance, _ = self._rod_between_jaws()
         # Once the jaws have closed on the rod it is held (the rod node follows the gripper,
         # one macro step behind): the grasp lasts until the jaws open.

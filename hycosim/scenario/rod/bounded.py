@@ -11,6 +11,8 @@ from pythonfmu import Real
 
 
 class BoundedReal(Real):
+    """A pythonfmu Real variable whose modelDescription.xml entry declares its ``min`` and ``max``."""
+
     def __init__(self, name: str, low: float, high: float, **kwargs: Any):
         super().__init__(name, **kwargs)
         self.low, self.high = low, high

@@ -27,6 +27,9 @@ import numpy as np
 
 @dataclass(frozen=True)
 class RodParams:
+    """The rod: its size, mass and hinge damping, where it hangs and where it is grasped, its release
+    state, MuJoCo's time step, the observer's gain (0: no correction by the camera) and gravity."""
+
     length: float = 0.6          # m
     mass: float = 0.3            # kg
     radius: float = 0.01         # m
@@ -79,6 +82,8 @@ def rod_mjcf(p: RodParams, name: str = "rod") -> str:
 
 @dataclass
 class RodOutputs:
+    """The rod's state: angle, angular velocity, and where its grasp point and tip are (m, world)."""
+
     angle: float
     omega: float
     grasp: np.ndarray = field(repr=False)
@@ -104,6 +109,7 @@ class RodModel:
         self.reset(self.p.initial_angle, self.p.initial_omega)
 
     def reset(self, angle: float, omega: float = 0.0) -> None:
+        """Put the rod at ``angle`` with angular velocity ``omega``, at time zero, free."""
         mujoco.mj_resetData(self.model, self.data)
         self.data.qpos[self._hinge] = angle
         self.data.qvel[self._dof] = omega
@@ -116,18 +122,23 @@ class RodModel:
 
     @property
     def angle(self) -> float:
+        """The rod's angle from hanging down (rad)."""
         return float(self.data.qpos[self._hinge])
 
     @property
     def omega(self) -> float:
+        """The rod's angular velocity (rad/s)."""
         return float(self.data.qvel[self._dof])
 
     @property
     def time(self) -> float:
+        """The model's simulated time (s)."""
         return float(self.data.time)
 
     @property
     def driven(self) -> bool:
+        """Whether the rod follows the gripper (the grasp's constraint is active) rather than swinging
+        freely."""
         return bool(self.data.eq_active[self._eq])
 
     def set_driven(self, driven: bool) -> None:
@@ -260,6 +271,7 @@ class RodModel:
         self._history.append((self.time, self.angle))
 
     def outputs(self) -> RodOutputs:
+        """The rod's state as it stands (:class:`RodOutputs`)."""
         return RodOutputs(self.angle, self.omega, self.data.site_xpos[self._grasp].copy(),
                           self.data.site_xpos[self._tip].copy())
 

@@ -64,6 +64,10 @@ def rod_params(parameters: dict[str, Any]) -> RodParams:
 
 
 class RodNode(Node):
+    """The rod twin as a Python node: it swings freely, or follows the gripper while the event drives
+    it, and is pulled towards the camera's measurements where its observer gain says so; it outputs its
+    angle, angular velocity, grasp point and tip."""
+
     PARAMETERS = ROD_PARAMETERS
     INPUTS = frozenset({"driven", "grip_x", "grip_y", "grip_z", "meas_angle", "meas_t", "meas_valid"})
     OUTPUTS = frozenset({"angle", "omega", "grasp_x", "grasp_y", "grasp_z", "tip_x", "tip_y", "tip_z"})

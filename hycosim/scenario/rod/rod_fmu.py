@@ -26,6 +26,9 @@ _OUTPUTS = ("angle", "omega", "grasp_x", "grasp_y", "grasp_z", "tip_x", "tip_y",
 
 
 class Rod(Fmi2Slave):
+    """The rod twin as an FMI 2.0 co-simulation FMU (pythonfmu): the driven flag, the gripper's position
+    and the camera's measurement in; angle, angular velocity, grasp point and tip out."""
+
     description = "hycosim swinging wooden rod (MuJoCo)"
     author = "hycosim"
 
@@ -65,10 +68,13 @@ class Rod(Fmi2Slave):
         self.tip_x, self.tip_y, self.tip_z = (float(v) for v in o.tip)
 
     def exit_initialization_mode(self):
+        """Build the rod from the parameters set during initialisation."""
         # Parameters are final here.
         self._refresh(RodModel(self._params()))
 
     def do_step(self, current_time, step_size):
+        """Step the rod over ``step_size`` on the inputs set (following the gripper while driven), and
+        publish its outputs."""
         driven = bool(self.driven)
         if driven:
             self.model.set_gripper([self.grip_x, self.grip_y, self.grip_z])
