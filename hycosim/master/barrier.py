@@ -287,8 +287,9 @@ class Barrier:
                 msg = self.inbox.recv(deadline - time.monotonic())
                 if msg is None:
                     break
-                if msg[0] == LOCAL:
-                    live = frames.decode(msg[1])
+                key, payload = msg
+                if key == LOCAL:
+                    live = frames.decode(payload)
                     if not live.alive:
                         self.members.alive.discard(live.node)
         except Exception:  # shutting down: never mask the run's own outcome

@@ -279,11 +279,11 @@ class RowWriter:
             raise self._gone(step)
         self._replies.feed(data)
         for reply in self._replies:
-            if reply[0] == "error":
-                if not past_errors:
-                    raise RecordError.writing(self._run_dir, reply[1], reply[2], step)
-            else:
+            if reply[0] != "error":
                 self._answers.append(reply)
+            elif not past_errors:
+                _, name, why = reply
+                raise RecordError.writing(self._run_dir, name, why, step)
 
     def _answer(self, kind: str, past_errors: bool = False) -> list[Any]:
         """Wait for the writer's answer ``kind`` (every wait has its end)."""
@@ -343,14 +343,16 @@ def serve(run_dir: Path, timing_format: str | None, resume_at: dict[str, int], l
     unpacker = msgpack.Unpacker(strict_map_key=False)
     while data := os.read(0, 1 << 20):
         unpacker.feed(data)
-        for message in unpacker:
-            kind = message[0]
+        for kind, *body in unpacker:
             if kind == VALUES:
-                values(joined_row(message[1], lead))
+                cells, = body
+                values(joined_row(cells, lead))
             elif kind == TIMING:
-                timing(timing_format % tuple(message[1]))  # type: ignore[operator]
+                cells, = body
+                timing(timing_format % tuple(cells))  # type: ignore[operator]
             elif kind == TEXT:
-                files[message[1]].buffer.write(message[2])
+                name, text = body
+                files[name].buffer.write(text)
             elif kind == POSITIONS:
                 ends = {}
                 for name, f in files.items():
@@ -362,8 +364,9 @@ def serve(run_dir: Path, timing_format: str | None, resume_at: dict[str, int], l
                 else:
                     answer("positions", ends)
             elif kind == CUT:
+                offsets, = body
                 for name, f in files.items():
-                    f.cut(message[1][name])
+                    f.cut(offsets[name])
                 answer("cut")
             elif kind == CLOSE:
                 answer("closed", close_all(files))

@@ -113,9 +113,10 @@ class ZenohNode(NodeRuntime):
             if msg is None:
                 raise receiver.silence(bound, "release")
             release = None
-            if flat_now and msg[0] != LOCAL:
+            key, payload = msg
+            if flat_now and key != LOCAL:
                 try:  # ReleaseReader.plain, without its call
-                    release = decode(msg[1])
+                    release = decode(payload)
                 except REFUSED:
                     pass
             if release is None:

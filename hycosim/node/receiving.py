@@ -91,7 +91,8 @@ class Receiver:
         for another node, or the server's liveliness news (taken in here: a link cut is waited
         out by :meth:`next_frame` within linkGrace; without a grace it ends the node)."""
         try:
-            frame = self.accept(msg[0] == LOCAL, msg[1])
+            key, payload = msg
+            frame = self.accept(key == LOCAL, payload)
         except frames.FrameError as exc:
             self.drops.drop("not a release", str(exc), self.steps())
             return None
