@@ -106,8 +106,8 @@ def step(k: int, t: float, h: float, driven: bool, values: list[float]) -> bytes
 
 
 def parse_step(payload: bytes) -> tuple[int, float, float, bool, list[float]]:
-    """Step, time, step size, driven flag and input values of a STEP payload (written by the gateway,
-    read by the C side and the tests)."""
+    """Step, time, step size, driven flag and input values of a STEP payload: one the gateway
+    itself wrote (the C side reads its own copy), so its length is not checked."""
     k, t, h, driven, n = struct.unpack_from("<qddBH", payload)
     return k, t, h, bool(driven), list(struct.unpack_from(f"<{n}d", payload, 27))
 
