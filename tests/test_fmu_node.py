@@ -15,7 +15,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from hycosim.core.config import load_project
-from hycosim.fmi.loader import FmuError, FmuInstance
+from hycosim.fmi.instance import FmuInstance
+from hycosim.fmi.loader import FmuError
 from hycosim.fmi.fmu_open import open_fmu
 from hycosim.bridge.model_fmu import ModelFmuError, build_model_fmu
 from tests.helpers import REPO, column, hycosim, meta, read_rows, run_project, write_project

@@ -15,7 +15,8 @@ from typing import Any
 
 from fmpy.fmi1 import FMICallException
 
-from hycosim.fmi.loader import FmuError, FmuInstance
+from hycosim.fmi.instance import FmuInstance
+from hycosim.fmi.loader import FmuError
 from hycosim.fmi.model_exchange import MeInstance
 
 

@@ -1,6 +1,6 @@
 """Opening an FMU as a node's entry says: the one place that knows both kinds of instance.
 
-A co-simulation FMU steps itself (:class:`~hycosim.fmi.loader.FmuInstance`, FMI 1.0's
+A co-simulation FMU steps itself (:class:`~hycosim.fmi.instance.FmuInstance`, FMI 1.0's
 :class:`~hycosim.fmi.fmi1.Fmi1Instance`); a Model
 Exchange FMU is integrated by the node (:class:`~hycosim.fmi.model_exchange.MeInstance`, built on
 the former). Kept apart from both so that neither module imports the other in a circle.
@@ -13,7 +13,8 @@ from typing import Any
 
 from hycosim.core.schema import Node
 from hycosim.fmi.fmi1 import Fmi1Instance, Fmi1MeInstance
-from hycosim.fmi.loader import MODEL_EXCHANGE, FmuInstance, check_fmu
+from hycosim.fmi.instance import FmuInstance
+from hycosim.fmi.loader import MODEL_EXCHANGE, check_fmu
 from hycosim.fmi.model_exchange import MeInstance
 
 

@@ -27,7 +27,8 @@ from typing import Any
 from fmpy.fmi1 import FMICallException
 
 from hycosim.core.schema import Node
-from hycosim.fmi.loader import FmuError, FmuInstance, FmuMapping, FmuTerminated
+from hycosim.fmi.instance import FmuInstance
+from hycosim.fmi.loader import FmuError, FmuMapping, FmuTerminated
 
 DEFAULT_RELATIVE_TOLERANCE = 1e-5  # FMPy's
 

@@ -10,7 +10,8 @@ from typing import Any
 import structlog
 
 from hycosim.core.schema import Node as NodeSpec, Port
-from hycosim.fmi.loader import FmuError, FmuInstance, FmuTerminated
+from hycosim.fmi.instance import FmuInstance
+from hycosim.fmi.loader import FmuError, FmuTerminated
 from hycosim.fmi.fmu_open import open_fmu
 
 from hycosim.node.interface import Node, NodeContext, NodeModelError, SimulationEnded
