@@ -53,6 +53,21 @@ def loaded(tmp_path_factory):
     return load_project(path)
 
 
+# The same nodes with two events that drive ``h``: releases in three modes, two of them naming the
+# same driven node (only the mode tells them apart).
+GRASPED = {"name": "grasped", "when": "clock.y > 1", "drives": "h", "until": "clock.y > 2"}
+HELD = {"name": "held", "when": "clock.y > 3", "drives": "h", "until": "clock.y > 4"}
+
+
+@pytest.fixture(scope="module")
+def loaded_events(tmp_path_factory):
+    path = write_project(tmp_path_factory.mktemp("recv") / "p.json", NODES,
+                         [{"from": "clock.y", "to": "g.u"}, {"from": "g.y", "to": "h.u", "activeIn": ["free"]},
+                          {"from": "clock.y", "to": "h.u", "activeIn": ["grasped", "held"]}],
+                         events=[GRASPED, HELD], name="recv")
+    return load_project(path)
+
+
 def _quiet() -> None:
     structlog.configure(logger_factory=structlog.ReturnLoggerFactory())
 
@@ -812,26 +827,88 @@ def _a_release(node: str):
             | _from_the_server(node, None).map(lambda sent: sent[0]))
 
 
+@st.composite
+def _a_step(draw, node: str, drives: dict[str, tuple[str, ...]]) -> bytes:
+    """A STEP for ``node`` in a mode of the run or another, naming the nodes the mode drives as its
+    server does most of the time, else others, with or without slopes; its time and step size
+    finite or not (the server's strategy rarely reaches a STEP the flat path takes in a mode)."""
+    released = draw(st.sets(st.sampled_from(sorted(_RECEIVERS)))) | {node}
+    inputs = {n: draw(_INPUTS[n]) for n in sorted(released)}
+    mode = draw(st.sampled_from([*drives, "other"]))
+    exact = list(drives.get(mode, ()))
+    driven = draw(st.sampled_from([exact, exact, exact, [], ["h"], ["g"], ["g", "h"], ["h", "h"], [7]]))
+    slopes = draw(st.sampled_from([{}, {}, {}, {"clock": [0.1]}, {node: [0.1] * len(inputs[node])}]))
+    fields = [draw(st.integers(0, 40)), draw(st.floats(0, 10)), draw(st.floats(1e-4, 1.0))]
+    if draw(st.sampled_from([False, False, False, True])):  # one of them out of range
+        at = draw(st.integers(0, 2))
+        fields[at] = draw(st.sampled_from([[-1, frames.MAX_STEP], [math.nan, math.inf], [0.0, -0.1, math.nan]][at]))
+    return frames.msgpack.packb([frames.VERSION, frames.STEP, *fields, mode, inputs, driven, slopes])
+
+
+@pytest.mark.parametrize("events", [False, True], ids=["no events", "two events driving h"])
 @pytest.mark.parametrize("node", ["g", "h"])
 @given(data=st.data())
-def test_the_flat_release_path_passes_exactly_what_a_node_accepts(loaded, node, data):
-    """A node tries each release on ReleaseReader.plain first: it must pass exactly the STEPs that
-    the node's decode + check_release pass (equal to what they give), and nothing else."""
+def test_the_flat_release_path_passes_exactly_what_a_node_accepts(loaded, loaded_events, events, node, data):
+    """A node stepping in a mode (driven or not) tries each release on ReleaseReader.plain first:
+    it must pass exactly the STEPs that the node's decode + check_release pass (equal to what
+    they give) and that leave it in that mode and state, naming the nodes the mode drives as its
+    server names them; nothing else, and nothing before the node has a mode of the run."""
     _quiet()
-    receiver = NodeRuntime(loaded, node, impl=None, endpoint="tcp/127.0.0.1:1").receiver
-    payload = data.draw(_a_release(node))
-    got = receiver.plain(payload)
+    project = loaded_events if events else loaded
+    receiver = NodeRuntime(project, node, impl=None, endpoint="tcp/127.0.0.1:1").receiver
+    drives = project.project.driven_in()
+    # Half the time a STEP drawn for this test: in a union with the four of _a_release, a fifth.
+    payload = data.draw(_a_step(node, drives) if data.draw(st.sampled_from([True, False])) else _a_release(node))
+    mode = data.draw(st.sampled_from([None, "free", "grasped", "held", "other"]))
+    driven = data.draw(st.booleans())
+    if data.draw(st.sampled_from([True, True, True, False])):  # mostly the node in the state a STEP leaves it in
+        try:
+            step = frames.decode(payload)
+        except frames.FrameError:
+            step = None
+        if step is not None and step.kind == frames.STEP:
+            mode, driven = step.mode, node in step.driven
+    got = receiver.releases.plain(payload, mode, driven)
     try:
         frame = receiver.accept(False, payload)
     except frames.FrameError:
         frame = None
-    expected = frame if frame is not None and frame.kind == frames.STEP else None
+    expected = frame if (frame is not None and frame.kind == frames.STEP and frame.mode == mode and mode in drives
+                         and list(frame.driven) == list(drives[mode]) and (node in frame.driven) == driven) else None
     assert (got is None) == (expected is None)
+    event("flat" if got is not None else "whole way")
     if got is not None:
         release, mine = got, got.inputs.mine
         assert _same([release.step, release.t, release.h, release.mode, release.driven, mine],
                      [expected.step, expected.t, expected.h, expected.mode, expected.driven, expected.inputs[node]])
         assert node not in expected.slopes
+
+
+@pytest.mark.parametrize("node", ["g", "h"])
+def test_a_server_release_in_each_mode_takes_the_flat_path_of_the_state_it_leaves(loaded_events, node):
+    """What the flat path takes in a mode is what the server sends in it: a release encoded as the
+    barrier encodes it, with the coordinator in each mode of the run, passes the flat decoder of a
+    node stepping in that mode (driven where the mode drives it) and no other mode's."""
+    _quiet()
+    from hycosim.master.coordinator import Coordinator
+
+    receiver = NodeRuntime(loaded_events, node, impl=None, endpoint="tcp/127.0.0.1:1").receiver
+    coordinator = Coordinator(loaded_events.project.events, loaded_events.guards)
+    inputs = {"g": [0.5], "h": [0.25, 3, True]}
+    modes = loaded_events.project.modes()
+    assert modes == ["free", "grasped", "held"]
+    for mode in modes:
+        coordinator.mode = mode
+        driven = coordinator.driven_nodes()
+        payload = frames.encode(frames.STEP, 4, 0.4, 0.1, mode, inputs, driven, {})
+        release = receiver.releases.plain(payload, mode, node in driven)
+        assert release is not None and release.step == 4 and _same(release.inputs.mine, inputs[node])
+        assert (node in driven) == (node == "h" and mode != "free")
+        for other in modes:
+            if other != mode:
+                assert receiver.releases.plain(payload, other, node in driven) is None
+                assert receiver.releases.plain(payload, other, node not in driven) is None
+        assert receiver.releases.plain(payload, mode, node not in driven) is None
 
 
 def _but_the_others(payload: bytes, node: str) -> bytes | None:
@@ -914,12 +991,12 @@ def test_a_node_steps_on_a_release_whatever_another_nodes_entry_holds(loaded, ga
                 frames.decode(payload)
             frame = receiver.accept(False, payload)
             assert frame.kind == frames.STEP and frame.inputs == {"g": [0.25]} and frame.step == 3
-            release = receiver.plain(payload)
+            release = receiver.releases.plain(payload, "free", False)
             assert release.step == 3 and release.inputs.mine == (0.25,)
         else:  # an opcode msgpack never uses, or a string longer than the frame
             with pytest.raises(frames.FrameError):
                 receiver.accept(False, payload)
-            assert receiver.plain(payload) is None
+            assert receiver.releases.plain(payload, "free", False) is None
 
 
 @given(st.lists(frame_arrays(), min_size=1, max_size=8))

@@ -146,7 +146,7 @@ def test_a_node_takes_a_tune_only_of_its_tunable_parameters_each_of_its_type(pay
     from hycosim.node.receiving import Receiver
 
     spec = NodeSpec.model_validate({"nodeName": "g", "UID": 2, "model": "gain", "input": ["u"], "output": ["y"]})
-    receiver = Receiver(spec, CoSimulation(), "tcp/127.0.0.1:1", None, None, lambda: 0)
+    receiver = Receiver(spec, CoSimulation(), "tcp/127.0.0.1:1", None, None, lambda: 0, {"free": ()})
     receiver.tunable = _TUNABLE
     try:
         frame = receiver.accept(False, payload)

@@ -517,6 +517,11 @@ class Project(_Strict):
         """The run's modes: free running first, then one per event."""
         return [FREE_MODE, *(e.name for e in self.events)]
 
+    def driven_in(self) -> dict[str, tuple[str, ...]]:
+        """Each mode and the nodes it drives, in the order its releases name them (the events'):
+        what ``driven`` of every release in that mode holds."""
+        return {mode: tuple(e.drives for e in self.events if e.name == mode) for mode in self.modes()}
+
     def stepping_nodes(self) -> list[Node]:
         """The nodes the barrier releases and waits for (every node but the asynchronous sources)."""
         return [n for n in self.nodeLists if not n.asynchronous]

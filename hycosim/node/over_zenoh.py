@@ -14,7 +14,6 @@ from hycosim.node.releases import REFUSED
 from hycosim.node.replay import SamplePlayer
 from hycosim.node.runtime import NodeRuntime, PHASE_RESTART, PHASE_RESTORING, PHASE_START, PHASE_STEPPING
 from hycosim.node.sources import run_source, source_start
-from hycosim.transport.inbox import LOCAL
 from hycosim.transport.node_side import ZenohNodeLink
 from hycosim.transport.session import FrameTooLarge
 
@@ -41,7 +40,7 @@ class ZenohNode(NodeRuntime):
                     return
                 done = False
                 while not done:
-                    if self._phase == PHASE_STEPPING and self.receiver.plain is not None \
+                    if self._phase == PHASE_STEPPING and self.receiver.flat \
                             and self.receiver.server_lost is None:
                         done = self._releases_plainly()
                     else:
@@ -94,9 +93,9 @@ class ZenohNode(NodeRuntime):
         Every step of a run comes here, where the layers of the general path cost a node as
         much CPU as the floor's whole step (benchmarks/FINDINGS.md, 2026-12-04)."""
         receiver, link, impl, at, outbox = self.receiver, self.link, self.impl, self._stepping, self.outbox
-        name, decode, in_names, uid = self.name, receiver.releases.plain_decode, self._in_names, self.spec.UID
+        plain_for, in_names, uid = receiver.releases.plain_decoder, self._in_names, self.spec.UID
         pack, encode, packed = outbox.pack, frames.encode, frames.packed
-        put, limit = link.publisher.unchecked_put, link.publisher.limit
+        receive, put, limit = link.receive, link.publisher.unchecked_put, link.publisher.limit
         held, VERSION, OUTPUTS = signals.HELD, frames.VERSION, frames.OUTPUTS
         # A model that steps on lists (an FMU, Node.listed_step) takes the inputs as read and
         # gives its outputs as the wire has them: no dict either way, no conversion. Asked at
@@ -105,16 +104,18 @@ class ZenohNode(NodeRuntime):
         bound = self.cosim.stepTimeout + 30.0  # as _pull's: the last resort for a frozen server
         # Read flat only where the flat step will take it (not decoded twice otherwise): not in
         # a run with checkpoints or for a node of its own rate, nor while a state waits to go
-        # (only a frame taken the whole way below asks for one).
+        # (only a frame taken the whole way below asks for one). The decoder takes the releases
+        # of the mode the node steps in alone: a release that switches it (the first one
+        # included) goes the whole way, which tells the model, and the mode needs no check here.
         flat = not at.checkpoint and self._rate == 1
-        flat_now = flat and at.pending_state is None
+        decode = plain_for(at.mode, at.driven) if flat and at.pending_state is None else None
         while True:
-            msg = link.receive(bound)
+            msg = receive(bound)
             if msg is None:
                 raise receiver.silence(bound, "release")
+            _, payload = msg  # (key, payload): a STEP is known by its payload alone
             release = None
-            key, payload = msg
-            if flat_now and key != LOCAL:
+            if decode is not None:  # a session-local payload (LIVE news) is refused as any no STEP is
                 try:  # ReleaseReader.plain, without its call
                     release = decode(payload)
                 except REFUSED:
@@ -125,11 +126,9 @@ class ZenohNode(NodeRuntime):
                     return True
                 if self._phase != PHASE_STEPPING or receiver.server_lost is not None:
                     return False
-                flat_now = flat and at.pending_state is None
+                decode = plain_for(at.mode, at.driven) if flat and at.pending_state is None else None
                 continue
-            k, t, h, mode = release.step, release.t, release.h, release.mode
-            if mode != at.mode or (name in release.driven) != at.driven:
-                self._enter_step(impl, at, k, mode, name in release.driven)
+            k, t, h = release.step, release.t, release.h
             try:
                 if listed is not None:
                     values = listed(t, h, release.inputs.mine)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from hycosim.core import frames
@@ -26,7 +26,7 @@ class Receiver:
     messages); ``interpolating``: whether its releases may carry input slopes."""
 
     def __init__(self, spec: NodeSpec, cosim: CoSimulation, endpoint: str, drops: DropLog, log: Any,
-                 steps: Callable[[], int]):
+                 steps: Callable[[], int], drives: Mapping[str, tuple[str, ...]]):
         self.name, self.cosim, self.endpoint, self.drops, self.log, self.steps = (
             spec.nodeName, cosim, endpoint, drops, log, steps)
         # Releases carry inputs for the stepping nodes; an asynchronous source only reads their time.
@@ -37,10 +37,12 @@ class Receiver:
         self.interpolating = False
         # A stepping node reads a release's own entry alone (node/releases.py); its releases
         # over Zenoh take the flat path (ReleaseReader.plain in ZenohNode) where every input is a
-        # scalar: None, every release goes the whole way.
-        self.releases = ReleaseReader(self.release_for, self.in_types) if self.release_for is not None else None
+        # scalar (``flat``); otherwise every release goes the whole way. ``drives``: each mode's
+        # driven nodes, as its releases name them.
+        self.releases = ReleaseReader(self.release_for, self.in_types, drives) \
+            if self.release_for is not None else None
         self._decode = self.releases.decode if self.releases is not None else frames.decode
-        self.plain = self.releases.plain if self.releases is not None and self.releases.flat else None
+        self.flat = self.releases is not None and self.releases.flat
         self.tunable: dict[str, Any] = {}  # the model's tunable parameters and their start values
         self.link: NodeLink | None = None
         self.pulls = False  # over Zenoh frames are pulled; in process the master pushes them

@@ -13,12 +13,16 @@ is sent, then checked by ``frames.check_release``) and :meth:`ReleaseReader.plai
 path over Zenoh, which gives exactly the STEPs the first way acts on and None for the rest).
 The flat path reads ``inputs`` as a struct whose one field is the node's entry: the other
 entries are skipped as unknown fields are, and the frame and the node's inputs are decoded and
-typed in one call.
+typed in one call. It takes the releases of the mode the node steps in alone, each naming the
+nodes that mode drives as its server names them (:meth:`ReleaseReader.plain_decoder`), so
+that a release it passes needs no check of mode: one that switches the mode goes the whole way,
+which tells the model.
 """
 
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable, Mapping
 from typing import Annotated, Any, Literal, Union
 
 import msgpack
@@ -53,13 +57,15 @@ _POSITIVE = Union[Annotated[int, msgspec.Meta(gt=0)], Annotated[float, msgspec.M
 REFUSED = (msgspec.MsgspecError, RecursionError)
 
 
-def _plain_step(node: str, input_types: tuple[tuple[type, ...], ...]) -> type[msgspec.Struct]:
-    """A STEP as node ``node`` reads it on the flat path: StepWire's fields, with ``inputs`` a
-    struct of one field, this node's entry, typed (its other keys, the other nodes' entries, are
-    skipped as a struct's unknown fields are: checked to be well-formed, never built), and
-    ``slopes`` a struct whose one field, this node's entry, takes no value: a release with input
-    slopes for this node goes the whole way. The field's name is the wire's key, which need not
-    be a Python identifier; ``mine`` is its field."""
+def _plain_step(node: str, input_types: tuple[tuple[type, ...], ...], mode: str,
+                driven: tuple[str, ...]) -> type[msgspec.Struct]:
+    """A STEP as node ``node`` reads it on the flat path in ``mode``: StepWire's fields, with
+    ``mode`` that mode and ``driven`` exactly the nodes it drives (``driven``, in the release's
+    order), ``inputs`` a struct of one field, this node's entry, typed (its other keys, the other
+    nodes' entries, are skipped as a struct's unknown fields are: checked to be well-formed,
+    never built), and ``slopes`` a struct whose one field, this node's entry, takes no value: a
+    release with input slopes for this node goes the whole way. The field's name is the wire's
+    key, which need not be a Python identifier; ``mine`` is its field."""
     mine = msgspec.defstruct("Mine", [("mine", tuple[tuple(Union[types] for types in input_types)])],
                              rename={"mine": node}, gc=False)
     no_slopes = msgspec.defstruct("NoSlopes", [("mine", msgspec.UnsetType, msgspec.UNSET)],
@@ -67,22 +73,38 @@ def _plain_step(node: str, input_types: tuple[tuple[type, ...], ...]) -> type[ms
     return msgspec.defstruct("PlainStep", [
         ("version", Literal[frames.VERSION]), ("kind", Literal[frames.STEP]),
         ("step", Annotated[int, msgspec.Meta(ge=0, lt=frames.MAX_STEP)]), ("t", _FINITE),
-        ("h", _POSITIVE), ("mode", str), ("inputs", mine), ("driven", list[str]),
+        ("h", _POSITIVE), ("mode", Literal[mode]), ("inputs", mine),
+        ("driven", tuple[tuple(Literal[n] for n in driven)] if driven else tuple[()]),  # type: ignore[misc]
         ("slopes", no_slopes)], array_like=True, forbid_unknown_fields=True, gc=False)
 
 
 class ReleaseReader:
     """Releases as node ``node`` reads them; ``input_types`` per input the Python types msgpack
-    yields for it (``schema.wire_types``)."""
+    yields for it (``schema.wire_types``); ``drives``: each mode of the run and the nodes it
+    drives, as a release names them (``Project.driven_in``)."""
 
-    def __init__(self, node: str, input_types: tuple[tuple[type, ...], ...]):
+    def __init__(self, node: str, input_types: tuple[tuple[type, ...], ...],
+                 drives: Mapping[str, tuple[str, ...]]):
         self.node = node
+        self._input_types, self._drives = input_types, dict(drives)
         # The flat path decodes and types a STEP and the node's inputs in one call in C where
         # every input is a scalar (an array or binary port, which may be a list, goes the whole way).
         self.flat = all(list not in types for types in input_types)
-        # plain() without its call, for the loop that reads every release: it raises REFUSED
-        # where plain() gives None.
-        self.plain_decode = msgspec.msgpack.Decoder(_plain_step(node, input_types)).decode if self.flat else None
+        self._plain: dict[tuple[str, bool], Callable[[bytes], Any] | None] = {}
+
+    def plain_decoder(self, mode: str | None, driven: bool) -> Callable[[bytes], Any] | None:
+        """:meth:`plain` for a node stepping in ``mode`` (``driven``: as a node it drives), as
+        the decoding call, for the loop that reads every release: it raises REFUSED where
+        plain() gives None. None where no release takes the flat path in that state: a node
+        whose inputs are not all scalars, a mode the run does not have (before the first
+        release), or a state the mode's releases would change."""
+        key = (mode, driven) if mode is not None else None
+        if key is None or not self.flat or mode not in self._drives or (self.node in self._drives[mode]) != driven:
+            return None
+        if key not in self._plain:
+            step = _plain_step(self.node, self._input_types, mode, self._drives[mode])
+            self._plain[key] = msgspec.msgpack.Decoder(step).decode
+        return self._plain[key]
 
     def decode(self, payload: bytes) -> frames.Frame:
         """``frames.decode`` for this node: a STEP comes with this node's entry of ``inputs``
@@ -102,14 +124,17 @@ class ReleaseReader:
         slopes = {node: _unpack(wire.slopes[node])} if node in wire.slopes else {}
         return frames.Step(wire.step, wire.t, wire.h, wire.mode, inputs, wire.driven, slopes)
 
-    def plain(self, payload: bytes) -> Any | None:
+    def plain(self, payload: bytes, mode: str | None, driven: bool) -> Any | None:
         """The STEP in ``payload`` (its fields named as StepWire's, this node's inputs as
         ``inputs.mine``) if it is one that :meth:`decode` and ``frames.check_release`` pass for
-        this node, with inputs for it and no input slopes; None for anything else, which the
-        caller hands to those two (the judges of what it is and of why it is refused). Only for
-        a node whose inputs are all scalars (``flat``)."""
+        this node, with inputs for it and no input slopes, that leaves a node stepping in
+        ``mode`` (``driven`` or not) in it; None for anything else, which the caller hands to
+        those two (the judges of what it is and of why it is refused)."""
+        decode = self.plain_decoder(mode, driven)
+        if decode is None:
+            return None
         try:
-            return self.plain_decode(payload)
+            return decode(payload)
         except REFUSED:
             return None
 

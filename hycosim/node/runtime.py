@@ -57,7 +57,8 @@ class NodeRuntime:
         # Where frames come from and go to (run: Zenoh; host: the in-process bus). Over Zenoh
         # the handler's acknowledgements (a STOP after an END) are waited for; in process the
         # master reads what a node sent as soon as its call returns.
-        self.receiver = Receiver(self.spec, self.cosim, endpoint, self.drops, self._log, lambda: self.outbox.steps)
+        self.receiver = Receiver(self.spec, self.cosim, endpoint, self.drops, self._log, lambda: self.outbox.steps,
+                                 loaded.project.driven_in())
         self.outbox = Outbox(self.spec, self.cosim, self.receiver, self._log)
         self.samples = 0  # an asynchronous source's samples sent
         self._phase = PHASE_START  # what the next frame is taken as (see handle)

@@ -56,15 +56,15 @@ class Gain(Node):
                     outputs: list[Port]) -> Callable[[float, float, Sequence[Any]], list[Any]] | None:
         """step() then outputs() on lists, where the ports are the gain's own (input ``u``, and
         output ``y`` a real scalar, its wire value a float) and they are the gain's own too: a
-        subclass that changes step() or outputs() is stepped through them."""
-        if not self.steps_as(Gain):
+        subclass that changes step() or outputs() is stepped through them. A gain that stands in
+        for an expensive model (``work_s``, fixed at setup) steps through them too: its step
+        is its sleep, and the benchmark ring's gains then ask nothing of it at every step."""
+        if not self.steps_as(Gain) or self.work_s > 0:
             return None
         if inputs != ["u"] or [(p.name, p.type, p.shape) for p in outputs] != [("y", PortType.REAL, None)]:
             return None
 
         def step(t: float, h: float, values: Sequence[Any]) -> list[Any]:
-            if self.work_s > 0:
-                time.sleep(self.work_s)
             self.y = y = self.k * values[0] + self.b
             return [y]
         return step
