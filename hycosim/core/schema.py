@@ -393,6 +393,13 @@ class Event(_Strict):
     description: str | None = None
 
 
+def driven_by_mode(events: list[Event]) -> dict[str, tuple[str, ...]]:
+    """Free running and each event's mode, each with the nodes it drives in the order its
+    releases name them (the events'): what ``driven`` of every release in that mode holds, as
+    the server sends it and as a node's flat path takes it."""
+    return {mode: tuple(e.drives for e in events if e.name == mode) for mode in [FREE_MODE, *(e.name for e in events)]}
+
+
 class Ramp(_Strict):
     """An override that moves a Real input linearly to ``to`` over ``duration`` seconds, from
     ``from`` (default: the value an override held there before, else the port's start value)."""
@@ -518,9 +525,8 @@ class Project(_Strict):
         return [FREE_MODE, *(e.name for e in self.events)]
 
     def driven_in(self) -> dict[str, tuple[str, ...]]:
-        """Each mode and the nodes it drives, in the order its releases name them (the events'):
-        what ``driven`` of every release in that mode holds."""
-        return {mode: tuple(e.drives for e in self.events if e.name == mode) for mode in self.modes()}
+        """Each mode and the nodes it drives (:func:`driven_by_mode`)."""
+        return driven_by_mode(self.events)
 
     def stepping_nodes(self) -> list[Node]:
         """The nodes the barrier releases and waits for (every node but the asynchronous sources)."""

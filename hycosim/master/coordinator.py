@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-from hycosim.core.schema import FREE_MODE, Event
+from hycosim.core.schema import FREE_MODE, Event, driven_by_mode
 
 from hycosim.core.config import EventGuards
 from hycosim.core.guards import Guard
@@ -56,12 +56,13 @@ class Coordinator:
     def __init__(self, events: list[Event], guards: Mapping[str, EventGuards]):
         self._events = events
         self._guards = guards
+        self._driven = driven_by_mode(events)
         self.mode = FREE_MODE
         self.disarmed: set[str] = set()  # released events waiting for their rearm guard
 
     def driven_nodes(self) -> list[str]:
         """Nodes that follow another node instead of their own dynamics in the current mode."""
-        return [e.drives for e in self._events if e.name == self.mode]
+        return list(self._driven.get(self.mode, ()))
 
     def _holds(self, event: str, guard: Guard, values: Mapping[tuple[str, str], Any]) -> bool:
         try:
