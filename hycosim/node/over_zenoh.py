@@ -115,7 +115,7 @@ class ZenohNode(NodeRuntime):
                 raise receiver.silence(bound, "release")
             _, payload = msg  # (key, payload): a STEP is known by its payload alone
             release = None
-            if decode is not None:  # a session-local payload (LIVE news) is refused as any no STEP is
+            if decode is not None:  # LIVE news (a session-local payload) is no STEP: the decoder refuses it
                 try:  # ReleaseReader.plain, without its call
                     release = decode(payload)
                 except REFUSED:

@@ -90,17 +90,17 @@ class ReleaseReader:
         # The flat path decodes and types a STEP and the node's inputs in one call in C where
         # every input is a scalar (an array or binary port, which may be a list, goes the whole way).
         self.flat = all(list not in types for types in input_types)
-        self._plain: dict[tuple[str, bool], Callable[[bytes], Any] | None] = {}
+        self._plain: dict[tuple[str, bool], Callable[[bytes], Any]] = {}
 
     def plain_decoder(self, mode: str | None, driven: bool) -> Callable[[bytes], Any] | None:
-        """:meth:`plain` for a node stepping in ``mode`` (``driven``: as a node it drives), as
-        the decoding call, for the loop that reads every release: it raises REFUSED where
-        plain() gives None. None where no release takes the flat path in that state: a node
-        whose inputs are not all scalars, a mode the run does not have (before the first
-        release), or a state the mode's releases would change."""
-        key = (mode, driven) if mode is not None else None
-        if key is None or not self.flat or mode not in self._drives or (self.node in self._drives[mode]) != driven:
+        """:meth:`plain` for a node stepping in ``mode`` (``driven``: following its driver
+        there), as the decoding call, for the loop that reads every release: it raises REFUSED
+        where plain() gives None. None where no release takes the flat path in that state: a
+        node whose inputs are not all scalars, a mode the run does not have (before the first
+        release, none), or a state the mode's releases would change."""
+        if mode is None or not self.flat or mode not in self._drives or (self.node in self._drives[mode]) != driven:
             return None
+        key = (mode, driven)
         if key not in self._plain:
             step = _plain_step(self.node, self._input_types, mode, self._drives[mode])
             self._plain[key] = msgspec.msgpack.Decoder(step).decode
