@@ -163,13 +163,17 @@ class _ScriptedLink:
         pass
 
 
-def _run_scripted(monkeypatch, tmp_path, impl, script: list[bytes]) -> list[frames.Frame]:
-    """What a Zenoh node of the gain ``g`` sends over :class:`_ScriptedLink`, decoded."""
+def _run_scripted(monkeypatch, tmp_path, impl, script: list[bytes], events: list[dict] | None = None
+                  ) -> list[frames.Frame]:
+    """What a Zenoh node of the gain ``g`` sends over :class:`_ScriptedLink`, decoded (``events``:
+    the project's, on a ramp ``c`` that feeds ``g``, which the script never steps)."""
     from hycosim.node import over_zenoh
 
-    cfg = write_project(tmp_path / "p.json", [
-        {"nodeName": "g", "UID": 1, "model": "gain", "parameters": {"k": 0.5, "b": 1.0}, "input": ["u"],
-         "output": ["y"]}], cosim={"stepSize": 0.1, "stopTime": 1.0})
+    gain = {"nodeName": "g", "UID": 1, "model": "gain", "parameters": {"k": 0.5, "b": 1.0}, "input": ["u"],
+            "output": ["y"]}
+    nodes = [gain] if not events else [gain, {"nodeName": "c", "UID": 2, "model": "ramp", "output": ["y", "v"]}]
+    cfg = write_project(tmp_path / "p.json", nodes, [{"from": "c.y", "to": "g.u"}] if events else None,
+                        events=events, cosim={"stepSize": 0.1, "stopTime": 1.0})
     loaded = load_project(cfg)
     link = _ScriptedLink(script)
     monkeypatch.setattr(over_zenoh.ZenohNodeLink, "open", classmethod(lambda cls, *args, **kwargs: link))
@@ -223,6 +227,55 @@ def test_a_zenoh_node_steps_a_model_on_lists_where_it_can_as_it_steps_it_through
     assert [f.values for f in outputs][1:] == [[0.5 * 0.0 + 1.0], [0.5 * 0.25 + 1.0], [0.5 * 2 + 1.0],
                                                [-2.0 * 0.75 + 1.0], [-2.0 * 4 + 1.0], [-2.0 * 1.25 + 1.0]]
     assert all(type(v) is float for f in outputs for v in f.values)
+
+
+def test_a_zenoh_node_takes_the_flat_path_again_after_each_switch_of_mode(monkeypatch, tmp_path):
+    """Over Zenoh a release that enters a mode (the run's first, an event's, free running
+    again) goes the whole way, which tells the model its mode; the releases after it in that
+    mode take the flat path (the model's list step) again: the model is told of each switch
+    once, and its outputs are those stepped through step() and outputs() all the way."""
+    from hycosim.node.reference.gain import Gain
+
+    calls: dict[str, int] = {"listed": 0, "step": 0}
+    modes: list[tuple[str, bool]] = []
+
+    class Counted(Gain):
+        def listed_step(self, inputs, outputs):
+            stepped = super().listed_step(inputs, outputs)
+
+            def step(t, h, values):
+                calls["listed"] += 1
+                return stepped(t, h, values)
+            return step if stepped is not None else None
+
+        def set_mode(self, mode, driven):
+            modes.append((mode, driven))
+
+    class Dicts(Gain):
+        def listed_step(self, inputs, outputs):
+            return None
+
+    events = [{"name": "hold", "when": "c.y > 1", "drives": "g", "until": "c.y > 2"},
+              {"name": "watch", "when": "c.v > 1", "drives": "c", "until": "c.v > 2"}]
+    script = [frames.encode(frames.START, "run", 0.0, 0.1, 0.0, None, {})]
+    for k, (mode, driven) in enumerate([("free", []), ("free", []), ("hold", ["g"]), ("hold", ["g"]),
+                                        ("hold", ["g"]), ("watch", ["c"]), ("watch", ["c"]), ("free", []),
+                                        ("free", [])]):
+        script.append(frames.encode(frames.STEP, k, 0.1 * k, 0.1, mode, {"g": [0.5 * k]}, driven, {}))
+    script.append(frames.encode(frames.STOP, 9, "completed"))
+    counted = Counted()
+    through_step = counted.step
+
+    def step(t, h, inputs):  # on the instance: the class's step stays the gain's own
+        calls["step"] += 1
+        through_step(t, h, inputs)
+    counted.step = step
+    flat = _run_scripted(monkeypatch, tmp_path, counted, script, events)
+    through_dicts = _run_scripted(monkeypatch, tmp_path, Dicts(), script, events)
+    assert modes == [("free", False), ("hold", True), ("watch", False), ("free", False)]
+    assert calls == {"listed": 5, "step": 4}
+    outputs = [(f.step, f.values) for f in flat if f.kind == frames.OUTPUTS]
+    assert len(outputs) == 10 and outputs == [(f.step, f.values) for f in through_dicts if f.kind == frames.OUTPUTS]
 
 
 def test_the_gain_steps_on_lists_only_where_its_ports_and_its_step_are_its_own(monkeypatch, tmp_path):
