@@ -181,15 +181,11 @@ def _run_scripted(monkeypatch, tmp_path, impl, script: list[bytes], events: list
     return [frames.decode(p) for p in link.sent]
 
 
-def test_a_zenoh_node_steps_a_model_on_lists_where_it_can_as_it_steps_it_through_dicts(monkeypatch, tmp_path):
-    """Over Zenoh every plain release steps a model that offers listed_step by it (no dict either
-    way): the gain's outputs are the same frames, byte for byte in their values, as stepped
-    through step() and outputs(), its parameters tuned between steps included; and every step
-    but the first went through the listed call (the first release enters the run's mode, which
-    the whole way tells the model)."""
+def _counted_gain(calls: dict[str, int], modes: list[tuple[str, bool]] | None = None):
+    """A gain that counts its steps by its list step (``calls["listed"]``) and through step()
+    (``calls["step"]``, counted on the instance: the class's step stays the gain's own, so that
+    the list step is offered), and keeps each mode it is told of in ``modes``."""
     from hycosim.node.reference.gain import Gain
-
-    calls = {"listed": 0, "step": 0}
 
     class Counted(Gain):
         def listed_step(self, inputs, outputs):
@@ -200,10 +196,38 @@ def test_a_zenoh_node_steps_a_model_on_lists_where_it_can_as_it_steps_it_through
                 return stepped(t, h, values)
             return step if stepped is not None else None
 
+        def set_mode(self, mode, driven):
+            if modes is not None:
+                modes.append((mode, driven))
+            super().set_mode(mode, driven)
+
+    gain = Counted()
+    through_step = gain.step
+
+    def step(t, h, inputs):
+        calls["step"] += 1
+        through_step(t, h, inputs)
+    gain.step = step
+    return gain
+
+
+def _dicts_gain():
+    """A gain stepped through step() and outputs() alone (it offers no list step)."""
+    from hycosim.node.reference.gain import Gain
+
     class Dicts(Gain):
         def listed_step(self, inputs, outputs):
             return None
+    return Dicts()
 
+
+def test_a_zenoh_node_steps_a_model_on_lists_where_it_can_as_it_steps_it_through_dicts(monkeypatch, tmp_path):
+    """Over Zenoh every plain release steps a model that offers listed_step by it (no dict either
+    way): the gain's outputs are the same frames, byte for byte in their values, as stepped
+    through step() and outputs(), its parameters tuned between steps included; and every step
+    but the first went through the listed call (the first release enters the run's mode, which
+    the whole way tells the model)."""
+    calls = {"listed": 0, "step": 0}
     script = [frames.encode(frames.START, "run", 0.0, 0.1, 0.0, None, {})]
     for k in range(6):
         if k == 3:
@@ -211,15 +235,8 @@ def test_a_zenoh_node_steps_a_model_on_lists_where_it_can_as_it_steps_it_through
         script.append(frames.encode(frames.STEP, k, 0.1 * k, 0.1, "free",
                                     {"g": [0.25 * k if k % 2 else k], "h": [9.0]}, [], {}))
     script.append(frames.encode(frames.STOP, 6, "completed"))
-    counted = Counted()
-    through_step = counted.step
-
-    def step(t, h, inputs):  # on the instance: the class's step stays the gain's own
-        calls["step"] += 1
-        through_step(t, h, inputs)
-    counted.step = step
-    listed = _run_scripted(monkeypatch, tmp_path, counted, script)
-    through_dicts = _run_scripted(monkeypatch, tmp_path, Dicts(), script)
+    listed = _run_scripted(monkeypatch, tmp_path, _counted_gain(calls), script)
+    through_dicts = _run_scripted(monkeypatch, tmp_path, _dicts_gain(), script)
     assert calls == {"listed": 5, "step": 1}
     outputs = [f for f in listed if f.kind == frames.OUTPUTS]
     assert [(f.step, f.values) for f in outputs] == [(f.step, f.values) for f in through_dicts
@@ -234,27 +251,8 @@ def test_a_zenoh_node_takes_the_flat_path_again_after_each_switch_of_mode(monkey
     again) goes the whole way, which tells the model its mode; the releases after it in that
     mode take the flat path (the model's list step) again: the model is told of each switch
     once, and its outputs are those stepped through step() and outputs() all the way."""
-    from hycosim.node.reference.gain import Gain
-
     calls: dict[str, int] = {"listed": 0, "step": 0}
     modes: list[tuple[str, bool]] = []
-
-    class Counted(Gain):
-        def listed_step(self, inputs, outputs):
-            stepped = super().listed_step(inputs, outputs)
-
-            def step(t, h, values):
-                calls["listed"] += 1
-                return stepped(t, h, values)
-            return step if stepped is not None else None
-
-        def set_mode(self, mode, driven):
-            modes.append((mode, driven))
-
-    class Dicts(Gain):
-        def listed_step(self, inputs, outputs):
-            return None
-
     events = [{"name": "hold", "when": "c.y > 1", "drives": "g", "until": "c.y > 2"},
               {"name": "watch", "when": "c.v > 1", "drives": "c", "until": "c.v > 2"}]
     script = [frames.encode(frames.START, "run", 0.0, 0.1, 0.0, None, {})]
@@ -263,15 +261,8 @@ def test_a_zenoh_node_takes_the_flat_path_again_after_each_switch_of_mode(monkey
                                         ("free", [])]):
         script.append(frames.encode(frames.STEP, k, 0.1 * k, 0.1, mode, {"g": [0.5 * k]}, driven, {}))
     script.append(frames.encode(frames.STOP, 9, "completed"))
-    counted = Counted()
-    through_step = counted.step
-
-    def step(t, h, inputs):  # on the instance: the class's step stays the gain's own
-        calls["step"] += 1
-        through_step(t, h, inputs)
-    counted.step = step
-    flat = _run_scripted(monkeypatch, tmp_path, counted, script, events)
-    through_dicts = _run_scripted(monkeypatch, tmp_path, Dicts(), script, events)
+    flat = _run_scripted(monkeypatch, tmp_path, _counted_gain(calls, modes), script, events)
+    through_dicts = _run_scripted(monkeypatch, tmp_path, _dicts_gain(), script, events)
     assert modes == [("free", False), ("hold", True), ("watch", False), ("free", False)]
     assert calls == {"listed": 5, "step": 4}
     outputs = [(f.step, f.values) for f in flat if f.kind == frames.OUTPUTS]
